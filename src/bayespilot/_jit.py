@@ -1,0 +1,30 @@
+"""The one place that sets numba options for every kernel in bayespilot.
+
+``cache=True`` writes compiled kernels next to the source so a new process
+(a test run, a dask worker) loads them instead of compiling again.
+``error_model="numpy"`` makes 0/0 give NaN instead of raising, which the
+kernels turn into +inf costs rather than exceptions.  ``fastmath`` stays off:
+the likelihood must be reproducible to the last bit between the scalar and
+batch forms.
+"""
+
+from __future__ import annotations
+
+import numba
+
+JIT_OPTIONS = {"cache": True, "error_model": "numpy", "nogil": True}
+
+
+def njit(*args, **kwargs):
+    """``numba.njit`` with the package defaults; keyword arguments override them."""
+    opts = dict(JIT_OPTIONS)
+    opts.update(kwargs)
+    if args and callable(args[0]):
+        return numba.njit(**opts)(args[0])
+    return numba.njit(*args, **opts)
+
+
+def pjit(*args, **kwargs):
+    """``njit`` with ``parallel=True``, for kernels that ``prange`` over independent items."""
+    kwargs.setdefault("parallel", True)
+    return njit(*args, **kwargs)

@@ -1,0 +1,91 @@
+"""Multisine forcing functions (Eq. 5 of Pool et al. 2012).
+
+f(t) = sum_i A(i) sin(omega_0 n(i) t + phi(i))
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+import numpy as np
+
+__all__ = ["Multisine"]
+
+
+@dataclass(frozen=True, eq=False)
+class Multisine:
+    """A sum of sinusoids at integer multiples of a base frequency.
+
+    Parameters
+    ----------
+    base_frequency : float
+        omega_0 = 2 pi / T0, rad/s.
+    n : array_like of int
+        Integer multiples n(i) of the base frequency.
+    amplitude : array_like of float
+        A(i), rad.
+    phase : array_like of float
+        phi(i), rad.
+
+    Examples
+    --------
+    >>> f = Multisine(0.5, [1, 2], [1.0, 0.5], [0.0, 0.0])
+    >>> float(f(np.array([0.0]))[0])
+    0.0
+    """
+
+    base_frequency: float
+    n: np.ndarray
+    amplitude: np.ndarray
+    phase: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = np.atleast_1d(np.asarray(self.n, dtype=float))
+        a = np.atleast_1d(np.asarray(self.amplitude, dtype=float))
+        p = np.atleast_1d(np.asarray(self.phase, dtype=float))
+        if not (n.shape == a.shape == p.shape) or n.ndim != 1:
+            raise ValueError(
+                f"n, amplitude and phase must be 1-D of equal length, got shapes "
+                f"{n.shape}, {a.shape}, {p.shape}"
+            )
+        if not (np.all(np.isfinite(n)) and np.all(np.isfinite(a)) and np.all(np.isfinite(p))):
+            raise ValueError("n, amplitude and phase must be finite")
+        if not np.isfinite(self.base_frequency) or self.base_frequency <= 0:
+            raise ValueError(f"base_frequency must be positive, got {self.base_frequency!r}")
+        object.__setattr__(self, "n", n)
+        object.__setattr__(self, "amplitude", a)
+        object.__setattr__(self, "phase", p)
+        object.__setattr__(self, "base_frequency", float(self.base_frequency))
+
+    @property
+    def frequencies(self) -> np.ndarray:
+        """omega_0 n(i), rad/s."""
+        return self.base_frequency * self.n
+
+    def scaled(self, factor: float) -> "Multisine":
+        """The same signal with every amplitude multiplied by ``factor``."""
+        return Multisine(self.base_frequency, self.n, self.amplitude * factor, self.phase)
+
+    def __call__(self, t: np.ndarray, derivative: int = 0) -> np.ndarray:
+        """Evaluate f, or its ``derivative``-th time derivative, at times ``t``."""
+        t = np.asarray(t, dtype=float)
+        w = self.frequencies
+        arg = np.multiply.outer(t, w) + self.phase
+        # d^k/dt^k sin(x) = sin(x + k pi / 2)
+        return (np.sin(arg + derivative * np.pi / 2) * (self.amplitude * w**derivative)).sum(axis=-1)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``n``, ``amplitude``, ``phase`` lists of the recording format."""
+        return {"n": self.n.astype(int).tolist(), "amplitude": self.amplitude.tolist(),
+                "phase": self.phase.tolist()}
+
+    @classmethod
+    def from_dict(cls, base_frequency: float, d: Mapping[str, Any]) -> "Multisine":
+        """Build from a ``forcing.target`` or ``forcing.disturbance`` object."""
+        return cls(base_frequency, d["n"], d["amplitude"], d["phase"])
+
+    @classmethod
+    def zero(cls, base_frequency: float = 1.0) -> "Multisine":
+        """A signal that is 0 everywhere."""
+        return cls(base_frequency, [1.0], [0.0], [0.0])

@@ -1,0 +1,147 @@
+"""Block primitives shared by the likelihood and the closed-loop simulator.
+
+Every linear block of a channel is a continuous-time biquad
+
+    H(s) = (b2 s^2 + b1 s + b0) / (a2 s^2 + a1 s + a0)
+
+whose coefficients come from :func:`stage_tf` (a kind code and up to two
+parameter values).  The likelihood discretises it with Tustin's rule
+(:func:`tustin`) at the recording's rate; the simulator integrates the same
+biquad in state-space form (:func:`biquad_ss`) at a finer step.  A static
+nonlinearity is :func:`nonlinearity` (a kind code and two parameters).
+
+Extension point: a new parametric linear block is a new ``STAGE_*`` code with
+its coefficients in :func:`stage_tf`; a new static nonlinearity is a new
+``NL_*`` code in :func:`nonlinearity`.  Nothing else in the kernels changes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import njit
+
+# Stage kinds (linear blocks before the nonlinearity).
+STAGE_NONE = 0
+STAGE_FIXED = 1       # constant coefficients (b0, b1, b2, a0, a1, a2)
+STAGE_HIGHPASS1 = 2   # s / (s + p0)                      washout, p0 = break frequency, rad/s
+STAGE_LOWPASS2 = 3    # p0^2 / (s^2 + 2 p1 p0 s + p0^2)   e.g. motion-platform bandwidth
+STAGE_LOWPASS1 = 4    # 1 / (p0 s + 1)                     first-order lag, p0 = time constant, s
+STAGE_HIGHPASS2 = 5   # s^2 / (s^2 + 2 p1 p0 s + p0^2)     second-order washout
+
+# Static nonlinearities.
+NL_NONE = 0
+NL_DEADZONE = 1       # sign(x) max(|x| - p0, 0)            Pool et al. (2012), Fig. 3
+NL_SOFT_DEADZONE = 2  # smooth dead zone, width p1 (see nonlinearity)
+NL_SATURATION = 3     # clip(x, -p0, p0)
+
+# Channel gain modulation.
+MOD_NONE = 0
+MOD_LINEAR = 1        # gain x (1 + p0 (t / T - 1/2)): a gain that drifts linearly over the run
+
+
+@njit
+def stage_tf(kind, p0, p1, const):
+    """Continuous biquad coefficients (b0, b1, b2, a0, a1, a2) of a stage."""
+    if kind == STAGE_FIXED:
+        return const[0], const[1], const[2], const[3], const[4], const[5]
+    if kind == STAGE_HIGHPASS1:
+        return 0.0, 1.0, 0.0, p0, 1.0, 0.0
+    if kind == STAGE_LOWPASS2:
+        w2 = p0 * p0
+        return w2, 0.0, 0.0, w2, 2.0 * p1 * p0, 1.0
+    if kind == STAGE_LOWPASS1:
+        return 1.0, 0.0, 0.0, 1.0, p0, 0.0
+    if kind == STAGE_HIGHPASS2:
+        return 0.0, 0.0, 1.0, p0 * p0, 2.0 * p1 * p0, 1.0
+    return 1.0, 0.0, 0.0, 1.0, 0.0, 0.0
+
+
+@njit
+def tustin(b0, b1, b2, a0, a1, a2, dt):
+    """Tustin (bilinear) discretisation of a continuous biquad.
+
+    Returns (B0, B1, B2, A1, A2) of
+    y[k] = B0 x[k] + B1 x[k-1] + B2 x[k-2] - A1 y[k-1] - A2 y[k-2].
+    """
+    c = 2.0 / dt
+    c2 = c * c
+    d0 = a2 * c2 + a1 * c + a0
+    d1 = 2.0 * (a0 - a2 * c2)
+    d2 = a2 * c2 - a1 * c + a0
+    n0 = b2 * c2 + b1 * c + b0
+    n1 = 2.0 * (b0 - b2 * c2)
+    n2 = b2 * c2 - b1 * c + b0
+    return n0 / d0, n1 / d0, n2 / d0, d1 / d0, d2 / d0
+
+
+@njit
+def biquad_ss(b0, b1, b2, a0, a1, a2):
+    """State-space form of a proper continuous biquad.
+
+    Returns (order, alpha0, alpha1, c0, c1, d) for
+    order 2:  x1' = x2,  x2' = -alpha0 x1 - alpha1 x2 + in,  y = c0 x1 + c1 x2 + d in
+    order 1:  x1' = -alpha0 x1 + in,                          y = c0 x1 + d in
+    order 0:  y = d in
+    """
+    if a2 != 0.0:
+        d = b2 / a2
+        al0 = a0 / a2
+        al1 = a1 / a2
+        return 2, al0, al1, b0 / a2 - d * al0, b1 / a2 - d * al1, d
+    if a1 != 0.0:
+        d = b1 / a1
+        al0 = a0 / a1
+        return 1, al0, 0.0, b0 / a1 - d * al0, 0.0, d
+    return 0, 0.0, 0.0, 0.0, 0.0, b0 / a0
+
+
+@njit
+def nonlinearity(kind, x, p0, p1):
+    """Static nonlinearity of a channel (threshold shapes, saturation)."""
+    if kind == NL_DEADZONE:
+        ax = abs(x) - p0
+        if ax <= 0.0:
+            return 0.0
+        return ax if x > 0.0 else -ax
+    if kind == NL_SOFT_DEADZONE:
+        # Softplus-rounded dead zone: w log(1 + exp((|x| - d) / w)) minus its value
+        # at x = 0, so the output is 0 at 0, odd, and tends to the crisp dead zone
+        # as w -> 0.
+        w = p1 if p1 > 1e-12 else 1e-12
+        a = (abs(x) - p0) / w
+        a0 = -p0 / w
+        sp = a + math.log1p(math.exp(-a)) if a > 0.0 else math.log1p(math.exp(a))
+        sp0 = a0 + math.log1p(math.exp(-a0)) if a0 > 0.0 else math.log1p(math.exp(a0))
+        y = w * (sp - sp0)
+        return y if x >= 0.0 else -y
+    if kind == NL_SATURATION:
+        if x > p0:
+            return p0
+        if x < -p0:
+            return -p0
+        return x
+    return x
+
+
+@njit
+def modulation(kind, t_frac, p0):
+    """Gain modulation factor at run fraction ``t_frac`` in [0, 1)."""
+    if kind == MOD_LINEAR:
+        return 1.0 + p0 * (t_frac - 0.5)
+    return 1.0
+
+
+@njit
+def param_or(theta, idx, default):
+    """``theta[idx]``, or ``default`` where the index is -1 (no parameter)."""
+    if idx < 0:
+        return default
+    return theta[idx]
+
+
+def as_plan_array(x, dtype):
+    """C-contiguous copy for kernel arguments (plain numpy helper)."""
+    return np.ascontiguousarray(x, dtype=dtype)

@@ -1,0 +1,285 @@
+"""Open-loop pilot-model response u_hat and the Eq. 4 likelihood, in numba.
+
+The model is driven by the recorded channel inputs (already passed through the
+channels' fixed linear stages, e.g. the canal model) at the recording's rate:
+
+    per channel c:  x_c -> parametric stages (Tustin) -> nonlinearity -> q_c
+                    d_c(t) = g_c(t) q_c(t - tau_c)           (linear interpolation)
+    u_hat = out_nl( sum_c  K_c (1 + T_c s) H_nm(s) d_c )    (Tustin, one recursion)
+
+Initial conditions (``periodic``): the forcing functions are periodic in the
+record length, so the record is treated as one period: delays read across the
+start from the end of the record, and every recursion is first run over the
+last ``warm`` samples, so the model starts in (near) periodic steady state as
+the pilot, who was already tracking, did.  With ``periodic=False`` the model
+starts from rest (zero state, zero input before t = 0).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .._jit import njit, pjit
+from ._blocks import (MOD_NONE, NL_DEADZONE, NL_NONE, STAGE_FIXED, STAGE_NONE, modulation,
+                      nonlinearity, param_or, stage_tf, tustin)
+
+# Layout of the plan's integer channel table (one row per channel).
+CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, \
+    CH_MOD_P0, CH_NSTAGES, CH_SOURCE = range(11)
+CH_NFIELDS = 12
+# Float channel table.
+CHF_GAIN_CONST, CHF_SIGN = range(2)
+CHF_NFIELDS = 2
+# Output table.
+OUT_OMEGA, OUT_ZETA, OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1 = range(5)
+OUT_NFIELDS = 5
+
+
+@njit
+def _filter_biquad(x, B0, B1, B2, A1, A2, periodic, warm, out):
+    """Direct-form-I biquad of x into out, periodic warm start or from rest."""
+    n = x.shape[0]
+    x1 = 0.0
+    x2 = 0.0
+    y1 = 0.0
+    y2 = 0.0
+    if periodic:
+        start = n - warm if warm < n else 0
+        if start > 0:
+            x1 = x[start - 1]
+            x2 = x[start - 2] if start >= 2 else 0.0
+        for k in range(start, n):
+            xk = x[k]
+            yk = B0 * xk + B1 * x1 + B2 * x2 - A1 * y1 - A2 * y2
+            x2 = x1
+            x1 = xk
+            y2 = y1
+            y1 = yk
+    for k in range(n):
+        xk = x[k]
+        yk = B0 * xk + B1 * x1 + B2 * x2 - A1 * y1 - A2 * y2
+        x2 = x1
+        x1 = xk
+        y2 = y1
+        y1 = yk
+        out[k] = yk
+
+
+@njit
+def _tap(src, j, n, periodic):
+    """src[j] with periodic wrap, or rest (0 before the start, last value after the end)."""
+    if periodic:
+        j = j % n
+        return src[j]
+    if j < 0:
+        return 0.0
+    if j >= n:
+        return src[n - 1]
+    return src[j]
+
+
+@njit
+def _accumulate_delayed(v, src, m, c0, c1, c2, c3, periodic):
+    """v[k] += c0 src[k-m] + c1 src[k-m-1] + c2 src[k-m-2] + c3 src[k-m-3].
+
+    The fractional delay (linear interpolation) and the Tustin numerator of the
+    channel fold into these four taps.  The bulk of the record has no
+    wrap-around and runs as a branch-free loop that LLVM vectorises.
+    """
+    n = src.shape[0]
+    lo = m + 3
+    if lo < 0:
+        lo = 0
+    hi = n + m
+    if hi > n:
+        hi = n
+    if lo > hi:
+        lo = hi
+    for k in range(0, lo):
+        j = k - m
+        v[k] += (c0 * _tap(src, j, n, periodic) + c1 * _tap(src, j - 1, n, periodic)
+                 + c2 * _tap(src, j - 2, n, periodic) + c3 * _tap(src, j - 3, n, periodic))
+    for k in range(lo, hi):
+        j = k - m
+        v[k] += c0 * src[j] + c1 * src[j - 1] + c2 * src[j - 2] + c3 * src[j - 3]
+    for k in range(max(hi, lo), n):
+        j = k - m
+        v[k] += (c0 * _tap(src, j, n, periodic) + c1 * _tap(src, j - 1, n, periodic)
+                 + c2 * _tap(src, j - 2, n, periodic) + c3 * _tap(src, j - 3, n, periodic))
+
+
+@njit
+def _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind, mod_p, periodic):
+    """Like _accumulate_delayed, for a channel whose gain is modulated in time."""
+    n = src.shape[0]
+    d1 = 0.0
+    d2 = 0.0
+    start = -2 if periodic else 0
+    for k in range(start, n):
+        j = k - m
+        dk = (1.0 - f) * _tap(src, j, n, periodic) + f * _tap(src, j - 1, n, periodic)
+        dk *= modulation(mod_kind, ((k + n) % n) / n, mod_p)
+        if k >= 0:
+            v[k] += B0 * dk + B1 * d1 + B2 * d2
+        d2 = d1
+        d1 = dk
+
+
+@njit
+def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
+                  y, q, v):
+    """Pilot-model response for full parameter vector ``theta`` into ``y``.
+
+    ``q`` and ``v`` are work buffers of the record's length.  Returns False if
+    the response is not finite (an unstable or degenerate parameter vector).
+    """
+    n_ch = X.shape[0]
+    n = X.shape[1]
+    wn = theta[out_int[OUT_OMEGA]]
+    zn = theta[out_int[OUT_ZETA]]
+    w2 = wn * wn
+    # Common Tustin denominator of H_nm (numerator differs per channel).
+    _, _, _, A1, A2 = tustin(w2, 0.0, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
+    for k in range(n):
+        v[k] = 0.0
+    for c in range(n_ch):
+        src = X[c]
+        nst = ch_int[c, CH_NSTAGES]
+        for s in range(nst):
+            kind = st_int[c, s, 0]
+            if kind == STAGE_FIXED or kind == STAGE_NONE:
+                continue  # fixed stages are already applied to X
+            b0, b1, b2, a0, a1, a2 = stage_tf(kind, param_or(theta, st_int[c, s, 1], 0.0),
+                                              param_or(theta, st_int[c, s, 2], 0.0),
+                                              st_const[c, s])
+            sB0, sB1, sB2, sA1, sA2 = tustin(b0, b1, b2, a0, a1, a2, dt)
+            _filter_biquad(src, sB0, sB1, sB2, sA1, sA2, periodic, warm, q)
+            src = q
+        nl = ch_int[c, CH_NL_KIND]
+        if nl == NL_DEADZONE:
+            dz = param_or(theta, ch_int[c, CH_NL_P0], 0.0)
+            for k in range(n):
+                xk = src[k]
+                a = abs(xk) - dz
+                a = a if a > 0.0 else 0.0
+                q[k] = a if xk >= 0.0 else -a
+            src = q
+        elif nl != NL_NONE:
+            p0 = param_or(theta, ch_int[c, CH_NL_P0], 0.0)
+            p1 = param_or(theta, ch_int[c, CH_NL_P1], 0.0)
+            for k in range(n):
+                q[k] = nonlinearity(nl, src[k], p0, p1)
+            src = q
+        gain = ch_float[c, CHF_GAIN_CONST] * ch_float[c, CHF_SIGN] \
+            * param_or(theta, ch_int[c, CH_GAIN0], 1.0) * param_or(theta, ch_int[c, CH_GAIN1], 1.0)
+        lead = param_or(theta, ch_int[c, CH_LEAD], 0.0)
+        kg = gain * w2
+        B0, B1, B2, _, _ = tustin(kg, kg * lead, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
+        dd = theta[ch_int[c, CH_DELAY]] / dt
+        if not (abs(dd) < n - 4):
+            return False
+        m = int(math.floor(dd))
+        f = dd - m
+        mod_kind = ch_int[c, CH_MOD_KIND]
+        if mod_kind == MOD_NONE:
+            _accumulate_delayed(v, src, m, B0 * (1.0 - f), B0 * f + B1 * (1.0 - f),
+                                B1 * f + B2 * (1.0 - f), B2 * f, periodic)
+        else:
+            _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind,
+                                  param_or(theta, ch_int[c, CH_MOD_P0], 0.0), periodic)
+    # The common recursion through H_nm; (v - A2 y2) - A1 y1 keeps one
+    # multiply-add on the loop-carried path.
+    y1 = 0.0
+    y2 = 0.0
+    if periodic:
+        start = n - warm if warm < n else 0
+        for k in range(start, n):
+            yk = (v[k] - A2 * y2) - A1 * y1
+            y2 = y1
+            y1 = yk
+    for k in range(n):
+        yk = (v[k] - A2 * y2) - A1 * y1
+        y2 = y1
+        y1 = yk
+        y[k] = yk
+    out_nl = out_int[OUT_NL_KIND]
+    if out_nl != NL_NONE:
+        o0 = param_or(theta, out_int[OUT_NL_P0], 0.0)
+        o1 = param_or(theta, out_int[OUT_NL_P1], 0.0)
+        for k in range(n):
+            y[k] = nonlinearity(out_nl, y[k], o0, o1)
+    return math.isfinite(y1) and math.isfinite(y2)
+
+
+@njit
+def neg_log_lik_from_sse(sse, n, s2_floor):
+    """Eq. 4 with the output-error variance profiled out: N/2 ln(sse/N) + N/2.
+
+    The variance is floored at ``s2_floor`` so a perfect fit gives a finite
+    value instead of -inf.  Returns (value, floored).
+    """
+    if not math.isfinite(sse):
+        return np.inf, False
+    s2 = sse / n
+    floored = False
+    if s2 < s2_floor:
+        s2 = s2_floor
+        floored = True
+    return 0.5 * n * math.log(s2) + 0.5 * n, floored
+
+
+@njit
+def neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
+                    s2_floor, y, q, v):
+    """-ln L (Eq. 4) for one full parameter vector; returns (value, floored)."""
+    ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
+                       warm, y, q, v)
+    if not ok:
+        return np.inf, False
+    sse = 0.0
+    for k in range(u.shape[0]):
+        r = u[k] - y[k]
+        sse += r * r
+    return neg_log_lik_from_sse(sse, u.shape[0], s2_floor)
+
+
+@pjit
+def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_const, out_int,
+                      dt, periodic, warm, s2_floor, n_chunks, out, floored):
+    """-ln L for every row of ``free`` (free parameters), in parallel over rows.
+
+    Rows are split into ``n_chunks`` contiguous chunks, one per thread, so each
+    thread allocates its work buffers once (prange over independent parameter
+    vectors, never over time steps).
+    """
+    m = free.shape[0]
+    n = u.shape[0]
+    for ch in numba.prange(n_chunks):
+        lo = (ch * m) // n_chunks
+        hi = ((ch + 1) * m) // n_chunks
+        y = np.empty(n)
+        q = np.empty(n)
+        v = np.empty(n)
+        theta = base.copy()
+        for r in range(lo, hi):
+            for j in range(free_idx.shape[0]):
+                theta[free_idx[j]] = free[r, j]
+            val, fl = neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int,
+                                      dt, periodic, warm, s2_floor, y, q, v)
+            out[r] = val
+            floored[r] = fl
+
+
+@njit
+def response(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm):
+    """Allocate and return (u_hat, ok)."""
+    n = X.shape[1]
+    y = np.empty(n)
+    q = np.empty(n)
+    v = np.empty(n)
+    ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
+                       warm, y, q, v)
+    return y, ok

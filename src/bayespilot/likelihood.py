@@ -1,0 +1,224 @@
+"""The time-domain likelihood of Eq. 4: a pilot model driven by a recording's inputs.
+
+-ln L(theta) = N/2 ln s2(theta) + 1/(2 s2(theta)) sum_k eps(k|theta)^2,  eps = u - u_hat(theta)
+
+with the output-error variance s2 profiled out (s2 = mean eps^2), which gives
+N/2 ln(mean eps^2) + N/2.  u_hat is simulated from the MEASURED e and
+theta_ddot_m at the recording's rate (Tustin discretisation, fractional
+delays by linear interpolation; see ``kernels/_response.py``).
+
+:class:`Likelihood` binds a model to a recording once (it precomputes the
+channel inputs, e.g. the canal output i) and then evaluates single parameter
+vectors or whole populations (:meth:`Likelihood.batch`, parallel over the
+population), which is what the genetic algorithm and emcee call.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Mapping, Sequence
+
+import numba
+import numpy as np
+from scipy import signal
+
+from .kernels import _blocks as B
+from .kernels import _response as R
+from .model import FixedFilter, PilotModel
+from .recording import Recording
+
+__all__ = ["Likelihood", "PerfectFitWarning", "channel_inputs", "neg_log_lik", "model_response", "vaf"]
+
+INITIAL_CONDITIONS = ("periodic", "rest")
+
+
+class PerfectFitWarning(RuntimeWarning):
+    """The model reproduces u to round-off, so s2 was floored and -ln L is a bound."""
+
+
+def _source_signal(recording: Recording, source: str) -> np.ndarray:
+    if source == "e":
+        return recording.e
+    if source == "theta_ddot_m":
+        return recording.theta_ddot_m
+    if source in ("theta_m", "theta"):
+        if "theta" not in recording:
+            raise ValueError(f"{recording.source or 'recording'}: the model needs the 'theta' "
+                             f"column (source {source!r}), which this recording does not have")
+        th = recording["theta"]
+        return th * recording.motion_gain if source == "theta_m" else th
+    raise ValueError(f"unknown source {source!r}")
+
+
+def channel_inputs(model: PilotModel, recording: Recording, initial: str = "periodic") -> np.ndarray:
+    """The recorded source of each channel passed through its fixed stages.
+
+    Parameters
+    ----------
+    model : PilotModel
+    recording : Recording
+    initial : {"periodic", "rest"}
+        ``"periodic"`` filters as if the record repeats (two extra periods of
+        warm-up, so the canal output is in periodic steady state);
+        ``"rest"`` starts the filters from zero state.
+
+    Returns
+    -------
+    ndarray, shape (n_channels, n_samples)
+    """
+    if initial not in INITIAL_CONDITIONS:
+        raise ValueError(f"initial must be one of {INITIAL_CONDITIONS}, got {initial!r}")
+    n = recording.n_samples
+    X = np.empty((len(model.channels), n))
+    for c, ch in enumerate(model.channels):
+        x = np.asarray(_source_signal(recording, ch.source), dtype=float)
+        for st in ch.stages:
+            if not isinstance(st, FixedFilter):
+                continue
+            # The same Tustin rule as the kernels' parametric stages.
+            b, a = signal.bilinear(st.num, st.den, fs=recording.sample_rate_hz)
+            if initial == "periodic":
+                x = signal.lfilter(b, a, np.tile(x, 3))[-n:]
+            else:
+                x = signal.lfilter(b, a, x)
+        X[c] = x
+    return X
+
+
+class Likelihood:
+    """Eq. 4 for one model and one recording, evaluated fast and in batches.
+
+    Parameters
+    ----------
+    model : PilotModel
+    recording : Recording
+    initial : {"periodic", "rest"}, default "periodic"
+        How the model's start-up is treated (see module docs and
+        ``docs/faithfulness.md``).
+    warmup : float, default 5.0
+        Seconds of the record's end used to warm up each recursion when
+        ``initial="periodic"``.
+
+    Examples
+    --------
+    >>> from bayespilot.model import paper_model
+    >>> from bayespilot.simulate import simulate
+    >>> rec = simulate(paper_model(), task="FD", motion_gain=1.0, seed=1, duration=10.0).recording
+    >>> lik = Likelihood(paper_model(), rec)
+    >>> bool(lik.neg_log_lik(paper_model().defaults) < 0)
+    True
+    """
+
+    def __init__(self, model: PilotModel, recording: Recording, *, initial: str = "periodic",
+                 warmup: float = 5.0) -> None:
+        if not isinstance(model, PilotModel):
+            raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+        if not isinstance(recording, Recording):
+            raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+        if not (math.isfinite(warmup) and warmup >= 0):
+            raise ValueError(f"warmup must be a finite number of seconds >= 0, got {warmup!r}")
+        self.model = model
+        self.recording = recording
+        self.initial = initial
+        self.X = np.ascontiguousarray(channel_inputs(model, recording, initial))
+        self.u = np.ascontiguousarray(recording.u, dtype=float)
+        self.dt = recording.dt
+        self.n = recording.n_samples
+        self.warm = int(min(self.n, round(warmup * recording.sample_rate_hz)))
+        self.periodic = initial == "periodic"
+        # Floor of the output-error variance: a residual 1e-12 of rms(u).
+        self.s2_floor = 1e-24 * float(np.mean(self.u**2)) + 1e-300
+        self._plan = model.plan
+        self._base = model.full_vector()
+        self._free_idx = model.free_index
+
+    # -- helpers ---------------------------------------------------------------
+    def _theta(self, params) -> np.ndarray:
+        return self.model.full_vector(params)
+
+    def _args(self):
+        p = self._plan
+        return (p.ch_int, p.ch_float, p.st_int, p.st_const, p.out_int)
+
+    # -- single evaluations ----------------------------------------------------
+    def response(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+        """Model output u_hat at ``params`` (by name, or the free vector in order)."""
+        theta = self._theta(params)
+        y, ok = R.response(theta, self.X, *self._args(), self.dt, self.periodic, self.warm)
+        if not ok:
+            y[:] = np.nan
+        return y
+
+    def residual(self, params) -> np.ndarray:
+        """Output error eps = u - u_hat."""
+        return self.u - self.response(params)
+
+    def neg_log_lik(self, params) -> float:
+        """-ln L (Eq. 4, s2 profiled); +inf for an unstable parameter vector.
+
+        Warns with :class:`PerfectFitWarning` when the residual is at round-off
+        level: the variance is then floored and the value is a finite bound.
+        """
+        theta = self._theta(params)
+        y = np.empty(self.n)
+        q = np.empty(self.n)
+        v = np.empty(self.n)
+        val, floored = R.neg_log_lik_one(theta, self.X, self.u, *self._args(), self.dt,
+                                         self.periodic, self.warm, self.s2_floor, y, q, v)
+        if floored:
+            warnings.warn("the model reproduces u to round-off; the output-error variance was "
+                          "floored, so -ln L is a finite bound, not an optimum", PerfectFitWarning,
+                          stacklevel=2)
+        return float(val)
+
+    def vaf(self, params) -> float:
+        """Variance accounted for, 1 - var(eps)/var(u), in percent."""
+        return vaf(self.u, self.response(params))
+
+    # -- populations -------------------------------------------------------------
+    def batch(self, free: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """-ln L for every row of ``free`` (free-parameter vectors, shape (M, n_free)).
+
+        Runs in parallel over rows on numba's threads.  Non-finite or unstable
+        rows give +inf.
+        """
+        free = np.ascontiguousarray(free, dtype=float)
+        if free.ndim != 2 or free.shape[1] != self.model.n_free:
+            raise ValueError(f"free must have shape (M, {self.model.n_free}) "
+                             f"({', '.join(self.model.parameter_names)}), got {free.shape}")
+        m = free.shape[0]
+        if out is None:
+            out = np.empty(m)
+        floored = np.zeros(m, dtype=np.bool_)
+        n_chunks = max(1, min(m, numba.get_num_threads()))
+        R.neg_log_lik_batch(free, self._free_idx, self._base, self.X, self.u, *self._args(),
+                            self.dt, self.periodic, self.warm, self.s2_floor, n_chunks, out,
+                            floored)
+        out[~np.isfinite(out)] = np.inf
+        return out
+
+
+def model_response(model: PilotModel, recording: Recording, params, *, initial: str = "periodic") -> np.ndarray:
+    """Model output u_hat for ``recording`` at ``params`` (see :class:`Likelihood`)."""
+    return Likelihood(model, recording, initial=initial).response(params)
+
+
+def neg_log_lik(model: PilotModel, recording: Recording, params, *, initial: str = "periodic") -> float:
+    """-ln L of Eq. 4 for ``recording`` at ``params`` (see :class:`Likelihood`).
+
+    Examples
+    --------
+    >>> from bayespilot.model import paper_model
+    >>> from bayespilot.simulate import simulate
+    >>> rec = simulate(paper_model(), task="FT", motion_gain=1.0, seed=2, duration=10.0).recording
+    >>> value = neg_log_lik(paper_model(), rec, paper_model().defaults)
+    """
+    return Likelihood(model, recording, initial=initial).neg_log_lik(params)
+
+
+def vaf(u: np.ndarray, u_hat: np.ndarray) -> float:
+    """Variance accounted for, 100 (1 - var(u - u_hat) / var(u)), percent."""
+    u = np.asarray(u, float)
+    u_hat = np.asarray(u_hat, float)
+    return float(100.0 * (1.0 - np.var(u - u_hat) / np.var(u)))

@@ -1,0 +1,622 @@
+"""The multimodal pilot model (Fig. 4 of Pool et al. 2012) as composable parts.
+
+A :class:`PilotModel` is a set of parallel :class:`Channel` objects that all
+feed one neuromuscular block H_nm, plus an optional output nonlinearity.  A
+channel takes a source signal (``"e"``, ``"theta_ddot_m"``, ...), passes it
+through linear stages (fixed, like the canal model, or with parameters, like a
+washout), a static nonlinearity (the dead-zone threshold), a time delay and an
+equalisation gain with optional lead:
+
+    u = H_nm(s) sum_c  sign_c K_c (1 + T_c s) e^{-tau_c s} g_c(t) NL_c( H_c(s) x_c )  + n
+
+The paper's model (:func:`paper_model`) is two channels: visual
+``K_v (1 + T_vl s) e^{-tau_v s} e`` and vestibular
+``-K_m e^{-tau_m s} DZ(H_scc(s) theta_ddot_m)``.
+
+Extension point
+---------------
+Models are values: :meth:`PilotModel.add_stage`, :meth:`PilotModel.add_channel`,
+:meth:`PilotModel.with_nonlinearity`, :meth:`PilotModel.with_modulation` and
+:meth:`PilotModel.with_output` return new models with the extra parameters
+registered.  :meth:`PilotModel.plan` compiles any such model into the plain
+arrays that the numba simulator and likelihood interpret, so an extension
+needs no change to the simulator, the likelihood or the fitters.  A new kind
+of linear block or nonlinearity is one new code in ``kernels/_blocks.py``
+plus a small class here.
+
+Sign convention
+---------------
+The motion channel enters with a minus sign (``sign=-1``), so K_m > 0 as in
+Table 3: a nose-up acceleration makes the pilot push the stick nose-down,
+which is the stabilising (rate-damping) feedback the paper describes.  With a
+plus sign the closed loop of Fig. 2 is unstable for the Table 3 parameters
+(tested in ``tests/test_simulate.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from . import presets
+from .kernels import _blocks as B
+from .kernels import _response as R
+
+__all__ = [
+    "Parameter", "FixedFilter", "Washout", "SecondOrderWashout", "MotionSystem",
+    "FirstOrderLag", "DeadZone", "SoftDeadZone", "Saturation", "LinearDrift", "Channel",
+    "PilotModel", "Plan", "paper_model", "SOURCES", "semicircular_canal",
+]
+
+#: Source signals a channel may take, and what they are.
+SOURCES = {
+    "e": "tracking error shown on the display, rad",
+    "theta_ddot_m": "commanded (presented) pitch acceleration, rad/s^2",
+    "theta_m": "presented pitch attitude K_theta * theta, rad (needs the theta column)",
+    "theta": "controlled element pitch attitude, rad",
+}
+SOURCE_CODES = {"e": 0, "theta_ddot_m": 1, "theta_m": 2, "theta": 3}
+MAX_STAGES = 4
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A named model parameter with bounds (the prior support) and a default.
+
+    Examples
+    --------
+    >>> Parameter("K_v", 0.0, 10.0, 1.0).lower
+    0.0
+    """
+
+    name: str
+    lower: float
+    upper: float
+    default: float
+    unit: str = "-"
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.name.isidentifier():
+            raise ValueError(f"parameter name must be an identifier, got {self.name!r}")
+        if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < self.upper):
+            raise ValueError(f"{self.name}: need finite lower < upper, got [{self.lower}, {self.upper}]")
+        if not (self.lower <= self.default <= self.upper):
+            raise ValueError(f"{self.name}: default {self.default} outside [{self.lower}, {self.upper}]")
+
+
+# --- linear stages ---------------------------------------------------------------
+@dataclass(frozen=True)
+class FixedFilter:
+    """A fixed (parameter-free) proper transfer function of order <= 2.
+
+    Parameters
+    ----------
+    num, den : sequence of float
+        Coefficients in powers of s, highest first (as in ``scipy.signal``).
+    """
+
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+    kind = B.STAGE_FIXED
+    parameters: tuple[str, ...] = field(default=(), init=False)
+
+    def __post_init__(self) -> None:
+        num = tuple(float(x) for x in self.num)
+        den = tuple(float(x) for x in self.den)
+        if len(den) > 3 or len(num) > len(den) or not any(den):
+            raise ValueError("FixedFilter needs a proper transfer function of order <= 2")
+        object.__setattr__(self, "num", num)
+        object.__setattr__(self, "den", den)
+
+    def constants(self) -> np.ndarray:
+        b = np.zeros(3)
+        a = np.zeros(3)
+        b[: len(self.num)] = self.num[::-1]
+        a[: len(self.den)] = self.den[::-1]
+        return np.concatenate([b, a])
+
+
+@dataclass(frozen=True)
+class Washout:
+    """First-order washout (high-pass) s / (s + omega), omega a parameter (rad/s)."""
+
+    omega: str = "omega_w"
+    kind = B.STAGE_HIGHPASS1
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.omega,)
+
+
+@dataclass(frozen=True)
+class SecondOrderWashout:
+    """Second-order washout s^2 / (s^2 + 2 zeta omega s + omega^2)."""
+
+    omega: str = "omega_w"
+    zeta: str = "zeta_w"
+    kind = B.STAGE_HIGHPASS2
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.omega, self.zeta)
+
+
+@dataclass(frozen=True)
+class MotionSystem:
+    """Second-order motion-platform dynamics omega^2 / (s^2 + 2 zeta omega s + omega^2)."""
+
+    omega: str = "omega_ms"
+    zeta: str = "zeta_ms"
+    kind = B.STAGE_LOWPASS2
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.omega, self.zeta)
+
+
+@dataclass(frozen=True)
+class FirstOrderLag:
+    """First-order lag 1 / (T s + 1), T a parameter (s)."""
+
+    T: str = "T_lag"
+    kind = B.STAGE_LOWPASS1
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.T,)
+
+
+# --- nonlinearities --------------------------------------------------------------
+@dataclass(frozen=True)
+class DeadZone:
+    """Dead zone of half-width ``delta``: sign(x) max(|x| - delta, 0) (Fig. 3)."""
+
+    delta: str = "delta_abs"
+    kind = B.NL_DEADZONE
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.delta,)
+
+
+@dataclass(frozen=True)
+class SoftDeadZone:
+    """A dead zone with rounded corners of width ``width`` (tends to DeadZone as width -> 0)."""
+
+    delta: str = "delta_abs"
+    width: str = "w_soft"
+    kind = B.NL_SOFT_DEADZONE
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.delta, self.width)
+
+
+@dataclass(frozen=True)
+class Saturation:
+    """Clipping at +- ``limit``."""
+
+    limit: str = "u_max"
+    kind = B.NL_SATURATION
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.limit,)
+
+
+@dataclass(frozen=True)
+class LinearDrift:
+    """Channel gain times 1 + rate (t/T - 1/2): a gain that drifts linearly over the run."""
+
+    rate: str = "drift"
+    kind = B.MOD_LINEAR
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return (self.rate,)
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One parallel path of the pilot model, from a source signal to the H_nm input.
+
+    Parameters
+    ----------
+    name : str
+        Channel name, e.g. ``"visual"``.
+    source : str
+        One of :data:`SOURCES`.
+    delay : str
+        Name of the time-delay parameter (s).
+    gain : tuple of str
+        Names of parameters whose product is the channel gain (empty: 1).
+    stages : tuple
+        Linear blocks applied to the source, in order (FixedFilter, Washout, ...).
+    nonlinearity : DeadZone, SoftDeadZone, Saturation or None
+    lead : str or None
+        Name of the lead time constant T in (1 + T s), or None.
+    sign : {+1, -1}
+        How the channel enters the sum.
+    gain_const : float
+        A constant factor on the gain.
+    modulation : LinearDrift or None
+    """
+
+    name: str
+    source: str
+    delay: str
+    gain: tuple[str, ...] = ()
+    stages: tuple = ()
+    nonlinearity: object = None
+    lead: str | None = None
+    sign: float = 1.0
+    gain_const: float = 1.0
+    modulation: object = None
+
+    def __post_init__(self) -> None:
+        if self.source not in SOURCES:
+            raise ValueError(f"channel {self.name!r}: unknown source {self.source!r}; "
+                             f"choose from {', '.join(SOURCES)}")
+        if self.sign not in (1.0, -1.0, 1, -1):
+            raise ValueError(f"channel {self.name!r}: sign must be +1 or -1")
+        if len(self.gain) > 2:
+            raise ValueError(f"channel {self.name!r}: at most two gain parameters")
+        if len(self.stages) > MAX_STAGES:
+            raise ValueError(f"channel {self.name!r}: at most {MAX_STAGES} stages")
+        object.__setattr__(self, "gain", tuple(self.gain))
+        object.__setattr__(self, "stages", tuple(self.stages))
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        names = [self.delay, *self.gain]
+        if self.lead:
+            names.append(self.lead)
+        for st in self.stages:
+            names.extend(st.parameters)
+        for blk in (self.nonlinearity, self.modulation):
+            if blk is not None:
+                names.extend(blk.parameters)
+        return tuple(names)
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """A model compiled to the arrays the numba kernels interpret (see kernels/_response.py)."""
+
+    names: tuple[str, ...]
+    ch_int: np.ndarray
+    ch_float: np.ndarray
+    st_int: np.ndarray
+    st_const: np.ndarray
+    out_int: np.ndarray
+    sources: tuple[str, ...]
+
+
+def semicircular_canal() -> FixedFilter:
+    """Reduced canal model, Eq. 1: K_scc (1 + T1 s) / (1 + T2 s), IPUT per rad/s^2."""
+    return FixedFilter((presets.K_SCC * presets.T_SCC1, presets.K_SCC), (presets.T_SCC2, 1.0))
+
+
+def _paper_parameters() -> tuple[Parameter, ...]:
+    units = presets.PARAMETER_UNITS
+    desc = {
+        "K_v": "visual gain", "T_vl": "visual lead time constant", "tau_v": "visual delay",
+        "K_m": "motion gain", "tau_m": "motion delay", "omega_nm": "neuromuscular frequency",
+        "zeta_nm": "neuromuscular damping", "delta_abs": "absolute threshold on canal output",
+    }
+    fd = presets.TABLE3["FD"]
+    return tuple(Parameter(n, *presets.TABLE1_BOUNDS[n], fd[n], units[n], desc[n])
+                 for n in presets.PARAMETER_NAMES)
+
+
+@dataclass(frozen=True, eq=False)
+class PilotModel:
+    """A multimodal pilot model: channels, neuromuscular block, parameters.
+
+    Use :func:`paper_model` for the model of Pool et al. (2012) and the
+    ``add_*``/``with_*`` methods to extend it.
+
+    Parameters
+    ----------
+    channels : sequence of Channel
+    parameters : sequence of Parameter
+        Every parameter the channels refer to (order = full-vector order).
+    omega_nm, zeta_nm : str
+        Names of the neuromuscular frequency and damping parameters.
+    output : Saturation or None
+        A nonlinearity on the model output (e.g. control saturation).
+    fixed : mapping of str to float
+        Parameters held at a value (not estimated), e.g. ``{"delta_abs": 0}``.
+    name : str
+        A label for reports.
+    """
+
+    channels: tuple[Channel, ...]
+    parameters: tuple[Parameter, ...]
+    omega_nm: str = "omega_nm"
+    zeta_nm: str = "zeta_nm"
+    output: object = None
+    fixed: Mapping[str, float] = field(default_factory=dict)
+    name: str = "pilot model"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "channels", tuple(self.channels))
+        object.__setattr__(self, "parameters", tuple(self.parameters))
+        object.__setattr__(self, "fixed", dict(self.fixed))
+        known = [p.name for p in self.parameters]
+        if len(set(known)) != len(known):
+            raise ValueError("duplicate parameter names")
+        if len({c.name for c in self.channels}) != len(self.channels):
+            raise ValueError("duplicate channel names")
+        used = {self.omega_nm, self.zeta_nm}
+        for c in self.channels:
+            used.update(c.parameter_names)
+        if self.output is not None:
+            used.update(self.output.parameters)
+        missing = sorted(used - set(known))
+        if missing:
+            raise ValueError(f"parameters used but not declared: {', '.join(missing)}")
+        for k, v in self.fixed.items():
+            if k not in known:
+                raise ValueError(f"cannot fix unknown parameter {k!r}; known: {', '.join(known)}")
+            if not math.isfinite(float(v)):
+                raise ValueError(f"fixed value of {k} must be finite")
+
+    # -- parameter bookkeeping -----------------------------------------------
+    @property
+    def all_names(self) -> tuple[str, ...]:
+        """Every parameter name, in full-vector order."""
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        """Names of the free (estimated) parameters, in vector order."""
+        return tuple(p.name for p in self.parameters if p.name not in self.fixed)
+
+    @property
+    def n_free(self) -> int:
+        return len(self.parameter_names)
+
+    def parameter(self, name: str) -> Parameter:
+        for p in self.parameters:
+            if p.name == name:
+                return p
+        raise KeyError(f"unknown parameter {name!r}; known: {', '.join(self.all_names)}")
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) arrays of the free parameters."""
+        ps = [self.parameter(n) for n in self.parameter_names]
+        return np.array([p.lower for p in ps]), np.array([p.upper for p in ps])
+
+    @property
+    def defaults(self) -> dict[str, float]:
+        return {p.name: p.default for p in self.parameters}
+
+    @cached_property
+    def free_index(self) -> np.ndarray:
+        """Positions of the free parameters in the full vector."""
+        full = self.all_names
+        return np.array([full.index(n) for n in self.parameter_names], dtype=np.int64)
+
+    def full_vector(self, values: Mapping[str, float] | Sequence[float] | np.ndarray | None = None) -> np.ndarray:
+        """Full parameter vector from free values (by name or in order), defaults and fixed values.
+
+        Raises
+        ------
+        ValueError
+            On unknown or misspelled names, a wrong length, or non-finite values.
+        """
+        full = np.array([p.default for p in self.parameters], dtype=float)
+        names = self.all_names
+        for k, v in self.fixed.items():
+            full[names.index(k)] = float(v)
+        if values is None:
+            return full
+        if isinstance(values, Mapping):
+            unknown = [k for k in values if k not in names]
+            if unknown:
+                raise ValueError(f"unknown parameter(s) {', '.join(map(repr, unknown))}; "
+                                 f"this model has {', '.join(names)}")
+            for k, v in values.items():
+                if k in self.fixed:
+                    continue
+                try:
+                    x = float(v)
+                except (TypeError, ValueError):
+                    raise ValueError(f"parameter {k} must be a number, got {v!r}") from None
+                if not math.isfinite(x):
+                    raise ValueError(f"parameter {k} must be finite, got {v!r}")
+                full[names.index(k)] = x
+            return full
+        arr = np.asarray(values, dtype=float)
+        if arr.shape != (self.n_free,):
+            raise ValueError(f"expected {self.n_free} free parameter values "
+                             f"({', '.join(self.parameter_names)}), got shape {arr.shape}")
+        if not np.all(np.isfinite(arr)):
+            raise ValueError("parameter values must be finite")
+        full[self.free_index] = arr
+        return full
+
+    def free_vector(self, values: Mapping[str, float] | None = None) -> np.ndarray:
+        """Free-parameter vector from values by name (defaults for the rest)."""
+        return self.full_vector(values)[self.free_index]
+
+    def as_dict(self, vector: np.ndarray | Sequence[float], *, full: bool = False) -> dict[str, float]:
+        """Name -> value from a free (default) or full vector."""
+        vec = np.asarray(vector, dtype=float)
+        names = self.all_names if full else self.parameter_names
+        if vec.shape != (len(names),):
+            raise ValueError(f"expected {len(names)} values, got shape {vec.shape}")
+        return {n: float(x) for n, x in zip(names, vec)}
+
+    # -- building new models ----------------------------------------------------
+    def _with_params(self, new: Iterable[Parameter]) -> tuple[Parameter, ...]:
+        params = list(self.parameters)
+        have = {p.name for p in params}
+        for p in new:
+            if p.name not in have:
+                params.append(p)
+                have.add(p.name)
+        return tuple(params)
+
+    def _channel(self, name: str) -> int:
+        for i, c in enumerate(self.channels):
+            if c.name == name:
+                return i
+        raise KeyError(f"no channel {name!r}; channels: {', '.join(c.name for c in self.channels)}")
+
+    def _replace_channel(self, name: str, channel: Channel, params: Iterable[Parameter], label: str) -> "PilotModel":
+        chans = list(self.channels)
+        chans[self._channel(name)] = channel
+        return replace(self, channels=tuple(chans), parameters=self._with_params(params),
+                       name=f"{self.name} + {label}")
+
+    def fix(self, **values: float) -> "PilotModel":
+        """A model with some parameters held fixed, e.g. ``fix(delta_abs=0.0)``."""
+        fixed = dict(self.fixed)
+        fixed.update({k: float(v) for k, v in values.items()})
+        return replace(self, fixed=fixed)
+
+    def free(self, *names: str) -> "PilotModel":
+        """A model in which the named fixed parameters are estimated again."""
+        return replace(self, fixed={k: v for k, v in self.fixed.items() if k not in names})
+
+    def add_stage(self, channel: str, stage, parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Append a linear stage (e.g. :class:`Washout`) to a channel, before its nonlinearity."""
+        c = self.channels[self._channel(channel)]
+        return self._replace_channel(channel, replace(c, stages=c.stages + (stage,)), parameters,
+                                     f"{type(stage).__name__} on {channel}")
+
+    def with_nonlinearity(self, channel: str, nonlinearity, parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Replace a channel's nonlinearity (e.g. a :class:`SoftDeadZone` threshold)."""
+        c = self.channels[self._channel(channel)]
+        return self._replace_channel(channel, replace(c, nonlinearity=nonlinearity), parameters,
+                                     f"{type(nonlinearity).__name__} on {channel}")
+
+    def with_modulation(self, channel: str, modulation, parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Modulate a channel's gain over the run (e.g. :class:`LinearDrift`)."""
+        c = self.channels[self._channel(channel)]
+        return self._replace_channel(channel, replace(c, modulation=modulation), parameters,
+                                     f"{type(modulation).__name__} on {channel}")
+
+    def add_channel(self, channel: Channel, parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Add a parallel channel (e.g. an otolith channel)."""
+        return replace(self, channels=self.channels + (channel,),
+                       parameters=self._with_params(parameters),
+                       name=f"{self.name} + {channel.name} channel")
+
+    def with_output(self, output, parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Put a nonlinearity (e.g. :class:`Saturation`) on the model output."""
+        return replace(self, output=output, parameters=self._with_params(parameters),
+                       name=f"{self.name} + output {type(output).__name__}")
+
+    @property
+    def has_threshold(self) -> bool:
+        """True if some channel has a threshold that is estimated (not fixed at 0)."""
+        for c in self.channels:
+            nl = c.nonlinearity
+            if isinstance(nl, (DeadZone, SoftDeadZone)) and not (
+                    nl.delta in self.fixed and self.fixed[nl.delta] == 0.0):
+                return True
+        return False
+
+    # -- compile --------------------------------------------------------------
+    @cached_property
+    def plan(self) -> Plan:
+        """The model as kernel tables (cached)."""
+        names = self.all_names
+        idx = {n: i for i, n in enumerate(names)}
+
+        def ix(name):
+            return -1 if name is None else idx[name]
+
+        nc = len(self.channels)
+        ch_int = np.full((nc, R.CH_NFIELDS), -1, dtype=np.int64)
+        ch_float = np.zeros((nc, R.CHF_NFIELDS))
+        st_int = np.full((nc, MAX_STAGES, 3), -1, dtype=np.int64)
+        st_int[:, :, 0] = B.STAGE_NONE
+        st_const = np.zeros((nc, MAX_STAGES, 6))
+        for c, ch in enumerate(self.channels):
+            nl = ch.nonlinearity
+            ch_int[c, R.CH_NL_KIND] = B.NL_NONE if nl is None else nl.kind
+            if nl is not None:
+                ps = nl.parameters
+                ch_int[c, R.CH_NL_P0] = ix(ps[0])
+                ch_int[c, R.CH_NL_P1] = ix(ps[1]) if len(ps) > 1 else -1
+            ch_int[c, R.CH_DELAY] = ix(ch.delay)
+            ch_int[c, R.CH_GAIN0] = ix(ch.gain[0]) if len(ch.gain) > 0 else -1
+            ch_int[c, R.CH_GAIN1] = ix(ch.gain[1]) if len(ch.gain) > 1 else -1
+            ch_int[c, R.CH_LEAD] = ix(ch.lead)
+            mod = ch.modulation
+            ch_int[c, R.CH_MOD_KIND] = B.MOD_NONE if mod is None else mod.kind
+            ch_int[c, R.CH_MOD_P0] = -1 if mod is None else ix(mod.parameters[0])
+            ch_int[c, R.CH_NSTAGES] = len(ch.stages)
+            ch_int[c, R.CH_SOURCE] = SOURCE_CODES[ch.source]
+            ch_float[c, R.CHF_GAIN_CONST] = ch.gain_const
+            ch_float[c, R.CHF_SIGN] = float(ch.sign)
+            for s, st in enumerate(ch.stages):
+                st_int[c, s, 0] = st.kind
+                ps = st.parameters
+                st_int[c, s, 1] = ix(ps[0]) if len(ps) > 0 else -1
+                st_int[c, s, 2] = ix(ps[1]) if len(ps) > 1 else -1
+                if isinstance(st, FixedFilter):
+                    st_const[c, s] = st.constants()
+        out_int = np.full(R.OUT_NFIELDS, -1, dtype=np.int64)
+        out_int[R.OUT_OMEGA] = ix(self.omega_nm)
+        out_int[R.OUT_ZETA] = ix(self.zeta_nm)
+        out_int[R.OUT_NL_KIND] = B.NL_NONE if self.output is None else self.output.kind
+        if self.output is not None:
+            ps = self.output.parameters
+            out_int[R.OUT_NL_P0] = ix(ps[0])
+            out_int[R.OUT_NL_P1] = ix(ps[1]) if len(ps) > 1 else -1
+        return Plan(names, ch_int, ch_float, st_int, st_const, out_int,
+                    tuple(c.source for c in self.channels))
+
+    def summary(self) -> str:
+        """A readable description of the structure and parameters."""
+        lines = [f"{self.name}: {len(self.channels)} channel(s) -> H_nm({self.omega_nm}, {self.zeta_nm})"]
+        for c in self.channels:
+            parts = [c.source]
+            parts += [type(s).__name__ for s in c.stages]
+            if c.nonlinearity is not None:
+                parts.append(type(c.nonlinearity).__name__)
+            g = "*".join(c.gain) or "1"
+            lead = f"(1 + {c.lead} s)" if c.lead else ""
+            parts.append(f"{'-' if c.sign < 0 else '+'}{g}{lead} e^(-{c.delay} s)")
+            lines.append(f"  {c.name}: " + " -> ".join(parts))
+        lines.append("  parameters: " + ", ".join(
+            f"{p.name}" + (f"={self.fixed[p.name]:g} (fixed)" if p.name in self.fixed else "")
+            for p in self.parameters))
+        return "\n".join(lines)
+
+
+def paper_model(threshold: bool = True) -> PilotModel:
+    """The multimodal pilot model of Pool et al. (2012), Fig. 4 and Eq. 2-3.
+
+    Parameters
+    ----------
+    threshold : bool, default True
+        With ``False``, ``delta_abs`` is fixed at 0: the model without threshold
+        (the same model, one parameter fewer).
+
+    Examples
+    --------
+    >>> paper_model().parameter_names
+    ('K_v', 'T_vl', 'tau_v', 'K_m', 'tau_m', 'omega_nm', 'zeta_nm', 'delta_abs')
+    >>> paper_model(threshold=False).n_free
+    7
+    """
+    visual = Channel("visual", "e", delay="tau_v", gain=("K_v",), lead="T_vl")
+    vestibular = Channel("vestibular", "theta_ddot_m", delay="tau_m", gain=("K_m",),
+                         stages=(semicircular_canal(),), nonlinearity=DeadZone("delta_abs"),
+                         sign=-1.0)
+    model = PilotModel((visual, vestibular), _paper_parameters(), name="Pool et al. (2012)")
+    if not threshold:
+        model = replace(model.fix(delta_abs=0.0), name="Pool et al. (2012), no threshold")
+    return model

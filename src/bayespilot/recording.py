@@ -1,0 +1,209 @@
+"""The in-memory form of one tracking run: signals, sample rate and metadata.
+
+A :class:`Recording` is what every later stage consumes (likelihood, fits,
+posteriors, diagnosis).  It validates its own contents on construction, so a
+Recording that exists is a Recording that is fit to use; :mod:`bayespilot.io`
+turns files into Recordings and adds the file name to any error.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+__all__ = ["Recording", "RecordingError", "REQUIRED_SIGNALS", "OPTIONAL_SIGNALS", "TASKS"]
+
+#: Columns every recording must have (recording format, version 1).
+REQUIRED_SIGNALS = ("t", "e", "u", "theta_ddot_m")
+#: Columns the model may use when present.
+OPTIONAL_SIGNALS = ("theta", "f_t", "f_d")
+#: Allowed values of the ``task`` key.
+TASKS = ("FD", "FT", "other")
+
+
+class RecordingError(ValueError):
+    """A recording (in memory or on disk) is not valid.
+
+    The message names the file, when there is one, and the problem.
+    """
+
+
+@dataclass(frozen=True, eq=False)
+class Recording:
+    """One tracking run: equally spaced samples of the signals and what the run was.
+
+    Parameters
+    ----------
+    signals : mapping of str to ndarray
+        1-D float arrays of equal length, by column name.  Must hold ``t``,
+        ``e``, ``u`` and ``theta_ddot_m``; ``theta``, ``f_t`` and ``f_d`` are
+        used when present and any other column is kept.
+    sample_rate_hz : float
+        Samples per second; must agree with ``t``.
+    motion_gain : float
+        K_theta, the pitch motion cueing gain (0 means no motion).
+    task : {"FD", "FT", "other"}
+        Mainly disturbance rejection, mainly target following, or other.
+    metadata : mapping, optional
+        Every other key of the recording's JSON sidecar (``controlled_element_gain``,
+        ``controlled_element``, ``control_gain``, ``subject``, ``run``,
+        ``forcing``, ``notes`` and unknown keys), kept as given.
+    source : str, optional
+        Where the recording came from (a file stem), used in messages.
+
+    Raises
+    ------
+    RecordingError
+        If a required signal is missing, a signal is not finite or of another
+        length, ``t`` is not uniform or disagrees with ``sample_rate_hz``, or a
+        metadata value is out of range.
+    """
+
+    signals: Mapping[str, np.ndarray]
+    sample_rate_hz: float
+    motion_gain: float
+    task: str = "other"
+    metadata: Mapping[str, Any] = field(default_factory=dict)
+    source: str | None = None
+
+    def __post_init__(self) -> None:
+        where = f"{self.source}: " if self.source else ""
+
+        def fail(msg: str) -> None:
+            raise RecordingError(where + msg)
+
+        if not isinstance(self.signals, Mapping):
+            fail("signals must be a mapping of column name to array")
+        missing = [c for c in REQUIRED_SIGNALS if c not in self.signals]
+        if missing:
+            fail(f"missing required column(s): {', '.join(missing)}")
+        clean: dict[str, np.ndarray] = {}
+        length = None
+        for name, values in self.signals.items():
+            try:
+                arr = np.asarray(values, dtype=np.float64)
+            except (TypeError, ValueError):
+                fail(f"column {name!r} is not numeric")
+            if arr.ndim != 1:
+                fail(f"column {name!r} must be one-dimensional, got shape {arr.shape}")
+            if length is None:
+                length = arr.size
+            elif arr.size != length:
+                fail(f"columns have unequal lengths ({name!r} has {arr.size}, expected {length})")
+            bad = ~np.isfinite(arr)
+            if bad.any():
+                k = int(np.argmax(bad))
+                fail(f"column {name!r} has a non-finite value ({arr[k]!r}) at sample {k}")
+            arr = arr.copy()
+            arr.setflags(write=False)
+            clean[str(name)] = arr
+        if length is None or length < 2:
+            fail("a recording needs at least 2 samples")
+        try:
+            rate = float(self.sample_rate_hz)
+        except (TypeError, ValueError):
+            fail(f"sample_rate_hz must be a number, got {self.sample_rate_hz!r}")
+        if not math.isfinite(rate) or rate <= 0:
+            fail(f"sample_rate_hz must be a positive finite number, got {self.sample_rate_hz!r}")
+        try:
+            kth = float(self.motion_gain)
+        except (TypeError, ValueError):
+            fail(f"motion_gain must be a number, got {self.motion_gain!r}")
+        if not math.isfinite(kth) or kth < 0:
+            fail(f"motion_gain must be a finite number >= 0, got {self.motion_gain!r}")
+        if self.task not in TASKS:
+            fail(f"task must be one of {', '.join(TASKS)}, got {self.task!r}")
+        t = clean["t"]
+        dt = 1.0 / rate
+        steps = np.diff(t)
+        if abs(t[0]) > 1e-6 * dt + 1e-12:
+            fail(f"t must start at 0, starts at {t[0]!r}")
+        # Uniform within a tolerance that allows for text round-off of t.
+        tol = 1e-6 * dt + 1e-9 * max(abs(t[-1]), 1.0)
+        if np.any(np.abs(steps - steps.mean()) > max(tol, 1e-4 * dt)):
+            k = int(np.argmax(np.abs(steps - steps.mean())))
+            fail(f"t is not uniformly spaced (step {steps[k]!r} s at sample {k + 1})")
+        if abs(steps.mean() - dt) > 1e-4 * dt:
+            fail(
+                f"t has a step of {steps.mean():.6g} s, which disagrees with "
+                f"sample_rate_hz = {rate:g} (step {dt:.6g} s)"
+            )
+        meta = dict(self.metadata)
+        if "controlled_element" in meta and "controlled_element_gain" in meta:
+            fail("give either controlled_element or controlled_element_gain, not both")
+        object.__setattr__(self, "signals", clean)
+        object.__setattr__(self, "sample_rate_hz", rate)
+        object.__setattr__(self, "motion_gain", kth)
+        object.__setattr__(self, "metadata", meta)
+
+    # -- convenience views -------------------------------------------------
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.signals[name]
+
+    def __contains__(self, name: object) -> bool:
+        return name in self.signals
+
+    @property
+    def t(self) -> np.ndarray:
+        """Time since the start of the run, s."""
+        return self.signals["t"]
+
+    @property
+    def e(self) -> np.ndarray:
+        """Tracking error shown on the display, rad."""
+        return self.signals["e"]
+
+    @property
+    def u(self) -> np.ndarray:
+        """Pilot control deflection, rad."""
+        return self.signals["u"]
+
+    @property
+    def theta_ddot_m(self) -> np.ndarray:
+        """Commanded pitch motion acceleration, rad/s^2."""
+        return self.signals["theta_ddot_m"]
+
+    @property
+    def n_samples(self) -> int:
+        """Number of samples."""
+        return int(self.signals["t"].size)
+
+    @property
+    def dt(self) -> float:
+        """Sample interval, s."""
+        return 1.0 / self.sample_rate_hz
+
+    @property
+    def duration(self) -> float:
+        """Length of the record, n_samples / sample_rate_hz, s."""
+        return self.n_samples / self.sample_rate_hz
+
+    @property
+    def control_gain(self) -> float:
+        """K_delta_u, the stick-to-control-input gain (default 0.69)."""
+        return float(self.metadata.get("control_gain", 0.69))
+
+    @property
+    def controlled_element(self) -> tuple[np.ndarray, np.ndarray]:
+        """Controlled element delta -> theta as (num, den) in powers of s, highest first."""
+        ce = self.metadata.get("controlled_element")
+        if ce is not None:
+            return np.asarray(ce["num"], float), np.asarray(ce["den"], float)
+        kc = float(self.metadata.get("controlled_element_gain", 4.0))
+        return np.array([kc]), np.array([1.0, 0.0, 0.0])
+
+    def with_signals(self, **signals: np.ndarray) -> "Recording":
+        """Return a copy with some signals replaced or added."""
+        new = dict(self.signals)
+        new.update(signals)
+        return Recording(new, self.sample_rate_hz, self.motion_gain, self.task,
+                         self.metadata, self.source)
+
+    def __repr__(self) -> str:
+        cols = ", ".join(self.signals)
+        src = f" from {self.source!r}" if self.source else ""
+        return (f"Recording({self.n_samples} samples at {self.sample_rate_hz:g} Hz, "
+                f"task={self.task}, K_theta={self.motion_gain:g}, columns=[{cols}]{src})")

@@ -1,0 +1,394 @@
+"""Simulate the closed-loop tracking task (Fig. 2) with a pilot model, to a Recording.
+
+The task (controlled element, control gain, forcing functions, motion gain,
+sample rate, duration) is a :class:`TrackingTask`; :meth:`TrackingTask.paper`
+is the preset of Pool et al. (2012).  :func:`simulate` integrates the loop at
+``oversample`` times the recording rate after a run-in, adds remnant per Eq. 6
+with K_n set directly or calibrated to a remnant fraction F_n (Eq. 7), and
+returns a :class:`Simulation` holding the Recording and the hidden truth.
+
+Remnant white-noise convention: w is white noise whose two-sided power
+spectral density is ``noise_psd`` (rad^2 s).  The default,
+``1 / sample_rate_hz``, is the same as unit-variance samples at the recording
+rate (MATLAB's ``randn`` at 100 Hz), which is the convention that reproduces
+the remnant gains of Table 4 (see ``docs/faithfulness.md``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Mapping
+
+import numpy as np
+from scipy import signal
+
+from . import presets
+from .forcing import Multisine
+from .kernels import _closed_loop as CL
+from .model import PilotModel, paper_model
+from .recording import Recording
+
+__all__ = ["TrackingTask", "Simulation", "simulate", "remnant", "calibrate_remnant_gain",
+           "remnant_fraction"]
+
+
+@dataclass(frozen=True, eq=False)
+class TrackingTask:
+    """A compensatory tracking task with motion feedback (Fig. 2).
+
+    Parameters
+    ----------
+    target, disturbance : Multisine
+        f_t (rad) and f_d (rad, inserted before the controlled element).
+    motion_gain : float
+        K_theta (0 = no motion).
+    controlled_element : (num, den)
+        delta -> theta transfer function in powers of s, highest first;
+        strictly proper with relative degree >= 2 (theta_ddot must not depend
+        on the derivative of the input).  Default K_c / s^2 with K_c = 4.
+    control_gain : float
+        K_delta_u.
+    sample_rate_hz : float
+        Rate of the recording.
+    duration : float
+        Measurement time T0, s.
+    run_in : float
+        Simulated time before the measurement window starts, s.
+    task : {"FD", "FT", "other"}
+        Label written to the recording.
+    """
+
+    target: Multisine
+    disturbance: Multisine
+    motion_gain: float = 1.0
+    controlled_element: tuple = ((presets.K_C,), (1.0, 0.0, 0.0))
+    control_gain: float = presets.K_DU
+    sample_rate_hz: float = presets.SAMPLE_RATE_HZ
+    duration: float = presets.T0
+    run_in: float = presets.T0 / 2
+    task: str = "other"
+
+    def __post_init__(self) -> None:
+        for name in ("motion_gain", "control_gain", "sample_rate_hz", "duration", "run_in"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite number, got {v!r}")
+        if self.motion_gain < 0:
+            raise ValueError(f"motion_gain must be >= 0, got {self.motion_gain}")
+        if self.sample_rate_hz <= 0 or self.duration <= 0 or self.run_in < 0:
+            raise ValueError("sample_rate_hz and duration must be > 0 and run_in >= 0")
+        if self.task not in ("FD", "FT", "other"):
+            raise ValueError(f"task must be 'FD', 'FT' or 'other', got {self.task!r}")
+        num, den = self.controlled_element
+        num = np.atleast_1d(np.asarray(num, float))
+        den = np.atleast_1d(np.asarray(den, float))
+        num = np.trim_zeros(num, "f") if np.any(num) else np.array([0.0])
+        den = np.trim_zeros(den, "f")
+        if den.size == 0 or den.size - num.size < 2:
+            raise ValueError("controlled_element must be strictly proper with relative degree >= 2 "
+                             f"(got num={num.tolist()}, den={den.tolist()})")
+        object.__setattr__(self, "controlled_element", (tuple(num), tuple(den)))
+
+    @classmethod
+    def paper(cls, task: str = "FD", motion_gain: float = 1.0,
+              scale: str | float = "paper_simulation", **kwargs: Any) -> "TrackingTask":
+        """The task of Pool et al. (2012): Table 2 forcing with the FD/FT scaling, K_c/s^2.
+
+        Parameters
+        ----------
+        task : {"FD", "FT"}
+        motion_gain : float
+            K_theta.
+        scale : str or float
+            Forcing amplitude scale, see :func:`bayespilot.presets.paper_forcing`.
+        **kwargs
+            Overrides of the other fields (e.g. ``duration``).
+        """
+        ft, fd = presets.paper_forcing(task, scale)
+        return cls(ft, fd, motion_gain=float(motion_gain), task=task, **kwargs)
+
+    @property
+    def n_samples(self) -> int:
+        return int(round(self.duration * self.sample_rate_hz))
+
+    def metadata(self) -> dict[str, Any]:
+        """Recording-format metadata describing this task."""
+        num, den = self.controlled_element
+        meta: dict[str, Any] = {"control_gain": self.control_gain}
+        if len(num) == 1 and tuple(den) == (1.0, 0.0, 0.0):
+            meta["controlled_element_gain"] = num[0]
+        else:
+            meta["controlled_element"] = {"num": list(num), "den": list(den)}
+        meta["forcing"] = {"base_frequency": self.target.base_frequency,
+                           "target": self.target.to_dict(),
+                           "disturbance": self.disturbance.to_dict()}
+        return meta
+
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """Result of :func:`simulate`.
+
+    Attributes
+    ----------
+    recording : Recording
+        What a lab would have recorded (t, e, u, theta_ddot_m, theta, f_t, f_d).
+    params : dict
+        The true pilot parameters, by name.
+    remnant : ndarray
+        The remnant n added to u, at the recording's samples.
+    channels : dict
+        Per channel name, ``"pre"`` (input of the nonlinearity, e.g. the canal
+        output i) and ``"post"`` (its output, e.g. o) at the recording's samples.
+    remnant_gain, remnant_fraction : float
+        K_n used and the F_n = var(n) / var(u) it gave.
+    seed : int or None
+    settings : dict
+    """
+
+    recording: Recording
+    params: dict[str, float]
+    remnant: np.ndarray
+    channels: dict[str, dict[str, np.ndarray]]
+    remnant_gain: float
+    remnant_fraction: float
+    seed: int | None
+    settings: dict[str, Any] = field(default_factory=dict)
+
+
+def remnant(n_samples: int, dt: float, gain: float, T_n: float, rng: np.random.Generator,
+            noise_psd: float) -> np.ndarray:
+    """Remnant n = K_n / (T_n s + 1)^4 w (Eq. 6) on a grid of step ``dt``.
+
+    w is held constant over each step with variance ``noise_psd / dt`` (white
+    noise of two-sided PSD ``noise_psd``); the filter is discretised exactly
+    for such held input (zero-order hold), and started in its stationary state
+    by a run-in of 40 T_n.
+    """
+    if gain == 0.0:
+        return np.zeros(n_samples)
+    num = [gain]
+    den = np.poly(np.full(4, -1.0 / T_n)) * T_n**4
+    bd, ad, _ = signal.cont2discrete((num, den), dt, method="zoh")
+    bd = np.ravel(bd)
+    extra = int(math.ceil(40 * T_n / dt)) + 8
+    w = rng.standard_normal(n_samples + extra) * math.sqrt(noise_psd / dt)
+    return signal.lfilter(bd, ad, w)[extra:]
+
+
+def remnant_fraction(n: np.ndarray, u: np.ndarray) -> float:
+    """F_n = var(n) / var(u), Eq. 7."""
+    return float(np.var(n) / np.var(u))
+
+
+def _plant_ss(task: TrackingTask):
+    num, den = task.controlled_element
+    A, Bm, C, D = signal.tf2ss(num, den)
+    Bv = Bm[:, 0]
+    Cv = C[0]
+    C2 = Cv @ A @ A
+    D2 = float(Cv @ A @ Bv)
+    return (np.ascontiguousarray(A), np.ascontiguousarray(Bv), np.ascontiguousarray(Cv),
+            np.ascontiguousarray(C2), D2)
+
+
+def _run(model: PilotModel, theta: np.ndarray, task: TrackingTask, n_fine: np.ndarray,
+         oversample: int):
+    fs = task.sample_rate_hz
+    h = 1.0 / (fs * oversample)
+    n_rec = task.n_samples
+    k_start = int(round(task.run_in / h))
+    n_steps = k_start + n_rec * oversample
+    t_half = np.arange(2 * n_steps + 2) * (h / 2)
+    ft = task.target(t_half)
+    fd = task.disturbance(t_half)
+    # remnant tabulated at half steps by linear interpolation of the fine grid
+    nrem = np.interp(t_half, np.arange(n_fine.size) * h, n_fine)
+    A, Bv, C0, C2, D2 = _plant_ss(task)
+    p = model.plan
+    sig, xpre, qpost, ok = CL.simulate_closed_loop(
+        theta, p.ch_int, p.ch_float, p.st_int, p.st_const, p.out_int, A, Bv, C0, C2, D2,
+        float(task.control_gain), float(task.motion_gain), ft, fd, nrem, h, n_steps,
+        oversample, k_start, task.duration)
+    return sig, xpre, qpost, ok, h, k_start
+
+
+def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None = None, *,
+             task: str | TrackingTask = "FD", motion_gain: float = 1.0,
+             remnant_fraction: float | None = None, remnant_gain: float | None = None,
+             T_n: float | None = None, seed: int | None = 0, oversample: int = 10,
+             duration: float | None = None, noise_psd: float | None = None,
+             forcing_scale: str | float = "paper_simulation") -> Simulation:
+    """Simulate one run of the closed-loop tracking task.
+
+    Parameters
+    ----------
+    model : PilotModel, optional
+        Default :func:`~bayespilot.model.paper_model`.
+    params : mapping, optional
+        Pilot parameters by name; missing ones take Table 3 values for the
+        task (FD/FT) or the model's defaults.
+    task : {"FD", "FT"} or TrackingTask
+        The paper's task preset, or a task of your own.
+    motion_gain : float
+        K_theta, used with a preset task name.
+    remnant_fraction : float, optional
+        F_n in [0, 1): K_n is calibrated so that var(n)/var(u) = F_n on this
+        realization (Eq. 7).  0 means no remnant.
+    remnant_gain : float, optional
+        K_n directly (exclusive with ``remnant_fraction``).
+    T_n : float, optional
+        Remnant filter time constant; default Table 3 for FD/FT, else 0.06 s.
+    seed : int or None
+        Seed of the remnant noise (numpy Generator); the same seed gives the
+        same run, bit for bit.
+    oversample : int
+        Integration steps per recorded sample (>= 2).
+    duration : float, optional
+        Measurement time (default the task's, 81.92 s).
+    noise_psd : float, optional
+        Two-sided PSD of the remnant's white noise; default 1/sample rate.
+    forcing_scale : str or float
+        Amplitude scale of a preset task's forcing functions.
+
+    Returns
+    -------
+    Simulation
+
+    Examples
+    --------
+    >>> sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=3, duration=20.0)
+    >>> sim.recording.n_samples
+    2000
+    >>> round(sim.remnant_fraction, 3)
+    0.2
+    """
+    model = paper_model() if model is None else model
+    if not isinstance(model, PilotModel):
+        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+    if isinstance(task, str):
+        if task not in ("FD", "FT"):
+            raise ValueError(f"task must be 'FD', 'FT' or a TrackingTask, got {task!r}")
+        tt = TrackingTask.paper(task, motion_gain, scale=forcing_scale)
+    elif isinstance(task, TrackingTask):
+        tt = task
+    else:
+        raise TypeError(f"task must be 'FD', 'FT' or a TrackingTask, got {type(task).__name__}")
+    if duration is not None:
+        if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
+            raise ValueError(f"duration must be a positive number of seconds, got {duration!r}")
+        tt = replace(tt, duration=float(duration))
+    if not isinstance(oversample, (int, np.integer)) or oversample < 2:
+        raise ValueError(f"oversample must be an integer >= 2, got {oversample!r}")
+    if remnant_fraction is not None and remnant_gain is not None:
+        raise ValueError("give remnant_fraction or remnant_gain, not both")
+    if remnant_fraction is not None and not (0.0 <= remnant_fraction < 1.0):
+        raise ValueError(f"remnant_fraction must be in [0, 1), got {remnant_fraction!r}")
+    if remnant_gain is not None and not (math.isfinite(remnant_gain) and remnant_gain >= 0):
+        raise ValueError(f"remnant_gain must be a finite number >= 0, got {remnant_gain!r}")
+    values: dict[str, float] = {}
+    if tt.task in presets.TABLE3:
+        values.update({k: v for k, v in presets.TABLE3[tt.task].items() if k in model.all_names})
+    if params is not None:
+        values.update(params)
+    theta = model.full_vector({k: v for k, v in values.items()})
+    for k, v in model.fixed.items():
+        if params is not None and k in params:
+            theta[model.all_names.index(k)] = float(params[k])
+    if T_n is None:
+        T_n = presets.TABLE3_T_N.get(tt.task, 0.06)
+    if not (math.isfinite(T_n) and T_n > 0):
+        raise ValueError(f"T_n must be positive, got {T_n!r}")
+    psd = 1.0 / tt.sample_rate_hz if noise_psd is None else float(noise_psd)
+    if not (math.isfinite(psd) and psd > 0):
+        raise ValueError(f"noise_psd must be positive, got {noise_psd!r}")
+
+    rng = np.random.default_rng(seed)
+    h = 1.0 / (tt.sample_rate_hz * oversample)
+    n_fine_len = int(round(tt.run_in / h)) + tt.n_samples * oversample + 2
+    unit = remnant(n_fine_len, h, 1.0, T_n, rng, psd)  # remnant for K_n = 1
+
+    def run(kn):
+        sig, xpre, qpost, ok, _, _ = _run(model, theta, tt, kn * unit, oversample)
+        if not ok:
+            raise RuntimeError("the closed loop diverged for these parameters "
+                               f"({model.as_dict(theta, full=True)})")
+        n = kn * np.interp(np.arange(tt.n_samples) / tt.sample_rate_hz + tt.run_in,
+                           np.arange(unit.size) * h, unit)
+        return sig, xpre, qpost, n
+
+    if remnant_gain is not None:
+        kn = float(remnant_gain)
+        sig, xpre, qpost, n = run(kn)
+    elif remnant_fraction:
+        kn, (sig, xpre, qpost, n) = _calibrate(run, remnant_fraction)
+    else:
+        kn = 0.0
+        sig, xpre, qpost, n = run(0.0)
+    u = sig[:, CL.SIG_U]
+    fn = remnant_fraction_value = float(np.var(n) / np.var(u)) if kn > 0 else 0.0
+    t = np.arange(tt.n_samples) / tt.sample_rate_hz
+    signals = {"t": t, "e": sig[:, CL.SIG_E], "u": u, "theta_ddot_m": sig[:, CL.SIG_THDDM],
+               "theta": sig[:, CL.SIG_THETA], "f_t": sig[:, CL.SIG_FT], "f_d": sig[:, CL.SIG_FD]}
+    meta = tt.metadata()
+    meta["notes"] = (f"simulated by bayespilot: seed={seed}, K_n={kn:.6g}, T_n={T_n:g}, "
+                     f"F_n={fn:.4f}, oversample={oversample}")
+    rec = Recording(signals, tt.sample_rate_hz, tt.motion_gain, tt.task, meta,
+                    source=f"simulation(seed={seed})")
+    chans = {c.name: {"pre": xpre[i].copy(), "post": qpost[i].copy()}
+             for i, c in enumerate(model.channels)}
+    settings = {"oversample": oversample, "T_n": T_n, "noise_psd": psd, "run_in": tt.run_in,
+                "duration": tt.duration, "forcing_scale": forcing_scale,
+                "requested_remnant_fraction": remnant_fraction}
+    return Simulation(rec, model.as_dict(theta, full=True), n, chans, kn, remnant_fraction_value,
+                      seed, settings)
+
+
+def _calibrate(run, target: float, tol: float = 1e-4, max_iter: int = 8):
+    """K_n giving var(n)/var(u) = target on this noise realisation.
+
+    u is close to u_0 + n_loop, so var(u) ~ a + b K^2 and F = K^2 v / (a + b K^2);
+    the exact closed loop (dead zone included) is then met by a few secant steps
+    in K^2 on the actual simulation.
+    """
+    sig0, _, _, n_unit = run(1.0)
+    u1 = sig0[:, CL.SIG_U]
+    sig_zero, _, _, _ = run(0.0)
+    a = float(np.var(sig_zero[:, CL.SIG_U]))
+    v = float(np.var(n_unit))
+    b = max(float(np.var(u1)) - a, 1e-30)
+    if target * b >= v:
+        raise ValueError(f"remnant fraction {target} cannot be reached in this closed loop "
+                         f"(the loop itself limits F_n to about {v / b:.3f})")
+    k2 = target * a / (v - target * b)
+
+    def frac(k2_):
+        out = run(math.sqrt(k2_))
+        return float(np.var(out[3]) / np.var(out[0][:, CL.SIG_U])), out
+
+    f_prev, out = frac(k2)
+    k2_prev = k2
+    k2 = k2 * target / f_prev * (1 - f_prev) / (1 - target)  # F/(1-F) is close to linear in K^2
+    for _ in range(max_iter):
+        f_new, out = frac(k2)
+        if abs(f_new - target) < tol:
+            break
+        slope = (f_new - f_prev) / (k2 - k2_prev) if k2 != k2_prev else 0.0
+        k2_prev, f_prev = k2, f_new
+        k2 = k2 + (target - f_new) / slope if slope > 0 else k2 * target / f_new
+    return math.sqrt(k2), out
+
+
+def calibrate_remnant_gain(remnant_fraction: float, *, task: str = "FD", motion_gain: float = 1.0,
+                           model: PilotModel | None = None, params: Mapping[str, float] | None = None,
+                           seeds: range | list[int] = range(10), **kwargs: Any) -> tuple[float, np.ndarray]:
+    """K_n that gives ``remnant_fraction`` on average over several realizations.
+
+    Returns the mean K_n over ``seeds`` and the per-seed values (each seed
+    calibrated on its own realization), the quantity Table 4 lists.
+    """
+    gains = np.array([simulate(model, params, task=task, motion_gain=motion_gain,
+                               remnant_fraction=remnant_fraction, seed=s, **kwargs).remnant_gain
+                      for s in seeds])
+    return float(gains.mean()), gains
