@@ -96,7 +96,7 @@ class Recording:
             bad = ~np.isfinite(arr)
             if bad.any():
                 k = int(np.argmax(bad))
-                fail(f"column {name!r} has a non-finite value ({arr[k]!r}) at sample {k}")
+                fail(f"column {name!r} has a non-finite value ({float(arr[k])!r}) at sample {k}")
             arr = arr.copy()
             arr.setflags(write=False)
             clean[str(name)] = arr
@@ -120,12 +120,12 @@ class Recording:
         dt = 1.0 / rate
         steps = np.diff(t)
         if abs(t[0]) > 1e-6 * dt + 1e-12:
-            fail(f"t must start at 0, starts at {t[0]!r}")
+            fail(f"t must start at 0, starts at {float(t[0])!r}")
         # Uniform within a tolerance that allows for text round-off of t.
         tol = 1e-6 * dt + 1e-9 * max(abs(t[-1]), 1.0)
         if np.any(np.abs(steps - steps.mean()) > max(tol, 1e-4 * dt)):
             k = int(np.argmax(np.abs(steps - steps.mean())))
-            fail(f"t is not uniformly spaced (step {steps[k]!r} s at sample {k + 1})")
+            fail(f"t is not uniformly spaced (step {float(steps[k])!r} s at sample {k + 1})")
         if abs(steps.mean() - dt) > 1e-4 * dt:
             fail(
                 f"t has a step of {steps.mean():.6g} s, which disagrees with "
