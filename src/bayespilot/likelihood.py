@@ -51,6 +51,28 @@ def _source_signal(recording: Recording, source: str) -> np.ndarray:
     raise ValueError(f"unknown source {source!r}")
 
 
+def _pitch_rate_at_start(recording: Recording) -> float | None:
+    """K_theta * d(theta)/dt at t = 0 from the recorded theta (second-order one-sided difference)."""
+    if "theta" not in recording or recording.n_samples < 3:
+        return None
+    th = recording["theta"]
+    return recording.motion_gain * (-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * recording.dt)
+
+
+def _impulse_tail(num, den, t: np.ndarray) -> np.ndarray:
+    """Impulse response of the strictly proper part of num/den at times t (continuous, exact)."""
+    num = np.atleast_1d(np.asarray(num, float))
+    den = np.atleast_1d(np.asarray(den, float))
+    num = np.concatenate([np.zeros(den.size - num.size), num])
+    d = num[0] / den[0]
+    sp = num - d * den
+    sp = np.trim_zeros(sp, "f")
+    if sp.size == 0:
+        return np.zeros_like(t)
+    _, y = signal.impulse((sp, den), T=t)
+    return y
+
+
 def channel_inputs(model: PilotModel, recording: Recording, initial: str = "periodic") -> np.ndarray:
     """The recorded source of each channel passed through its fixed stages.
 
@@ -59,9 +81,14 @@ def channel_inputs(model: PilotModel, recording: Recording, initial: str = "peri
     model : PilotModel
     recording : Recording
     initial : {"periodic", "rest"}
-        ``"periodic"`` filters as if the record repeats (two extra periods of
-        warm-up, so the canal output is in periodic steady state);
-        ``"rest"`` starts the filters from zero state.
+        ``"rest"`` starts the filters from zero state.  ``"periodic"`` starts
+        them in the state the run-in left them in: for a channel on
+        ``theta_ddot_m`` of a recording with a ``theta`` column, the fixed
+        stages (the canal model, whose 5.9 s time constant would otherwise
+        leave a transient over the first ~20 s) start as if the pitch rate at
+        t = 0, K_theta dtheta/dt, had been built up by an impulse just before
+        the record; otherwise the record is treated as one period of a
+        periodic signal (two extra periods of warm-up).
 
     Returns
     -------
@@ -71,17 +98,22 @@ def channel_inputs(model: PilotModel, recording: Recording, initial: str = "peri
         raise ValueError(f"initial must be one of {INITIAL_CONDITIONS}, got {initial!r}")
     n = recording.n_samples
     X = np.empty((len(model.channels), n))
+    rate0 = _pitch_rate_at_start(recording) if initial == "periodic" else None
     for c, ch in enumerate(model.channels):
         x = np.asarray(_source_signal(recording, ch.source), dtype=float)
-        for st in ch.stages:
-            if not isinstance(st, FixedFilter):
-                continue
+        fixed = [st for st in ch.stages if isinstance(st, FixedFilter)]
+        if fixed:
+            num, den = np.array([1.0]), np.array([1.0])
+            for st in fixed:
+                num, den = np.polymul(num, st.num), np.polymul(den, st.den)
             # The same Tustin rule as the kernels' parametric stages.
-            b, a = signal.bilinear(st.num, st.den, fs=recording.sample_rate_hz)
-            if initial == "periodic":
-                x = signal.lfilter(b, a, np.tile(x, 3))[-n:]
-            else:
+            b, a = signal.bilinear(num, den, fs=recording.sample_rate_hz)
+            if initial == "rest":
                 x = signal.lfilter(b, a, x)
+            elif ch.source == "theta_ddot_m" and rate0 is not None:
+                x = signal.lfilter(b, a, x) + rate0 * _impulse_tail(num, den, recording.t)
+            else:
+                x = signal.lfilter(b, a, np.tile(x, 3))[-n:]
         X[c] = x
     return X
 

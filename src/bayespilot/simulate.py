@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Mapping
 
 import numpy as np
-from scipy import signal
+from scipy import optimize, signal
 
 from . import presets
 from .forcing import Multisine
@@ -120,10 +120,18 @@ class TrackingTask:
             meta["controlled_element_gain"] = num[0]
         else:
             meta["controlled_element"] = {"num": list(num), "den": list(den)}
+        # The recording's t = 0 is simulation time run_in: shift the phases so the
+        # sidecar's multisines equal the recorded f_t and f_d at the recording's t.
         meta["forcing"] = {"base_frequency": self.target.base_frequency,
-                           "target": self.target.to_dict(),
-                           "disturbance": self.disturbance.to_dict()}
+                           "target": _shifted(self.target, self.run_in).to_dict(),
+                           "disturbance": _shifted(self.disturbance, self.run_in).to_dict()}
         return meta
+
+
+def _shifted(f: Multisine, dt: float) -> Multisine:
+    """The multisine g with g(t) = f(t + dt)."""
+    return Multisine(f.base_frequency, f.n, f.amplitude,
+                     np.mod(f.phase + f.frequencies * dt, 2 * np.pi))
 
 
 @dataclass(frozen=True, eq=False)
@@ -345,39 +353,46 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
                       seed, settings)
 
 
-def _calibrate(run, target: float, tol: float = 1e-4, max_iter: int = 8):
+def _calibrate(run, target: float):
     """K_n giving var(n)/var(u) = target on this noise realisation.
 
-    u is close to u_0 + n_loop, so var(u) ~ a + b K^2 and F = K^2 v / (a + b K^2);
-    the exact closed loop (dead zone included) is then met by a few secant steps
-    in K^2 on the actual simulation.
+    F_n(K_n) is measured on the actual closed loop (the dead zone included:
+    more remnant opens the threshold and changes the loop, so a linear
+    estimate is only the starting guess) and solved with Brent's method on a
+    bracket that is widened until it holds the target.
     """
+    def frac(k):
+        out = run(k)
+        return float(np.var(out[3]) / np.var(out[0][:, CL.SIG_U])) - target, out
+
+    # Starting guess from var(u) ~ a + b K^2 (linear loop): F = K^2 v / (a + b K^2).
     sig0, _, _, n_unit = run(1.0)
-    u1 = sig0[:, CL.SIG_U]
-    sig_zero, _, _, _ = run(0.0)
-    a = float(np.var(sig_zero[:, CL.SIG_U]))
+    a = float(np.var(run(0.0)[0][:, CL.SIG_U]))
     v = float(np.var(n_unit))
-    b = max(float(np.var(u1)) - a, 1e-30)
-    if target * b >= v:
-        raise ValueError(f"remnant fraction {target} cannot be reached in this closed loop "
-                         f"(the loop itself limits F_n to about {v / b:.3f})")
-    k2 = target * a / (v - target * b)
-
-    def frac(k2_):
-        out = run(math.sqrt(k2_))
-        return float(np.var(out[3]) / np.var(out[0][:, CL.SIG_U])), out
-
-    f_prev, out = frac(k2)
-    k2_prev = k2
-    k2 = k2 * target / f_prev * (1 - f_prev) / (1 - target)  # F/(1-F) is close to linear in K^2
-    for _ in range(max_iter):
-        f_new, out = frac(k2)
-        if abs(f_new - target) < tol:
+    b = max(float(np.var(sig0[:, CL.SIG_U])) - a, 1e-30)
+    k0 = math.sqrt(target * a / (v - target * b)) if v > target * b else math.sqrt(a / v)
+    lo, hi = k0, k0
+    f_lo, _ = frac(lo)
+    f_hi = f_lo
+    for _ in range(40):
+        if f_lo <= 0.0:
             break
-        slope = (f_new - f_prev) / (k2 - k2_prev) if k2 != k2_prev else 0.0
-        k2_prev, f_prev = k2, f_new
-        k2 = k2 + (target - f_new) / slope if slope > 0 else k2 * target / f_new
-    return math.sqrt(k2), out
+        hi, f_hi = lo, f_lo
+        lo /= 1.5
+        f_lo, _ = frac(lo)
+    for _ in range(40):
+        if f_hi >= 0.0:
+            break
+        lo, f_lo = hi, f_hi
+        hi *= 1.5
+        f_hi, _ = frac(hi)
+    if f_hi < 0.0 or f_lo > 0.0:
+        raise ValueError(f"remnant fraction {target} cannot be reached in this closed loop "
+                         f"(F_n stays at {f_hi + target:.3f} or below up to K_n = {hi:.3g})")
+    if f_hi == 0.0:
+        lo = hi
+    k = lo if f_lo == 0.0 else optimize.brentq(lambda x: frac(x)[0], lo, hi, xtol=1e-7, rtol=1e-6)
+    return k, run(k)
 
 
 def calibrate_remnant_gain(remnant_fraction: float, *, task: str = "FD", motion_gain: float = 1.0,

@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from .._jit import njit
 
 # Stage kinds (linear blocks before the nonlinearity).
@@ -67,6 +65,11 @@ def tustin(b0, b1, b2, a0, a1, a2, dt):
     y[k] = B0 x[k] + B1 x[k-1] + B2 x[k-2] - A1 y[k-1] - A2 y[k-2].
     """
     c = 2.0 / dt
+    if a2 == 0.0 and b2 == 0.0:
+        # First order: keep it first order.  The biquad formulas below would
+        # add a cancelled pole/zero pair at z = -1, which a warm start excites.
+        d0 = a1 * c + a0
+        return (b1 * c + b0) / d0, (b0 - b1 * c) / d0, 0.0, (a0 - a1 * c) / d0, 0.0
     c2 = c * c
     d0 = a2 * c2 + a1 * c + a0
     d1 = 2.0 * (a0 - a2 * c2)
@@ -75,6 +78,12 @@ def tustin(b0, b1, b2, a0, a1, a2, dt):
     n1 = 2.0 * (b0 - b2 * c2)
     n2 = b2 * c2 - b1 * c + b0
     return n0 / d0, n1 / d0, n2 / d0, d1 / d0, d2 / d0
+
+
+@njit
+def stable(A1, A2):
+    """True if z^2 + A1 z + A2 has both roots strictly inside the unit circle (Jury)."""
+    return abs(A2) < 1.0 and abs(A1) < 1.0 + A2
 
 
 @njit
@@ -141,7 +150,3 @@ def param_or(theta, idx, default):
         return default
     return theta[idx]
 
-
-def as_plan_array(x, dtype):
-    """C-contiguous copy for kernel arguments (plain numpy helper)."""
-    return np.ascontiguousarray(x, dtype=dtype)

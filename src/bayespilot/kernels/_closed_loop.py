@@ -123,7 +123,7 @@ def _derivs(t, x, jh, frac_h, ft, fd, nrem, Ap, Bp, C0, C2, D2, k_du, k_theta, c
     for c in range(n_ch):
         td = t - taus[c]
         p = td / h
-        if p <= 0.0:
+        if p < 0.0:
             qd = 0.0  # at rest before the start of the simulation
         elif p >= k_now:
             t_k = k_now * h

@@ -24,7 +24,7 @@ import numpy as np
 
 from .._jit import njit, pjit
 from ._blocks import (MOD_NONE, NL_DEADZONE, NL_NONE, STAGE_FIXED, STAGE_NONE, modulation,
-                      nonlinearity, param_or, stage_tf, tustin)
+                      nonlinearity, param_or, stable, stage_tf, tustin)
 
 # Layout of the plan's integer channel table (one row per channel).
 CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, \
@@ -143,6 +143,8 @@ def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, per
     w2 = wn * wn
     # Common Tustin denominator of H_nm (numerator differs per channel).
     _, _, _, A1, A2 = tustin(w2, 0.0, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
+    if not stable(A1, A2):
+        return False  # an unstable (or marginal) H_nm is no pilot: -ln L = +inf
     for k in range(n):
         v[k] = 0.0
     for c in range(n_ch):
@@ -156,6 +158,8 @@ def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, per
                                               param_or(theta, st_int[c, s, 2], 0.0),
                                               st_const[c, s])
             sB0, sB1, sB2, sA1, sA2 = tustin(b0, b1, b2, a0, a1, a2, dt)
+            if not stable(sA1, sA2):
+                return False
             _filter_biquad(src, sB0, sB1, sB2, sA1, sA2, periodic, warm, q)
             src = q
         nl = ch_int[c, CH_NL_KIND]
