@@ -1,0 +1,346 @@
+"""The Eq. 4 likelihood and its numba kernels against independent references.
+
+References: ``tests/naive.py`` (plain NumPy/SciPy, cascaded Tustin filters
+and ``np.interp`` delays, written from the model equations) and, for the
+model without threshold, one ``scipy.signal.dlsim`` LTI system per input.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import naive
+from conftest import make_rng
+from bayespilot import presets
+from bayespilot.likelihood import (Likelihood, PerfectFitWarning, model_response, neg_log_lik,
+                                   vaf)
+from bayespilot.model import paper_model
+from bayespilot.recording import Recording
+
+INITIALS = ("rest", "periodic")
+
+FD = dict(presets.TABLE3["FD"])
+FT = dict(presets.TABLE3["FT"])
+
+#: Parameter vectors that exercise the kernel's branches.
+CASES = {
+    "table3": FD,
+    "fractional_delays": dict(FD, tau_v=0.23456, tau_m=0.18171),
+    "no_threshold": dict(FD, tau_v=0.31234, tau_m=0.12345, delta_abs=0.0),
+    "sub_sample_delays": dict(FD, tau_v=0.0037, tau_m=0.0091),
+    "zero_delays": dict(FD, tau_v=0.0, tau_m=0.0),
+    "large_threshold": dict(FD, delta_abs=0.05, tau_m=0.4567),
+    "other_dynamics": dict(K_v=2.5, T_vl=0.0, tau_v=0.7503, K_m=3.1, tau_m=0.9991,
+                           omega_nm=27.3, zeta_nm=0.93, delta_abs=0.002),
+    "light_damping": dict(FD, omega_nm=5.2, zeta_nm=0.03, tau_v=0.0999),
+}
+
+
+def _naive(rec, params, initial, warm, **kw):
+    return naive.naive_response(params, rec.e, rec.theta_ddot_m, rec.dt, initial, warm, **kw)
+
+
+def _naive_nll(rec, params, initial, warm):
+    return naive.naive_neg_log_lik(params, rec.u, rec.e, rec.theta_ddot_m, rec.dt, initial, warm)
+
+
+def _with_u(rec: Recording, u: np.ndarray) -> Recording:
+    signals = dict(rec.signals)
+    signals["u"] = u
+    return Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, rec.metadata)
+
+
+# --- the reference itself ----------------------------------------------------------
+def test_naive_reference_agrees_with_lti_reference(fd_rec):
+    """The two references (cascade vs one LTI system per input) agree at delta_abs = 0."""
+    rec = fd_rec
+    p = CASES["no_threshold"]
+    a = _naive(rec, p, "rest", 0)
+    b = naive.linear_reference(p, rec.e, rec.theta_ddot_m, rec.dt)
+    assert np.max(np.abs(a - b)) < 1e-9 * np.std(a)
+
+
+# --- response: kernel == naive -------------------------------------------------------
+@pytest.mark.parametrize("initial", INITIALS)
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_response_matches_naive(fd_rec, model, initial, case):
+    rec = fd_rec
+    lik = Likelihood(model, rec, initial=initial)
+    params = CASES[case]
+    got = lik.response(params)
+    ref = _naive(rec, params, initial, lik.warm)
+    assert np.all(np.isfinite(got))
+    assert np.max(np.abs(got - ref)) < 1e-10 * np.std(ref)
+
+
+@pytest.mark.parametrize("initial", INITIALS)
+def test_response_matches_naive_ft(ft_rec, model, initial):
+    rec = ft_rec
+    lik = Likelihood(model, rec, initial=initial)
+    for params in (FT, dict(FT, tau_v=0.2555, tau_m=0.0042, delta_abs=0.0)):
+        ref = _naive(rec, params, initial, lik.warm)
+        assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
+
+
+@pytest.mark.parametrize("warmup", [0.0, 0.013, 2.0, 12.5, 20.0, 45.0])
+def test_periodic_warmup_lengths(fd_rec, model, warmup):
+    rec = fd_rec
+    lik = Likelihood(model, rec, initial="periodic", warmup=warmup)
+    assert lik.warm == min(rec.n_samples, round(warmup * rec.sample_rate_hz))
+    params = CASES["fractional_delays"]
+    ref = _naive(rec, params, "periodic", lik.warm)
+    assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
+
+
+def test_simulation_truth_is_close(fd_sim, model):
+    """Sanity: at the true parameters the open-loop response explains u minus the remnant."""
+    rec = fd_sim.recording
+    lik = Likelihood(model, rec, initial="rest")
+    u_hat = lik.response(fd_sim.params)
+    # after the 5 s start-up transient of the rest initial condition: the
+    # simulator's continuous RK4 loop and the Tustin likelihood agree closely
+    k0 = int(5.0 * rec.sample_rate_hz)
+    assert vaf((rec.u - fd_sim.remnant)[k0:], u_hat[k0:]) > 99.9
+
+
+def test_channel_inputs_follow_documented_initial_state(fd_sim, fd_rec, model):
+    """Rest: canal from zero state.  Periodic without theta: canal over the record tiled x3."""
+    for rec in (fd_sim.recording, fd_rec):
+        X = Likelihood(model, rec, initial="rest").X
+        assert np.array_equal(X[0], rec.e)
+        assert np.max(np.abs(X[1] - naive.canal(rec.theta_ddot_m, rec.dt, "rest"))) \
+            < 1e-12 * np.std(X[1])
+    X = Likelihood(model, fd_rec, initial="periodic").X
+    assert np.max(np.abs(X[1] - naive.canal(fd_rec.theta_ddot_m, fd_rec.dt, "periodic"))) \
+        < 1e-12 * np.std(X[1])
+
+
+@pytest.mark.parametrize("case", ["table3", "fractional_delays", "sub_sample_delays"])
+def test_kernel_matches_naive_on_the_likelihoods_channel_inputs(fd_sim, model, case):
+    """Periodic mode with a theta column: whatever canal start the likelihood chose, the
+    rest of the chain (dead zone, delays, H_nm warm start) is the naive one."""
+    rec = fd_sim.recording
+    lik = Likelihood(model, rec, initial="periodic")
+    params = CASES[case]
+    ref = _naive(rec, params, "periodic", lik.warm, canal_output=lik.X[1])
+    assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
+
+
+# --- -ln L ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("initial", INITIALS)
+def test_neg_log_lik_matches_naive(fd_sim, fd_rec, ft_sim, ft_rec, model, initial):
+    for sim, rec in ((fd_sim, fd_rec), (ft_sim, ft_rec)):
+        lik = Likelihood(model, rec, initial=initial)
+        for params in (*CASES.values(), sim.params):
+            got = lik.neg_log_lik(params)
+            ref = _naive_nll(rec, params, initial, lik.warm)
+            assert got == pytest.approx(ref, rel=1e-9, abs=0)
+
+
+def test_neg_log_lik_formula(fd_sim, model):
+    """N/2 ln(mean eps^2) + N/2, from the residual the class itself reports."""
+    lik = Likelihood(model, fd_sim.recording)
+    eps = lik.residual(FD)
+    n = eps.size
+    assert lik.neg_log_lik(FD) == pytest.approx(0.5 * n * np.log(np.mean(eps**2)) + 0.5 * n,
+                                                rel=1e-13)
+    assert vaf(fd_sim.recording.u, lik.response(FD)) == lik.vaf(FD)
+
+
+def test_module_functions(fd_sim, model):
+    rec = fd_sim.recording
+    lik = Likelihood(model, rec, initial="rest")
+    assert np.array_equal(model_response(model, rec, FD, initial="rest"), lik.response(FD))
+    assert neg_log_lik(model, rec, FD, initial="rest") == lik.neg_log_lik(FD)
+
+
+def test_free_vector_and_mapping_agree(fd_sim, model):
+    lik = Likelihood(model, fd_sim.recording)
+    vec = model.free_vector(CASES["fractional_delays"])
+    assert lik.neg_log_lik(vec) == lik.neg_log_lik(CASES["fractional_delays"])
+
+
+# --- batch ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("initial", INITIALS)
+def test_batch_equals_loop_bit_for_bit(fd_sim, model, initial):
+    lik = Likelihood(model, fd_sim.recording, initial=initial)
+    lo, hi = model.bounds
+    pop = make_rng(37).uniform(lo, hi, size=(37, model.n_free))
+    got = lik.batch(pop)
+    loop = np.array([lik.neg_log_lik(row) for row in pop])
+    assert np.all(np.isfinite(got))
+    assert np.array_equal(got, loop)
+    out = np.empty(37)
+    assert lik.batch(pop, out=out) is out
+    assert np.array_equal(out, loop)
+    # one row, and a non-contiguous view
+    assert np.array_equal(lik.batch(pop[:1]), loop[:1])
+    assert np.array_equal(lik.batch(pop[::2]), loop[::2])
+
+
+def test_batch_threshold_free_model(fd_sim):
+    m7 = paper_model(threshold=False)
+    lik = Likelihood(m7, fd_sim.recording)
+    lo, hi = m7.bounds
+    pop = make_rng(7).uniform(lo, hi, size=(9, 7))
+    assert np.array_equal(lik.batch(pop), [lik.neg_log_lik(r) for r in pop])
+
+
+def test_batch_unstable_and_nan_rows_give_inf(fd_sim, model):
+    lik = Likelihood(model, fd_sim.recording)
+    good = model.free_vector(FD)
+    names = model.parameter_names
+    unstable = good.copy()
+    unstable[names.index("zeta_nm")] = -1.0
+    unstable[names.index("omega_nm")] = 30.0
+    nan_row = good.copy()
+    nan_row[names.index("K_m")] = np.nan
+    inf_row = good.copy()
+    inf_row[names.index("K_v")] = np.inf
+    out = lik.batch(np.vstack([good, unstable, nan_row, inf_row]))
+    assert np.isfinite(out[0])
+    assert np.all(np.isposinf(out[1:])), out
+    assert lik.neg_log_lik(unstable) == np.inf
+    assert np.all(np.isnan(lik.response(unstable)))
+
+
+@pytest.mark.parametrize("zeta", [-0.05, -0.5, -1e-6])
+def test_mildly_unstable_row_gives_inf(fd_sim, model, zeta):
+    """Instability is detected from the poles, not only when the response overflows."""
+    lik = Likelihood(model, fd_sim.recording)
+    row = model.free_vector(dict(FD, zeta_nm=zeta))
+    assert np.isposinf(lik.batch(row[None])[0])
+    assert lik.neg_log_lik(row) == np.inf
+    naive_val = naive.naive_neg_log_lik(dict(FD, zeta_nm=zeta), lik.u, lik.X[0],
+                                        fd_sim.recording.theta_ddot_m, lik.dt, "rest")
+    assert np.isfinite(naive_val)  # the overflow test alone would not have caught it
+
+
+# --- perfect fit ---------------------------------------------------------------------------
+@pytest.mark.parametrize("initial", INITIALS)
+def test_perfect_fit_is_finite_and_warns(fd_sim, model, initial):
+    rec = fd_sim.recording
+    u_model = Likelihood(model, rec, initial=initial).response(FD)
+    lik = Likelihood(model, _with_u(rec, u_model), initial=initial)
+    with pytest.warns(PerfectFitWarning):
+        val = lik.neg_log_lik(FD)
+    assert np.isfinite(val)
+    n = rec.n_samples
+    floor = 1e-24 * np.mean(u_model**2) + 1e-300
+    assert val == pytest.approx(0.5 * n * np.log(floor) + 0.5 * n, rel=1e-12)
+    batch = lik.batch(model.free_vector(FD)[None])
+    assert np.isfinite(batch[0]) and batch[0] == val
+    # an imperfect fit does not warn
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PerfectFitWarning)
+        assert lik.neg_log_lik(dict(FD, K_v=1.06)) > val
+
+
+# --- continuity in the delays -------------------------------------------------------
+@pytest.mark.parametrize("initial", INITIALS)
+@pytest.mark.parametrize("name", ["tau_v", "tau_m"])
+def test_continuous_in_delay(fd_sim, model, initial, name):
+    lik = Likelihood(model, fd_sim.recording, initial=initial)
+    dt = fd_sim.recording.dt
+    center = FD[name]
+    # a fine grid across three sample boundaries
+    grid = np.linspace(np.floor(center / dt) * dt - 0.5 * dt, np.floor(center / dt) * dt + 2.5 * dt,
+                       151)
+    vals = np.array([lik.neg_log_lik(dict(FD, **{name: t})) for t in grid])
+    steps = np.abs(np.diff(vals))
+    span = vals.max() - vals.min()
+    assert span > 0
+    # a jump at a sample boundary would be of order span / 3; smooth steps are ~span / 150
+    assert steps.max() < 0.05 * span
+    # straddling each boundary by +-1e-9 s changes -ln L by ~ slope * 2e-9 only
+    for k in range(3):
+        tb = (np.floor(center / dt) + k) * dt
+        lo = lik.neg_log_lik(dict(FD, **{name: tb - 1e-9}))
+        hi = lik.neg_log_lik(dict(FD, **{name: tb + 1e-9}))
+        assert abs(hi - lo) < 1e-3
+
+
+def test_continuous_at_zero_delay(fd_sim, model):
+    lik = Likelihood(model, fd_sim.recording, initial="rest")
+    a = lik.neg_log_lik(dict(FD, tau_m=0.0))
+    b = lik.neg_log_lik(dict(FD, tau_m=1e-9))
+    assert abs(a - b) < 1e-3
+
+
+# --- the model without threshold -------------------------------------------------------
+@pytest.mark.parametrize("initial", INITIALS)
+def test_threshold_free_model_equals_full_model_at_zero(fd_sim, initial):
+    rec = fd_sim.recording
+    full = Likelihood(paper_model(), rec, initial=initial)
+    free = Likelihood(paper_model(threshold=False), rec, initial=initial)
+    p7 = {k: v for k, v in CASES["fractional_delays"].items() if k != "delta_abs"}
+    assert np.array_equal(free.response(p7), full.response(dict(p7, delta_abs=0.0)))
+    assert free.neg_log_lik(p7) == full.neg_log_lik(dict(p7, delta_abs=0.0))
+    # delta_abs given to the threshold-free model is ignored (it is fixed)
+    assert free.neg_log_lik(dict(p7, delta_abs=0.05)) == free.neg_log_lik(p7)
+
+
+@pytest.mark.parametrize("case", ["no_threshold", "fractional_delays", "sub_sample_delays",
+                                  "zero_delays", "other_dynamics"])
+def test_threshold_free_model_equals_scipy_lti(fd_sim, case):
+    """python-control style: the nonlinear kernel on a linear case == scipy's LTI solver."""
+    rec = fd_sim.recording
+    m7 = paper_model(threshold=False)
+    p = {k: v for k, v in CASES[case].items() if k != "delta_abs"}
+    got = Likelihood(m7, rec, initial="rest").response(p)
+    ref = naive.linear_reference(dict(p, delta_abs=0.0), rec.e, rec.theta_ddot_m, rec.dt)
+    assert np.max(np.abs(got - ref)) < 1e-9 * np.std(ref)
+
+
+def test_threshold_above_canal_output_leaves_visual_channel_only(fd_sim, model):
+    rec = fd_sim.recording
+    lik = Likelihood(model, rec, initial="rest")
+    i_max = np.max(np.abs(naive.canal(rec.theta_ddot_m, rec.dt, "rest")))
+    got = lik.response(dict(FD, delta_abs=i_max * 1.0001))
+    ref = naive.linear_reference(dict(FD, K_m=0.0), rec.e, rec.theta_ddot_m, rec.dt)
+    assert np.max(np.abs(got - ref)) < 1e-9 * np.std(ref)
+
+
+# --- input validation -------------------------------------------------------------------
+def test_batch_shape_errors(fd_sim, model):
+    lik = Likelihood(model, fd_sim.recording)
+    with pytest.raises(ValueError, match=r"\(M, 8\)"):
+        lik.batch(np.zeros((3, 7)))
+    with pytest.raises(ValueError, match=r"\(M, 8\)"):
+        lik.batch(np.zeros(8))
+    with pytest.raises(ValueError, match=r"\(M, 7\)"):
+        Likelihood(paper_model(threshold=False), fd_sim.recording).batch(np.zeros((2, 8)))
+
+
+def test_parameter_name_errors(fd_sim, model):
+    lik = Likelihood(model, fd_sim.recording)
+    with pytest.raises(ValueError, match=r"'K_vv'.*K_v, T_vl, tau_v, K_m, tau_m, omega_nm"):
+        lik.neg_log_lik(dict(FD, K_vv=1.0))
+    with pytest.raises(ValueError, match="delta_abs"):
+        lik.response({"dela_abs": 0.01})
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_parameter_errors(fd_sim, model, bad):
+    lik = Likelihood(model, fd_sim.recording)
+    with pytest.raises(ValueError, match="finite"):
+        lik.neg_log_lik(dict(FD, tau_v=bad))
+    vec = model.free_vector(FD)
+    vec[2] = bad
+    with pytest.raises(ValueError, match="finite"):
+        lik.neg_log_lik(vec)
+
+
+def test_other_argument_errors(fd_sim, model):
+    rec = fd_sim.recording
+    with pytest.raises(ValueError, match="initial"):
+        Likelihood(model, rec, initial="steady")
+    with pytest.raises(ValueError, match="warmup"):
+        Likelihood(model, rec, warmup=-1.0)
+    with pytest.raises(TypeError):
+        Likelihood(model, rec.signals)
+    with pytest.raises(ValueError, match="expected 8"):
+        Likelihood(model, rec).neg_log_lik(np.ones(7))

@@ -1,0 +1,179 @@
+"""The pilot model as data (names, bounds, Table 1) and its extension point.
+
+The extension check adds a first-order washout s / (s + omega_w) after the
+canal model and verifies the likelihood kernel against ``tests/naive.py``
+with the same extra Tustin filter, its limit omega_w -> 0, the parameter
+bookkeeping, and the closed-loop simulator with the extended model.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import naive
+from bayespilot import presets
+from bayespilot.likelihood import Likelihood
+from bayespilot.model import Channel, DeadZone, Parameter, Washout, paper_model
+from bayespilot.simulate import simulate
+
+FD = dict(presets.TABLE3["FD"])
+OMEGA_W = Parameter("omega_w", 0.01, 10.0, 0.5, "rad/s")
+
+
+def washout_model():
+    return paper_model().add_stage("vestibular", Washout("omega_w"), [OMEGA_W])
+
+
+def washout_tf(params):
+    """The extra stage for naive.py: s / (s + omega_w)."""
+    return [1.0, 0.0], [1.0, params["omega_w"]]
+
+
+def _base(params):
+    return {k: v for k, v in params.items() if k != "omega_w"}
+
+
+# --- the paper's model ------------------------------------------------------------------
+def test_paper_model_names_order_and_table1_bounds():
+    m = paper_model()
+    assert m.parameter_names == ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm",
+                                 "delta_abs")
+    assert m.parameter_names == presets.PARAMETER_NAMES
+    assert m.n_free == 8
+    lo, hi = m.bounds
+    assert np.array_equal(lo, [presets.TABLE1_BOUNDS[n][0] for n in m.parameter_names])
+    assert np.array_equal(hi, [presets.TABLE1_BOUNDS[n][1] for n in m.parameter_names])
+    # spot-check Table 1 itself
+    assert presets.TABLE1_BOUNDS["omega_nm"] == (5.0, 30.0)
+    assert presets.TABLE1_BOUNDS["delta_abs"] == (0.0, 0.1)
+    assert m.defaults == FD
+    assert [c.name for c in m.channels] == ["visual", "vestibular"]
+    assert m.channels[1].sign == -1.0 and m.channels[0].sign == 1.0
+
+
+def test_threshold_free_model():
+    m7 = paper_model(threshold=False)
+    assert m7.n_free == 7
+    assert m7.parameter_names == presets.PARAMETER_NAMES[:7]
+    assert m7.fixed == {"delta_abs": 0.0}
+    assert not m7.has_threshold and paper_model().has_threshold
+    lo, hi = m7.bounds
+    assert lo.shape == hi.shape == (7,)
+    full = m7.full_vector(m7.free_vector(FD))
+    assert full[-1] == 0.0 and np.array_equal(full[:7], [FD[n] for n in m7.parameter_names])
+    # fixing and freeing round-trips
+    assert paper_model().fix(delta_abs=0.0).n_free == 7
+    assert m7.free("delta_abs").n_free == 8
+
+
+def test_vector_dict_round_trip():
+    m = paper_model()
+    vec = m.free_vector(dict(FD, tau_v=0.3))
+    assert m.as_dict(vec)["tau_v"] == 0.3
+    assert np.array_equal(m.full_vector(m.as_dict(vec)), vec)
+
+
+# --- extension: a washout after the canals ----------------------------------------------
+def test_washout_parameter_bookkeeping():
+    m = washout_model()
+    assert m.parameter_names == presets.PARAMETER_NAMES + ("omega_w",)
+    assert m.n_free == 9
+    lo, hi = m.bounds
+    assert (lo[-1], hi[-1]) == (0.01, 10.0)
+    assert np.array_equal(lo[:8], paper_model().bounds[0])
+    assert m.defaults["omega_w"] == 0.5
+    assert "omega_w" in m.channels[1].parameter_names
+    assert len(m.channels[1].stages) == 2
+    # the base model is unchanged (models are values)
+    assert paper_model().n_free == 8
+    assert m.fix(omega_w=0.3).n_free == 8
+
+
+def test_washout_response_matches_naive_rest(fd_sim):
+    rec = fd_sim.recording
+    m = washout_model()
+    lik = Likelihood(m, rec, initial="rest")
+    for params in (dict(FD, omega_w=0.5), dict(FD, omega_w=3.7, tau_m=0.1234, delta_abs=0.001)):
+        ref = naive.naive_response(params, rec.e, rec.theta_ddot_m, rec.dt, "rest", 0,
+                                   extra_vestibular=[washout_tf])
+        assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
+        nll = naive.naive_neg_log_lik(params, rec.u, rec.e, rec.theta_ddot_m, rec.dt, "rest", 0,
+                                      extra_vestibular=[washout_tf])
+        assert lik.neg_log_lik(params) == pytest.approx(nll, rel=1e-9, abs=0)
+
+
+def test_washout_response_matches_naive_periodic(fd_sim, fd_rec):
+    """Periodic warm start of a first-order parametric stage (a regression test: Tustin
+    of a first-order stage must stay first order, with no cancelled pole at z = -1)."""
+    m = washout_model()
+    for params in (dict(FD, omega_w=0.5), dict(FD, omega_w=7.3, tau_m=0.0042)):
+        # without theta the whole chain is the documented periodic one ...
+        lik = Likelihood(m, fd_rec, initial="periodic")
+        ref = naive.naive_response(params, fd_rec.e, fd_rec.theta_ddot_m, fd_rec.dt, "periodic",
+                                   lik.warm, extra_vestibular=[washout_tf])
+        assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
+        # ... with theta, the stages after the likelihood's own canal output i
+        rec = fd_sim.recording
+        lik = Likelihood(m, rec, initial="periodic")
+        ref = naive.naive_response(params, rec.e, rec.theta_ddot_m, rec.dt, "periodic",
+                                   lik.warm, extra_vestibular=[washout_tf],
+                                   canal_output=lik.X[1])
+        assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
+
+
+def test_washout_tends_to_base_model(fd_sim):
+    rec = fd_sim.recording
+    lik_w = Likelihood(washout_model(), rec, initial="rest")
+    lik_0 = Likelihood(paper_model(), rec, initial="rest")
+    base = lik_0.response(FD)
+    diffs = []
+    for om in (1e-3, 1e-6, 1e-9):
+        diffs.append(np.max(np.abs(lik_w.response(dict(FD, omega_w=om)) - base)) / np.std(base))
+    assert diffs[-1] < 1e-7
+    assert diffs[0] > diffs[1] > diffs[2]
+
+
+def test_simulator_runs_with_washout_and_likelihood_explains_it():
+    m = washout_model()
+    truth = dict(FD, omega_w=0.5)
+    sim = simulate(m, params=truth, duration=10.0, remnant_fraction=0.0)
+    assert sim.params == truth
+    assert sim.remnant_gain == 0.0
+    rec = sim.recording
+    assert rec.n_samples == 1000
+    lik = Likelihood(m, rec, initial="rest")
+    assert lik.vaf(truth) > 99.0
+    # ... and the washout matters: the base model at the same values explains less
+    assert Likelihood(paper_model(), rec, initial="rest").vaf(_base(truth)) < lik.vaf(truth) - 1.0
+
+
+# --- errors ---------------------------------------------------------------------------
+def test_unknown_channel():
+    with pytest.raises(KeyError, match="otolith.*visual, vestibular"):
+        paper_model().add_stage("otolith", Washout("omega_w"), [OMEGA_W])
+
+
+def test_undeclared_parameter():
+    with pytest.raises(ValueError, match="not declared: omega_w"):
+        paper_model().add_stage("vestibular", Washout("omega_w"))
+    with pytest.raises(ValueError, match="not declared: delta_2"):
+        paper_model().with_nonlinearity("visual", DeadZone("delta_2"))
+
+
+def test_fix_unknown_parameter():
+    with pytest.raises(ValueError, match="unknown parameter 'K_x'.*K_v"):
+        paper_model().fix(K_x=1.0)
+    with pytest.raises(KeyError, match="unknown parameter 'omega_w'"):
+        paper_model().parameter("omega_w")
+
+
+def test_bad_parameter_and_channel_definitions():
+    with pytest.raises(ValueError, match="outside"):
+        Parameter("omega_w", 0.01, 10.0, 20.0)
+    with pytest.raises(ValueError, match="lower < upper"):
+        Parameter("omega_w", 1.0, 0.5, 0.7)
+    with pytest.raises(ValueError, match="unknown source 'pitch'"):
+        Channel("c", "pitch", delay="tau_v")
+    with pytest.raises(ValueError, match="duplicate channel"):
+        paper_model().add_channel(Channel("visual", "e", delay="tau_v"))

@@ -1,0 +1,154 @@
+"""Closed-loop simulator: determinism, remnant (Eq. 6-7), signs, and agreement with the likelihood."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy import integrate, signal
+
+from bayespilot import presets
+from bayespilot.forcing import Multisine
+from bayespilot.likelihood import Likelihood
+from bayespilot.model import paper_model
+from bayespilot.simulate import TrackingTask, remnant, simulate
+
+
+def test_same_seed_same_run_and_other_seed_differs():
+    a = simulate(task="FT", motion_gain=0.5, remnant_fraction=0.2, seed=11, duration=8.0)
+    b = simulate(task="FT", motion_gain=0.5, remnant_fraction=0.2, seed=11, duration=8.0)
+    c = simulate(task="FT", motion_gain=0.5, remnant_fraction=0.2, seed=12, duration=8.0)
+    for name in ("e", "u", "theta_ddot_m", "theta"):
+        assert np.array_equal(a.recording[name], b.recording[name])
+    assert not np.array_equal(a.recording.u, c.recording.u)
+
+
+def test_requested_remnant_fraction_is_met():
+    sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.25, seed=4, duration=40.0)
+    assert sim.remnant_fraction == pytest.approx(0.25, abs=2e-4)
+    assert np.var(sim.remnant) / np.var(sim.recording.u) == pytest.approx(0.25, abs=2e-4)
+
+
+def test_remnant_variance_matches_closed_form():
+    """var of K/(T s + 1)^4 white noise of two-sided PSD S is K^2 S 5/(32 T)."""
+    rng = np.random.default_rng(0)
+    T, K, S, dt = 0.06, 0.3, 0.01, 0.001
+    n = remnant(400_000, dt, K, T, rng, S)
+    expected = K**2 * S * 5.0 / (32.0 * T)
+    # 400 s of a process with ~0.2 s correlation time: ~2% standard error
+    assert np.var(n) == pytest.approx(expected, rel=0.06)
+
+
+def test_motion_channel_sign_is_stabilising():
+    """With the motion channel added (+) the loop diverges for Table 3; with (-) it is stable."""
+    model = paper_model()
+    plus = replace(model, channels=(model.channels[0], replace(model.channels[1], sign=1.0)))
+    simulate(model, task="FD", motion_gain=1.0, duration=20.0)
+    with pytest.raises(RuntimeError, match="diverged"):
+        simulate(plus, task="FD", motion_gain=1.0, duration=20.0)
+
+
+def test_likelihood_reproduces_simulator_without_remnant():
+    """u_hat at the true parameters vs the simulated u: only discretisation error remains."""
+    model = paper_model()
+    for task, k in (("FD", 1.0), ("FT", 0.25)):
+        sim = simulate(model, task=task, motion_gain=k, seed=0)
+        uh = Likelihood(model, sim.recording).response(sim.params)
+        rel = np.sqrt(np.mean((uh - sim.recording.u) ** 2)) / np.std(sim.recording.u)
+        assert rel < 0.01, (task, k, rel)
+
+
+def test_likelihood_reproduces_u_minus_n_with_remnant():
+    model = paper_model()
+    sim = simulate(model, task="FD", motion_gain=0.75, remnant_fraction=0.2, seed=5, duration=40.96)
+    rec = sim.recording
+    uh = Likelihood(model, rec).response(sim.params)
+    err = uh - (rec.u - sim.remnant)
+    assert np.sqrt(np.mean(err[500:] ** 2)) / np.std(rec.u - sim.remnant) < 0.01
+
+
+def test_error_comes_from_the_likelihood_discretisation_not_the_simulator():
+    """Halving the simulator step changes the recorded u far less than the model-vs-sim error."""
+    model = paper_model()
+    a = simulate(model, task="FD", motion_gain=1.0, seed=0, oversample=10, duration=20.0)
+    b = simulate(model, task="FD", motion_gain=1.0, seed=0, oversample=20, duration=20.0)
+    sim_change = np.sqrt(np.mean((a.recording.u - b.recording.u) ** 2))
+    uh = Likelihood(model, a.recording).response(a.params)
+    model_err = np.sqrt(np.mean((uh - a.recording.u) ** 2))
+    assert sim_change < 0.05 * model_err
+
+
+def test_linear_loop_matches_scipy_ode_solver():
+    """Without threshold and with delays replaced by none, the loop is linear: compare with solve_ivp.
+
+    Pilot: u = H_nm [K_v (1 + T_vl s) e - K_m H_scc theta_ddot_m], delays 0, plant K_c/s^2.
+    """
+    p = dict(presets.TABLE3["FD"], delta_abs=0.0, tau_v=0.0, tau_m=0.0)
+    ft = Multisine(presets.OMEGA0, [6, 19], [0.02, 0.01], [0.3, 1.0])
+    fd = Multisine(presets.OMEGA0, [11, 46], [0.01, 0.02], [0.0, 2.0])
+    task = TrackingTask(ft, fd, motion_gain=1.0, duration=10.0, run_in=0.0)
+    sim = simulate(paper_model(), params=p, task=task, seed=0, oversample=10)
+    Kc, Kdu, K, T1, T2 = presets.K_C, presets.K_DU, presets.K_SCC, presets.T_SCC1, presets.T_SCC2
+    w, z = p["omega_nm"], p["zeta_nm"]
+
+    def rhs(t, x):
+        th, thd, xs, z1v, z2v, z1m, z2m = x
+        u = w**2 * (z1v + p["T_vl"] * z2v) + w**2 * z1m
+        thdd = Kc * (Kdu * u + fd(np.array([t]))[0])
+        e = ft(np.array([t]))[0] - th
+        # canal: K (1 + T1 s)/(1 + T2 s) = K T1/T2 + K (1 - T1/T2)/T2 / (s + 1/T2)
+        i = K * T1 / T2 * thdd + K * (1 - T1 / T2) / T2 * xs
+        return [thd, thdd, -xs / T2 + thdd,
+                z2v, -w**2 * z1v - 2 * z * w * z2v + p["K_v"] * e,
+                z2m, -w**2 * z1m - 2 * z * w * z2m - p["K_m"] * i]
+
+    t = sim.recording.t
+    sol = integrate.solve_ivp(rhs, (0, t[-1]), np.zeros(7), t_eval=t, rtol=1e-10, atol=1e-12,
+                              method="DOP853")
+    u_ref = w**2 * (sol.y[3] + p["T_vl"] * sol.y[4]) + w**2 * sol.y[5]
+    assert np.max(np.abs(sim.recording.u - u_ref)) < 1e-6 * np.max(np.abs(u_ref)) + 1e-9
+
+
+def test_results_are_continuous_in_tau():
+    """A delay change smaller than the step changes the run by a proportionally small amount."""
+    base = simulate(task="FD", motion_gain=1.0, seed=0, duration=10.0)
+    u = [simulate(task="FD", motion_gain=1.0, seed=0, duration=10.0,
+                  params={"tau_m": presets.TABLE3["FD"]["tau_m"] + d}).recording.u
+         for d in (1e-5, 2e-5)]
+    d1 = np.max(np.abs(u[0] - base.recording.u))
+    d2 = np.max(np.abs(u[1] - base.recording.u))
+    assert 0 < d1 < 1e-3 * np.std(base.recording.u)
+    assert d2 == pytest.approx(2 * d1, rel=0.1)
+
+
+def test_other_plant_and_sample_rate():
+    """A non-paper task: K/(s (s + 1)) at 50 Hz; the likelihood still reproduces the run."""
+    ft = Multisine(0.1, [3, 7, 15], [0.05, 0.03, 0.01], [0.0, 1.0, 2.0])
+    fd = Multisine(0.1, [5, 11], [0.02, 0.03], [0.5, 1.5])
+    task = TrackingTask(ft, fd, motion_gain=0.8, controlled_element=([3.0], [1.0, 1.0, 0.0]),
+                        sample_rate_hz=50.0, duration=30.0, run_in=20.0)
+    model = paper_model()
+    sim = simulate(model, params=presets.TABLE3["FT"], task=task, seed=1)
+    rec = sim.recording
+    assert rec.sample_rate_hz == 50.0 and rec.n_samples == 1500
+    assert rec.metadata["controlled_element"] == {"num": [3.0], "den": [1.0, 1.0, 0.0]}
+    uh = Likelihood(model, rec).response(sim.params)
+    assert np.sqrt(np.mean((uh[250:] - rec.u[250:]) ** 2)) / np.std(rec.u) < 0.02
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"task": "XX"}, "task must be"),
+    ({"remnant_fraction": 1.2}, "remnant_fraction"),
+    ({"remnant_fraction": 0.2, "remnant_gain": 0.1}, "not both"),
+    ({"oversample": 1}, "oversample"),
+    ({"params": {"K_x": 1.0}}, "unknown parameter"),
+    ({"duration": -1.0}, "duration"),
+])
+def test_bad_input_is_refused_clearly(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        simulate(**kwargs)
+
+
+def test_improper_plant_is_refused():
+    ft, fd = presets.paper_forcing("FD")
+    with pytest.raises(ValueError, match="relative degree"):
+        TrackingTask(ft, fd, controlled_element=([1.0, 0.0], [1.0, 1.0]))
