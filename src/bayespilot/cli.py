@@ -1,0 +1,473 @@
+"""The ``bayespilot`` command: simulate runs, evaluate -ln L, run the demo.
+
+``main(argv)`` parses the command line, runs one subcommand and returns the
+exit code (0 success, 1 runtime failure, 2 bad input or usage).  Every
+refusal is one line on stderr, ``bayespilot: error: <message>``, without a
+traceback.  The numerical modules are imported inside the subcommands, so
+``bayespilot --help`` answers at once.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import traceback
+import warnings
+from pathlib import Path
+from typing import Mapping, Sequence
+
+from . import __version__
+
+__all__ = ["main", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE"]
+
+EXIT_OK = 0
+EXIT_FAILURE = 1
+EXIT_USAGE = 2
+
+PROG = "bayespilot"
+
+
+class UsageError(Exception):
+    """Bad input from the user (arguments, files): one line on stderr, exit code 2."""
+
+
+class CommandFailed(Exception):
+    """Valid input, but the computation or writing the output failed: exit code 1."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors become :class:`UsageError` (one line, exit 2)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise UsageError(f"{message} (see '{self.prog} --help')")
+
+
+# --- argument types -----------------------------------------------------------------
+def _finite(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return x
+
+
+def _nonnegative(text: str) -> float:
+    x = _finite(text)
+    if x < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return x
+
+
+def _positive(text: str) -> float:
+    x = _finite(text)
+    if x <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return x
+
+
+def _fraction(text: str) -> float:
+    x = _finite(text)
+    if not 0.0 <= x < 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {text}")
+    return x
+
+
+def _seed(text: str) -> int:
+    try:
+        x = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if x < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return x
+
+
+# --- helpers --------------------------------------------------------------------------
+def _say(args: argparse.Namespace, text: str) -> None:
+    """An informational line on stdout, unless --quiet."""
+    if not args.quiet:
+        print(text)
+
+
+def _detail(args: argparse.Namespace, text: str) -> None:
+    """A detail on stderr, with --verbose only."""
+    if args.verbose:
+        print(text, file=sys.stderr)
+
+
+def _read_params(path: str, model, *, require: Sequence[str] = ()) -> dict[str, float]:
+    """Pilot parameters by name from a JSON object, checked against ``model``'s names and bounds."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise UsageError(f"{p}: parameter file not found") from None
+    except IsADirectoryError:
+        raise UsageError(f"{p}: is a directory, not a parameter file") from None
+    except UnicodeDecodeError as exc:
+        raise UsageError(f"{p}: is not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise UsageError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+
+    def reject(name: str):
+        raise ValueError(f"{name} is not a finite number")
+
+    try:
+        obj = json.loads(text, parse_constant=reject)
+    except json.JSONDecodeError as exc:
+        raise UsageError(f"{p}: is not valid JSON ({exc.msg} at line {exc.lineno} "
+                         f"column {exc.colno})") from None
+    except (ValueError, RecursionError) as exc:
+        raise UsageError(f"{p}: is not valid JSON ({exc})") from None
+    names = model.all_names
+    if not isinstance(obj, dict):
+        raise UsageError(f"{p}: must hold a JSON object of parameter values by name "
+                         f"({', '.join(names)}), e.g. {{\"K_v\": 1.057}}")
+    unknown = [k for k in obj if k not in names]
+    if unknown:
+        raise UsageError(f"{p}: unknown parameter name(s) {', '.join(map(repr, unknown))}; "
+                         f"valid names are {', '.join(names)}")
+    values: dict[str, float] = {}
+    for name, v in obj.items():
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool)
+        try:
+            x = float(v) if ok else math.nan
+        except OverflowError:
+            x = math.nan
+        if not math.isfinite(x):
+            raise UsageError(f"{p}: {name} must be a finite number, got {json.dumps(v)}")
+        par = model.parameter(name)
+        if not par.lower <= x <= par.upper:
+            unit = "" if par.unit == "-" else f" {par.unit}"
+            raise UsageError(f"{p}: {name} = {x:g} is outside its range [{par.lower:g}, "
+                             f"{par.upper:g}]{unit} (Table 1 of Pool et al. 2012)")
+        values[name] = x
+    missing = [n for n in require if n not in values]
+    if missing:
+        raise UsageError(f"{p}: missing parameter(s) {', '.join(missing)} "
+                         f"(this command needs {', '.join(require)})")
+    return values
+
+
+def _read(path: str):
+    """A Recording from disk; any problem with it is bad input."""
+    from .io import read_recording
+    from .recording import RecordingError
+
+    try:
+        return read_recording(path)
+    except RecordingError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: str, motion_gain: float,
+                        seed: int, remnant_fraction: float | None = None,
+                        remnant_gain: float | None = None, duration: float | None = None):
+    """Simulate one run with the paper's model and write it; returns (simulation, csv, json).
+
+    The JSON sidecar gets a ``simulation`` key with the true parameters,
+    the remnant gain and fraction, T_n and the seed, so the truth travels
+    with the file.
+    """
+    from .io import write_recording
+    from .model import paper_model
+    from .recording import Recording, RecordingError
+    from .simulate import simulate
+
+    try:
+        sim = simulate(paper_model(), params, task=task, motion_gain=motion_gain,
+                       remnant_fraction=remnant_fraction, remnant_gain=remnant_gain, seed=seed,
+                       duration=duration)
+    except RuntimeError as exc:
+        raise CommandFailed(str(exc)) from None
+    except ValueError as exc:  # e.g. a remnant fraction this loop cannot reach
+        raise UsageError(str(exc)) from None
+    rec = sim.recording
+    meta = dict(rec.metadata)
+    meta["simulation"] = {"parameters": dict(sim.params), "seed": seed,
+                          "remnant_gain": sim.remnant_gain,
+                          "remnant_fraction": sim.remnant_fraction, "T_n": sim.settings["T_n"]}
+    rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, rec.source)
+    try:
+        csv_path, json_path = write_recording(rec, out)
+    except RecordingError as exc:  # e.g. an output path ending in .mat
+        raise UsageError(str(exc)) from None
+    except OSError as exc:
+        where = exc.filename or out
+        raise CommandFailed(f"{where}: cannot write the recording ({exc.strerror or exc})") from None
+    return sim, csv_path, json_path
+
+
+def _likelihood(model, recording, params: Mapping[str, float], initial: str = "periodic"):
+    """(-ln L, VAF %) of ``model`` on ``recording``; a non-finite -ln L is a failure."""
+    from .likelihood import Likelihood, PerfectFitWarning
+
+    lik = Likelihood(model, recording, initial=initial)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", PerfectFitWarning)
+        value = lik.neg_log_lik(params)
+    for w in caught:
+        print(f"{PROG}: warning: {w.message}", file=sys.stderr)
+    if not math.isfinite(value):
+        raise CommandFailed(f"the pilot model is unstable at these parameters on "
+                            f"{recording.source or 'this recording'} (-ln L = {value})")
+    return value, lik.vaf(params)
+
+
+# --- subcommands ------------------------------------------------------------------------
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from . import presets
+    from .model import paper_model
+
+    if args.duration is not None and args.duration * presets.SAMPLE_RATE_HZ < 2:
+        raise UsageError(f"argument --duration: {args.duration:g} s is shorter than 2 samples "
+                         f"at {presets.SAMPLE_RATE_HZ:g} Hz")
+    params = presets.paper_parameters(args.task)
+    if args.params is not None:
+        params.update(_read_params(args.params, paper_model()))
+    _detail(args, "parameters: " + ", ".join(f"{k}={v:g}" for k, v in params.items()))
+    sim, csv_path, json_path = _simulate_and_write(
+        args.output, params, task=args.task, motion_gain=args.motion_gain, seed=args.seed,
+        remnant_fraction=None if args.remnant_gain is not None else args.remnant_fraction,
+        remnant_gain=args.remnant_gain, duration=args.duration)
+    rec = sim.recording
+    _say(args, f"wrote {csv_path} and {json_path}: task {rec.task}, K_theta = {rec.motion_gain:g}, "
+               f"{rec.duration:g} s, seed {args.seed}, K_n = {sim.remnant_gain:.4g}, "
+               f"F_n = {sim.remnant_fraction:.3f}")
+    return EXIT_OK
+
+
+def _cmd_loglik(args: argparse.Namespace) -> int:
+    from .model import paper_model
+
+    model = paper_model(threshold=not args.no_threshold)
+    params = _read_params(args.params, model, require=model.parameter_names)
+    if args.no_threshold and "delta_abs" in params:
+        _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
+    rec = _read(args.recording)
+    _detail(args, f"{rec!r}\n{model.summary()}\ninitial conditions: {args.initial}")
+    value, vaf = _likelihood(model, rec, params, args.initial)
+    print(f"-ln L = {value!r}")
+    _say(args, f"VAF = {vaf:.2f} %")
+    return EXIT_OK
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from . import presets
+    from .model import paper_model
+    from .plots import plot_traces
+
+    task, motion_gain, fraction = "FD", 1.0, 0.2
+    truth = presets.paper_parameters(task)
+    out = Path(args.out)
+    _say(args, f"Simulating task {task} at K_theta = {motion_gain:g}, remnant fraction "
+               f"F_n = {fraction:g}, Table 3 parameters of Pool et al. (2012), seed {args.seed} ...")
+    sim, csv_path, json_path = _simulate_and_write(out / "recording", truth, task=task,
+                                                   motion_gain=motion_gain, seed=args.seed,
+                                                   remnant_fraction=fraction)
+    _say(args, f"wrote {csv_path} and {json_path} ({sim.recording.duration:g} s, "
+               f"K_n = {sim.remnant_gain:.4g}, F_n = {sim.remnant_fraction:.3f})")
+    rec = _read(csv_path)  # evaluate what was written, as a user would
+    with_thr, vaf = _likelihood(paper_model(), rec, truth)
+    without_thr, vaf0 = _likelihood(paper_model(threshold=False), rec, truth)
+    print(f"-ln L at Table 3 parameters, with threshold (delta_abs = {truth['delta_abs']:g}): "
+          f"{with_thr:.2f}")
+    print(f"-ln L at Table 3 parameters, without threshold (delta_abs = 0):      {without_thr:.2f}")
+    print(f"VAF with threshold: {vaf:.2f} %   (without: {vaf0:.2f} %)")
+    png = out / "traces.png"
+    fig = plot_traces(rec, canal=sim.channels["vestibular"]["pre"], delta_abs=truth["delta_abs"])
+    try:
+        fig.savefig(png, dpi=110)
+    except OSError as exc:
+        raise CommandFailed(f"{png}: cannot write the plot ({exc.strerror or exc})") from None
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    _say(args, f"wrote {png} (e, u, theta_ddot_m and the canal output i with the band "
+               f"+-delta_abs)")
+    return EXIT_OK
+
+
+# --- the parser ------------------------------------------------------------------------
+TOP_EPILOG = f"""\
+Estimates pilot-model parameters and motion-perception thresholds from
+manual-tracking recordings, after Pool et al. (2012), J. Guidance, Control,
+and Dynamics 35(3), 749-763.
+
+Examples:
+  bayespilot demo
+  bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
+  bayespilot loglik out/run --params params.json
+
+A recording is two files with one stem, STEM.csv (signals) and STEM.json
+(what the run was); see docs/recording-format.md.
+
+Exit codes:
+  0  success
+  1  runtime failure (the simulated loop diverged, the model is unstable at
+     the given parameters, an output file could not be written)
+  2  bad input or usage (a missing, unreadable or invalid recording or
+     parameter file, an unknown parameter name, an out-of-range value)
+Errors are one line on stderr: 'bayespilot: error: <message>'.
+"""
+
+SIMULATE_EPILOG = """\
+Simulates one run of the closed-loop tracking task (Fig. 2 of the paper) with
+the multimodal pilot model (Fig. 4) and writes it as OUT.csv + OUT.json in the
+recording format. The JSON sidecar also records the true parameters, K_n,
+F_n, T_n and the seed under the key "simulation". The same seed gives the same
+files, bit for bit.
+
+Parameter file (--params): a JSON object with some of
+K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs;
+the others keep their Table 3 values for the task. Values must lie within the
+bounds of Table 1. For example:
+  {"K_m": 0.3, "delta_abs": 0.02}
+
+Example:
+  bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
+  bayespilot simulate --task FD --motion-gain 0.5 --params mine.json --duration 40 -o out/short
+"""
+
+LOGLIK_EPILOG = """\
+Prints -ln L of Eq. 4 (output error variance profiled out; lower is better),
+with the pilot model driven by the recording's measured e and theta_ddot_m,
+then the variance accounted for (VAF) on a second line unless --quiet.
+
+Parameter file (--params): a JSON object with all of
+K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs
+(with --no-threshold, delta_abs may be left out; it is fixed at 0). E.g.
+  {"K_v": 1.057, "T_vl": 0.409, "tau_v": 0.279, "K_m": 0.532, "tau_m": 0.203,
+   "omega_nm": 12.0, "zeta_nm": 0.22, "delta_abs": 0.0075}
+
+Example:
+  bayespilot loglik out/run --params params.json
+  bayespilot loglik out/run.csv --params params.json --no-threshold --initial rest
+"""
+
+DEMO_EPILOG = """\
+Runs the main job on a built-in example: simulates one run of task FD at
+K_theta = 1 with remnant fraction F_n = 0.2 and the Table 3 parameters of
+Pool et al. (2012); writes it to DIR/recording.csv + .json; reads it back and
+prints -ln L at the paper's parameters for the model with and without the
+threshold, and the VAF; plots e, u, theta_ddot_m and the canal output i with the threshold
+band +-delta_abs to DIR/traces.png. Takes a few seconds (the first run also
+compiles the numerical kernels).
+
+Example:
+  bayespilot demo
+  bayespilot demo --out /tmp/demo --seed 7
+"""
+
+
+def _common(parser: argparse.ArgumentParser, *, sub: bool) -> None:
+    """-q/-v, on the top-level parser and (so they work after the command) on each subcommand."""
+    parser.add_argument("-q", "--quiet", action="store_true",
+                        default=argparse.SUPPRESS if sub else False,
+                        help="print only the results (no summaries, no VAF line)")
+    parser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS if sub else 0,
+                        help="print details (parameters, model, recording) to stderr, and the "
+                             "traceback of an unexpected error")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of the ``bayespilot`` command."""
+    fmt = argparse.RawDescriptionHelpFormatter
+    parser = _Parser(prog=PROG, formatter_class=fmt, epilog=TOP_EPILOG,
+                     description="bayespilot: pilot-model parameters and motion-perception "
+                                 "thresholds from manual-tracking recordings.")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    _common(parser, sub=False)
+    subs = parser.add_subparsers(dest="command", metavar="COMMAND", required=True,
+                                 parser_class=_Parser)
+
+    p = subs.add_parser("simulate", formatter_class=fmt, epilog=SIMULATE_EPILOG,
+                        help="simulate a tracking run and write it as a recording",
+                        description="Simulate one tracking run with the paper's pilot model.")
+    p.add_argument("-o", "--output", required=True, metavar="OUT",
+                   help="output stem (or .csv path): writes OUT.csv and OUT.json, creating "
+                        "missing directories")
+    p.add_argument("--task", choices=("FD", "FT"), default="FD",
+                   help="FD: mainly disturbance rejection; FT: mainly target following "
+                        "(sets the forcing scaling and the Table 3 parameters; default FD)")
+    p.add_argument("--motion-gain", type=_nonnegative, default=1.0, metavar="K",
+                   help="motion cueing gain K_theta >= 0 (0: no motion; default 1)")
+    rem = p.add_mutually_exclusive_group()
+    rem.add_argument("--remnant-fraction", type=_fraction, default=0.0, metavar="F",
+                     help="remnant fraction F_n = var(n)/var(u) in [0, 1), Eq. 7; K_n is "
+                          "calibrated to reach it on this run (default 0: no remnant)")
+    rem.add_argument("--remnant-gain", type=_nonnegative, default=None, metavar="K",
+                     help="remnant gain K_n >= 0 of Eq. 6, instead of --remnant-fraction")
+    p.add_argument("--seed", type=_seed, default=0, metavar="S",
+                   help="seed of the remnant noise, an integer >= 0 (default 0)")
+    p.add_argument("--duration", type=_positive, default=None, metavar="S",
+                   help="measurement time in seconds (default 81.92, the paper's T0)")
+    p.add_argument("--params", metavar="FILE.json",
+                   help="JSON object overriding some Table 3 parameters by name (see below)")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_simulate)
+
+    p = subs.add_parser("loglik", formatter_class=fmt, epilog=LOGLIK_EPILOG,
+                        help="print -ln L (Eq. 4) of a recording at given parameters",
+                        description="Evaluate the negative log-likelihood of Eq. 4.")
+    p.add_argument("recording", metavar="REC",
+                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    p.add_argument("--params", required=True, metavar="FILE.json",
+                   help="JSON object with the pilot parameters by name (see below)")
+    p.add_argument("--no-threshold", action="store_true",
+                   help="use the model without threshold (delta_abs fixed at 0)")
+    p.add_argument("--initial", choices=("periodic", "rest"), default="periodic",
+                   help="model start-up: 'periodic' treats the record as periodic (filters in "
+                        "steady state), 'rest' starts from zero state (default periodic)")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_loglik)
+
+    p = subs.add_parser("demo", formatter_class=fmt, epilog=DEMO_EPILOG,
+                        help="simulate, evaluate and plot a built-in example",
+                        description="The main job of bayespilot on a built-in example.")
+    p.add_argument("--out", default="bayespilot-demo", metavar="DIR",
+                   help="directory for recording.csv, recording.json and traces.png "
+                        "(default bayespilot-demo/)")
+    p.add_argument("--seed", type=_seed, default=0, metavar="S",
+                   help="seed of the remnant noise, an integer >= 0 (default 0)")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``bayespilot`` command with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    parser = build_parser()
+    verbose = 0
+    try:
+        args = parser.parse_args(argv)
+        verbose = args.verbose
+        if args.quiet and args.verbose:
+            raise UsageError("give -q/--quiet or -v/--verbose, not both")
+        return args.handler(args)
+    except SystemExit as exc:  # --help, --version
+        return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_USAGE)
+    except UsageError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except CommandFailed as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+    except Exception as exc:  # a bug: say so in one line; the traceback with -v
+        if verbose:
+            traceback.print_exc()
+        print(f"{PROG}: error: unexpected {type(exc).__name__}: {exc} "
+              f"(run with -v for the traceback, and please report it)", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+if __name__ == "__main__":
+    sys.exit(main())
