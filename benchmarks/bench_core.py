@@ -249,7 +249,8 @@ def main(argv=None) -> int:
     v = np.empty(n)
     p = model.plan
     kargs = (theta, lik.X, lik.u, p.ch_int, p.ch_float, p.st_int, p.st_const, p.out_int, lik.dt,
-             lik.periodic, lik.warm, lik.s2_floor, y, q, v)
+             lik.periodic, lik.warm, lik.s2_floor, y, q, v,
+             np.empty((lik.X.shape[0], n + 2 * lik.pad)), lik.pad)
     t_raw = median_time(lambda: R.neg_log_lik_one(*kargs), int(400 * rep) + 5, inner=20)
     t_api = median_time(lambda: lik.neg_log_lik(free), int(400 * rep) + 5, inner=20)
     t_sp = median_time(lambda: sp(theta), int(100 * rep) + 5, inner=5)

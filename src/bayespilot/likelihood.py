@@ -159,6 +159,7 @@ class Likelihood:
         self.n = recording.n_samples
         self.warm = int(min(self.n, round(warmup * recording.sample_rate_hz)))
         self.periodic = initial == "periodic"
+        self.pad = R.padding(self.n, self.dt)
         # Floor of the output-error variance: a residual 1e-12 of rms(u).
         self.s2_floor = 1e-24 * float(np.mean(self.u**2)) + 1e-300
         self._plan = model.plan
@@ -196,8 +197,10 @@ class Likelihood:
         y = np.empty(self.n)
         q = np.empty(self.n)
         v = np.empty(self.n)
+        Qp = np.empty((self.X.shape[0], self.n + 2 * self.pad))
         val, floored = R.neg_log_lik_one(theta, self.X, self.u, *self._args(), self.dt,
-                                         self.periodic, self.warm, self.s2_floor, y, q, v)
+                                         self.periodic, self.warm, self.s2_floor, y, q, v, Qp,
+                                         self.pad)
         if floored:
             warnings.warn("the model reproduces u to round-off; the output-error variance was "
                           "floored, so -ln L is a finite bound, not an optimum", PerfectFitWarning,
@@ -225,8 +228,8 @@ class Likelihood:
         floored = np.zeros(m, dtype=np.bool_)
         n_chunks = max(1, min(m, numba.get_num_threads()))
         R.neg_log_lik_batch(free, self._free_idx, self._base, self.X, self.u, *self._args(),
-                            self.dt, self.periodic, self.warm, self.s2_floor, n_chunks, out,
-                            floored)
+                            self.dt, self.periodic, self.warm, self.s2_floor, n_chunks,
+                            self.pad, out, floored)
         out[~np.isfinite(out)] = np.inf
         return out
 

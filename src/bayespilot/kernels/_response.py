@@ -236,9 +236,205 @@ def neg_log_lik_from_sse(sse, n, s2_floor):
 
 
 @njit
+def _fill_pads(row, n, pad, periodic):
+    """Given row[pad:pad+n] = signal, fill the pads: wrapped (periodic) or rest."""
+    for j in range(pad):
+        if periodic:
+            row[j] = row[pad + (n - pad + j) % n]
+            row[pad + n + j] = row[pad + j % n]
+        else:
+            row[j] = 0.0
+            row[pad + n + j] = row[pad + n - 1]
+
+
+@njit(fastmath={"contract"})
+def _recursion_2(q0, q1, o0, o1, a0, a1, a2, a3, b0, b1, b2, b3, u, A1, A2, periodic, warm, n):
+    """Two-channel fused loop: v_k from 4 taps per channel, y_k = v_k - A1 y_{k-1} - A2 y_{k-2}.
+
+    Speed is the point of this kernel (the GA and emcee call it ~10^5-10^6 times
+    per data set), so two exceptions to the package's jit defaults are made
+    here: ``contract`` lets LLVM fuse multiply-adds (no reassociation, results
+    stay deterministic), and the recursion runs two samples per step with the
+    exact look-ahead form
+
+        y_k     = v_k - A1 y_{k-1} - A2 y_{k-2}
+        y_{k+1} = (v_{k+1} - A1 v_k) + (A1^2 - A2) y_{k-1} + A1 A2 y_{k-2},
+
+    which halves the loop-carried dependency chain per sample.
+    """
+    C1 = A1 * A1 - A2
+    C2 = A1 * A2
+    y1 = 0.0
+    y2 = 0.0
+    if periodic:
+        start = n - warm if warm < n else 0
+        for k in range(start, n):
+            j = o0 + k
+            i = o1 + k
+            vk = (a0 * q0[j] + a1 * q0[j - 1] + a2 * q0[j - 2] + a3 * q0[j - 3]
+                  + b0 * q1[i] + b1 * q1[i - 1] + b2 * q1[i - 2] + b3 * q1[i - 3])
+            yk = (vk - A2 * y2) - A1 * y1
+            y2 = y1
+            y1 = yk
+    sse = 0.0
+    sse1 = 0.0
+    half = n // 2
+    for h in range(half):
+        k = 2 * h
+        j = o0 + k
+        i = o1 + k
+        vk = (a0 * q0[j] + a1 * q0[j - 1] + a2 * q0[j - 2] + a3 * q0[j - 3]
+              + b0 * q1[i] + b1 * q1[i - 1] + b2 * q1[i - 2] + b3 * q1[i - 3])
+        vn = (a0 * q0[j + 1] + a1 * q0[j] + a2 * q0[j - 1] + a3 * q0[j - 2]
+              + b0 * q1[i + 1] + b1 * q1[i] + b2 * q1[i - 1] + b3 * q1[i - 2])
+        yk = (vk - A2 * y2) - A1 * y1
+        yn = ((vn - A1 * vk) + C2 * y2) + C1 * y1
+        y2 = yk
+        y1 = yn
+        r = u[k] - yk
+        rn = u[k + 1] - yn
+        sse += r * r
+        sse1 += rn * rn
+    for k in range(2 * half, n):
+        j = o0 + k
+        i = o1 + k
+        vk = (a0 * q0[j] + a1 * q0[j - 1] + a2 * q0[j - 2] + a3 * q0[j - 3]
+              + b0 * q1[i] + b1 * q1[i - 1] + b2 * q1[i - 2] + b3 * q1[i - 3])
+        yk = (vk - A2 * y2) - A1 * y1
+        y2 = y1
+        y1 = yk
+        r = u[k] - yk
+        sse += r * r
+    return sse + sse1, y1, y2
+
+
+@njit
+def _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n):
+    """Any number of channels (see _recursion_2)."""
+    n_ch = Qp.shape[0]
+    y1 = 0.0
+    y2 = 0.0
+    start = (n - warm if warm < n else 0) if periodic else n
+    sse = 0.0
+    for kk in range(start, n + n):
+        k = kk if kk < n else kk - n
+        vk = 0.0
+        for c in range(n_ch):
+            j = pad + k - ms[c]
+            vk += (taps[c, 0] * Qp[c, j] + taps[c, 1] * Qp[c, j - 1]
+                   + taps[c, 2] * Qp[c, j - 2] + taps[c, 3] * Qp[c, j - 3])
+        yk = (vk - A2 * y2) - A1 * y1
+        y2 = y1
+        y1 = yk
+        if kk >= n:
+            r = u[k] - yk
+            sse += r * r
+    return sse, y1, y2
+
+
+@njit
+def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
+               s2_floor, Qp, pad, q):
+    """-ln L in one fused pass: per-channel taps, H_nm recursion and residual sum together.
+
+    Handles models without gain modulation or output nonlinearity whose delays
+    fit the padding; returns (value, floored, handled) and handled=False
+    otherwise, so the caller falls back to the general ``response_into`` path.
+    The arithmetic is that of ``response_into`` regrouped into one loop, so
+    the FIR work of the channels overlaps the latency of the recursion.
+    """
+    n_ch = X.shape[0]
+    n = X.shape[1]
+    if out_int[OUT_NL_KIND] != NL_NONE:
+        return np.inf, False, False
+    wn = theta[out_int[OUT_OMEGA]]
+    zn = theta[out_int[OUT_ZETA]]
+    w2 = wn * wn
+    _, _, _, A1, A2 = tustin(w2, 0.0, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
+    if not stable(A1, A2):
+        return np.inf, False, True
+    taps = np.empty((n_ch, 4))
+    ms = np.empty(n_ch, dtype=np.int64)
+    for c in range(n_ch):
+        if ch_int[c, CH_MOD_KIND] != MOD_NONE:
+            return np.inf, False, False
+        dd = theta[ch_int[c, CH_DELAY]] / dt
+        if not (abs(dd) < pad - 4):
+            return np.inf, False, False
+        m = int(math.floor(dd))
+        f = dd - m
+        ms[c] = m
+        gain = ch_float[c, CHF_GAIN_CONST] * ch_float[c, CHF_SIGN] \
+            * param_or(theta, ch_int[c, CH_GAIN0], 1.0) * param_or(theta, ch_int[c, CH_GAIN1], 1.0)
+        lead = param_or(theta, ch_int[c, CH_LEAD], 0.0)
+        kg = gain * w2
+        B0, B1, B2, _, _ = tustin(kg, kg * lead, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
+        taps[c, 0] = B0 * (1.0 - f)
+        taps[c, 1] = B0 * f + B1 * (1.0 - f)
+        taps[c, 2] = B1 * f + B2 * (1.0 - f)
+        taps[c, 3] = B2 * f
+        # channel signal (stages, nonlinearity) into the padded buffer
+        src = X[c]
+        for s in range(ch_int[c, CH_NSTAGES]):
+            kind = st_int[c, s, 0]
+            if kind == STAGE_FIXED or kind == STAGE_NONE:
+                continue
+            b0, b1, b2, a0, a1, a2 = stage_tf(kind, param_or(theta, st_int[c, s, 1], 0.0),
+                                              param_or(theta, st_int[c, s, 2], 0.0),
+                                              st_const[c, s])
+            sB0, sB1, sB2, sA1, sA2 = tustin(b0, b1, b2, a0, a1, a2, dt)
+            if not stable(sA1, sA2):
+                return np.inf, False, True
+            _filter_biquad(src, sB0, sB1, sB2, sA1, sA2, periodic, warm, q)
+            src = q
+        nl = ch_int[c, CH_NL_KIND]
+        row = Qp[c]
+        if nl == NL_DEADZONE:
+            dz = param_or(theta, ch_int[c, CH_NL_P0], 0.0)
+            for k in range(n):
+                xk = src[k]
+                a = abs(xk) - dz
+                a = a if a > 0.0 else 0.0
+                row[pad + k] = a if xk >= 0.0 else -a
+        elif nl != NL_NONE:
+            p0 = param_or(theta, ch_int[c, CH_NL_P0], 0.0)
+            p1 = param_or(theta, ch_int[c, CH_NL_P1], 0.0)
+            for k in range(n):
+                row[pad + k] = nonlinearity(nl, src[k], p0, p1)
+        else:
+            for k in range(n):
+                row[pad + k] = src[k]
+        _fill_pads(row, n, pad, periodic)
+    if n_ch == 2:
+        # The paper's model (visual + vestibular): scalar taps in registers.
+        sse, y1, y2 = _recursion_2(Qp[0], Qp[1], pad + 0 - ms[0], pad + 0 - ms[1],
+                                   taps[0, 0], taps[0, 1], taps[0, 2], taps[0, 3],
+                                   taps[1, 0], taps[1, 1], taps[1, 2], taps[1, 3],
+                                   u, A1, A2, periodic, warm, n)
+    else:
+        sse, y1, y2 = _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n)
+    if not (math.isfinite(y1) and math.isfinite(y2)):
+        return np.inf, False, True
+    val, fl = neg_log_lik_from_sse(sse, n, s2_floor)
+    return val, fl, True
+
+
+def padding(n, dt, max_delay=1.5):
+    """Padding (samples) of the fused path's channel buffer: delays up to ``max_delay`` s."""
+    return int(min(n, math.ceil(max_delay / dt) + 8))
+
+
+@njit
 def neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
-                    s2_floor, y, q, v):
-    """-ln L (Eq. 4) for one full parameter vector; returns (value, floored)."""
+                    s2_floor, y, q, v, Qp, pad):
+    """-ln L (Eq. 4) for one full parameter vector; returns (value, floored).
+
+    ``Qp`` is a (n_channels, n + 2 pad) work buffer for the fused path.
+    """
+    val, fl, handled = _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt,
+                                  periodic, warm, s2_floor, Qp, pad, q)
+    if handled:
+        return val, fl
     ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
                        warm, y, q, v)
     if not ok:
@@ -252,7 +448,7 @@ def neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt
 
 @pjit
 def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_const, out_int,
-                      dt, periodic, warm, s2_floor, n_chunks, out, floored):
+                      dt, periodic, warm, s2_floor, n_chunks, pad, out, floored):
     """-ln L for every row of ``free`` (free parameters), in parallel over rows.
 
     Rows are split into ``n_chunks`` contiguous chunks, one per thread, so each
@@ -267,12 +463,13 @@ def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_c
         y = np.empty(n)
         q = np.empty(n)
         v = np.empty(n)
+        Qp = np.empty((X.shape[0], n + 2 * pad))
         theta = base.copy()
         for r in range(lo, hi):
             for j in range(free_idx.shape[0]):
                 theta[free_idx[j]] = free[r, j]
             val, fl = neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int,
-                                      dt, periodic, warm, s2_floor, y, q, v)
+                                      dt, periodic, warm, s2_floor, y, q, v, Qp, pad)
             out[r] = val
             floored[r] = fl
 
