@@ -256,6 +256,31 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_fit(args: argparse.Namespace) -> int:
+    from .fit.fast import fit_fast
+    from .fit.three_step import fit_paper
+
+    rec = _read(args.recording)
+    threshold = not args.no_threshold
+    if args.method == "paper":
+        _say(args, f"fitting {rec.source} with the paper's three-step procedure "
+                   f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
+        fit = fit_paper(rec, threshold=threshold, seed=args.seed, progress=not args.quiet)
+    else:
+        _say(args, f"fitting {rec.source} with the fast estimator ...")
+        fit = fit_fast(rec, threshold=threshold, seed=args.seed)
+    if not math.isfinite(fit.neg_log_lik):
+        raise CommandFailed("the fit did not reach a finite -ln L")
+    print(fit.summary())
+    if args.json:
+        try:
+            fit.to_json(args.json)
+        except OSError as exc:
+            raise CommandFailed(f"cannot write {args.json}: {exc}") from None
+        _say(args, f"wrote {args.json}")
+    return EXIT_OK
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from . import presets
     from .model import paper_model
@@ -303,6 +328,7 @@ Examples:
   bayespilot demo
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
   bayespilot loglik out/run --params params.json
+  bayespilot fit out/run --json out/run-fit.json
 
 A recording is two files with one stem, STEM.csv (signals) and STEM.json
 (what the run was); see docs/recording-format.md.
@@ -348,6 +374,18 @@ K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs
 Example:
   bayespilot loglik out/run --params params.json
   bayespilot loglik out/run.csv --params params.json --no-threshold --initial rest
+"""
+
+FIT_EPILOG = """\
+Estimates K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm and delta_abs by
+maximum likelihood (Eq. 4) and prints a table with -ln L and the VAF. The
+JSON (--json) has "params" (the 8 names), "neg_log_lik", "vaf", "method",
+"seed", the settings, and the details of every step (GA repetitions with their
+histories, Gauss-Newton refinements, the threshold scan).
+
+Example:
+  bayespilot fit out/run --json out/run-fit.json
+  bayespilot fit out/run --method fast --no-threshold --seed 2
 """
 
 DEMO_EPILOG = """\
@@ -426,6 +464,25 @@ def build_parser() -> argparse.ArgumentParser:
                         "steady state), 'rest' starts from zero state (default periodic)")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_loglik)
+
+    p = subs.add_parser("fit", formatter_class=fmt, epilog=FIT_EPILOG,
+                        help="maximum-likelihood fit of the pilot model to a recording",
+                        description="Fit the multimodal pilot model (with or without threshold).")
+    p.add_argument("recording", metavar="REC",
+                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    p.add_argument("--no-threshold", action="store_true",
+                   help="fit the model without threshold (delta_abs fixed at 0)")
+    p.add_argument("--method", choices=("paper", "fast"), default="paper",
+                   help="'paper': the three-step procedure of Pool et al. (GA, Gauss-Newton, "
+                        "scan; default); 'fast': multi-start least squares with a profile over "
+                        "delta_abs")
+    p.add_argument("--seed", type=_seed, default=0, metavar="S",
+                   help="seed of the genetic algorithm / starting points (default 0)")
+    p.add_argument("--json", metavar="OUT",
+                   help="write the result (params, neg_log_lik, vaf, method, seed and every "
+                        "step) to this JSON file")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_fit)
 
     p = subs.add_parser("demo", formatter_class=fmt, epilog=DEMO_EPILOG,
                         help="simulate, evaluate and plot a built-in example",

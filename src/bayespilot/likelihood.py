@@ -211,6 +211,39 @@ class Likelihood:
         """Variance accounted for, 1 - var(eps)/var(u), in percent."""
         return vaf(self.u, self.response(params))
 
+    def jacobian(self, params, names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Model output and its exact derivatives with respect to parameters.
+
+        Parameters
+        ----------
+        params : mapping or free vector
+            Where to evaluate.
+        names : sequence of str, optional
+            Parameters to differentiate by (default: the free parameters).
+
+        Returns
+        -------
+        u_hat : ndarray, shape (N,)
+        J : ndarray, shape (N, len(names))
+            d u_hat / d parameter, from the forward sensitivity equations of the
+            discrete model (``kernels/_sensitivity.py``), not finite differences.
+            NaN where the parameter vector is unstable.
+        """
+        from .kernels import _sensitivity as S
+
+        theta = self._theta(params)
+        names = self.model.parameter_names if names is None else tuple(names)
+        full = self.model.all_names
+        unknown = [n for n in names if n not in full]
+        if unknown:
+            raise ValueError(f"unknown parameter(s) {unknown}; this model has {', '.join(full)}")
+        cols = np.array([full.index(n) for n in names], dtype=np.int64)
+        y, J, ok = S.jacobian(theta, cols, self.X, *self._args(), self.dt, self.periodic, self.warm)
+        if not ok:
+            y[:] = np.nan
+            J[:] = np.nan
+        return y, J
+
     # -- populations -------------------------------------------------------------
     def batch(self, free: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """-ln L for every row of ``free`` (free-parameter vectors, shape (M, n_free)).

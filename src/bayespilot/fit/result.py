@@ -1,0 +1,101 @@
+"""The result of a maximum-likelihood fit: parameters by name, fit quality, how it was found."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from .. import presets
+
+__all__ = ["FitResult"]
+
+
+@dataclass(frozen=True, eq=False)
+class FitResult:
+    """A fitted pilot model.
+
+    Attributes
+    ----------
+    params : dict
+        Every parameter of the model by name (fixed ones included, e.g.
+        ``delta_abs = 0`` without threshold).
+    neg_log_lik : float
+        Final -ln L (Eq. 4, output-error variance profiled out).
+    vaf : float
+        Variance accounted for, percent.
+    method : {"paper", "fast"}
+    seed : int or None
+    threshold : bool
+        Whether delta_abs was estimated.
+    settings : dict
+        Every setting of the procedure.
+    steps : dict
+        Step I (the GA repetitions and their histories), Step II (each
+        refinement) and Step III (the scan), or the fast method's stages.
+    elapsed : float
+        Wall time, s.
+    source : str or None
+        The recording it was fitted to.
+    """
+
+    params: dict[str, float]
+    neg_log_lik: float
+    vaf: float
+    method: str
+    seed: int | None
+    threshold: bool
+    settings: dict[str, Any] = field(default_factory=dict)
+    steps: dict[str, Any] = field(default_factory=dict)
+    elapsed: float = math.nan
+    source: str | None = None
+
+    def to_dict(self, *, full: bool = True) -> dict[str, Any]:
+        """JSON-ready dict: ``params``, ``neg_log_lik``, ``vaf``, ``method``, ``seed``, ... .
+
+        With ``full=False`` the per-step details are left out.
+        """
+        d = {"params": dict(self.params), "neg_log_lik": self.neg_log_lik, "vaf": self.vaf,
+             "method": self.method, "seed": self.seed, "threshold": self.threshold,
+             "elapsed_seconds": self.elapsed, "source": self.source, "settings": self.settings}
+        if full:
+            d["steps"] = self.steps
+        return d
+
+    def to_json(self, path: str | Path, *, full: bool = True) -> Path:
+        """Write :meth:`to_dict` to ``path`` (parent folders created)."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_dict(full=full), indent=1, allow_nan=True))
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "FitResult":
+        return cls(dict(d["params"]), float(d["neg_log_lik"]), float(d["vaf"]), d["method"],
+                   d.get("seed"), bool(d.get("threshold", True)), d.get("settings", {}),
+                   d.get("steps", {}), float(d.get("elapsed_seconds", math.nan)), d.get("source"))
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> "FitResult":
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
+    def summary(self) -> str:
+        """A readable table of the estimates and the fit."""
+        units = presets.PARAMETER_UNITS
+        lines = [f"bayespilot fit ({self.method} method, "
+                 f"{'with' if self.threshold else 'without'} threshold, seed {self.seed})"]
+        if self.source:
+            lines.append(f"recording: {self.source}")
+        lines.append(f"{'parameter':<10} {'estimate':>12}  unit")
+        for k, v in self.params.items():
+            fixed = "  (fixed)" if (k == "delta_abs" and not self.threshold) else ""
+            lines.append(f"{k:<10} {v:>12.6g}  {units.get(k, '')}{fixed}")
+        lines.append(f"-ln L = {self.neg_log_lik:.3f}   VAF = {self.vaf:.2f} %   "
+                     f"time = {self.elapsed:.1f} s")
+        return "\n".join(lines)
+
+    __str__ = summary

@@ -1,0 +1,144 @@
+"""The paper's three-step maximum-likelihood fit (Section III.A, Fig. 5 of Pool et al. 2012).
+
+Step I   genetic algorithm on all parameters within the Table 1 bounds, run
+         ``repetitions`` times; the Step I delta_abs is the mean over the
+         ``n_best`` runs with the lowest -ln L (:func:`bayespilot.fit.genetic.step_one`).
+Step II  every Step I result is refined by unconstrained Gauss-Newton with
+         delta_abs held at the Step I estimate (:func:`bayespilot.fit.gauss_newton.refine`);
+         the lowest -ln L is kept.
+Step III -ln L over delta_abs on [0, 0.1] with the Step II parameters fixed;
+         the minimiser is the final delta_abs (:func:`bayespilot.fit.scan.scan_parameter`).
+         With ``iterate=True`` Steps II and III repeat until nothing changes.
+
+Without threshold the same procedure runs on the model with delta_abs fixed
+at 0 (Step III is then empty).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from ..likelihood import Likelihood
+from ..model import PilotModel, paper_model
+from ..recording import Recording
+from .gauss_newton import refine
+from .result import FitResult
+from .scan import scan_parameter
+
+__all__ = ["fit_paper"]
+
+
+def _model_for(model: PilotModel | None, threshold: bool) -> PilotModel:
+    if model is None:
+        return paper_model(threshold=threshold)
+    if not isinstance(model, PilotModel):
+        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+    if not threshold and "delta_abs" in model.parameter_names:
+        return model.fix(delta_abs=0.0)
+    return model
+
+
+def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshold: bool = True,
+              seed: int | None = None, repetitions: int = 20, n_best: int = 5,
+              population: int = 160, generations: int = 100, p_crossover: float = 0.7,
+              p_mutation: float = 0.01, bits: int = 20, scan_step: float = 1e-4,
+              iterate: bool = False, max_iterations: int = 10, initial: str = "periodic",
+              progress: bool = False) -> FitResult:
+    """Fit a pilot model to a recording with the paper's three-step procedure.
+
+    Parameters
+    ----------
+    recording : Recording
+    model : PilotModel, optional
+        Default :func:`~bayespilot.model.paper_model`.
+    threshold : bool
+        False fits the model without threshold (delta_abs = 0).
+    seed : int, optional
+        Seeds the genetic algorithm; the same seed gives the same fit.
+    repetitions, n_best : int
+        Step I: GA runs per data set, and how many of the best give delta_abs.
+    population, generations, p_crossover, p_mutation, bits
+        The GA settings (the paper's by default).
+    scan_step : float
+        Step III resolution in IPUT.
+    iterate : bool
+        Repeat Steps II and III until delta_abs and -ln L no longer change.
+    initial : {"periodic", "rest"}
+        Initial-condition treatment of the likelihood.
+    progress : bool
+        Show a progress bar over the GA repetitions.
+
+    Returns
+    -------
+    FitResult
+
+    Examples
+    --------
+    >>> from bayespilot.simulate import simulate
+    >>> rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.1, seed=1, duration=20).recording
+    >>> fit = fit_paper(rec, seed=0, repetitions=2, n_best=1, generations=5, population=20)
+    >>> sorted(fit.params)[:3]
+    ['K_m', 'K_v', 'T_vl']
+    """
+    from .genetic import step_one
+
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    for name, v in (("repetitions", repetitions), ("n_best", n_best), ("max_iterations", max_iterations)):
+        if not isinstance(v, (int, np.integer)) or v < 1:
+            raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    if n_best > repetitions:
+        raise ValueError(f"n_best ({n_best}) cannot exceed repetitions ({repetitions})")
+    if not (scan_step > 0):
+        raise ValueError(f"scan_step must be positive, got {scan_step!r}")
+    t0 = time.perf_counter()
+    model = _model_for(model, threshold)
+    lik = Likelihood(model, recording, initial=initial)
+    has_delta = "delta_abs" in model.parameter_names
+
+    s1 = step_one(lik, repetitions=repetitions, n_best=n_best, seed=seed, progress=progress,
+                  population=population, generations=generations, p_crossover=p_crossover,
+                  p_mutation=p_mutation, bits=bits)
+    delta1 = s1.delta_abs if has_delta else None
+
+    step2 = []
+    for run in s1.runs:
+        start = model.as_dict(run.x)
+        if has_delta:
+            start["delta_abs"] = delta1
+        step2.append(refine(lik, start, hold=("delta_abs",)))
+    k_best = int(np.argmin([r.neg_log_lik for r in step2]))
+    params = dict(step2[k_best].params)
+    fun = step2[k_best].neg_log_lik
+
+    scans: list[dict[str, Any]] = []
+    iterations = []
+    if has_delta:
+        for it in range(max_iterations if iterate else 1):
+            sc = scan_parameter(lik, params, "delta_abs", step=scan_step)
+            scans.append(sc.to_dict())
+            moved = abs(sc.best - params["delta_abs"])
+            params["delta_abs"] = sc.best
+            fun = sc.best_neg_log_lik
+            if not iterate:
+                break
+            r = refine(lik, params, hold=("delta_abs",))
+            iterations.append(r.to_dict())
+            improved = fun - r.neg_log_lik
+            params, fun = dict(r.params), r.neg_log_lik
+            if it > 0 and moved < 0.5 * scan_step and improved < 1e-6 * max(1.0, abs(fun)):
+                break
+
+    full = dict(model.as_dict(model.full_vector(params), full=True))
+    settings = {"repetitions": repetitions, "n_best": n_best, "population": population,
+                "generations": generations, "p_crossover": p_crossover, "p_mutation": p_mutation,
+                "bits": bits, "scan_step": scan_step, "iterate": iterate,
+                "max_iterations": max_iterations, "initial": initial, "model": model.name}
+    steps = {"step1": s1.to_dict(), "step1_delta_abs": delta1,
+             "step2": [r.to_dict() for r in step2], "step2_best": k_best,
+             "step3": scans, "iterations": iterations}
+    return FitResult(full, float(fun), lik.vaf(params), "paper", seed, has_delta, settings, steps,
+                     time.perf_counter() - t0, recording.source)

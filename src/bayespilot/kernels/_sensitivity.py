@@ -1,0 +1,336 @@
+"""Exact parameter sensitivities of the pilot-model response (forward mode).
+
+``response_tangent`` runs the same discrete computation as
+``_response.response_into`` and, alongside it, its derivative along one
+direction ``dtheta`` of the full parameter vector: the discrete-time
+sensitivity equations of every block (Tustin coefficients, stage filters,
+nonlinearity, fractional delay, H_nm recursion).  The Jacobian of u_hat with
+respect to a set of parameters is one tangent run per parameter.  These are
+the derivatives of the computation the likelihood actually performs, exact to
+round-off (no finite differences); where the computation is not
+differentiable (a delay at an integer number of samples, the dead zone's
+corners) they are the one-sided derivative from above.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import njit
+from ._blocks import (MOD_LINEAR, MOD_NONE, NL_DEADZONE, NL_NONE, NL_SATURATION,
+                      NL_SOFT_DEADZONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
+                      STAGE_LOWPASS1, STAGE_LOWPASS2, STAGE_NONE, modulation, nonlinearity,
+                      param_or, stable, stage_tf, tustin)
+from ._response import (CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
+                        CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_NSTAGES, CHF_GAIN_CONST, CHF_SIGN,
+                        OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1, OUT_OMEGA, OUT_ZETA)
+
+
+@njit
+def _dparam(dtheta, idx):
+    return 0.0 if idx < 0 else dtheta[idx]
+
+
+@njit
+def stage_tf_tangent(kind, p0, p1, dp0, dp1):
+    """Derivative of ``stage_tf`` coefficients (b0, b1, b2, a0, a1, a2) along (dp0, dp1)."""
+    if kind == STAGE_HIGHPASS1:
+        return 0.0, 0.0, 0.0, dp0, 0.0, 0.0
+    if kind == STAGE_LOWPASS2:
+        dw2 = 2.0 * p0 * dp0
+        return dw2, 0.0, 0.0, dw2, 2.0 * (dp1 * p0 + p1 * dp0), 0.0
+    if kind == STAGE_LOWPASS1:
+        return 0.0, 0.0, 0.0, 0.0, dp0, 0.0
+    if kind == STAGE_HIGHPASS2:
+        return 0.0, 0.0, 0.0, 2.0 * p0 * dp0, 2.0 * (dp1 * p0 + p1 * dp0), 0.0
+    return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+
+
+@njit
+def tustin_tangent(b0, b1, b2, a0, a1, a2, db0, db1, db2, da0, da1, da2, dt):
+    """Derivative of ``tustin`` (B0, B1, B2, A1, A2) along the coefficient tangent."""
+    c = 2.0 / dt
+    if a2 == 0.0 and b2 == 0.0:
+        d0 = a1 * c + a0
+        dd0 = da1 * c + da0
+        n0 = b1 * c + b0
+        n1 = b0 - b1 * c
+        d1 = a0 - a1 * c
+        dn0 = db1 * c + db0
+        dn1 = db0 - db1 * c
+        dd1 = da0 - da1 * c
+        return ((dn0 * d0 - n0 * dd0) / (d0 * d0), (dn1 * d0 - n1 * dd0) / (d0 * d0), 0.0,
+                (dd1 * d0 - d1 * dd0) / (d0 * d0), 0.0)
+    c2 = c * c
+    d0 = a2 * c2 + a1 * c + a0
+    d1 = 2.0 * (a0 - a2 * c2)
+    d2 = a2 * c2 - a1 * c + a0
+    n0 = b2 * c2 + b1 * c + b0
+    n1 = 2.0 * (b0 - b2 * c2)
+    n2 = b2 * c2 - b1 * c + b0
+    dd0 = da2 * c2 + da1 * c + da0
+    dd1 = 2.0 * (da0 - da2 * c2)
+    dd2 = da2 * c2 - da1 * c + da0
+    dn0 = db2 * c2 + db1 * c + db0
+    dn1 = 2.0 * (db0 - db2 * c2)
+    dn2 = db2 * c2 - db1 * c + db0
+    q = d0 * d0
+    return ((dn0 * d0 - n0 * dd0) / q, (dn1 * d0 - n1 * dd0) / q, (dn2 * d0 - n2 * dd0) / q,
+            (dd1 * d0 - d1 * dd0) / q, (dd2 * d0 - d2 * dd0) / q)
+
+
+@njit
+def nonlinearity_tangent(kind, x, p0, p1, dx, dp0, dp1):
+    """Derivative of ``nonlinearity`` along (dx, dp0, dp1)."""
+    if kind == NL_DEADZONE:
+        if abs(x) - p0 <= 0.0:
+            return 0.0
+        return dx - dp0 if x > 0.0 else dx + dp0
+    if kind == NL_SOFT_DEADZONE:
+        w = p1 if p1 > 1e-12 else 1e-12
+        dw = dp1 if p1 > 1e-12 else 0.0
+        ax = abs(x)
+        dax = dx if x >= 0.0 else -dx
+        a = (ax - p0) / w
+        a0 = -p0 / w
+        da = (dax - dp0) / w - a * dw / w
+        da0 = -dp0 / w - a0 * dw / w
+        sp = a + math.log1p(math.exp(-a)) if a > 0.0 else math.log1p(math.exp(a))
+        sp0 = a0 + math.log1p(math.exp(-a0)) if a0 > 0.0 else math.log1p(math.exp(a0))
+        sig = 1.0 / (1.0 + math.exp(-a))
+        sig0 = 1.0 / (1.0 + math.exp(-a0))
+        dy = dw * (sp - sp0) + w * (sig * da - sig0 * da0)
+        return dy if x >= 0.0 else -dy
+    if kind == NL_SATURATION:
+        if x > p0:
+            return dp0
+        if x < -p0:
+            return -dp0
+        return dx
+    return dx
+
+
+@njit
+def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic, warm, y, dy):
+    """A biquad and its tangent: y = F(x), dy = F(dx) + (dF) x."""
+    n = x.shape[0]
+    x1 = 0.0
+    x2 = 0.0
+    y1 = 0.0
+    y2 = 0.0
+    dx1 = 0.0
+    dx2 = 0.0
+    dy1 = 0.0
+    dy2 = 0.0
+    if periodic:
+        start = n - warm if warm < n else 0
+        if start > 0:
+            x1 = x[start - 1]
+            dx1 = dx[start - 1]
+            if start >= 2:
+                x2 = x[start - 2]
+                dx2 = dx[start - 2]
+        for k in range(start, n):
+            xk = x[k]
+            dxk = dx[k]
+            yk = B0 * xk + B1 * x1 + B2 * x2 - A1 * y1 - A2 * y2
+            dyk = (dB0 * xk + dB1 * x1 + dB2 * x2 - dA1 * y1 - dA2 * y2
+                   + B0 * dxk + B1 * dx1 + B2 * dx2 - A1 * dy1 - A2 * dy2)
+            x2, x1, y2, y1 = x1, xk, y1, yk
+            dx2, dx1, dy2, dy1 = dx1, dxk, dy1, dyk
+    for k in range(n):
+        xk = x[k]
+        dxk = dx[k]
+        yk = B0 * xk + B1 * x1 + B2 * x2 - A1 * y1 - A2 * y2
+        dyk = (dB0 * xk + dB1 * x1 + dB2 * x2 - dA1 * y1 - dA2 * y2
+               + B0 * dxk + B1 * dx1 + B2 * dx2 - A1 * dy1 - A2 * dy2)
+        x2, x1, y2, y1 = x1, xk, y1, yk
+        dx2, dx1, dy2, dy1 = dx1, dxk, dy1, dyk
+        y[k] = yk
+        dy[k] = dyk
+
+
+@njit
+def _tap(src, j, n, periodic):
+    if periodic:
+        return src[j % n]
+    if j < 0:
+        return 0.0
+    if j >= n:
+        return src[n - 1]
+    return src[j]
+
+
+@njit
+def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
+                     warm, y, dy):
+    """u_hat into ``y`` and its derivative along ``dtheta`` into ``dy``; False if unstable."""
+    n_ch = X.shape[0]
+    n = X.shape[1]
+    wn = theta[out_int[OUT_OMEGA]]
+    zn = theta[out_int[OUT_ZETA]]
+    dwn = _dparam(dtheta, out_int[OUT_OMEGA])
+    dzn = _dparam(dtheta, out_int[OUT_ZETA])
+    w2 = wn * wn
+    dw2 = 2.0 * wn * dwn
+    a1c = 2.0 * zn * wn
+    da1c = 2.0 * (dzn * wn + zn * dwn)
+    _, _, _, A1, A2 = tustin(w2, 0.0, 0.0, w2, a1c, 1.0, dt)
+    if not stable(A1, A2):
+        return False
+    _, _, _, dA1, dA2 = tustin_tangent(w2, 0.0, 0.0, w2, a1c, 1.0, dw2, 0.0, 0.0, dw2, da1c, 0.0, dt)
+    v = np.zeros(n)
+    dv = np.zeros(n)
+    q = np.empty(n)
+    dq = np.empty(n)
+    q2 = np.empty(n)
+    dq2 = np.empty(n)
+    zero = np.zeros(n)
+    for c in range(n_ch):
+        src = X[c]
+        dsrc = zero
+        nst = ch_int[c, CH_NSTAGES]
+        for s in range(nst):
+            kind = st_int[c, s, 0]
+            if kind == STAGE_FIXED or kind == STAGE_NONE:
+                continue
+            i0 = st_int[c, s, 1]
+            i1 = st_int[c, s, 2]
+            p0 = param_or(theta, i0, 0.0)
+            p1 = param_or(theta, i1, 0.0)
+            b0, b1, b2, a0, a1, a2 = stage_tf(kind, p0, p1, st_const[c, s])
+            db0, db1, db2, da0, da1, da2 = stage_tf_tangent(kind, p0, p1, _dparam(dtheta, i0),
+                                                            _dparam(dtheta, i1))
+            sB0, sB1, sB2, sA1, sA2 = tustin(b0, b1, b2, a0, a1, a2, dt)
+            if not stable(sA1, sA2):
+                return False
+            tB0, tB1, tB2, tA1, tA2 = tustin_tangent(b0, b1, b2, a0, a1, a2, db0, db1, db2,
+                                                     da0, da1, da2, dt)
+            _filter_tangent(src, dsrc, sB0, sB1, sB2, sA1, sA2, tB0, tB1, tB2, tA1, tA2,
+                            periodic, warm, q2, dq2)
+            for k in range(n):
+                q[k] = q2[k]
+                dq[k] = dq2[k]
+            src = q
+            dsrc = dq
+        nl = ch_int[c, CH_NL_KIND]
+        if nl != NL_NONE:
+            i0 = ch_int[c, CH_NL_P0]
+            i1 = ch_int[c, CH_NL_P1]
+            p0 = param_or(theta, i0, 0.0)
+            p1 = param_or(theta, i1, 0.0)
+            dp0 = _dparam(dtheta, i0)
+            dp1 = _dparam(dtheta, i1)
+            for k in range(n):
+                xk = src[k]
+                q2[k] = nonlinearity(nl, xk, p0, p1)
+                dq2[k] = nonlinearity_tangent(nl, xk, p0, p1, dsrc[k], dp0, dp1)
+            for k in range(n):
+                q[k] = q2[k]
+                dq[k] = dq2[k]
+            src = q
+            dsrc = dq
+        ig0 = ch_int[c, CH_GAIN0]
+        ig1 = ch_int[c, CH_GAIN1]
+        g0 = param_or(theta, ig0, 1.0)
+        g1 = param_or(theta, ig1, 1.0)
+        cst = ch_float[c, CHF_GAIN_CONST] * ch_float[c, CHF_SIGN]
+        gain = cst * g0 * g1
+        dgain = cst * (_dparam(dtheta, ig0) * g1 + g0 * _dparam(dtheta, ig1))
+        il = ch_int[c, CH_LEAD]
+        lead = param_or(theta, il, 0.0)
+        dlead = _dparam(dtheta, il)
+        kg = gain * w2
+        dkg = dgain * w2 + gain * dw2
+        B0, B1, B2, _, _ = tustin(kg, kg * lead, 0.0, w2, a1c, 1.0, dt)
+        dB0, dB1, dB2, _, _ = tustin_tangent(kg, kg * lead, 0.0, w2, a1c, 1.0,
+                                             dkg, dkg * lead + kg * dlead, 0.0, dw2, da1c, 0.0, dt)
+        idl = ch_int[c, CH_DELAY]
+        dd = theta[idl] / dt
+        ddd = _dparam(dtheta, idl) / dt
+        if not (abs(dd) < n - 4):
+            return False
+        m = int(math.floor(dd))
+        f = dd - m
+        df = ddd
+        mod_kind = ch_int[c, CH_MOD_KIND]
+        imod = ch_int[c, CH_MOD_P0]
+        mp = param_or(theta, imod, 0.0)
+        dmp = _dparam(dtheta, imod)
+        d1 = 0.0
+        d2 = 0.0
+        t1 = 0.0
+        t2 = 0.0
+        start = -2 if periodic else 0
+        for k in range(start, n):
+            j = k - m
+            sa = _tap(src, j, n, periodic)
+            sb = _tap(src, j - 1, n, periodic)
+            dsa = _tap(dsrc, j, n, periodic)
+            dsb = _tap(dsrc, j - 1, n, periodic)
+            dk = (1.0 - f) * sa + f * sb
+            tk = (1.0 - f) * dsa + f * dsb + df * (sb - sa)
+            if mod_kind != MOD_NONE:
+                frac = ((k + n) % n) / n
+                g = modulation(mod_kind, frac, mp)
+                dg = dmp * (frac - 0.5) if mod_kind == MOD_LINEAR else 0.0
+                tk = g * tk + dg * dk
+                dk = g * dk
+            if k >= 0:
+                v[k] += B0 * dk + B1 * d1 + B2 * d2
+                dv[k] += dB0 * dk + dB1 * d1 + dB2 * d2 + B0 * tk + B1 * t1 + B2 * t2
+            d2 = d1
+            d1 = dk
+            t2 = t1
+            t1 = tk
+    y1 = 0.0
+    y2 = 0.0
+    dy1 = 0.0
+    dy2 = 0.0
+    if periodic:
+        start = n - warm if warm < n else 0
+        for k in range(start, n):
+            yk = (v[k] - A2 * y2) - A1 * y1
+            dyk = dv[k] - dA1 * y1 - dA2 * y2 - A1 * dy1 - A2 * dy2
+            y2, y1 = y1, yk
+            dy2, dy1 = dy1, dyk
+    for k in range(n):
+        yk = (v[k] - A2 * y2) - A1 * y1
+        dyk = dv[k] - dA1 * y1 - dA2 * y2 - A1 * dy1 - A2 * dy2
+        y2, y1 = y1, yk
+        dy2, dy1 = dy1, dyk
+        y[k] = yk
+        dy[k] = dyk
+    out_nl = out_int[OUT_NL_KIND]
+    if out_nl != NL_NONE:
+        i0 = out_int[OUT_NL_P0]
+        i1 = out_int[OUT_NL_P1]
+        o0 = param_or(theta, i0, 0.0)
+        o1 = param_or(theta, i1, 0.0)
+        do0 = _dparam(dtheta, i0)
+        do1 = _dparam(dtheta, i1)
+        for k in range(n):
+            dy[k] = nonlinearity_tangent(out_nl, y[k], o0, o1, dy[k], do0, do1)
+            y[k] = nonlinearity(out_nl, y[k], o0, o1)
+    return math.isfinite(y1) and math.isfinite(dy1)
+
+
+@njit
+def jacobian(theta, cols, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm):
+    """(u_hat, J) with J[:, j] = d u_hat / d theta[cols[j]]; ok flag."""
+    n = X.shape[1]
+    y = np.empty(n)
+    J = np.empty((n, cols.shape[0]))
+    dy = np.empty(n)
+    dtheta = np.zeros(theta.shape[0])
+    ok = True
+    for j in range(cols.shape[0]):
+        dtheta[:] = 0.0
+        dtheta[cols[j]] = 1.0
+        ok = response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_int, dt,
+                              periodic, warm, y, dy) and ok
+        for k in range(n):
+            J[k, j] = dy[k]
+    return y, J, ok
