@@ -203,7 +203,7 @@ BAD = {
                         "no sidecar"),
     "invalid recording": (lambda d, run, p: ["loglik", _nan_csv(d, run), "--params", p],
                           "NaN in column 'u'"),
-    "unknown command": (lambda d, run, p: ["fit"], "invalid choice"),
+    "unknown command": (lambda d, run, p: ["fitt"], "invalid choice"),
 }
 
 

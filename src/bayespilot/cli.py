@@ -318,6 +318,116 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _csv_of(item_type, what: str):
+    """An argparse type: a comma-separated list of ``item_type`` values, no repeats."""
+    def parse(text: str) -> tuple:
+        parts = [t.strip() for t in text.split(",")]
+        if not text.strip() or any(not t for t in parts):
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list of {what}, "
+                                             f"got {text!r}")
+        values = tuple(item_type(t) for t in parts)
+        if len(set(values)) != len(values):
+            raise argparse.ArgumentTypeError(f"repeated value in {text!r}")
+        return values
+    return parse
+
+
+def _task_name(text: str) -> str:
+    if text not in ("FD", "FT"):
+        raise argparse.ArgumentTypeError(f"task must be FD or FT, got {text!r}")
+    return text
+
+
+def _count(text: str) -> int:
+    try:
+        x = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+    if x < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
+    return x
+
+
+def _fit_option(text: str) -> tuple[str, object]:
+    name, sep, value = text.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    try:
+        parsed = json.loads(value)
+    except ValueError:
+        parsed = value
+    return name.strip(), parsed
+
+
+def _cmd_replicate(args: argparse.Namespace) -> int:
+    from .campaign import (CampaignError, load_results, paper_study, run_campaign, summarise,
+                           summary_markdown, write_summary_csv)
+
+    if args.scheduler is not None and args.workers is not None:
+        raise UsageError("give --scheduler (an existing cluster) or --workers (a local one), "
+                         "not both")
+    try:
+        jobs = paper_study(args.realizations, tasks=args.tasks, motion_gains=args.motion_gains,
+                           remnant_fractions=args.remnant_fractions, threshold=(True, False),
+                           method=args.method, duration=args.duration, **dict(args.fit_option))
+    except ValueError as exc:  # e.g. an option the fit function does not take
+        raise UsageError(f"argument --fit-option: {exc}") from None
+    out = Path(args.out)
+    where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
+    _say(args, f"{len(jobs)} fits ({args.method} method, {args.realizations} realization(s) x "
+               f"{len(args.tasks)} task(s) x {len(args.motion_gains)} K_theta x "
+               f"{len(args.remnant_fractions)} F_n, with and without threshold) on {where} "
+               f"-> {out}")
+    try:
+        summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
+                               progress=not args.quiet)
+    except CampaignError as exc:
+        raise CommandFailed(str(exc)) from None
+    _say(args, str(summary))
+    results = load_results(out, jobs)
+    if not results:
+        raise CommandFailed(f"no fit finished; the errors are in {out}/<key>.error.json")
+    rows = summarise(results)
+    table = summary_markdown(rows)
+    csv_path, md_path, png = out / "summary.csv", out / "summary.md", out / "delta_abs_histograms.png"
+    header = (f"# Simulation study of Pool et al. (2012), Section III.B.2: ours beside Figs. 14/15\n\n"
+              f"{len(results)} of {len(jobs)} fits finished ({args.method} method"
+              f"{'' if args.duration is None else f', {args.duration:g}-s runs'}"
+              f"{', options ' + str(dict(args.fit_option)) if args.fit_option else ''}).\n"
+              f"mu, sigma: mean and standard deviation (ddof 1) of the final delta_abs; N50: "
+              f"estimates within +-50 % of the true 0.0075 IPUT. The paper's columns are the "
+              f"fits with threshold over 100 realizations. flag: N50 differs from the paper's "
+              f"by more than 2 binomial standard deviations, or mu by more than 2 standard "
+              f"errors.\n\n")
+    fractions = [f for f in args.remnant_fractions if f in (0.0, 0.2, 0.3)] \
+        or list(args.remnant_fractions)
+    try:
+        write_summary_csv(rows, csv_path)
+        md_path.write_text(header + table + "\n", encoding="utf-8")
+    except OSError as exc:
+        raise CommandFailed(f"cannot write the summary in {out} ({exc.strerror or exc})") from None
+    print(table)
+    if any(r["threshold"] for r in results):
+        from .plots import plot_threshold_histograms
+
+        fig = plot_threshold_histograms(results, fractions=fractions, method=args.method)
+        try:
+            fig.savefig(png, dpi=110)
+        except OSError as exc:
+            raise CommandFailed(f"{png}: cannot write the plot ({exc.strerror or exc})") from None
+        finally:
+            import matplotlib.pyplot as plt
+
+            plt.close(fig)
+        _say(args, f"wrote {csv_path}, {md_path} and {png}")
+    else:
+        _say(args, f"wrote {csv_path} and {md_path} (no fit with threshold finished: no figure)")
+    if summary.failed:
+        raise CommandFailed(f"{summary.failed} of {summary.total} fits failed (messages in "
+                            f"{out}/<key>.error.json); run the same command again to retry them")
+    return EXIT_OK
+
+
 # --- the parser ------------------------------------------------------------------------
 TOP_EPILOG = f"""\
 Estimates pilot-model parameters and motion-perception thresholds from
@@ -402,6 +512,29 @@ Example:
   bayespilot demo --out /tmp/demo --seed 7
 """
 
+
+REPLICATE_EPILOG = """\
+Replicates the simulation study of Section III.B.2 (Figs. 14 and 15): for each
+task, K_theta, remnant fraction F_n and realization, simulates a run with the
+Table 3 parameters and fits it with and without threshold. The fits run in
+parallel on dask.distributed: a local cluster (--workers, default one per
+core) or an existing one (--scheduler tcp://host:8786). Seeds follow from the
+task, K_theta, F_n and realization number, so a rerun gives the same fits.
+
+Each fit is written to DIR/<key>.json (e.g. FD_k1_fn0.2_r007_thr_paper.json)
+as soon as it finishes. Running the same command again skips the fits already
+in DIR, so an interrupted campaign resumes where it stopped; a fit that failed
+is in DIR/<key>.error.json and is retried. At the end the command writes
+DIR/summary.csv and DIR/summary.md (mu, sigma and N50 of delta_abs per cell
+beside the paper's, with a binomial check) and DIR/delta_abs_histograms.png.
+The full study is 8000 fits (4000 with threshold, 4000 without).
+
+Example:
+  bayespilot replicate --realizations 100 --out replication
+  bayespilot replicate --realizations 5 --method fast --tasks FD --motion-gains 0.25,1 \\
+      --remnant-fractions 0,0.2 --out quick --workers 2
+  bayespilot replicate --realizations 100 --out replication --scheduler tcp://10.0.0.5:8786
+"""
 
 def _common(parser: argparse.ArgumentParser, *, sub: bool) -> None:
     """-q/-v, on the top-level parser and (so they work after the command) on each subcommand."""
@@ -494,6 +627,41 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seed of the remnant noise, an integer >= 0 (default 0)")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_demo)
+
+    p = subs.add_parser("replicate", formatter_class=fmt, epilog=REPLICATE_EPILOG,
+                        help="replicate the simulation study (Figs. 14/15) on a dask cluster",
+                        description="Run the Monte Carlo study of Section III.B.2 as a "
+                                    "resumable campaign of fits.")
+    p.add_argument("--realizations", type=_count, default=100, metavar="N",
+                   help="remnant realizations per cell (default 100, as in the paper)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for one JSON per fit and the summary (created if missing; "
+                        "fits already in it are not redone)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="address of a running dask scheduler, e.g. tcp://host:8786 "
+                        "(default: a local cluster)")
+    p.add_argument("--workers", type=_count, metavar="N",
+                   help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--method", choices=("paper", "fast"), default="paper",
+                   help="'paper': the three-step procedure (default); 'fast': multi-start "
+                        "least squares with a profile over delta_abs")
+    p.add_argument("--tasks", type=_csv_of(_task_name, "tasks (FD, FT)"), default=("FD", "FT"),
+                   metavar="LIST", help="comma-separated tasks (default FD,FT)")
+    p.add_argument("--motion-gains", type=_csv_of(_nonnegative, "numbers >= 0"),
+                   default=(0.25, 0.5, 0.75, 1.0), metavar="LIST",
+                   help="comma-separated K_theta values (default 0.25,0.5,0.75,1)")
+    p.add_argument("--remnant-fractions", type=_csv_of(_fraction, "numbers in [0, 1)"),
+                   default=(0.0, 0.1, 0.2, 0.25, 0.3), metavar="LIST",
+                   help="comma-separated F_n values (default 0,0.1,0.2,0.25,0.3)")
+    p.add_argument("--duration", type=_positive, default=None, metavar="S",
+                   help="measurement time of each simulated run in seconds (default 81.92; "
+                        "shorter for a quick check)")
+    p.add_argument("--fit-option", type=_fit_option, action="append", default=[],
+                   metavar="NAME=VALUE",
+                   help="an option of the fit (repeatable), e.g. repetitions=5 or "
+                        "population=80 for the paper method, n_starts=4 for the fast one")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_replicate)
     return parser
 
 

@@ -1,0 +1,726 @@
+"""The Monte Carlo study of Section III.B.2 as a campaign of independent fits on dask.distributed.
+
+A campaign is a list of :class:`Job` (one simulated remnant realization, one
+fit); :func:`paper_study` builds the paper's grid (task x K_theta x F_n x
+realization, with and without threshold).  :func:`run_campaign` sends the jobs
+to a dask cluster and writes every finished fit to ``out_dir/<key>.json`` as
+it arrives; :func:`load_results` reads them back and :func:`summarise` gives
+the Figs. 14/15 numbers (mu, sigma, N50%) beside the paper's.
+
+Seeds
+-----
+Every number of a job follows from its fields.  The remnant seed is derived
+from (task, K_theta, F_n, realization) only, so the fits with and without
+threshold, and by either method, see the same recording (a paired
+comparison, as in Fig. 11).  The fit seed (GA / Latin-hypercube starts) comes
+from the same four fields through a separate stream of the same
+``numpy.random.SeedSequence``, so it is independent of the remnant.  Both are
+``SeedSequence([SEED_ROOT, stream, task code, round(1e4 K_theta),
+round(1e4 F_n), realization]).generate_state(1, uint64)[0] >> 1`` with stream
+0 for the remnant and 1 for the fit (see :func:`job_seed`).
+
+Resume semantics
+----------------
+A result file is written atomically (a temporary file in the same folder,
+then ``os.replace``) as soon as its fit finishes, so a file that exists is
+complete.  Running the same jobs again skips every job whose file exists and
+parses (its fit is not redone); a file that does not parse is redone.  A job
+that raised leaves ``<key>.error.json`` (type, message, traceback) and the
+campaign goes on; the next run retries it and removes the error file once it
+succeeds.  A result file written for other settings of the same key (other
+fit options) is an error, not a silent mix.
+
+Numba and the workers
+---------------------
+The kernels are compiled with ``cache=True`` (:mod:`bayespilot._jit`), so a
+process loads compiled code from the on-disk cache instead of compiling.
+Before submitting, :func:`run_campaign` runs one tiny simulation and fit of
+each method in the client process: this fills the cache once, and the
+workers, which import the kernels only when their first job arrives, load it
+instead of each compiling every kernel (tens of seconds each) at the same
+time.  Workers of a remote cluster profit
+only if they share the package folder (or ``NUMBA_CACHE_DIR``) with the client.
+A local cluster gives each worker ``cpu_count // workers`` numba threads, so
+the parallel GA kernel does not oversubscribe the cores.
+"""
+
+from __future__ import annotations
+
+import csv
+import inspect
+import json
+import math
+import os
+import platform
+import sys
+import time
+import traceback
+import uuid
+import warnings
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from . import presets
+
+__all__ = ["Job", "CampaignError", "CampaignSummary", "paper_study", "run_job", "run_campaign",
+           "load_results", "summarise", "summary_markdown", "write_summary_csv", "job_seed",
+           "SEED_ROOT", "TRUE_DELTA_ABS"]
+
+#: Root entropy of every seed of a campaign (arbitrary, fixed: the paper's year and issue).
+SEED_ROOT = 2012_035_003
+#: The true threshold of the simulation study (Table 3), IPUT.
+TRUE_DELTA_ABS = 0.0075
+_TASK_CODE = {"FD": 1, "FT": 2}
+_STREAMS = {"remnant": 0, "fit": 1}
+_METHODS = ("paper", "fast")
+
+
+class CampaignError(RuntimeError):
+    """A campaign cannot run: the scheduler is unreachable, results cannot be written, ... ."""
+
+
+def job_seed(stream: str, task: str, motion_gain: float, remnant_fraction: float,
+             realization: int) -> int:
+    """The seed of ``stream`` ("remnant" or "fit") for one cell and realization (module docs).
+
+    Examples
+    --------
+    >>> job_seed("remnant", "FD", 1.0, 0.2, 7) == job_seed("remnant", "FD", 1, 0.2, 7)
+    True
+    >>> job_seed("remnant", "FD", 1.0, 0.2, 7) != job_seed("fit", "FD", 1.0, 0.2, 7)
+    True
+    """
+    if stream not in _STREAMS:
+        raise ValueError(f"stream must be 'remnant' or 'fit', got {stream!r}")
+    entropy = [SEED_ROOT, _STREAMS[stream], _TASK_CODE[task], int(round(1e4 * motion_gain)),
+               int(round(1e4 * remnant_fraction)), int(realization)]
+    return int(np.random.SeedSequence(entropy).generate_state(1, np.uint64)[0] >> np.uint64(1))
+
+
+def _fit_function(method: str):
+    if method == "paper":
+        from .fit.three_step import fit_paper
+        return fit_paper
+    from .fit.fast import fit_fast
+    return fit_fast
+
+
+def _fit_option_names(method: str) -> tuple[str, ...]:
+    sig = inspect.signature(_fit_function(method))
+    return tuple(n for n, p in sig.parameters.items()
+                 if p.kind == p.KEYWORD_ONLY and n not in ("threshold", "seed", "progress"))
+
+
+def _json_roundtrip(obj: Any) -> Any:
+    return json.loads(json.dumps(obj))
+
+
+@dataclass(frozen=True)
+class Job:
+    """One fit of the campaign: a simulated realization and how to fit it.
+
+    Parameters
+    ----------
+    task : {"FD", "FT"}
+    motion_gain : float
+        K_theta.
+    remnant_fraction : float
+        F_n in [0, 1); 0 simulates without remnant.
+    realization : int
+        Realization number >= 0 (sets the seeds, see the module docs).
+    threshold : bool
+        Fit the model with (True) or without (False) threshold.
+    method : {"paper", "fast"}
+        :func:`~bayespilot.fit.three_step.fit_paper` or
+        :func:`~bayespilot.fit.fast.fit_fast`.
+    fit_kwargs : dict
+        Further keyword arguments of the fit function (e.g. ``repetitions``),
+        JSON-serialisable.
+    duration : float or None
+        Measurement time of the simulated run, s (None: the paper's 81.92 s).
+
+    Attributes
+    ----------
+    key : str
+        Stable name of the job and of its result file, e.g.
+        ``FD_k1_fn0.2_r007_thr_paper`` (``_T20`` appended for a 20-s run).
+    remnant_seed, fit_seed : int
+
+    Examples
+    --------
+    >>> Job("FD", 1.0, 0.2, 7).key
+    'FD_k1_fn0.2_r007_thr_paper'
+    >>> Job("FT", 0.25, 0.0, 12, threshold=False, method="fast", duration=20).key
+    'FT_k0.25_fn0_r012_nothr_fast_T20'
+    """
+
+    task: str
+    motion_gain: float
+    remnant_fraction: float
+    realization: int
+    threshold: bool = True
+    method: str = "paper"
+    fit_kwargs: dict[str, Any] = field(default_factory=dict, hash=False)
+    duration: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.task not in _TASK_CODE:
+            raise ValueError(f"task must be 'FD' or 'FT', got {self.task!r}")
+        for name in ("motion_gain", "remnant_fraction"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)) \
+                    or not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite number, got {v!r}")
+            object.__setattr__(self, name, float(v))
+        if self.motion_gain < 0:
+            raise ValueError(f"motion_gain must be >= 0, got {self.motion_gain}")
+        if not 0.0 <= self.remnant_fraction < 1.0:
+            raise ValueError(f"remnant_fraction must be in [0, 1), got {self.remnant_fraction}")
+        if isinstance(self.realization, bool) or not isinstance(self.realization, (int, np.integer)) \
+                or self.realization < 0:
+            raise ValueError(f"realization must be an integer >= 0, got {self.realization!r}")
+        object.__setattr__(self, "realization", int(self.realization))
+        if not isinstance(self.threshold, (bool, np.bool_)):
+            raise ValueError(f"threshold must be True or False, got {self.threshold!r}")
+        object.__setattr__(self, "threshold", bool(self.threshold))
+        if self.method not in _METHODS:
+            raise ValueError(f"method must be 'paper' or 'fast', got {self.method!r}")
+        if not isinstance(self.fit_kwargs, Mapping):
+            raise ValueError(f"fit_kwargs must be a dict, got {type(self.fit_kwargs).__name__}")
+        allowed = _fit_option_names(self.method)
+        unknown = [k for k in self.fit_kwargs if k not in allowed]
+        if unknown:
+            raise ValueError(f"unknown option(s) {', '.join(map(repr, unknown))} for the "
+                             f"{self.method} method; valid are {', '.join(allowed)}")
+        try:
+            kw = _json_roundtrip(dict(self.fit_kwargs))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"fit_kwargs must be JSON-serialisable ({exc})") from None
+        object.__setattr__(self, "fit_kwargs", kw)
+        if self.duration is not None:
+            d = self.duration
+            if isinstance(d, bool) or not isinstance(d, (int, float, np.floating, np.integer)) \
+                    or not (math.isfinite(d) and d > 0):
+                raise ValueError(f"duration must be a positive number of seconds or None, got {d!r}")
+            object.__setattr__(self, "duration", float(d))
+
+    @property
+    def key(self) -> str:
+        k = (f"{self.task}_k{self.motion_gain:g}_fn{self.remnant_fraction:g}_r{self.realization:03d}"
+             f"_{'thr' if self.threshold else 'nothr'}_{self.method}")
+        return k if self.duration is None else f"{k}_T{self.duration:g}"
+
+    @property
+    def remnant_seed(self) -> int:
+        return job_seed("remnant", self.task, self.motion_gain, self.remnant_fraction,
+                        self.realization)
+
+    @property
+    def fit_seed(self) -> int:
+        return job_seed("fit", self.task, self.motion_gain, self.remnant_fraction, self.realization)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as a JSON-ready dict (what a result file stores under ``"job"``)."""
+        return {"task": self.task, "motion_gain": self.motion_gain,
+                "remnant_fraction": self.remnant_fraction, "realization": self.realization,
+                "threshold": self.threshold, "method": self.method,
+                "fit_kwargs": dict(self.fit_kwargs), "duration": self.duration}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Job":
+        return cls(d["task"], d["motion_gain"], d["remnant_fraction"], d["realization"],
+                   d.get("threshold", True), d.get("method", "paper"), d.get("fit_kwargs", {}),
+                   d.get("duration"))
+
+
+def paper_study(realizations: int = 100, tasks: Sequence[str] = ("FD", "FT"),
+                motion_gains: Sequence[float] = presets.MOTION_GAINS,
+                remnant_fractions: Sequence[float] = (0.0, 0.1, 0.2, 0.25, 0.3),
+                threshold: bool | Sequence[bool] = (True, False), method: str = "paper", *,
+                duration: float | None = None, **fit_kwargs: Any) -> list[Job]:
+    """The jobs of the simulation study of Section III.B.2 (Figs. 14 and 15).
+
+    Parameters
+    ----------
+    realizations : int
+        Remnant realizations per cell (the paper: 100).
+    tasks, motion_gains, remnant_fractions
+        The grid.
+    threshold : bool or sequence of bool
+        Fit with threshold, without, or both (default).
+    method : {"paper", "fast"}
+    duration : float, optional
+        Shorter simulated runs (s), for smoke tests.
+    **fit_kwargs
+        Options of the fit function, e.g. ``repetitions=2`` (see :class:`Job`).
+
+    Returns
+    -------
+    list of Job
+        Realization outermost, so that any leading part of the list covers
+        every cell with a few realizations (useful for a campaign run in chunks).
+
+    Examples
+    --------
+    >>> jobs = paper_study(2, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.2,))
+    >>> [j.key for j in jobs]  # doctest: +NORMALIZE_WHITESPACE
+    ['FD_k1_fn0.2_r000_thr_paper', 'FD_k1_fn0.2_r000_nothr_paper',
+     'FD_k1_fn0.2_r001_thr_paper', 'FD_k1_fn0.2_r001_nothr_paper']
+    """
+    if isinstance(realizations, bool) or not isinstance(realizations, (int, np.integer)) \
+            or realizations < 1:
+        raise ValueError(f"realizations must be a positive integer, got {realizations!r}")
+    thresholds = (threshold,) if isinstance(threshold, (bool, np.bool_)) else tuple(threshold)
+    for name, seq in (("tasks", tasks), ("motion_gains", motion_gains),
+                      ("remnant_fractions", remnant_fractions), ("threshold", thresholds)):
+        if isinstance(seq, str) or len(seq) == 0:
+            raise ValueError(f"{name} must be a non-empty sequence, got {seq!r}")
+    return [Job(task, k, fn, r, thr, method, dict(fit_kwargs), duration)
+            for r in range(int(realizations)) for task in tasks for k in motion_gains
+            for fn in remnant_fractions for thr in thresholds]
+
+
+def _jsonable(obj: Any) -> Any:
+    """Numpy scalars and arrays, tuples and mappings to plain JSON types."""
+    if isinstance(obj, Mapping):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating):
+        return float(obj)
+    return obj
+
+
+def _versions() -> dict[str, str]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {"python": platform.python_version()}
+    for name in ("bayespilot", "numpy", "scipy", "numba", "distributed"):
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = "not installed"
+    return out
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """Simulate one realization and fit it; return a JSON-ready dict.
+
+    Keys: ``key``; the job fields (``task``, ``motion_gain``,
+    ``remnant_fraction``, ``realization``, ``threshold``, ``method``,
+    ``fit_kwargs``, ``duration``) and the same under ``"job"``;
+    ``remnant_seed``, ``fit_seed``; ``true_params``; ``K_n`` and ``F_n`` (the
+    remnant gain and the fraction reached); ``fit`` (``FitResult.to_dict(full=False)``);
+    ``step1_delta_abs`` (paper method with threshold only); ``elapsed_seconds``
+    (simulation and fit); ``host``; ``versions``.
+    """
+    from .simulate import simulate
+
+    if not isinstance(job, Job):
+        raise TypeError(f"job must be a Job, got {type(job).__name__}")
+    t0 = time.perf_counter()
+    sim = simulate(task=job.task, motion_gain=job.motion_gain,
+                   remnant_fraction=job.remnant_fraction or None, seed=job.remnant_seed,
+                   duration=job.duration)
+    fit = _fit_function(job.method)(sim.recording, threshold=job.threshold, seed=job.fit_seed,
+                                    **job.fit_kwargs)
+    out: dict[str, Any] = {"key": job.key, **job.to_dict(), "job": job.to_dict(),
+                           "remnant_seed": job.remnant_seed, "fit_seed": job.fit_seed,
+                           "true_params": dict(sim.params), "K_n": sim.remnant_gain,
+                           "F_n": sim.remnant_fraction, "fit": fit.to_dict(full=False)}
+    step1 = fit.steps.get("step1_delta_abs")
+    if step1 is not None:
+        out["step1_delta_abs"] = step1
+    out.update({"elapsed_seconds": time.perf_counter() - t0, "host": platform.node(),
+                "versions": _versions()})
+    return _jsonable(out)
+
+
+@dataclass(frozen=True)
+class CampaignSummary:
+    """What :func:`run_campaign` did.
+
+    Attributes
+    ----------
+    total : int
+        Jobs asked for.
+    completed : int
+        Fits run and written by this call.
+    skipped : int
+        Jobs whose result file already existed and parsed (not redone).
+    failed : int
+        Jobs that raised (see ``errors`` and ``out_dir/<key>.error.json``).
+    errors : dict
+        key -> one-line message of each failure.
+    out_dir : Path
+    elapsed : float
+        Wall time of the call, s.
+    """
+
+    total: int
+    completed: int
+    skipped: int
+    failed: int
+    errors: dict[str, str]
+    out_dir: Path
+    elapsed: float
+
+    @property
+    def ok(self) -> bool:
+        return self.failed == 0
+
+    def __str__(self) -> str:
+        return (f"{self.total} fits: {self.completed} run, {self.skipped} already done, "
+                f"{self.failed} failed ({self.elapsed:.1f} s) -> {self.out_dir}")
+
+
+def _result_path(out_dir: Path, job: Job) -> Path:
+    return out_dir / f"{job.key}.json"
+
+
+def _error_path(out_dir: Path, job: Job) -> Path:
+    return out_dir / f"{job.key}.error.json"
+
+
+def _read_json(path: Path) -> Any:
+    """The parsed file, or None if it is missing or does not parse."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError):
+        return None
+
+
+def _write_json_atomic(path: Path, obj: Any) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        tmp.write_text(json.dumps(obj, indent=1, allow_nan=True), encoding="utf-8")
+        os.replace(tmp, path)
+    except OSError as exc:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise CampaignError(f"{path}: cannot write the result ({exc.strerror or exc})") from None
+
+
+def _warm_numba_cache(methods: Iterable[str]) -> None:
+    """One tiny simulation and fit per method and threshold setting, in this process.
+
+    Fills numba's on-disk cache (``cache=True``) so that workers load the
+    compiled kernels instead of each compiling them at the same time.
+    """
+    from .fit.fast import fit_fast
+    from .fit.three_step import fit_paper
+    from .simulate import simulate
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.1, seed=0, duration=2.0).recording
+    for thr in (True, False):
+        if "paper" in methods:
+            fit_paper(rec, threshold=thr, seed=0, repetitions=1, n_best=1, population=4,
+                      generations=1)
+        if "fast" in methods:
+            fit_fast(rec, threshold=thr, seed=0, n_starts=1, profile_step=0.05)
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
+
+
+def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
+             connect_timeout: float):
+    """A distributed.Client: to ``scheduler``, or to a LocalCluster closed with ``stack``."""
+    from distributed import Client, LocalCluster
+
+    if scheduler is None:
+        n = int(workers or os.cpu_count() or 1)
+        numba_threads = max(1, (os.cpu_count() or 1) // n)
+        try:
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                env={"NUMBA_NUM_THREADS": str(numba_threads)}))
+        except Exception as exc:
+            raise CampaignError(f"cannot start a local dask cluster with {n} workers "
+                                f"({_first_line(exc)})") from None
+        return stack.enter_context(Client(cluster))
+    try:
+        client = Client(scheduler, timeout=f"{connect_timeout}s")
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+        raise CampaignError(f"cannot reach the dask scheduler at {scheduler!r} within "
+                            f"{connect_timeout:g} s ({_first_line(exc)})") from None
+    stack.enter_context(client)
+    try:
+        client.wait_for_workers(1, timeout=connect_timeout)
+    except (OSError, TimeoutError) as exc:
+        raise CampaignError(f"the dask scheduler at {scheduler!r} has no workers "
+                            f"(waited {connect_timeout:g} s: {_first_line(exc)})") from None
+    return client
+
+
+def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *, scheduler: str | None = None,
+                 workers: int | None = None, progress: bool = True, connect_timeout: float = 10.0,
+                 warm_cache: bool = True) -> CampaignSummary:
+    """Run the jobs on dask.distributed, writing ``out_dir/<key>.json`` as each fit finishes.
+
+    Parameters
+    ----------
+    jobs : iterable of Job
+        Keys must be unique.
+    out_dir : str or Path
+        Created if missing.  Jobs whose result file exists and parses are
+        skipped (module docs, "Resume semantics").
+    scheduler : str, optional
+        Address of a running dask scheduler (``"tcp://host:8786"``).  Default:
+        a ``LocalCluster`` of ``workers`` single-threaded processes, started
+        and closed here.  On a cluster of your own, start one single-threaded
+        worker process per core, or set ``NUMBA_NUM_THREADS`` in the workers'
+        environment so that the numba threads of the workers on one machine
+        add up to its cores.
+    workers : int, optional
+        Workers of the local cluster (default ``os.cpu_count()``); not with
+        ``scheduler``.
+    progress : bool
+        A tqdm bar on stderr: fits done / total, with the time left.
+    connect_timeout : float
+        Seconds to wait for the scheduler and for its first worker.
+    warm_cache : bool
+        Fill numba's cache in this process first (module docs).
+
+    Returns
+    -------
+    CampaignSummary
+
+    Raises
+    ------
+    CampaignError
+        The scheduler cannot be reached (within ``connect_timeout``) or has no
+        workers, a local cluster cannot start, a result cannot be written, or
+        ``out_dir`` holds a result of the same key for other settings.
+    ValueError
+        Duplicate keys, ``workers`` < 1 or given with ``scheduler``.
+
+    Examples
+    --------
+    >>> jobs = paper_study(1, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.2,),
+    ...                    method="fast", duration=5.0, n_starts=1)
+    >>> summary = run_campaign(jobs, "campaign-out", workers=1, progress=False)  # doctest: +SKIP
+    """
+    t0 = time.perf_counter()
+    jobs = list(jobs)
+    for j in jobs:
+        if not isinstance(j, Job):
+            raise TypeError(f"jobs must be Job objects, got {type(j).__name__}")
+    seen: set[str] = set()
+    dupes = sorted({j.key for j in jobs if j.key in seen or seen.add(j.key)})
+    if dupes:
+        raise ValueError(f"duplicate job keys: {', '.join(dupes[:5])}"
+                         f"{' ...' if len(dupes) > 5 else ''}")
+    if workers is not None:
+        if scheduler is not None:
+            raise ValueError("workers sets the size of the local cluster; do not give it "
+                             "with scheduler")
+        if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
+            raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if not (isinstance(connect_timeout, (int, float)) and connect_timeout > 0):
+        raise ValueError(f"connect_timeout must be a positive number of seconds, "
+                         f"got {connect_timeout!r}")
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CampaignError(f"{out}: cannot create the output folder "
+                            f"({exc.strerror or exc})") from None
+
+    pending: list[Job] = []
+    skipped = 0
+    for j in jobs:
+        old = _read_json(_result_path(out, j))
+        if not (isinstance(old, dict) and old.get("key") == j.key and "fit" in old):
+            pending.append(j)
+            continue
+        if old.get("job") != _json_roundtrip(j.to_dict()):
+            raise CampaignError(f"{_result_path(out, j)} holds a fit of {j.key} with other "
+                                f"settings ({old.get('job')}); use another output folder "
+                                f"or delete it")
+        skipped += 1
+
+    completed, errors = 0, {}
+    if pending:
+        from distributed import as_completed
+        from tqdm import tqdm
+
+        with ExitStack() as stack:
+            # connect first, so that an unreachable scheduler is reported at once
+            client = _connect(stack, scheduler, workers, connect_timeout)
+            if warm_cache:
+                try:
+                    _warm_numba_cache({j.method for j in pending})
+                except Exception as exc:  # not fatal: the workers then compile for themselves
+                    warnings.warn(f"warming numba's cache failed ({_first_line(exc)}); each "
+                                  f"worker compiles the kernels itself", RuntimeWarning,
+                                  stacklevel=2)
+            futures = {client.submit(run_job, j, pure=False): j for j in pending}
+            bar = stack.enter_context(tqdm(total=len(jobs), initial=skipped, desc="fits",
+                                           unit="fit", disable=not progress, file=sys.stderr,
+                                           smoothing=0.1, dynamic_ncols=True))
+            for fut in as_completed(futures):
+                job = futures.pop(fut)
+                if fut.status == "finished":
+                    _write_json_atomic(_result_path(out, job), fut.result())
+                    completed += 1
+                    try:
+                        _error_path(out, job).unlink()
+                    except FileNotFoundError:
+                        pass
+                else:
+                    exc = fut.exception()
+                    tb = fut.traceback()
+                    errors[job.key] = _first_line(exc)
+                    _write_json_atomic(_error_path(out, job), {
+                        "key": job.key, "job": job.to_dict(), "error": type(exc).__name__,
+                        "message": str(exc),
+                        "traceback": "".join(traceback.format_tb(tb)) if tb is not None else None,
+                        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+                    bar.write(f"failed: {job.key}: {errors[job.key]}", file=sys.stderr)
+                fut.release()
+                bar.update(1)
+                bar.set_postfix(failed=len(errors), refresh=False)
+    return CampaignSummary(len(jobs), completed, skipped, len(errors), errors, out,
+                           time.perf_counter() - t0)
+
+
+def load_results(out_dir: str | Path, jobs: Iterable[Job] | None = None) -> list[dict[str, Any]]:
+    """The result dicts in ``out_dir`` (those of ``jobs`` only, if given), sorted by key.
+
+    Error files (``*.error.json``) and files that are not a finished fit are
+    left out; a file that does not parse is left out with a warning.
+    """
+    out = Path(out_dir)
+    if not out.is_dir():
+        raise FileNotFoundError(f"{out}: no such folder")
+    if jobs is not None:
+        paths = [_result_path(out, j) for j in jobs]
+        paths = [p for p in paths if p.exists()]
+    else:
+        paths = sorted(p for p in out.glob("*.json") if not p.name.endswith(".error.json"))
+    results = []
+    for p in paths:
+        d = _read_json(p)
+        if d is None:
+            warnings.warn(f"{p}: left out, not valid JSON (an interrupted write is redone "
+                          f"by the next run)", RuntimeWarning, stacklevel=2)
+        elif isinstance(d, dict) and "key" in d and "fit" in d:
+            results.append(d)
+    return sorted(results, key=lambda d: d["key"])
+
+
+def _paper_cell(task: str, fn: float, k: float):
+    for (t, f, kk), v in presets.FIG14_15.items():
+        if t == task and abs(f - fn) < 1e-9 and abs(kk - k) < 1e-9:
+            return v
+    return None
+
+
+def summarise(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Figs. 14/15 statistics per (task, F_n, K_theta, threshold, method), beside the paper's.
+
+    Each result needs ``task``, ``remnant_fraction``, ``motion_gain``,
+    ``threshold``, ``method``, ``true_params["delta_abs"]``,
+    ``fit["params"]["delta_abs"]`` and ``fit["neg_log_lik"]`` (what
+    :func:`run_job` returns).
+
+    Returns
+    -------
+    list of dict, one per cell, sorted, with
+        ``task, F_n, K_theta, threshold, method``; ``n``; ``mu`` and ``sigma``
+        (ddof=1; NaN for n < 2) of the final delta_abs; ``N50`` (count within
+        +-50 % of the true delta_abs, bounds included) and ``N50_pct``;
+        ``mean_neg_log_lik``; ``paper_mu, paper_sigma, paper_N50`` (None where
+        Figs. 14/15 have no such cell; the paper's are fits with threshold);
+        ``flag_N50``: ``|N50 - n p| > 2 sqrt(n p (1-p))`` with
+        p = paper_N50 / 100 (for n = 100 this is ``|N50 - paper_N50| > ...``;
+        for p = 0 or 1 any difference flags); ``flag_mu``:
+        ``|mu - paper_mu| > 2 sqrt(sigma^2/n + paper_sigma^2/100)`` (False for
+        n < 2); ``flag`` = either.
+    """
+    groups: dict[tuple, list[Mapping[str, Any]]] = {}
+    for r in results:
+        key = (r["task"], float(r["remnant_fraction"]), float(r["motion_gain"]),
+               bool(r["threshold"]), r["method"])
+        groups.setdefault(key, []).append(r)
+    rows = []
+    order = sorted(groups, key=lambda k: (k[4], not k[3], k[0], k[1], k[2]))
+    for key in order:
+        task, fn, k, thr, method = key
+        rs = groups[key]
+        d = np.array([float(r["fit"]["params"]["delta_abs"]) for r in rs])
+        truths = {float(r["true_params"]["delta_abs"]) for r in rs}
+        if len(truths) != 1:
+            raise ValueError(f"cell {key} mixes true delta_abs values {sorted(truths)}")
+        true = truths.pop()
+        n = d.size
+        mu = float(d.mean())
+        sigma = float(d.std(ddof=1)) if n > 1 else math.nan
+        n50 = int(np.count_nonzero(np.abs(d - true) <= 0.5 * true))
+        nll = float(np.mean([float(r["fit"]["neg_log_lik"]) for r in rs]))
+        row = {"task": task, "F_n": fn, "K_theta": k, "threshold": thr, "method": method, "n": n,
+               "mu": mu, "sigma": sigma, "N50": n50, "N50_pct": 100.0 * n50 / n,
+               "mean_neg_log_lik": nll, "true_delta_abs": true, "paper_mu": None,
+               "paper_sigma": None, "paper_N50": None, "flag_N50": False, "flag_mu": False,
+               "flag": False}
+        paper = _paper_cell(task, fn, k) if thr else None
+        if paper is not None:
+            pmu, psig, pn50 = paper
+            p = pn50 / 100.0
+            flag_n50 = abs(n50 - n * p) > 2.0 * math.sqrt(n * p * (1.0 - p))
+            flag_mu = n > 1 and abs(mu - pmu) > 2.0 * math.sqrt(sigma**2 / n + psig**2 / 100.0)
+            row.update({"paper_mu": pmu, "paper_sigma": psig, "paper_N50": pn50,
+                        "flag_N50": bool(flag_n50), "flag_mu": bool(flag_mu),
+                        "flag": bool(flag_n50 or flag_mu)})
+        rows.append(row)
+    return rows
+
+
+SUMMARY_COLUMNS = ("task", "F_n", "K_theta", "threshold", "method", "n", "mu", "sigma", "N50",
+                   "N50_pct", "paper_mu", "paper_sigma", "paper_N50", "flag_N50", "flag_mu",
+                   "flag", "mean_neg_log_lik", "true_delta_abs")
+
+
+def write_summary_csv(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
+    """Write :func:`summarise` rows as CSV (empty fields where the paper has no cell)."""
+    path = Path(path)
+    with path.open("w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=SUMMARY_COLUMNS, extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow({c: ("" if r.get(c) is None else r.get(c)) for c in SUMMARY_COLUMNS})
+    return path
+
+
+def summary_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
+    """:func:`summarise` rows as a Markdown table, ours beside the paper's (Figs. 14/15)."""
+    def f(x, spec):
+        return "" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
+
+    head = ("| task | F_n | K_theta | thr | method | n | mu | sigma | N50 | paper mu | "
+            "paper sigma | paper N50% | mean -ln L | flag |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        flags = ",".join(n for n, on in (("N50", r["flag_N50"]), ("mu", r["flag_mu"])) if on)
+        n50 = (f"{r['N50']}" if r["n"] == 100 else f"{r['N50']} ({r['N50_pct']:.0f}%)")
+        lines.append(
+            f"| {r['task']} | {r['F_n']:g} | {r['K_theta']:g} | {'yes' if r['threshold'] else 'no'} "
+            f"| {r['method']} | {r['n']} | {f(r['mu'], '.4f')} | {f(r['sigma'], '.4f')} | {n50} "
+            f"| {f(r['paper_mu'], '.4f')} | {f(r['paper_sigma'], '.4f')} | {f(r['paper_N50'], 'd')} "
+            f"| {f(r['mean_neg_log_lik'], '.1f')} | {('**' + flags + '**') if flags else ''} |")
+    return "\n".join(lines)

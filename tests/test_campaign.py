@@ -1,0 +1,227 @@
+"""Tests of bayespilot.campaign (the Monte Carlo study on dask), its CLI and its figure.
+
+The campaign runs for real on a dask LocalCluster, with tiny fits (the fast
+method, one start, a coarse profile) on 4-s runs without remnant, so the whole
+file takes well under a minute.  Resumption is checked on the files: a job
+that is skipped leaves its result file untouched (same mtime, same bytes).
+summarise() is checked against statistics computed here with plain numpy.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+
+import numpy as np
+import pytest
+
+from bayespilot import presets
+from bayespilot.campaign import (CampaignError, Job, load_results, paper_study, run_campaign,
+                                 summarise, summary_markdown, write_summary_csv)
+from bayespilot.cli import main
+
+pytest.importorskip("distributed")
+
+TINY = {"n_starts": 1, "profile_step": 0.02}
+
+
+def _jobs(**kw):
+    """Two jobs (with and without threshold) of one cell: FD, K_theta = 1, F_n = 0, 4-s run."""
+    return paper_study(1, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.0,),
+                       method="fast", duration=4.0, **dict(TINY, **kw))
+
+
+def _stamp(path):
+    st = path.stat()
+    return st.st_mtime_ns, path.read_bytes()
+
+
+# --- jobs and seeds ----------------------------------------------------------------------
+def test_job_key_seeds_and_validation():
+    j = Job("FD", 1.0, 0.2, 7)
+    assert j.key == "FD_k1_fn0.2_r007_thr_paper"
+    assert Job("FT", 0.25, 0.0, 12, False, "fast", duration=20).key == "FT_k0.25_fn0_r012_nothr_fast_T20"
+    # the remnant seed depends on the cell and realization only: fits with and
+    # without threshold, by either method, see the same recording
+    same = [Job("FD", 1, 0.2, 7, thr, m) for thr in (True, False) for m in ("paper", "fast")]
+    assert len({s.remnant_seed for s in same}) == 1 and len({s.fit_seed for s in same}) == 1
+    assert j.fit_seed != j.remnant_seed
+    others = [Job("FD", 1.0, 0.2, 8), Job("FT", 1.0, 0.2, 7), Job("FD", 0.75, 0.2, 7),
+              Job("FD", 1.0, 0.25, 7)]
+    assert j.remnant_seed not in {o.remnant_seed for o in others}
+    assert Job("FD", 1.0, 0.2, 7).remnant_seed == j.remnant_seed  # deterministic
+    assert Job.from_dict(json.loads(json.dumps(j.to_dict()))) == j
+    with pytest.raises(ValueError, match="unknown option"):
+        Job("FD", 1.0, 0.2, 0, method="fast", fit_kwargs={"repetitions": 2})
+    with pytest.raises(ValueError, match="task"):
+        Job("XX", 1.0, 0.2, 0)
+    with pytest.raises(ValueError, match="remnant_fraction"):
+        Job("FD", 1.0, 1.0, 0)
+    jobs = paper_study(3)
+    assert len(jobs) == 3 * 2 * 4 * 5 * 2 and len({x.key for x in jobs}) == len(jobs)
+
+
+# --- the campaign --------------------------------------------------------------------------
+def test_campaign_writes_skips_and_redoes(tmp_path):
+    out = tmp_path / "c"
+    jobs = _jobs()
+    s1 = run_campaign(jobs, out, workers=1, progress=False)
+    assert (s1.total, s1.completed, s1.skipped, s1.failed) == (2, 2, 0, 0)
+    paths = [out / f"{j.key}.json" for j in jobs]
+    assert all(p.is_file() for p in paths)
+    assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in paths)  # no tmp left
+    for j, p in zip(jobs, paths):
+        d = json.loads(p.read_text())
+        assert d["key"] == j.key and d["job"] == j.to_dict() and d["threshold"] == j.threshold
+        assert d["true_params"] == presets.paper_parameters("FD")
+        assert d["K_n"] == 0.0 and d["F_n"] == 0.0
+        assert d["fit"]["seed"] == j.fit_seed and d["remnant_seed"] == j.remnant_seed
+        assert set(d["fit"]["params"]) == set(presets.PARAMETER_NAMES)
+        assert "steps" not in d["fit"] and d["elapsed_seconds"] > 0
+        assert "numba" in d["versions"]
+    assert json.loads(paths[1].read_text())["fit"]["params"]["delta_abs"] == 0.0  # no threshold
+
+    # same jobs again: nothing is redone, the files are untouched
+    before = [_stamp(p) for p in paths]
+    s2 = run_campaign(jobs, out, workers=1, progress=False)
+    assert (s2.completed, s2.skipped, s2.failed) == (0, 2, 0)
+    assert [_stamp(p) for p in paths] == before
+
+    # one file deleted, plus a job that raises: only the deleted one is redone,
+    # the failure is recorded and the campaign goes on
+    paths[0].unlink()
+    bad = Job("FD", 1.0, 0.0, 1, True, "fast", {"n_starts": 0}, duration=4.0)
+    s3 = run_campaign(jobs + [bad], out, workers=1, progress=False)
+    assert (s3.completed, s3.skipped, s3.failed) == (1, 1, 1)
+    assert paths[0].is_file() and _stamp(paths[1]) == before[1]
+    err = json.loads((out / f"{bad.key}.error.json").read_text())
+    assert err["key"] == bad.key and "n_starts" in err["message"] and err["error"] == "ValueError"
+    assert "n_starts" in s3.errors[bad.key]
+    assert not (out / f"{bad.key}.json").exists()
+    assert [r["key"] for r in load_results(out)] == sorted(j.key for j in jobs)
+
+    # a result of the same key for other settings is not silently reused
+    with pytest.raises(CampaignError, match="other settings"):
+        run_campaign(_jobs(n_starts=2), out, workers=1, progress=False)
+
+
+def test_unreachable_scheduler_fails_quickly(tmp_path):
+    t0 = time.perf_counter()
+    with pytest.raises(CampaignError, match="cannot reach the dask scheduler") as info:
+        run_campaign(_jobs(), tmp_path, scheduler="tcp://127.0.0.1:9", connect_timeout=2,
+                     progress=False)
+    assert time.perf_counter() - t0 < 15
+    assert "\n" not in str(info.value)
+    with pytest.raises(ValueError, match="workers"):
+        run_campaign(_jobs(), tmp_path, scheduler="tcp://127.0.0.1:9", workers=2)
+
+
+# --- summarise -----------------------------------------------------------------------------
+def _synthetic(task, fn, k, deltas, thr=True, method="paper", nll=None):
+    nll = np.arange(len(deltas)) * -3.0 if nll is None else nll
+    return [{"key": f"{task}{fn}{k}{i}{thr}{method}", "task": task, "remnant_fraction": fn,
+             "motion_gain": k, "threshold": thr, "method": method,
+             "true_params": {"delta_abs": 0.0075},
+             "fit": {"params": {"delta_abs": float(d)}, "neg_log_lik": float(v)}}
+            for i, (d, v) in enumerate(zip(deltas, nll))]
+
+
+def test_summarise_against_numpy():
+    rng = np.random.default_rng(5)
+    inside = rng.uniform(0.00376, 0.01124, 55)             # within +-50 % of 0.0075
+    outside = np.r_[rng.uniform(0.0, 0.0037, 20), rng.uniform(0.0113, 0.1, 25)]
+    a = rng.permutation(np.r_[inside, outside])             # FD, 0.2, 1: paper N50 = 55
+    b = rng.permutation(np.r_[inside[:30], outside, rng.uniform(0.02, 0.1, 25)])  # N50 = 30
+    c = rng.uniform(0.0, 0.1, 7)                            # FD, 0.1: no paper cell
+    res = (_synthetic("FD", 0.2, 1.0, a) + _synthetic("FT", 0.2, 1.0, b)
+           + _synthetic("FD", 0.1, 0.5, c) + _synthetic("FD", 0.2, 1.0, np.zeros(4), thr=False)
+           + _synthetic("FD", 0.3, 1.0, [0.0112]))
+    rows = {(r["task"], r["F_n"], r["K_theta"], r["threshold"]): r for r in summarise(res)}
+    assert len(rows) == 5
+
+    for key, d in [(("FD", 0.2, 1.0, True), a), (("FT", 0.2, 1.0, True), b),
+                   (("FD", 0.1, 0.5, True), c)]:
+        r = rows[key]
+        assert r["n"] == d.size
+        assert r["mu"] == np.mean(d) and r["sigma"] == np.std(d, ddof=1)
+        assert r["N50"] == np.sum((d >= 0.00375) & (d <= 0.01125))
+        assert r["mean_neg_log_lik"] == np.mean(np.arange(d.size) * -3.0)
+    assert rows[("FD", 0.2, 1.0, True)]["N50"] == 55 and rows[("FT", 0.2, 1.0, True)]["N50"] == 30
+
+    # FD 0.2 / 1: N50 equal to the paper's -> no N50 flag; mu flag by the stated formula
+    r = rows[("FD", 0.2, 1.0, True)]
+    pmu, psig, pn50 = presets.FIG14_15[("FD", 0.2, 1.0)]
+    assert (r["paper_mu"], r["paper_sigma"], r["paper_N50"]) == (pmu, psig, pn50)
+    assert r["flag_N50"] is False
+    expect_mu = abs(np.mean(a) - pmu) > 2 * math.sqrt(np.var(a, ddof=1) / 100 + psig**2 / 100)
+    assert r["flag_mu"] is bool(expect_mu) and r["flag"] is bool(expect_mu)
+    # FT 0.2 / 1: 30 against the paper's 65, 2 sd = 2 sqrt(100 * 0.65 * 0.35) = 9.5 -> flagged
+    assert rows[("FT", 0.2, 1.0, True)]["flag_N50"] is True
+    assert rows[("FT", 0.2, 1.0, True)]["flag"] is True
+    # no paper cell, or without threshold: no paper values, no flags
+    for key in (("FD", 0.1, 0.5, True), ("FD", 0.2, 1.0, False)):
+        assert rows[key]["paper_mu"] is None and rows[key]["flag"] is False
+    assert rows[("FD", 0.2, 1.0, False)]["mu"] == 0.0 and rows[("FD", 0.2, 1.0, False)]["N50"] == 0
+    # one realization: sigma undefined, only the N50 check (1 of 1 vs the paper's 42 %)
+    one = rows[("FD", 0.3, 1.0, True)]
+    assert one["n"] == 1 and math.isnan(one["sigma"]) and one["N50"] == 1
+    assert one["flag_mu"] is False
+    assert one["flag_N50"] is (abs(1 - 0.42) > 2 * math.sqrt(0.42 * 0.58))
+
+
+def test_summary_table_and_csv(tmp_path):
+    rows = summarise(_synthetic("FD", 0.2, 1.0, np.full(100, 0.0075)))
+    md = summary_markdown(rows)
+    assert md.count("\n") == 2 and "| 0.0088 | 0.0049 | 55 |" in md and "**N50" in md
+    p = write_summary_csv(rows, tmp_path / "s.csv")
+    got = list(csv.DictReader(p.open()))
+    assert len(got) == 1 and got[0]["N50"] == "100" and got[0]["paper_N50"] == "55"
+
+
+def test_plot_threshold_histograms():
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from bayespilot.plots import plot_threshold_histograms
+
+    rng = np.random.default_rng(1)
+    res = [r for task in ("FD", "FT") for fn in (0.0, 0.1, 0.2) for k in (0.25, 1.0)
+           for r in _synthetic(task, fn, k, rng.uniform(0, 0.1, 10))]
+    fig = plot_threshold_histograms(res)  # F_n = 0.1 is not among the default fractions
+    assert len(fig.axes) == 2 * 2 * 2
+    plt.close(fig)
+    with pytest.raises(ValueError, match="several methods"):
+        plot_threshold_histograms(res + _synthetic("FD", 0.0, 1.0, [0.01], method="fast"))
+    with pytest.raises(ValueError, match="no fits"):
+        plot_threshold_histograms(res, fractions=(0.3,))
+
+
+# --- the CLI ---------------------------------------------------------------------------------
+def test_replicate_cli(tmp_path, capsys):
+    out = tmp_path / "rep"
+    code = main(["replicate", "--realizations", "1", "--method", "fast", "--tasks", "FD",
+                 "--motion-gains", "1", "--remnant-fractions", "0", "--duration", "4",
+                 "--fit-option", "n_starts=1", "--fit-option", "profile_step=0.02",
+                 "--workers", "1", "--out", str(out), "-q"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    assert len(list(out.glob("FD_k1_fn0_r000_*_fast_T4.json"))) == 2
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert {(r["threshold"], r["n"]) for r in rows} == {("True", "1"), ("False", "1")}
+    assert "paper mu" in (out / "summary.md").read_text()
+    assert (out / "delta_abs_histograms.png").stat().st_size > 1000
+    assert "| FD | 0 | 1 | yes | fast | 1 |" in captured.out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--fit-option", "bogus=1"], "unknown option"),
+    (["--tasks", "FD,XX"], "task must be FD or FT"),
+    (["--remnant-fractions", "0,1.5"], "must be in [0, 1)"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:9"], "not both"),
+])
+def test_replicate_cli_usage_errors(tmp_path, capsys, argv, message):
+    code = main(["replicate", "--out", str(tmp_path / "x"), "--method", "fast", *argv])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
