@@ -1,0 +1,764 @@
+"""Posterior sampling of the pilot-model parameters with emcee.
+
+:func:`sample` draws from
+
+    p(theta, r | u)  ~  p(theta) p(r) L(theta, r)
+
+with an affine-invariant ensemble sampler (``emcee.EnsembleSampler``, all
+walkers of a half-step evaluated in one parallel batched call), where L is
+either
+
+``"eq4"``
+    the paper's Eq. 4: white output error, variance profiled out
+    (:meth:`bayespilot.likelihood.Likelihood.batch`); or
+``"coloured"``
+    the output error as a stationary AR(p) process whose innovations are white,
+    conditional on the first p samples, innovation variance profiled out
+    (``kernels/_coloured.py``).  The AR model is sampled through its partial
+    autocorrelations ``pacf_1 ... pacf_p`` in (-1, 1), which keeps it
+    stationary.  The remnant of Eq. 6 is far from white at 100 Hz, so this is
+    the likelihood whose credible intervals can be taken at face value.
+
+Priors: uniform on the model bounds (Table 1) and uniform(-0.99, 0.99) on the
+partial autocorrelations unless given.  The run stops when the chain is longer
+than ``tau_factor`` integrated autocorrelation times and the estimate of tau
+has settled (emcee's documented recipe), or at ``max_steps`` with a
+:class:`ConvergenceWarning`.  The result is a :class:`Posterior` holding an
+ArviZ ``InferenceData`` (burn-in of 2 max(tau) dropped, thinned by min(tau)/2).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numba
+import numpy as np
+
+from .fit.result import FitResult
+from .kernels import _coloured as C
+from .likelihood import Likelihood
+from .model import PilotModel, paper_model
+from .recording import Recording
+
+__all__ = ["sample", "Posterior", "ConvergenceWarning", "LIKELIHOODS", "PACF_BOUND",
+           "pacf_names", "pacf_from_residual"]
+
+#: Likelihoods :func:`sample` can use.
+LIKELIHOODS = ("eq4", "coloured")
+#: Default prior on each partial autocorrelation: uniform(-PACF_BOUND, PACF_BOUND).
+PACF_BOUND = 0.99
+#: Half-width of the initial ball of walkers, as a fraction of each parameter's bound range.
+BALL_FRACTION = 1e-3
+_ARVIZ_WARNING = r"\s*ArviZ is undergoing a major refactor"
+_BACKEND_GROUP = "mcmc"
+_FINGERPRINT_ATTR = "bayespilot_fingerprint"
+_TAU_ATTR = "bayespilot_last_tau"
+_META_ATTR = "bayespilot_posterior"
+
+
+class ConvergenceWarning(RuntimeWarning):
+    """The chain reached ``max_steps`` before the autocorrelation criterion was met.
+
+    ``tau`` holds the last estimate of the integrated autocorrelation times and
+    ``n_steps`` the chain length, so a caller can decide how much longer to run.
+    """
+
+    def __init__(self, message: str, tau: np.ndarray | None = None, n_steps: int = 0) -> None:
+        super().__init__(message)
+        self.tau = tau
+        self.n_steps = n_steps
+
+
+def _arviz():
+    """arviz, imported without its import-time FutureWarning about the 1.0 refactor."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=_ARVIZ_WARNING, category=FutureWarning)
+        import arviz
+
+    return arviz
+
+
+def pacf_names(order: int) -> tuple[str, ...]:
+    """Names of the partial autocorrelations of an AR(order) residual model."""
+    return tuple(f"pacf_{j}" for j in range(1, order + 1))
+
+
+def pacf_from_residual(eps: np.ndarray, order: int) -> np.ndarray:
+    """Partial autocorrelations r_1..r_order of ``eps`` (Yule-Walker, Durbin-Levinson).
+
+    Uses the biased sample autocovariance, so |r_j| < 1 (the Yule-Walker AR
+    model is stationary).  Plain NumPy.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> w = rng.standard_normal(20000)
+    >>> x = np.empty_like(w); x[0] = w[0]
+    >>> for k in range(1, w.size): x[k] = 0.6 * x[k - 1] + w[k]
+    >>> bool(abs(pacf_from_residual(x, 2)[0] - 0.6) < 0.02)
+    True
+    """
+    eps = np.asarray(eps, dtype=float)
+    if eps.ndim != 1 or not np.all(np.isfinite(eps)):
+        raise ValueError("eps must be a finite 1-D array")
+    if not isinstance(order, (int, np.integer)) or order < 0 or order >= eps.size:
+        raise ValueError(f"order must be an integer in [0, {eps.size - 1}], got {order!r}")
+    x = eps - eps.mean()
+    n = x.size
+    c = np.array([x[: n - k] @ x[k:] / n for k in range(order + 1)])
+    r = np.zeros(order)
+    if not c[0] > 0:
+        return r
+    rho = c / c[0]
+    a = np.zeros(0)
+    for k in range(1, order + 1):
+        den = 1.0 - a @ rho[1:k]
+        kk = (rho[k] - a @ rho[k - 1:0:-1]) / den if den > 0 else 0.0
+        a = np.concatenate([a - kk * a[::-1], [kk]])
+        r[k - 1] = kk
+    return r
+
+
+# --- the posterior ---------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Posterior:
+    """Posterior draws of the pilot parameters (and AR partial autocorrelations).
+
+    Attributes
+    ----------
+    idata : arviz.InferenceData
+        ``posterior``: one variable per parameter, dims (chain = walker, draw),
+        burn-in (2 max tau) dropped and thinned by min(tau)/2; ``sample_stats``:
+        ``lp`` (log posterior) and ``acceptance`` (fraction of accepted
+        proposals per walker over the thinning window ending at each draw).
+        The settings are in the groups' attrs.
+    parameter_names : tuple of str
+        Sampled parameters, in vector order (pilot parameters, then pacf_j).
+    tau : dict
+        Integrated autocorrelation time (steps) per parameter, at the end.
+    converged : bool
+        Whether the autocorrelation criterion was met before ``max_steps``.
+    settings : dict
+        Every setting of the run, and its bookkeeping (steps, discard, thin,
+        acceptance, timing, the initial point).
+    seed : int or None
+    """
+
+    idata: Any
+    parameter_names: tuple[str, ...]
+    tau: dict[str, float]
+    converged: bool
+    settings: dict[str, Any] = field(default_factory=dict)
+    seed: int | None = None
+
+    def _check_name(self, name: str) -> None:
+        if name not in self.parameter_names:
+            raise ValueError(f"unknown parameter {name!r}; sampled: {', '.join(self.parameter_names)}")
+
+    def draws(self, name: str) -> np.ndarray:
+        """All retained draws of ``name``, walkers concatenated (1-D)."""
+        self._check_name(name)
+        return np.asarray(self.idata.posterior[name].values, dtype=float).ravel()
+
+    def credible_interval(self, name: str, prob: float = 0.9) -> tuple[float, float]:
+        """Highest-density interval of ``name`` holding ``prob`` of the posterior (arviz.hdi)."""
+        self._check_name(name)
+        if not (isinstance(prob, (int, float)) and 0.0 < prob < 1.0):
+            raise ValueError(f"prob must be in (0, 1), got {prob!r}")
+        az = _arviz()
+        lo, hi = az.hdi(self.draws(name), hdi_prob=float(prob))
+        return float(lo), float(hi)
+
+    def summary(self) -> dict[str, dict[str, Any]]:
+        """Per parameter: mean, median, hdi_90 [low, high], r_hat and ess_bulk (arviz).
+
+        r_hat and ess_bulk treat each walker as a chain, as ``arviz.from_emcee``
+        does; walkers of one ensemble are not independent, so r_hat is a
+        consistency check, not a proof of convergence (see ``converged``).
+        """
+        az = _arviz()
+        post = self.idata.posterior
+        hdi = az.hdi(self.idata, hdi_prob=0.9)
+        rhat = az.rhat(self.idata)
+        ess = az.ess(self.idata, method="bulk")
+        out = {}
+        for n in self.parameter_names:
+            x = np.asarray(post[n].values, dtype=float)
+            lo, hi = (float(v) for v in np.asarray(hdi[n].values))
+            out[n] = {"mean": float(x.mean()), "median": float(np.median(x)),
+                      "hdi_90": [lo, hi], "r_hat": float(rhat[n].values),
+                      "ess_bulk": float(ess[n].values)}
+        return out
+
+    def to_netcdf(self, path: str | os.PathLike) -> Path:
+        """Write the InferenceData (with everything needed by :meth:`from_netcdf`) to ``path``."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        self.idata.to_netcdf(str(tmp))
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def from_netcdf(cls, path: str | os.PathLike) -> "Posterior":
+        """Read a file written by :meth:`to_netcdf`."""
+        az = _arviz()
+        idata = az.from_netcdf(str(path))
+        try:
+            meta = json.loads(idata.posterior.attrs[_META_ATTR])
+        except KeyError:
+            raise ValueError(f"{path}: not written by bayespilot.sample (no {_META_ATTR!r} "
+                             "attribute on the posterior group)") from None
+        return cls(idata, tuple(meta["parameter_names"]), dict(meta["tau"]),
+                   bool(meta["converged"]), dict(meta["settings"]), meta["seed"])
+
+    def __str__(self) -> str:
+        s = self.summary()
+        lines = [f"bayespilot posterior ({self.settings.get('likelihood')} likelihood, "
+                 f"{'converged' if self.converged else 'NOT converged'}, seed {self.seed})",
+                 f"{'parameter':<10} {'mean':>10} {'median':>10} {'hdi 90%':>23} "
+                 f"{'r_hat':>6} {'ess':>7} {'tau':>7}"]
+        for n, d in s.items():
+            lines.append(f"{n:<10} {d['mean']:>10.4g} {d['median']:>10.4g} "
+                         f"[{d['hdi_90'][0]:>10.4g},{d['hdi_90'][1]:>10.4g}] "
+                         f"{d['r_hat']:>6.3f} {d['ess_bulk']:>7.0f} {self.tau[n]:>7.1f}")
+        return "\n".join(lines)
+
+
+# --- priors ----------------------------------------------------------------------------
+def _describe(dist) -> str:
+    if callable(dist) and not hasattr(dist, "logpdf"):
+        return f"callable {getattr(dist, '__qualname__', type(dist).__name__)}"
+    name = getattr(getattr(dist, "dist", None), "name", type(dist).__name__)
+    args = ", ".join([*(f"{a:g}" if isinstance(a, (int, float)) else repr(a) for a in dist.args),
+                      *(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v!r}"
+                        for k, v in dist.kwds.items())])
+    return f"{name}({args})"
+
+
+class _Prior:
+    """Vectorised log-prior on rows [free pilot parameters, pacf_1..pacf_p].
+
+    ``box`` is where the likelihood is defined (model bounds; (-1, 1) for the
+    partial autocorrelations); every prior is truncated to it.
+    """
+
+    def __init__(self, names, box_lo, box_hi, default_lo, default_hi, spec) -> None:
+        self.names = tuple(names)
+        self.box_lo = np.asarray(box_lo, float)
+        self.box_hi = np.asarray(box_hi, float)
+        self.callable = None
+        self.dists: dict[int, Any] = {}
+        lo = np.asarray(default_lo, float).copy()
+        hi = np.asarray(default_hi, float).copy()
+        if spec is None:
+            self.description = "uniform on the model bounds; " \
+                               f"uniform(-{PACF_BOUND}, {PACF_BOUND}) on pacf_j"
+        elif isinstance(spec, Mapping):
+            unknown = [k for k in spec if k not in self.names]
+            if unknown:
+                raise ValueError(f"prior for unknown parameter(s) {', '.join(map(repr, unknown))}; "
+                                 f"sampled parameters: {', '.join(self.names)}")
+            desc = []
+            for k, dist in spec.items():
+                i = self.names.index(k)
+                if not (hasattr(dist, "logpdf") and hasattr(dist, "cdf") and hasattr(dist, "support")):
+                    raise TypeError(f"prior for {k} must be a frozen continuous scipy.stats "
+                                    f"distribution (e.g. scipy.stats.uniform(0, 1)), got "
+                                    f"{type(dist).__name__}")
+                s_lo, s_hi = (float(v) for v in dist.support())
+                mass = float(dist.cdf(self.box_hi[i]) - dist.cdf(self.box_lo[i]))
+                if not (s_lo < self.box_hi[i] and s_hi > self.box_lo[i] and mass > 0):
+                    raise ValueError(f"prior for {k} has support [{s_lo:g}, {s_hi:g}], outside the "
+                                     f"bounds of {k}, [{self.box_lo[i]:g}, {self.box_hi[i]:g}]: "
+                                     "it has no probability where the model is defined")
+                self.dists[i] = dist
+                lo[i] = max(s_lo, self.box_lo[i])
+                hi[i] = min(s_hi, self.box_hi[i])
+                desc.append(f"{k} ~ {_describe(dist)}")
+            self.description = "; ".join(desc) + " (truncated to the bounds); uniform otherwise"
+        elif callable(spec):
+            self.callable = spec
+            lo, hi = self.box_lo.copy(), self.box_hi.copy()
+            self.description = f"{_describe(spec)} on the bounds"
+        else:
+            raise TypeError("prior must be None, a mapping of parameter name to a frozen "
+                            f"scipy.stats distribution, or a callable; got {type(spec).__name__}")
+        self.lo = lo
+        self.hi = hi
+        free = [i for i in range(len(self.names)) if i not in self.dists]
+        self._uniform = np.array(free, dtype=np.int64)
+        self._const = -float(np.sum(np.log(hi[free] - lo[free]))) if self.callable is None else 0.0
+
+    def inside(self, X: np.ndarray) -> np.ndarray:
+        """Rows strictly inside the support (open at pacf +-1)."""
+        return np.all((X >= self.lo) & (X <= self.hi), axis=1) & np.all(np.abs(X) < np.inf, axis=1)
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        X = np.atleast_2d(X)
+        out = np.where(self.inside(X), self._const, -np.inf)
+        for i, dist in self.dists.items():
+            ok = np.isfinite(out)
+            if ok.any():
+                out[ok] += dist.logpdf(X[ok, i])
+        if self.callable is not None:
+            for r in np.flatnonzero(np.isfinite(out)):
+                try:
+                    v = float(self.callable(X[r].copy()))
+                except (TypeError, ValueError) as exc:
+                    raise ValueError(f"the prior callable must return a number: {exc}") from exc
+                out[r] += v
+        out[np.isnan(out)] = -np.inf
+        return out
+
+    def center(self, x: np.ndarray) -> np.ndarray:
+        """``x`` moved, where the prior is zero there, to the prior's median (clipped to the support)."""
+        x = np.array(x, dtype=float)
+        for i, dist in self.dists.items():
+            if not np.isfinite(dist.logpdf(x[i])) or not (self.lo[i] <= x[i] <= self.hi[i]):
+                x[i] = float(np.clip(dist.median(), self.lo[i], self.hi[i]))
+        return np.clip(x, self.lo, self.hi)
+
+
+# --- the target --------------------------------------------------------------------------
+class _LogPosterior:
+    """log p(rows | u) for an (M, ndim) array, all rows in one parallel kernel call."""
+
+    def __init__(self, lik: Likelihood, order: int, prior: _Prior) -> None:
+        self.lik = lik
+        self.order = order
+        self.prior = prior
+        self.n_model = lik.model.n_free
+        self.free_idx = lik.model.free_index
+        self.base = lik.model.full_vector()
+        self.n_calls = 0
+        self.n_rows = 0
+
+    def neg_log_lik(self, rows: np.ndarray) -> np.ndarray:
+        rows = np.ascontiguousarray(rows, dtype=float)
+        if self.order == 0:
+            return self.lik.batch(rows)
+        m = rows.shape[0]
+        out = np.empty(m)
+        floored = np.zeros(m, dtype=np.bool_)
+        lik = self.lik
+        n_chunks = max(1, min(m, numba.get_num_threads()))
+        C.neg_log_lik_coloured_batch(rows, self.n_model, self.free_idx, self.base, lik.X, lik.u,
+                                     *lik._args(), lik.dt, lik.periodic, lik.warm, lik.s2_floor,
+                                     n_chunks, out, floored)
+        out[~np.isfinite(out)] = np.inf
+        return out
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        lp = self.prior(X)
+        ok = np.isfinite(lp)
+        out = np.full(X.shape[0], -np.inf)
+        if ok.any():
+            self.n_calls += 1
+            self.n_rows += int(ok.sum())
+            out[ok] = lp[ok] - self.neg_log_lik(X[ok])
+        out[~np.isfinite(out)] = -np.inf
+        return out
+
+
+# --- the sampler loop --------------------------------------------------------------------
+@dataclass
+class _Run:
+    sampler: Any
+    tau: np.ndarray
+    converged: bool
+    n_steps: int
+    history: list
+    start_iteration: int
+
+
+def _autocorr(sampler) -> np.ndarray:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.asarray(sampler.get_autocorr_time(tol=0), dtype=float)
+
+
+def _criterion(tau, old_tau, iteration, *, min_steps, tau_factor, tau_rtol) -> bool:
+    if not (np.all(np.isfinite(tau)) and np.all(tau > 0)):
+        return False
+    return bool(iteration >= min_steps and np.all(tau_factor * tau < iteration)
+                and np.all(np.abs(old_tau - tau) / tau < tau_rtol))
+
+
+def _run_emcee(log_prob: Callable[[np.ndarray], np.ndarray], p0: np.ndarray | None, *,
+               n_walkers: int, ndim: int, max_steps: int, min_steps: int, check_every: int,
+               tau_factor: float, tau_rtol: float, random_state=None, progress: bool = False,
+               backend=None) -> _Run:
+    """Run emcee until the autocorrelation criterion holds or ``max_steps`` (see :func:`sample`).
+
+    ``log_prob`` takes an (M, ndim) array and returns M values (vectorised).
+    ``p0`` is the initial ensemble, ignored when ``backend`` already holds a
+    chain (the run continues from its last state and saved random state).
+    ``random_state`` (a ``RandomState.get_state()`` tuple) seeds a fresh run.
+    """
+    import emcee
+
+    sampler = emcee.EnsembleSampler(n_walkers, ndim, log_prob, vectorize=True, backend=backend)
+    start = int(sampler.iteration)
+    old_tau = np.full(ndim, np.inf)
+    if start == 0:
+        if p0 is None:
+            raise ValueError("an initial ensemble is needed to start a new chain")
+        if random_state is not None:
+            sampler.random_state = random_state
+        state = p0
+    else:
+        state = sampler.get_last_sample()
+        if backend is not None:
+            old_tau = _read_backend_tau(backend, ndim, old_tau)
+    history: list = []
+    converged = False
+    remaining = max_steps - start
+    if remaining > 0:
+        gen = sampler.sample(state, iterations=remaining, progress=progress)
+        try:
+            for _ in gen:
+                it = sampler.iteration
+                if it % check_every:
+                    continue
+                tau = _autocorr(sampler)
+                history.append([int(it), float(np.max(tau))])
+                converged = _criterion(tau, old_tau, it, min_steps=min_steps,
+                                       tau_factor=tau_factor, tau_rtol=tau_rtol)
+                old_tau = tau
+                if backend is not None:
+                    _write_backend_attr(backend, _TAU_ATTR, tau)
+                if converged:
+                    break
+        finally:
+            gen.close()
+    n = int(sampler.iteration)
+    if not converged:
+        tau = _autocorr(sampler)
+        if not history or history[-1][0] != n:
+            converged = _criterion(tau, old_tau, n, min_steps=min_steps, tau_factor=tau_factor,
+                                   tau_rtol=tau_rtol)
+            history.append([n, float(np.max(tau))])
+    else:
+        tau = old_tau
+    return _Run(sampler, np.asarray(tau, float), converged, n, history, start)
+
+
+# --- HDF5 backend bookkeeping -------------------------------------------------------------
+def _write_backend_attr(backend, key: str, value) -> None:
+    import h5py
+
+    with h5py.File(backend.filename, "a") as f:
+        f[backend.name].attrs[key] = value
+
+
+def _read_backend_tau(backend, ndim, default):
+    import h5py
+
+    with h5py.File(backend.filename, "r") as f:
+        v = f[backend.name].attrs.get(_TAU_ATTR)
+    v = None if v is None else np.asarray(v, float)
+    return v if (v is not None and v.shape == (ndim,)) else default
+
+
+def _open_backend(path, fingerprint: dict, n_walkers: int, ndim: int):
+    """An emcee HDFBackend at ``path``; (backend, resuming).  Raises if it holds another run."""
+    import h5py
+    from emcee.backends import HDFBackend
+
+    backend = HDFBackend(str(path), name=_BACKEND_GROUP)
+    if not backend.initialized:
+        return backend, False
+    with h5py.File(str(path), "r") as f:
+        g = f[_BACKEND_GROUP]
+        stored = g.attrs.get(_FINGERPRINT_ATTR)
+        iteration = int(g.attrs.get("iteration", 0))
+    if stored is None:
+        raise ValueError(f"backend {path} holds an emcee chain not written by bayespilot.sample; "
+                         "give another path or delete the file")
+    stored = json.loads(stored)
+    diff = sorted(k for k in set(stored) | set(fingerprint) if stored.get(k) != fingerprint.get(k))
+    if backend.shape != (n_walkers, ndim):
+        diff.append(f"shape {tuple(backend.shape)} != {(n_walkers, ndim)}")
+    if diff:
+        raise ValueError(f"backend {path} holds a chain of a different run (differs in: "
+                         f"{', '.join(diff)}); give another path or delete the file to start over")
+    return backend, iteration > 0
+
+
+def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str, order: int,
+                 prior: _Prior, n_walkers: int, lik: Likelihood) -> dict:
+    h = hashlib.sha256()
+    for arr in (lik.u, lik.X):
+        h.update(np.ascontiguousarray(arr, dtype=float).tobytes())
+    h.update(repr((recording.sample_rate_hz, recording.motion_gain)).encode())
+    return {"recording_sha256": h.hexdigest(), "model": model.name,
+            "parameter_names": list(names), "fixed": {k: float(v) for k, v in model.fixed.items()},
+            "likelihood": likelihood, "ar_order": order, "prior": prior.description,
+            "n_walkers": n_walkers}
+
+
+# --- the chain as InferenceData ----------------------------------------------------------------
+def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
+    chain = np.asarray(sampler.get_chain(), dtype=float)  # (steps, walkers, ndim)
+    lp = np.asarray(sampler.get_log_prob(), dtype=float)
+    n = chain.shape[0]
+    finite = tau[np.isfinite(tau) & (tau > 0)]
+    tmax = float(finite.max()) if finite.size else 1.0
+    tmin = float(finite.min()) if finite.size else 1.0
+    discard = int(min(int(2 * tmax), n // 2))
+    thin = max(1, int(0.5 * tmin))
+    moved = np.zeros(chain.shape[:2])
+    moved[1:] = np.any(chain[1:] != chain[:-1], axis=2)
+    moved[0] = np.nan  # the first step's proposal is not recorded against p0
+    cum = np.nancumsum(moved, axis=0)
+    idx = np.arange(discard, n, thin)
+    lo = np.maximum(idx - thin, 0)
+    width = np.maximum(idx - lo, 1)
+    acc = (cum[idx] - cum[lo]) / width[:, None]
+    if idx.size and idx[0] == 0:
+        acc[0] = np.nan
+    posterior = {nm: chain[idx, :, i].T.copy() for i, nm in enumerate(names)}
+    stats = {"lp": lp[idx].T.copy(), "acceptance": acc.T.copy()}
+    meta = dict(meta)
+    meta["settings"] = dict(meta["settings"], discard=discard, thin=thin, n_draws=int(idx.size))
+    attrs = {"inference_library": "emcee", _META_ATTR: json.dumps(meta, allow_nan=True)}
+    for k, v in meta["settings"].items():
+        if isinstance(v, (str, int, float)) and not isinstance(v, bool):
+            attrs[k] = v
+        elif isinstance(v, bool):
+            attrs[k] = int(v)
+    attrs["converged"] = int(meta["converged"])
+    az = _arviz()
+    idata = az.from_dict(posterior=posterior, sample_stats=stats)
+    for group in (idata.posterior, idata.sample_stats):
+        group.attrs.update(attrs)
+    return idata, meta
+
+
+# --- the public entry point ----------------------------------------------------------------------
+def _check_int(name, v, lo):
+    if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+def _check_pos(name, v):
+    if not (isinstance(v, (int, float, np.floating)) and not isinstance(v, bool)
+            and math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a positive number, got {v!r}")
+    return float(v)
+
+
+def _initial_ensemble(center, prior: _Prior, logpost: _LogPosterior, n_walkers: int,
+                      rng: np.random.Generator) -> np.ndarray:
+    """Walkers in a ball of BALL_FRACTION of the support around ``center``, all with finite log p."""
+    lo, hi = prior.lo, prior.hi
+    width = BALL_FRACTION * (hi - lo)
+    c = np.clip(center, lo + width, hi - width)
+    p0 = np.empty((n_walkers, c.size))
+    todo = np.arange(n_walkers)
+    for _ in range(100):
+        x = c + width * rng.standard_normal((todo.size, c.size))
+        x = np.where(x < lo, 2 * lo - x, x)  # reflect at the bounds
+        x = np.where(x > hi, 2 * hi - x, x)
+        x = np.clip(x, lo, hi)
+        p0[todo] = x
+        bad = ~np.isfinite(logpost(x))
+        todo = todo[bad]
+        if todo.size == 0:
+            return p0
+    raise RuntimeError(f"could not place {todo.size} of {n_walkers} walkers where the posterior is "
+                       "positive around the initial point; give a better init")
+
+
+def sample(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
+           ar_order: int = 2, init: FitResult | Mapping[str, float] | None = None,
+           n_walkers: int | None = None, max_steps: int = 20000, min_steps: int = 1000,
+           check_every: int = 500, tau_factor: float = 50.0, tau_rtol: float = 0.05,
+           seed: int | None = None, progress: bool = True,
+           backend: str | os.PathLike | None = None,
+           prior: Mapping[str, Any] | Callable[[np.ndarray], float] | None = None) -> Posterior:
+    """Sample the posterior of the pilot parameters with emcee (see module docs).
+
+    Parameters
+    ----------
+    recording : Recording
+    model : PilotModel, optional
+        Default :func:`~bayespilot.model.paper_model` (with threshold).
+    likelihood : {"eq4", "coloured"}
+        White output error (Eq. 4) or AR(``ar_order``)-coloured output error.
+    ar_order : int
+        p of the AR residual model (``"coloured"`` only; >= 1).
+    init : FitResult or mapping, optional
+        Centre of the initial ball.  Default: :func:`~bayespilot.fit.fast.fit_fast`
+        with ``seed``.  The partial autocorrelations start at the Yule-Walker
+        estimate from the residual at ``init``.
+    n_walkers : int, optional
+        Default 4 x the number of sampled parameters (at least 2 x).
+    max_steps, min_steps, check_every : int
+        Hard limit on the chain length; no stop before ``min_steps``; the
+        autocorrelation time is estimated every ``check_every`` steps.
+    tau_factor, tau_rtol : float
+        Stop when the chain is longer than ``tau_factor`` x every integrated
+        autocorrelation time and each changed by less than ``tau_rtol``
+        (relative) since the previous check.
+    seed : int, optional
+        Seeds the initial fit, the initial ball and the sampler's moves: the
+        same seed gives the same chain, bit for bit (on the same machine and
+        thread count).
+    progress : bool
+        Show emcee's tqdm progress bar.
+    backend : path, optional
+        An emcee HDF5 file.  If it exists and holds a chain of this same run
+        (recording, model, likelihood, prior, walkers), sampling resumes from
+        its last state (``max_steps`` counts the steps already stored);
+        another run's file raises ValueError.
+    prior : mapping or callable, optional
+        Name -> frozen ``scipy.stats`` distribution for some parameters (the
+        others keep the default), truncated to the model bounds (Table 1;
+        (-1, 1) for ``pacf_j``); or a callable giving the log-prior density
+        (up to a constant) of one sampled vector, on the bounds.  Default:
+        uniform on the bounds, uniform(-0.99, 0.99) on each ``pacf_j``.
+
+    Returns
+    -------
+    Posterior
+
+    Raises
+    ------
+    ValueError
+        Bad settings, a prior for an unknown parameter or with no
+        probability inside that parameter's bounds, or a backend file of
+        another run.
+    TypeError
+        ``recording``/``model``/``init``/``prior`` of the wrong type.
+
+    Warns
+    -----
+    ConvergenceWarning
+        The run reached ``max_steps`` before the criterion held.
+
+    Examples
+    --------
+    >>> from bayespilot.simulate import simulate
+    >>> sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1, duration=20)
+    >>> post = sample(sim.recording, init=sim.params, n_walkers=16, max_steps=600,
+    ...               min_steps=100, check_every=200, seed=0, progress=False)  # doctest: +SKIP
+    >>> post.summary()["K_v"]["hdi_90"]  # doctest: +SKIP
+    """
+    t0 = time.perf_counter()
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    model = paper_model() if model is None else model
+    if not isinstance(model, PilotModel):
+        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+    if likelihood not in LIKELIHOODS:
+        raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
+    order = _check_int("ar_order", ar_order, 1) if likelihood == "coloured" else 0
+    max_steps = _check_int("max_steps", max_steps, 1)
+    min_steps = _check_int("min_steps", min_steps, 0)
+    check_every = _check_int("check_every", check_every, 1)
+    if min_steps > max_steps:
+        raise ValueError(f"min_steps ({min_steps}) must not exceed max_steps ({max_steps})")
+    tau_factor = _check_pos("tau_factor", tau_factor)
+    tau_rtol = _check_pos("tau_rtol", tau_rtol)
+    if seed is not None:
+        seed = _check_int("seed", seed, 0)
+    if init is not None and not isinstance(init, (FitResult, Mapping)):
+        raise TypeError(f"init must be a FitResult or a mapping of parameters, got {type(init).__name__}")
+
+    names = model.parameter_names + pacf_names(order)
+    ndim = len(names)
+    n_walkers = 4 * ndim if n_walkers is None else _check_int("n_walkers", n_walkers, 2 * ndim)
+    m_lo, m_hi = model.bounds
+    box_lo = np.concatenate([m_lo, np.full(order, -1.0)])
+    box_hi = np.concatenate([m_hi, np.full(order, 1.0)])
+    def_lo = np.concatenate([m_lo, np.full(order, -PACF_BOUND)])
+    def_hi = np.concatenate([m_hi, np.full(order, PACF_BOUND)])
+    pri = _Prior(names, box_lo, box_hi, def_lo, def_hi, prior)
+    if pri.callable is not None:
+        # open at the stationarity limit |r| = 1
+        pri.lo[len(m_lo):] = np.nextafter(-1.0, 0.0)
+        pri.hi[len(m_lo):] = np.nextafter(1.0, 0.0)
+
+    lik = Likelihood(model, recording)
+    logpost = _LogPosterior(lik, order, pri)
+    ss = np.random.SeedSequence(seed)
+    ball_ss, mcmc_ss = ss.spawn(2)
+
+    settings: dict[str, Any] = {
+        "likelihood": likelihood, "ar_order": order, "n_walkers": n_walkers,
+        "max_steps": max_steps, "min_steps": min_steps, "check_every": check_every,
+        "tau_factor": tau_factor, "tau_rtol": tau_rtol, "prior": pri.description,
+        "backend": None if backend is None else str(backend), "model": model.name,
+        "fixed": {k: float(v) for k, v in model.fixed.items()},
+        "recording": recording.source or "", "entropy": str(ss.entropy),
+        "numba_threads": int(numba.get_num_threads())}
+
+    bk, resuming = None, False
+    if backend is not None:
+        fp = _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik)
+        bk, resuming = _open_backend(backend, fp, n_walkers, ndim)
+
+    p0 = None
+    if resuming:
+        settings["init"] = "resumed"
+    else:
+        if init is None:
+            from .fit.fast import fit_fast
+
+            init = fit_fast(recording, model, seed=seed)
+            settings["init"] = "fit_fast"
+        else:
+            settings["init"] = "given"
+        params = dict(init.params) if isinstance(init, FitResult) else dict(init)
+        given_r = {k: params.pop(k) for k in list(params) if k.startswith("pacf_")}
+        centre_model = model.free_vector(params)
+        centre_model = np.clip(centre_model, m_lo, m_hi)
+        if order and set(pacf_names(order)) <= set(given_r):
+            r0 = np.array([float(given_r[k]) for k in pacf_names(order)])
+        elif order:
+            eps = lik.residual(model.as_dict(centre_model))
+            r0 = pacf_from_residual(eps, order) if np.all(np.isfinite(eps)) else np.zeros(order)
+        else:
+            r0 = np.zeros(0)
+        centre = pri.center(np.concatenate([centre_model, r0]))
+        settings["init_point"] = {n: float(v) for n, v in zip(names, centre)}
+        p0 = _initial_ensemble(centre, pri, logpost, n_walkers,
+                               np.random.default_rng(ball_ss))
+
+    rs = np.random.RandomState(np.random.MT19937(mcmc_ss)).get_state()
+    if bk is not None and not resuming:
+        bk.reset(n_walkers, ndim)  # a new (or emptied) chain, tagged with this run
+        _write_backend_attr(bk, _FINGERPRINT_ATTR, json.dumps(
+            _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik)))
+    run = _run_emcee(logpost, p0, n_walkers=n_walkers, ndim=ndim, max_steps=max_steps,
+                     min_steps=min_steps, check_every=check_every, tau_factor=tau_factor,
+                     tau_rtol=tau_rtol, random_state=rs, progress=progress, backend=bk)
+    if not run.converged:
+        warnings.warn(ConvergenceWarning(
+            f"the chain reached max_steps = {max_steps} before it was {tau_factor:g} "
+            f"autocorrelation times long with a settled tau (max tau = "
+            f"{np.nanmax(run.tau) if np.any(np.isfinite(run.tau)) else float('nan'):.0f} steps); "
+            "the posterior is a rough estimate: run longer (resume with the same backend)",
+            run.tau, run.n_steps), stacklevel=2)
+    acc = np.asarray(run.sampler.acceptance_fraction, float)
+    settings.update({"n_steps": run.n_steps, "resumed_from": run.start_iteration,
+                     "tau_history": run.history, "acceptance_fraction": float(np.mean(acc)),
+                     "log_prob_calls": logpost.n_calls, "likelihood_evaluations": logpost.n_rows,
+                     "elapsed_seconds": time.perf_counter() - t0})
+    tau = {n: float(t) for n, t in zip(names, run.tau)}
+    meta = {"parameter_names": list(names), "tau": tau, "converged": bool(run.converged),
+            "settings": settings, "seed": seed}
+    idata, meta = _to_idata(run.sampler, names, run.tau, meta)
+    return Posterior(idata, tuple(names), tau, bool(run.converged), meta["settings"], seed)
