@@ -451,21 +451,21 @@ def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_c
                       dt, periodic, warm, s2_floor, n_chunks, pad, out, floored):
     """-ln L for every row of ``free`` (free parameters), in parallel over rows.
 
-    Rows are split into ``n_chunks`` contiguous chunks, one per thread, so each
-    thread allocates its work buffers once (prange over independent parameter
+    Rows are dealt to ``n_chunks`` threads in turn, so each thread allocates
+    its work buffers once (prange over independent parameter
     vectors, never over time steps).
     """
     m = free.shape[0]
     n = u.shape[0]
     for ch in numba.prange(n_chunks):
-        lo = (ch * m) // n_chunks
-        hi = ((ch + 1) * m) // n_chunks
         y = np.empty(n)
         q = np.empty(n)
         v = np.empty(n)
         Qp = np.empty((X.shape[0], n + 2 * pad))
         theta = base.copy()
-        for r in range(lo, hi):
+        # rows interleaved over threads: unstable rows return at once, so
+        # contiguous blocks would leave one thread idle
+        for r in range(ch, m, n_chunks):
             for j in range(free_idx.shape[0]):
                 theta[free_idx[j]] = free[r, j]
             val, fl = neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int,
