@@ -23,7 +23,7 @@ from ._blocks import (MOD_LINEAR, MOD_NONE, NL_DEADZONE, NL_NONE, NL_SATURATION,
                       NL_SOFT_DEADZONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
                       STAGE_LOWPASS1, STAGE_LOWPASS2, STAGE_NONE, modulation, nonlinearity,
                       param_or, stable, stage_tf, tustin)
-from ._response import (CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
+from ._response import (_tap, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
                         CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_NSTAGES, CHF_GAIN_CONST, CHF_SIGN,
                         OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1, OUT_OMEGA, OUT_ZETA)
 
@@ -150,17 +150,6 @@ def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic
         dx2, dx1, dy2, dy1 = dx1, dxk, dy1, dyk
         y[k] = yk
         dy[k] = dyk
-
-
-@njit
-def _tap(src, j, n, periodic):
-    if periodic:
-        return src[j % n]
-    if j < 0:
-        return 0.0
-    if j >= n:
-        return src[n - 1]
-    return src[j]
 
 
 @njit
