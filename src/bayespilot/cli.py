@@ -76,14 +76,21 @@ def _fraction(text: str) -> float:
     return x
 
 
-def _seed(text: str) -> int:
-    try:
-        x = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
-    if x < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
-    return x
+def _whole_number(minimum: int):
+    """An argparse type: a whole number >= ``minimum``."""
+    def parse(text: str) -> int:
+        try:
+            x = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected a whole number >= {minimum}, got {text!r}") from None
+        if x < minimum:
+            raise argparse.ArgumentTypeError(f"must be >= {minimum}, got {text}")
+        return x
+    return parse
+
+
+_seed = _whole_number(0)
 
 
 # --- helpers --------------------------------------------------------------------------
@@ -338,14 +345,7 @@ def _task_name(text: str) -> str:
     return text
 
 
-def _count(text: str) -> int:
-    try:
-        x = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
-    if x < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {text}")
-    return x
+_count = _whole_number(1)
 
 
 def _fit_option(text: str) -> tuple[str, object]:
