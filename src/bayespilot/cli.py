@@ -94,6 +94,18 @@ _seed = _whole_number(0)
 
 
 # --- helpers --------------------------------------------------------------------------
+def _save_figure(fig, png: Path) -> None:
+    """Write a figure to PNG and close it; a failed write is a runtime failure (exit 1)."""
+    try:
+        fig.savefig(png, dpi=110)
+    except OSError as exc:
+        raise CommandFailed(f"{png}: cannot write the plot ({exc.strerror or exc})") from None
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+
+
 def _say(args: argparse.Namespace, text: str) -> None:
     """An informational line on stdout, unless --quiet."""
     if not args.quiet:
@@ -311,15 +323,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     print(f"-ln L at Table 3 parameters, without threshold (delta_abs = 0):      {without_thr:.2f}")
     print(f"VAF with threshold: {vaf:.2f} %   (without: {vaf0:.2f} %)")
     png = out / "traces.png"
-    fig = plot_traces(rec, canal=sim.channels["vestibular"]["pre"], delta_abs=truth["delta_abs"])
-    try:
-        fig.savefig(png, dpi=110)
-    except OSError as exc:
-        raise CommandFailed(f"{png}: cannot write the plot ({exc.strerror or exc})") from None
-    finally:
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
+    _save_figure(plot_traces(rec, canal=sim.channels["vestibular"]["pre"],
+                             delta_abs=truth["delta_abs"]), png)
     _say(args, f"wrote {png} (e, u, theta_ddot_m and the canal output i with the band "
                f"+-delta_abs)")
     return EXIT_OK
@@ -410,15 +415,8 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
     if any(r["threshold"] for r in results):
         from .plots import plot_threshold_histograms
 
-        fig = plot_threshold_histograms(results, fractions=fractions, method=args.method)
-        try:
-            fig.savefig(png, dpi=110)
-        except OSError as exc:
-            raise CommandFailed(f"{png}: cannot write the plot ({exc.strerror or exc})") from None
-        finally:
-            import matplotlib.pyplot as plt
-
-            plt.close(fig)
+        _save_figure(plot_threshold_histograms(results, fractions=fractions,
+                                               method=args.method), png)
         _say(args, f"wrote {csv_path}, {md_path} and {png}")
     else:
         _say(args, f"wrote {csv_path} and {md_path} (no fit with threshold finished: no figure)")
