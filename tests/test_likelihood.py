@@ -344,3 +344,56 @@ def test_other_argument_errors(fd_sim, model):
         Likelihood(model, rec.signals)
     with pytest.raises(ValueError, match="expected 8"):
         Likelihood(model, rec).neg_log_lik(np.ones(7))
+
+
+# --- a discarded lead-in -------------------------------------------------------------
+@pytest.mark.parametrize("discard", [0.01, 0.02, 0.5, 1.99, 2.0])
+def test_discarded_lead_in_matches_naive_tail(fd_rec, model, discard):
+    """Eq. 4 over the samples after the lead-in, from the naive full-record response.
+
+    Odd and even sample counts (0.01 s = 1 sample) exercise the snapshot in the
+    two-sample recursion; the batch must agree with the single evaluation.
+    """
+    rec = fd_rec
+    lik = Likelihood(model, rec, discard=discard)
+    skip = int(round(discard * rec.sample_rate_hz))
+    assert lik.skip == skip and lik.used == slice(skip, None)
+    for params in (FD, CASES["fractional_delays"], CASES["other_dynamics"]):
+        eps = (rec.u - _naive(rec, params, "periodic", lik.warm))[skip:]
+        n = eps.size
+        ref = 0.5 * n * np.log(np.mean(eps**2)) + 0.5 * n
+        got = lik.neg_log_lik(params)
+        assert got == pytest.approx(ref, rel=1e-9, abs=0)
+        assert lik.batch(model.free_vector(params)[None, :])[0] == got
+    assert lik.vaf(FD) == vaf(rec.u[skip:], lik.response(FD)[skip:])
+
+
+def test_discarded_lead_in_on_general_paths(fd_sim, model):
+    """Three channels (recursion over n channels) and a gain drift (the unfused path)."""
+    from bayespilot.kernels import _coloured as C
+    from bayespilot.model import Channel, LinearDrift, Parameter
+
+    rec = fd_sim.recording
+    extra = model.add_channel(Channel("extra", "e", delay="tau_x", gain=("K_x",)),
+                              [Parameter("K_x", -5.0, 5.0, 0.3), Parameter("tau_x", 0.0, 1.0, 0.15)])
+    drift = model.with_modulation("visual", LinearDrift("g_v"), [Parameter("g_v", -1.0, 1.0, 0.1)])
+    for m in (extra, drift):
+        full = Likelihood(m, rec)
+        cut = Likelihood(m, rec, discard=1.23)
+        p = m.defaults
+        eps = full.residual(p)[cut.skip:]
+        n = eps.size
+        assert cut.neg_log_lik(p) == pytest.approx(0.5 * n * np.log(np.mean(eps**2)) + 0.5 * n,
+                                                   rel=1e-11)
+        # the coloured likelihood with p = 0 is Eq. 4 over the same samples
+        out, fl = np.empty(1), np.zeros(1, dtype=np.bool_)
+        C.neg_log_lik_coloured_batch(m.free_vector(p)[None, :], m.n_free, m.free_index,
+                                     m.full_vector(), cut.X, cut.u, *cut._args(), cut.dt,
+                                     cut.periodic, cut.warm, cut.s2_floor, 1, out, fl, cut.skip)
+        assert out[0] == pytest.approx(cut.neg_log_lik(p), rel=1e-11)
+
+
+def test_discard_is_validated(fd_sim, model):
+    for bad in (-0.1, float("nan"), 1e6, "2", True):
+        with pytest.raises(ValueError, match="discard"):
+            Likelihood(model, fd_sim.recording, discard=bad)

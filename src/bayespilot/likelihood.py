@@ -131,6 +131,14 @@ class Likelihood:
     warmup : float, default 5.0
         Seconds of the record's end used to warm up each recursion when
         ``initial="periodic"``.
+    discard : float, default 0.0
+        Seconds at the start of the record left out of Eq. 4 (the model still
+        runs from t = 0; N in Eq. 4 becomes the number of samples kept).  The
+        paper uses the whole record (0, the default).  With remnant, the
+        model's short-memory state at t = 0 (H_nm and the delays) is not
+        known, and the first 1-2 s of the residual carry that start-up error;
+        ``discard=2`` removes it (``docs/faithfulness.md``, part E).  At most
+        half the record.
 
     Examples
     --------
@@ -143,13 +151,17 @@ class Likelihood:
     """
 
     def __init__(self, model: PilotModel, recording: Recording, *, initial: str = "periodic",
-                 warmup: float = 5.0) -> None:
+                 warmup: float = 5.0, discard: float = 0.0) -> None:
         if not isinstance(model, PilotModel):
             raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
         if not isinstance(recording, Recording):
             raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
         if not (math.isfinite(warmup) and warmup >= 0):
             raise ValueError(f"warmup must be a finite number of seconds >= 0, got {warmup!r}")
+        if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
+            raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
+                             f"(half the record), got {discard!r}")
         self.model = model
         self.recording = recording
         self.initial = initial
@@ -160,6 +172,10 @@ class Likelihood:
         self.warm = int(min(self.n, round(warmup * recording.sample_rate_hz)))
         self.periodic = initial == "periodic"
         self.pad = R.padding(self.n, self.dt)
+        self.discard = float(discard)
+        #: Samples at the start left out of Eq. 4, and the slice of the samples kept.
+        self.skip = int(round(discard * recording.sample_rate_hz))
+        self.used = slice(self.skip, None)
         # Floor of the output-error variance: a residual 1e-12 of rms(u).
         self.s2_floor = 1e-24 * float(np.mean(self.u**2)) + 1e-300
         self._plan = model.plan
@@ -184,7 +200,7 @@ class Likelihood:
         return y
 
     def residual(self, params) -> np.ndarray:
-        """Output error eps = u - u_hat."""
+        """Output error eps = u - u_hat over the whole record (Eq. 4 uses ``eps[self.used]``)."""
         return self.u - self.response(params)
 
     def neg_log_lik(self, params) -> float:
@@ -200,7 +216,7 @@ class Likelihood:
         Qp = np.empty((self.X.shape[0], self.n + 2 * self.pad))
         val, floored = R.neg_log_lik_one(theta, self.X, self.u, *self._args(), self.dt,
                                          self.periodic, self.warm, self.s2_floor, y, q, v, Qp,
-                                         self.pad)
+                                         self.pad, self.skip)
         if floored:
             warnings.warn("the model reproduces u to round-off; the output-error variance was "
                           "floored, so -ln L is a finite bound, not an optimum", PerfectFitWarning,
@@ -208,8 +224,8 @@ class Likelihood:
         return float(val)
 
     def vaf(self, params) -> float:
-        """Variance accounted for, 1 - var(eps)/var(u), in percent."""
-        return vaf(self.u, self.response(params))
+        """Variance accounted for, 1 - var(eps)/var(u), in percent, over the samples Eq. 4 uses."""
+        return vaf(self.u[self.used], self.response(params)[self.used])
 
     def jacobian(self, params, names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Model output and its exact derivatives with respect to parameters.
@@ -262,7 +278,7 @@ class Likelihood:
         n_chunks = max(1, min(m, numba.get_num_threads()))
         R.neg_log_lik_batch(free, self._free_idx, self._base, self.X, self.u, *self._args(),
                             self.dt, self.periodic, self.warm, self.s2_floor, n_chunks,
-                            self.pad, out, floored)
+                            self.pad, out, floored, self.skip)
         out[~np.isfinite(out)] = np.inf
         return out
 

@@ -39,7 +39,8 @@ __all__ = ["fit_fast"]
 
 def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold: bool = True,
              seed: int | None = None, n_starts: int = 8, profile_step: float = 0.0025,
-             scan_step: float = 1e-4, initial: str = "periodic") -> FitResult:
+             scan_step: float = 1e-4, initial: str = "periodic",
+             discard: float = 0.0) -> FitResult:
     """Fit by multi-start Gauss-Newton and a profile over delta_abs (see module docs).
 
     Parameters
@@ -79,7 +80,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     model = _model_for(model, threshold)
     has_delta = "delta_abs" in model.parameter_names
     base = model.fix(delta_abs=0.0) if has_delta else model
-    lik0 = Likelihood(base, recording, initial=initial)
+    lik0 = Likelihood(base, recording, initial=initial, discard=discard)
     lo, hi = base.bounds
     starts = qmc.scale(qmc.LatinHypercube(d=lo.size, seed=seed).random(n_starts), lo, hi)
     runs = [refine(lik0, base.as_dict(x), hold=(), bounded=True) for x in starts]
@@ -89,10 +90,11 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         p, f = best0.params, best0.neg_log_lik
         full = model.as_dict(model.full_vector(p), full=True)
         return FitResult(full, f, lik0.vaf(p), "fast", seed, False,
-                         {"n_starts": n_starts, "initial": initial, "model": model.name},
+                         {"n_starts": n_starts, "initial": initial, "discard": discard,
+                          "model": model.name},
                          stages, time.perf_counter() - t0, recording.source)
 
-    lik = Likelihood(model, recording, initial=initial)
+    lik = Likelihood(model, recording, initial=initial, discard=discard)
     upper = model.parameter("delta_abs").upper
     grid = np.arange(0.0, upper + 0.5 * profile_step, profile_step)
     prof = []
@@ -118,6 +120,6 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                    "scan": sc.to_dict()})
     full = model.as_dict(model.full_vector(params), full=True)
     settings = {"n_starts": n_starts, "profile_step": profile_step, "scan_step": scan_step,
-                "initial": initial, "model": model.name}
+                "initial": initial, "discard": discard, "model": model.name}
     return FitResult(full, float(fun), lik.vaf(params), "fast", seed, True, settings, stages,
                      time.perf_counter() - t0, recording.source)

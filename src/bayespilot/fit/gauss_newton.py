@@ -86,7 +86,8 @@ def refine(likelihood: Likelihood, start: Mapping[str, float], *, hold: Sequence
     names = tuple(n for n in model.parameter_names if n not in set(hold))
     if not names:
         raise ValueError("nothing to refine: every free parameter is held")
-    u = likelihood.u
+    used = likelihood.used  # the samples Eq. 4 uses (all unless a lead-in is discarded)
+    u = likelihood.u[used]
     big = 1e3 * (float(np.std(u)) + 1e-300)
 
     def params_of(x):
@@ -95,13 +96,13 @@ def refine(likelihood: Likelihood, start: Mapping[str, float], *, hold: Sequence
         return p
 
     def residual(x):
-        y = likelihood.response(params_of(x))
+        y = likelihood.response(params_of(x))[used]
         if not np.all(np.isfinite(y)):
             return np.full(u.shape, big)
         return u - y
 
     def jac(x):
-        _, J = likelihood.jacobian(params_of(x), names)
+        J = likelihood.jacobian(params_of(x), names)[1][used]
         if not np.all(np.isfinite(J)):
             return np.zeros((u.size, len(names)))
         return -J

@@ -46,6 +46,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
               population: int = 160, generations: int = 100, p_crossover: float = 0.7,
               p_mutation: float = 0.01, bits: int = 20, scan_step: float = 1e-4,
               iterate: bool = False, max_iterations: int = 10, initial: str = "periodic",
+              discard: float = 0.0,
               progress: bool = False) -> FitResult:
     """Fit a pilot model to a recording with the paper's three-step procedure.
 
@@ -68,6 +69,9 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         Repeat Steps II and III until delta_abs and -ln L no longer change.
     initial : {"periodic", "rest"}
         Initial-condition treatment of the likelihood.
+    discard : float
+        Seconds at the start left out of Eq. 4 (see :class:`~bayespilot.likelihood.Likelihood`;
+        0, the paper's choice, by default).
     progress : bool
         Show a progress bar over the GA repetitions.
 
@@ -96,7 +100,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         raise ValueError(f"scan_step must be positive, got {scan_step!r}")
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
-    lik = Likelihood(model, recording, initial=initial)
+    lik = Likelihood(model, recording, initial=initial, discard=discard)
     has_delta = "delta_abs" in model.parameter_names
 
     s1 = step_one(lik, repetitions=repetitions, n_best=n_best, seed=seed, progress=progress,
@@ -136,7 +140,8 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     settings = {"repetitions": repetitions, "n_best": n_best, "population": population,
                 "generations": generations, "p_crossover": p_crossover, "p_mutation": p_mutation,
                 "bits": bits, "scan_step": scan_step, "iterate": iterate,
-                "max_iterations": max_iterations, "initial": initial, "model": model.name}
+                "max_iterations": max_iterations, "initial": initial, "discard": discard,
+                "model": model.name}
     steps = {"step1": s1.to_dict(), "step1_delta_abs": delta1,
              "step2": [r.to_dict() for r in step2], "step2_best": k_best,
              "step3": scans, "iterations": iterations}

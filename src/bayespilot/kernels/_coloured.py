@@ -49,12 +49,12 @@ def pacf_to_ar(r, a, work):
 
 
 @njit
-def whitened_sse(u, y, a):
-    """sum_{k >= p} w_k^2 with eps = u - y and w_k = eps_k - sum_j a_j eps_{k-j}."""
+def whitened_sse(u, y, a, skip=0):
+    """sum_{k >= skip + p} w_k^2 with eps = u - y and w_k = eps_k - sum_j a_j eps_{k-j}."""
     n = u.shape[0]
     p = a.shape[0]
     sse = 0.0
-    for k in range(p, n):
+    for k in range(skip + p, n):
         w = u[k] - y[k]
         for j in range(p):
             w -= a[j] * (u[k - 1 - j] - y[k - 1 - j])
@@ -64,11 +64,12 @@ def whitened_sse(u, y, a):
 
 @njit
 def neg_log_lik_coloured_one(theta, r, X, u, ch_int, ch_float, st_int, st_const, out_int, dt,
-                             periodic, warm, s2_floor, y, q, v, a, work):
+                             periodic, warm, s2_floor, y, q, v, a, work, skip=0):
     """-ln L of the AR(p)-coloured output error for one full parameter vector ``theta``.
 
     ``r`` holds the p partial autocorrelations; ``y``, ``q``, ``v`` are work
-    buffers of the record's length, ``a`` and ``work`` of length p.  Returns
+    buffers of the record's length, ``a`` and ``work`` of length p.  The first
+    ``skip`` samples are left out (the likelihood conditions on the next p).  Returns
     (value, floored); the value is +inf for an unstable ``theta``, a partial
     autocorrelation outside (-1, 1), or a non-finite result.
     """
@@ -77,21 +78,21 @@ def neg_log_lik_coloured_one(theta, r, X, u, ch_int, ch_float, st_int, st_const,
     for j in range(p):
         if not (abs(r[j]) < 1.0):
             return np.inf, False
-    if n <= p:
+    if n <= skip + p:
         return np.inf, False
     ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
                        warm, y, q, v)
     if not ok:
         return np.inf, False
     pacf_to_ar(r, a, work)
-    sse = whitened_sse(u, y, a)
-    return neg_log_lik_from_sse(sse, n - p, s2_floor)
+    sse = whitened_sse(u, y, a, skip)
+    return neg_log_lik_from_sse(sse, n - skip - p, s2_floor)
 
 
 @pjit
 def neg_log_lik_coloured_batch(rows, n_model, free_idx, base, X, u, ch_int, ch_float, st_int,
                                st_const, out_int, dt, periodic, warm, s2_floor, n_chunks, out,
-                               floored):
+                               floored, skip=0):
     """-ln L (coloured residual) for every row of ``rows``, in parallel over rows.
 
     Each row is [free pilot parameters (``n_model`` of them, in the order of
@@ -126,6 +127,6 @@ def neg_log_lik_coloured_batch(rows, n_model, free_idx, base, X, u, ch_int, ch_f
                 continue
             val, fl = neg_log_lik_coloured_one(theta, r, X, u, ch_int, ch_float, st_int,
                                                st_const, out_int, dt, periodic, warm, s2_floor,
-                                               y, q, v, a, work)
+                                               y, q, v, a, work, skip)
             out[i] = val
             floored[i] = fl

@@ -248,7 +248,8 @@ def _fill_pads(row, n, pad, periodic):
 
 
 @njit(fastmath={"contract"})
-def _recursion_2(q0, q1, o0, o1, a0, a1, a2, a3, b0, b1, b2, b3, u, A1, A2, periodic, warm, n):
+def _recursion_2(q0, q1, o0, o1, a0, a1, a2, a3, b0, b1, b2, b3, u, A1, A2, periodic, warm, n,
+                 skip=0):
     """Two-channel fused loop: v_k from 4 taps per channel, y_k = v_k - A1 y_{k-1} - A2 y_{k-2}.
 
     Speed is the point of this kernel (the GA and emcee call it ~10^5-10^6 times
@@ -261,6 +262,10 @@ def _recursion_2(q0, q1, o0, o1, a0, a1, a2, a3, b0, b1, b2, b3, u, A1, A2, peri
         y_{k+1} = (v_{k+1} - A1 v_k) + (A1^2 - A2) y_{k-1} + A1 A2 y_{k-2},
 
     which halves the loop-carried dependency chain per sample.
+
+    The residuals of the first ``skip`` samples are left out of the returned
+    sum (a snapshot of the running sum is taken after the pair that holds
+    sample ``skip - 1``, so the loop stays branch-light).
     """
     C1 = A1 * A1 - A2
     C2 = A1 * A2
@@ -278,7 +283,9 @@ def _recursion_2(q0, q1, o0, o1, a0, a1, a2, a3, b0, b1, b2, b3, u, A1, A2, peri
             y1 = yk
     sse = 0.0
     sse1 = 0.0
+    snap = 0.0
     half = n // 2
+    h_snap = (skip - 1) // 2 if skip > 0 else -1
     for h in range(half):
         k = 2 * h
         j = o0 + k
@@ -295,6 +302,8 @@ def _recursion_2(q0, q1, o0, o1, a0, a1, a2, a3, b0, b1, b2, b3, u, A1, A2, peri
         rn = u[k + 1] - yn
         sse += r * r
         sse1 += rn * rn
+        if h == h_snap:
+            snap = sse + sse1 - (rn * rn if skip % 2 == 1 else 0.0)
     for k in range(2 * half, n):
         j = o0 + k
         i = o1 + k
@@ -305,11 +314,11 @@ def _recursion_2(q0, q1, o0, o1, a0, a1, a2, a3, b0, b1, b2, b3, u, A1, A2, peri
         y1 = yk
         r = u[k] - yk
         sse += r * r
-    return sse + sse1, y1, y2
+    return (sse + sse1) - snap, y1, y2
 
 
 @njit
-def _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n):
+def _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n, skip=0):
     """Any number of channels (see _recursion_2)."""
     n_ch = Qp.shape[0]
     y1 = 0.0
@@ -326,7 +335,7 @@ def _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n):
         yk = (vk - A2 * y2) - A1 * y1
         y2 = y1
         y1 = yk
-        if kk >= n:
+        if kk >= n + skip:
             r = u[k] - yk
             sse += r * r
     return sse, y1, y2
@@ -334,7 +343,7 @@ def _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n):
 
 @njit
 def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
-               s2_floor, Qp, pad, q):
+               s2_floor, Qp, pad, q, skip=0):
     """-ln L in one fused pass: per-channel taps, H_nm recursion and residual sum together.
 
     Handles models without gain modulation or output nonlinearity whose delays
@@ -410,12 +419,12 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
         sse, y1, y2 = _recursion_2(Qp[0], Qp[1], pad + 0 - ms[0], pad + 0 - ms[1],
                                    taps[0, 0], taps[0, 1], taps[0, 2], taps[0, 3],
                                    taps[1, 0], taps[1, 1], taps[1, 2], taps[1, 3],
-                                   u, A1, A2, periodic, warm, n)
+                                   u, A1, A2, periodic, warm, n, skip)
     else:
-        sse, y1, y2 = _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n)
+        sse, y1, y2 = _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n, skip)
     if not (math.isfinite(y1) and math.isfinite(y2)):
         return np.inf, False, True
-    val, fl = neg_log_lik_from_sse(sse, n, s2_floor)
+    val, fl = neg_log_lik_from_sse(sse, n - skip, s2_floor)
     return val, fl, True
 
 
@@ -426,13 +435,15 @@ def padding(n, dt, max_delay=1.5):
 
 @njit
 def neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
-                    s2_floor, y, q, v, Qp, pad):
+                    s2_floor, y, q, v, Qp, pad, skip=0):
     """-ln L (Eq. 4) for one full parameter vector; returns (value, floored).
 
-    ``Qp`` is a (n_channels, n + 2 pad) work buffer for the fused path.
+    ``Qp`` is a (n_channels, n + 2 pad) work buffer for the fused path.  The
+    model runs over the whole record; the first ``skip`` samples are left out
+    of Eq. 4 (N = n - skip).
     """
     val, fl, handled = _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt,
-                                  periodic, warm, s2_floor, Qp, pad, q)
+                                  periodic, warm, s2_floor, Qp, pad, q, skip)
     if handled:
         return val, fl
     ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
@@ -440,15 +451,15 @@ def neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt
     if not ok:
         return np.inf, False
     sse = 0.0
-    for k in range(u.shape[0]):
+    for k in range(skip, u.shape[0]):
         r = u[k] - y[k]
         sse += r * r
-    return neg_log_lik_from_sse(sse, u.shape[0], s2_floor)
+    return neg_log_lik_from_sse(sse, u.shape[0] - skip, s2_floor)
 
 
 @pjit
 def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_const, out_int,
-                      dt, periodic, warm, s2_floor, n_chunks, pad, out, floored):
+                      dt, periodic, warm, s2_floor, n_chunks, pad, out, floored, skip=0):
     """-ln L for every row of ``free`` (free parameters), in parallel over rows.
 
     Rows are dealt to ``n_chunks`` threads in turn, so each thread allocates
@@ -469,7 +480,7 @@ def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_c
             for j in range(free_idx.shape[0]):
                 theta[free_idx[j]] = free[r, j]
             val, fl = neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int,
-                                      dt, periodic, warm, s2_floor, y, q, v, Qp, pad)
+                                      dt, periodic, warm, s2_floor, y, q, v, Qp, pad, skip)
             out[r] = val
             floored[r] = fl
 
