@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from bayespilot.recording import OPTIONAL_SIGNALS, REQUIRED_SIGNALS, TASKS, Recording, RecordingError
+from bayespilot.recording import _warn_if_questionable
 
 __all__ = ["FORMAT", "read_recording", "read_mat", "write_recording"]
 
@@ -194,13 +195,16 @@ def _build(signals: dict[str, np.ndarray], rate: float, kth: float, task: str,
     """Make the Recording; any problem it finds is reported against ``where``."""
     source = str(stem)
     try:
-        return Recording(signals, rate, kth, task, metadata, source=source)
+        rec = Recording(signals, rate, kth, task, metadata, source=source)
     except RecordingError as exc:
         msg = str(exc)
         prefix = f"{source}: "
         if msg.startswith(prefix):
             msg = msg[len(prefix):]
         raise _fail(where, msg) from None
+    # valid but unlike the paper's data (short, slow): warn, at the reader's caller
+    _warn_if_questionable(rec, stacklevel=3)
+    return rec
 
 
 # ---------------------------------------------------------------------------
@@ -402,6 +406,13 @@ def read_recording(path: PathLike) -> Recording:
     TypeError
         If ``path`` is not a str or path.
 
+    Warns
+    -----
+    QuestionableRecordingWarning
+        If the record is shorter than 30 s or sampled below 50 Hz (see
+        :func:`~bayespilot.recording.questionable`); the recording is still
+        returned.
+
     Notes
     -----
     CSV cells are decimal numbers (surrounding blanks allowed); header names
@@ -558,6 +569,11 @@ def read_mat(path: PathLike) -> Recording:
         type (the same checks as for a JSON sidecar).
     TypeError
         If ``path`` is not a str or path.
+
+    Warns
+    -----
+    QuestionableRecordingWarning
+        If the record is shorter than 30 s or sampled below 50 Hz.
 
     Examples
     --------

@@ -9,12 +9,15 @@ turns files into Recordings and adds the file name to any error.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["Recording", "RecordingError", "REQUIRED_SIGNALS", "OPTIONAL_SIGNALS", "TASKS"]
+__all__ = ["Recording", "RecordingError", "QuestionableRecordingWarning", "questionable",
+           "REQUIRED_SIGNALS", "OPTIONAL_SIGNALS", "TASKS", "SHORT_RECORDING_S",
+           "LOW_SAMPLE_RATE_HZ"]
 
 #: Columns every recording must have (recording format, version 1).
 REQUIRED_SIGNALS = ("t", "e", "u", "theta_ddot_m")
@@ -29,6 +32,59 @@ class RecordingError(ValueError):
 
     The message names the file, when there is one, and the problem.
     """
+
+
+#: Records shorter than this (s) are read with a warning; the paper's runs are 81.92 s.
+SHORT_RECORDING_S = 30.0
+#: Sample rates below this (Hz) are read with a warning; the paper's is 100 Hz.
+LOW_SAMPLE_RATE_HZ = 50.0
+
+
+class QuestionableRecordingWarning(UserWarning):
+    """A valid recording that is unlike the data the method was made for.
+
+    Issued by :func:`~bayespilot.io.read_recording` and
+    :func:`~bayespilot.io.read_mat` for a record shorter than
+    :data:`SHORT_RECORDING_S` (the paper's runs are 81.92 s) or sampled below
+    :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz).  The recording
+    is still returned and can be used; the estimates from it are less
+    certain.  Silence it, once you know, with
+    ``warnings.simplefilter("ignore", QuestionableRecordingWarning)``.
+    """
+
+
+def questionable(recording: "Recording") -> list[str]:
+    """Why ``recording`` is questionable as input to the method, if it is.
+
+    Parameters
+    ----------
+    recording : Recording
+
+    Returns
+    -------
+    list of str
+        One sentence per problem (a record shorter than
+        :data:`SHORT_RECORDING_S`, a sample rate below
+        :data:`LOW_SAMPLE_RATE_HZ`); empty if there is none.
+    """
+    reasons = []
+    if recording.duration < SHORT_RECORDING_S:
+        reasons.append(
+            f"the record is {recording.duration:g} s long, much shorter than the 81.92 s runs of "
+            f"Pool et al. (2012); the estimates (of delta_abs above all) will be far less certain")
+    if recording.sample_rate_hz < LOW_SAMPLE_RATE_HZ:
+        reasons.append(
+            f"the sample rate is {recording.sample_rate_hz:g} Hz, under {LOW_SAMPLE_RATE_HZ:g} Hz "
+            f"(the paper's is 100 Hz); the pilot's delays and neuromuscular dynamics "
+            f"(omega_nm ~ 10 rad/s) are poorly resolved")
+    return reasons
+
+
+def _warn_if_questionable(recording: "Recording", stacklevel: int = 2) -> None:
+    """Issue one :class:`QuestionableRecordingWarning` per reason :func:`questionable` gives."""
+    where = f"{recording.source}: " if recording.source else ""
+    for reason in questionable(recording):
+        warnings.warn(where + reason, QuestionableRecordingWarning, stacklevel=stacklevel + 1)
 
 
 @dataclass(frozen=True, eq=False)
