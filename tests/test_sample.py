@@ -301,3 +301,18 @@ def test_informative_prior_is_used(short_sim):
     d = post.draws("delta_abs")
     assert np.all((d >= 0.02) & (d <= 0.03))
     assert "uniform" in post.settings["prior"]
+
+
+# --- (g) the package-level entry point and the diagnostics in the summary -------------------------
+def test_bayespilot_sample_is_callable(short_sim):
+    import bayespilot
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        post = bayespilot.sample(short_sim.recording, init=short_sim.params, seed=3,
+                                 **dict(SHORT, n_walkers=16, max_steps=40, min_steps=0,
+                                        check_every=20))
+    assert isinstance(post, Posterior) and bayespilot.sample.sample is sample
+    s = post.summary()["K_v"]
+    assert s["tau"] == post.tau["K_v"] and s["ess_tail"] > 0
+    assert post.truth == {}  # simulate() output carries no truth in its metadata

@@ -33,7 +33,9 @@ import hashlib
 import json
 import math
 import os
+import sys
 import time
+import types
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -178,9 +180,10 @@ class Posterior:
         return float(lo), float(hi)
 
     def summary(self) -> dict[str, dict[str, Any]]:
-        """Per parameter: mean, median, hdi_90 [low, high], r_hat and ess_bulk (arviz).
+        """Per parameter: mean, median, hdi_90 [low, high], r_hat, ess_bulk, ess_tail (arviz)
+        and tau, the integrated autocorrelation time of the chain in steps (emcee).
 
-        r_hat and ess_bulk treat each walker as a chain, as ``arviz.from_emcee``
+        r_hat and the ESS treat each walker as a chain, as ``arviz.from_emcee``
         does; walkers of one ensemble are not independent, so r_hat is a
         consistency check, not a proof of convergence (see ``converged``).
         """
@@ -189,14 +192,21 @@ class Posterior:
         hdi = az.hdi(self.idata, hdi_prob=0.9)
         rhat = az.rhat(self.idata)
         ess = az.ess(self.idata, method="bulk")
+        ess_tail = az.ess(self.idata, method="tail")
         out = {}
         for n in self.parameter_names:
             x = np.asarray(post[n].values, dtype=float)
             lo, hi = (float(v) for v in np.asarray(hdi[n].values))
             out[n] = {"mean": float(x.mean()), "median": float(np.median(x)),
                       "hdi_90": [lo, hi], "r_hat": float(rhat[n].values),
-                      "ess_bulk": float(ess[n].values)}
+                      "ess_bulk": float(ess[n].values), "ess_tail": float(ess_tail[n].values),
+                      "tau": float(self.tau.get(n, math.nan))}
         return out
+
+    @property
+    def truth(self) -> dict[str, float]:
+        """The true parameters when the recording carried them (a simulation), else {}."""
+        return dict(self.settings.get("true_parameters") or {})
 
     def to_netcdf(self, path: str | os.PathLike) -> Path:
         """Write the InferenceData (with everything needed by :meth:`from_netcdf`) to ``path``."""
@@ -537,6 +547,8 @@ def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
             attrs[k] = v
         elif isinstance(v, bool):
             attrs[k] = int(v)
+    for k, v in (meta["settings"].get("true_parameters") or {}).items():
+        attrs[f"true_{k}"] = float(v)
     attrs["converged"] = int(meta["converged"])
     az = _arviz()
     idata = az.from_dict(posterior=posterior, sample_stats=stats)
@@ -546,6 +558,21 @@ def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
 
 
 # --- the public entry point ----------------------------------------------------------------------
+def _true_parameters(recording: Recording, names) -> dict[str, float] | None:
+    """The true parameters a simulated recording carries in its metadata
+    (``simulation.parameters``, as ``bayespilot simulate`` writes), restricted to ``names``."""
+    sim = recording.metadata.get("simulation") if isinstance(recording.metadata, Mapping) else None
+    par = sim.get("parameters") if isinstance(sim, Mapping) else None
+    if not isinstance(par, Mapping):
+        return None
+    out = {}
+    for k, v in par.items():
+        if k in names and isinstance(v, (int, float)) and not isinstance(v, bool) \
+                and math.isfinite(float(v)):
+            out[k] = float(v)
+    return out or None
+
+
 def _check_int(name, v, lo):
     if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
         raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
@@ -697,6 +724,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     ball_ss, mcmc_ss = ss.spawn(2)
 
     settings: dict[str, Any] = {
+        "true_parameters": _true_parameters(recording, names),
         "likelihood": likelihood, "ar_order": order, "n_walkers": n_walkers,
         "max_steps": max_steps, "min_steps": min_steps, "check_every": check_every,
         "tau_factor": tau_factor, "tau_rtol": tau_rtol, "prior": pri.description,
@@ -762,3 +790,13 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
             "settings": settings, "seed": seed}
     idata, meta = _to_idata(run.sampler, names, run.tau, meta)
     return Posterior(idata, tuple(names), tau, bool(run.converged), meta["settings"], seed)
+
+
+class _CallableModule(types.ModuleType):
+    """This module, callable: ``bayespilot.sample(...)`` is :func:`sample`."""
+
+    def __call__(self, *args, **kwargs):
+        return sample(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -1,0 +1,1024 @@
+"""Bayesian model comparison: the pilot model with and without the threshold.
+
+:func:`compare` weighs the paper's model (``delta_abs`` free on [0, 0.1]
+IPUT, Table 1) against the same model with ``delta_abs = 0`` on one
+recording, three ways:
+
+1. **Log Bayes factor from nested sampling** (dynesty).  The evidence
+   Z = integral of L(theta) p(theta) is computed for each model with priors
+   uniform on the model bounds (Table 1), the same as the defaults of
+   :func:`bayespilot.sample.sample`, and
+
+       ln BF = ln Z(threshold) - ln Z(none),
+
+   with the uncertainty sqrt(err_1^2 + err_2^2) from dynesty's ``logzerr``
+   of each run.  Under Eq. 4 the output-error variance s^2 is marginalised
+   with the Jeffreys prior p(s) ~ 1/s, which gives
+   -ln L = N/2 ln(sum eps^2) + const: the profiled form of Eq. 4 up to a
+   constant that is the same for both models (same N), so it cancels in the
+   Bayes factor (the improper prior is shared by both models, which is what
+   makes the ratio well defined).  ``likelihood="coloured"`` uses the AR(p)
+   output-error model of :mod:`bayespilot.sample`, with the partial
+   autocorrelations uniform on (-0.99, 0.99) in both models.
+
+2. **Savage-Dickey ratio** from an emcee posterior of the model with
+   threshold: for nested models whose other priors do not depend on
+   ``delta_abs``, BF(none : threshold) = p(delta_abs = 0 | data) / p(delta_abs = 0).
+   0 is the lower bound of the prior, so the posterior density at 0 is a
+   density at a boundary; it is estimated with arviz's boundary-corrected
+   (reflection) kernel density estimate.  It is a valid cross-check only
+   where the prior of ``delta_abs`` starts at 0 and the posterior has
+   enough draws near 0 to estimate a density there; otherwise the result
+   says so and gives, where it can, a lower bound on ln BF.
+
+   Nested sampling can fail on this likelihood: for delta_abs above most
+   of |i| the dead zone switches the motion channel off, a broad plateau
+   that holds much prior volume, and a run may find the main mode late or
+   not at all, which lowers ln Z.  So the model with threshold is run
+   ``runs`` times (default 2, each with its own seed); runs whose best ln L
+   is below the best ln L without threshold (impossible for the nested
+   model) are replaced, runs whose ln Z is far below the others are
+   dropped, and the rest are averaged (:func:`_robust_evidence`).
+
+3. **Information criteria** from the maximum-likelihood fits:
+   AIC = 2k + 2(-ln L), BIC = k ln n + 2(-ln L), with k counting the output
+   error variance (and the AR coefficients).  ``delta_aic`` and
+   ``delta_bic`` are (none - threshold): positive favours the threshold.
+
+Decisions (:func:`decide`) use Jeffreys' scale on ln BF (Jeffreys 1961,
+Appendix B; in natural logs): |ln BF| < ln 10^(1/2) = 1.15 "barely worth
+mentioning", < ln 10 = 2.30 "substantial", < ln 10^(3/2) = 3.45 "strong",
+< ln 100 = 4.61 "very strong", beyond "decisive".  A decision for a model
+needs at least "strong" evidence (|ln BF| > ln 10) that holds with the
+estimate's uncertainty: ln BF - 2 err > ln 10 gives ``"threshold"``,
+ln BF + 2 err < -ln 10 gives ``"none"``, anything else ``"inconclusive"``.
+
+:func:`pool` combines recordings of one condition: the sum of the log Bayes
+factors (all recordings with a threshold against all without, each with its
+own parameters; errors in quadrature), decided on the same scale, and a
+paired test across recordings (a one-sample t-test of the per-recording
+ln BF, i.e. a paired t-test of ln Z with against without threshold, and a
+Wilcoxon signed-rank test).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+import types
+import warnings
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from .likelihood import Likelihood
+from .model import PilotModel, paper_model
+from .recording import Recording
+
+__all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested_evidence",
+           "evidence", "savage_dickey", "savage_dickey_from_posterior", "information_criteria",
+           "decide", "jeffreys_category", "compare", "pool", "JEFFREYS", "DECISION_LEVEL",
+           "DECISION_Z", "THRESHOLD"]
+
+#: The nested parameter: the model without threshold has it fixed at 0.
+THRESHOLD = "delta_abs"
+#: Jeffreys' scale (1961, Appendix B) in natural logs: (upper end of |ln BF|, category).
+JEFFREYS = ((0.5 * math.log(10.0), "barely worth mentioning"),
+            (math.log(10.0), "substantial"),
+            (1.5 * math.log(10.0), "strong"),
+            (2.0 * math.log(10.0), "very strong"),
+            (math.inf, "decisive"))
+#: |ln BF| a decision needs: Jeffreys' "strong" (BF > 10).
+DECISION_LEVEL = math.log(10.0)
+#: Standard errors of ln BF by which it must clear DECISION_LEVEL.
+DECISION_Z = 2.0
+DECISIONS = ("threshold", "none", "inconclusive")
+#: The threshold model's best ln L may fall this far below the no-threshold model's before
+#: :func:`compare` concludes that its nested-sampling run lost the main mode and reruns it.
+MODE_TOLERANCE = 2.0
+#: Extra runs (each with a new seed) :func:`compare` makes to replace runs that lost the mode.
+MAX_RERUNS = 2
+
+
+def _check_int(name: str, v, lo: int) -> int:
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
+    return int(v)
+
+
+def _check_pos(name: str, v) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not (
+            math.isfinite(v) and v > 0):
+        raise ValueError(f"{name} must be a positive number, got {v!r}")
+    return float(v)
+
+
+# --- decisions -----------------------------------------------------------------------------
+def jeffreys_category(log_bf: float) -> str:
+    """Jeffreys' name for the strength of evidence |ln BF| (see :data:`JEFFREYS`).
+
+    Examples
+    --------
+    >>> jeffreys_category(3.0)
+    'strong'
+    >>> jeffreys_category(-0.5)
+    'barely worth mentioning'
+    """
+    if not isinstance(log_bf, (int, float, np.floating)) or math.isnan(log_bf):
+        raise ValueError(f"log_bf must be a number, got {log_bf!r}")
+    a = abs(float(log_bf))
+    for upper, name in JEFFREYS:
+        if a < upper:
+            return name
+    return JEFFREYS[-1][1]
+
+
+def decide(log_bf: float, err: float = 0.0, *, level: float = DECISION_LEVEL,
+           z: float = DECISION_Z) -> str:
+    """``"threshold"``, ``"none"`` or ``"inconclusive"`` from ln BF (threshold : none).
+
+    ``"threshold"`` if ln BF - z err > level, ``"none"`` if ln BF + z err < -level,
+    else ``"inconclusive"`` (defaults: Jeffreys' "strong", BF > 10, at 2 standard
+    errors).
+
+    Examples
+    --------
+    >>> decide(8.0, 1.0), decide(-3.0, 0.2), decide(3.0, 1.0)
+    ('threshold', 'none', 'inconclusive')
+    """
+    for name, v in (("log_bf", log_bf), ("err", err), ("level", level), ("z", z)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or math.isnan(v):
+            raise ValueError(f"{name} must be a number, got {v!r}")
+    if err < 0 or level < 0 or z < 0:
+        raise ValueError("err, level and z must be >= 0")
+    if log_bf - z * err > level:
+        return "threshold"
+    if log_bf + z * err < -level:
+        return "none"
+    return "inconclusive"
+
+
+# --- nested sampling -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Evidence:
+    """The evidence of one model from one dynesty run.
+
+    Attributes
+    ----------
+    log_z, log_z_err : float
+        ln Z and dynesty's estimate of its standard error.
+    information : float
+        The information H (nats) of the posterior relative to the prior.
+    max_log_lik : float
+        The largest ln L met.
+    best : dict
+        The parameters at ``max_log_lik``.
+    mean : dict
+        Posterior mean of each parameter (importance-weighted samples).
+    parameter_names : tuple of str
+    n_calls, n_iter : int
+        Likelihood evaluations and nested-sampling iterations.
+    elapsed : float
+        Wall time, s.
+    settings : dict
+        nlive, dlogz, sample, bound, seed, the bounds.
+    """
+
+    log_z: float
+    log_z_err: float
+    information: float
+    max_log_lik: float
+    best: dict[str, float]
+    mean: dict[str, float]
+    parameter_names: tuple[str, ...]
+    n_calls: int
+    n_iter: int
+    elapsed: float
+    settings: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["parameter_names"] = list(self.parameter_names)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Evidence":
+        d = dict(d)
+        d["parameter_names"] = tuple(d["parameter_names"])
+        return cls(**d)
+
+
+def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequence[float],
+                    upper: Sequence[float], *, names: Sequence[str] | None = None,
+                    nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
+                    bound: str = "multi", seed: int | None = None,
+                    progress: bool = False) -> Evidence:
+    """ln Z of ``log_likelihood`` under a prior uniform on the box [lower, upper] (dynesty).
+
+    Parameters
+    ----------
+    log_likelihood : callable
+        ln L of one parameter vector (a float; -inf where the model is not
+        defined, e.g. unstable).
+    lower, upper : sequence of float
+        Finite bounds, lower < upper, one per parameter.
+    names : sequence of str, optional
+        Parameter names (default x0, x1, ...).
+    nlive : int
+        Live points (the error of ln Z falls as sqrt(H / nlive)).
+    dlogz : float
+        Stop when the remaining evidence is below this (dynesty's criterion).
+    sample, bound : str
+        dynesty's sampling method and bounding scheme.
+    seed : int, optional
+        Seeds dynesty's ``rstate`` (a numpy Generator): same seed, same run.
+    progress : bool
+        dynesty's progress line.
+
+    Returns
+    -------
+    Evidence
+
+    Examples
+    --------
+    A unit Gaussian likelihood (integral 1) in the box [-10, 10]^2 has
+    Z = 1/400:
+
+    >>> ll = lambda x: -0.5 * float(x @ x) - math.log(2 * math.pi)
+    >>> ev = nested_evidence(ll, [-10, -10], [10, 10], nlive=100, seed=1)
+    >>> bool(abs(ev.log_z - math.log(1 / 400)) < 4 * ev.log_z_err)
+    True
+    """
+    import dynesty
+
+    lo = np.asarray(lower, dtype=float)
+    hi = np.asarray(upper, dtype=float)
+    if lo.ndim != 1 or lo.shape != hi.shape or lo.size == 0:
+        raise ValueError("lower and upper must be 1-D sequences of the same length >= 1")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
+        raise ValueError("the prior box needs finite lower < upper in every dimension")
+    names = tuple(f"x{i}" for i in range(lo.size)) if names is None else tuple(names)
+    if len(names) != lo.size:
+        raise ValueError(f"names has {len(names)} entries for {lo.size} parameters")
+    if not callable(log_likelihood):
+        raise TypeError("log_likelihood must be callable")
+    nlive = _check_int("nlive", nlive, 2 * lo.size + 2)
+    dlogz = _check_pos("dlogz", dlogz)
+    if seed is not None:
+        seed = _check_int("seed", seed, 0)
+    width = hi - lo
+    n_calls = 0
+
+    def prior_transform(u):
+        return lo + u * width
+
+    def loglike(x):
+        nonlocal n_calls
+        n_calls += 1
+        v = float(log_likelihood(x))
+        if math.isnan(v) or v == math.inf:
+            return -math.inf
+        return v
+
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(np.random.SeedSequence(seed))
+    sampler = dynesty.NestedSampler(loglike, prior_transform, lo.size, nlive=nlive,
+                                    sample=sample, bound=bound, rstate=rng)
+    sampler.run_nested(dlogz=dlogz, print_progress=progress)
+    res = sampler.results
+    logz = float(res["logz"][-1])
+    logz_err = float(res["logzerr"][-1])
+    info = float(res["information"][-1])
+    logl = np.asarray(res["logl"], float)
+    samples = np.asarray(res["samples"], float)
+    w = np.exp(np.asarray(res["logwt"], float) - logz)
+    w = w / w.sum()
+    ib = int(np.argmax(logl))
+    settings = {"nlive": nlive, "dlogz": dlogz, "sample": sample, "bound": bound, "seed": seed,
+                "lower": lo.tolist(), "upper": hi.tolist(), "dynesty": dynesty.__version__}
+    return Evidence(logz, logz_err, info, float(logl[ib]),
+                    {n: float(v) for n, v in zip(names, samples[ib])},
+                    {n: float(v) for n, v in zip(names, w @ samples)}, names, int(n_calls),
+                    int(res["niter"]), time.perf_counter() - t0, settings)
+
+
+def _model_and_order(model: PilotModel | None, likelihood: str, ar_order: int):
+    from .sample import LIKELIHOODS
+
+    model = paper_model() if model is None else model
+    if not isinstance(model, PilotModel):
+        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+    if likelihood not in LIKELIHOODS:
+        raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
+    order = _check_int("ar_order", ar_order, 1) if likelihood == "coloured" else 0
+    return model, order
+
+
+class _NegLogLik:
+    """-ln L of one vector [free pilot parameters, pacf_1..pacf_p] (Eq. 4 or AR-coloured)."""
+
+    def __init__(self, model: PilotModel, recording: Recording, order: int) -> None:
+        from .sample import PACF_BOUND, _LogPosterior, _Prior, pacf_names
+
+        self.lik = Likelihood(model, recording)
+        self.order = order
+        self.names = model.parameter_names + pacf_names(order)
+        lo, hi = model.bounds
+        self.lower = np.concatenate([lo, np.full(order, -PACF_BOUND)])
+        self.upper = np.concatenate([hi, np.full(order, PACF_BOUND)])
+        prior = _Prior(self.names, np.concatenate([lo, np.full(order, -1.0)]),
+                       np.concatenate([hi, np.full(order, 1.0)]), self.lower, self.upper, None)
+        self._lp = _LogPosterior(self.lik, order, prior)
+        self._row = np.empty((1, len(self.names)))
+
+    def __call__(self, x: np.ndarray) -> float:
+        self._row[0] = x
+        return float(self._lp.neg_log_lik(self._row)[0])
+
+    def log_lik(self, x: np.ndarray) -> float:
+        return -self(x)
+
+    @property
+    def n(self) -> int:
+        return self.lik.n - self.order
+
+
+def evidence(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
+             ar_order: int = 2, nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
+             seed: int | None = None, progress: bool = False) -> Evidence:
+    """ln Z of ``model`` on ``recording`` with priors uniform on the model bounds (dynesty).
+
+    Parameters
+    ----------
+    recording : Recording
+    model : PilotModel, optional
+        Default :func:`~bayespilot.model.paper_model` (with threshold).
+    likelihood : {"eq4", "coloured"}
+        As in :func:`bayespilot.sample.sample` (variance marginalised with the
+        Jeffreys prior; see the module docs).
+    ar_order : int
+        AR order of the ``"coloured"`` likelihood; the partial
+        autocorrelations are uniform on (-0.99, 0.99).
+    nlive, dlogz, sample, seed, progress
+        See :func:`nested_evidence`.
+
+    Returns
+    -------
+    Evidence
+    """
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    model, order = _model_and_order(model, likelihood, ar_order)
+    nll = _NegLogLik(model, recording, order)
+    ev = nested_evidence(nll.log_lik, nll.lower, nll.upper, names=nll.names, nlive=nlive,
+                         dlogz=dlogz, sample=sample, seed=seed, progress=progress)
+    ev.settings.update({"likelihood": likelihood, "ar_order": order, "model": model.name,
+                        "fixed": {k: float(v) for k, v in model.fixed.items()}})
+    return ev
+
+
+# --- Savage-Dickey ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SavageDickey:
+    """A Savage-Dickey estimate of ln BF (threshold : none) from posterior draws.
+
+    Attributes
+    ----------
+    log_bayes_factor : float or None
+        ln p(0) - ln p(0 | data); None when not valid.
+    valid : bool
+        Whether the estimate can be used (see ``reason``).
+    reason : str
+        Why it is or is not valid.
+    lower_bound : float or None
+        When the posterior has too few draws near 0 for a density there: a
+        lower bound on ln BF, assuming the posterior density does not fall
+        on the way from 0 to the 10th-smallest draw.
+    prior_density, posterior_density : float
+        At the nested value (0).  posterior_density from arviz's
+        boundary-corrected KDE.
+    bandwidth : float
+        KDE bandwidth.
+    n_draws, n_near : int
+        Draws used, and draws within two bandwidths of 0.
+    """
+
+    log_bayes_factor: float | None
+    valid: bool
+    reason: str
+    lower_bound: float | None
+    prior_density: float
+    posterior_density: float
+    bandwidth: float
+    n_draws: int
+    n_near: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def savage_dickey(draws: Sequence[float] | np.ndarray, *, lower: float = 0.0, upper: float = 0.1,
+                  prior_density: float | None = None, min_near: int = 50) -> SavageDickey:
+    """Savage-Dickey ln BF (free : fixed at ``lower``) from draws of a parameter on [lower, upper].
+
+    The nested value is the prior's lower bound, so the posterior density is
+    estimated there with a boundary-corrected KDE (arviz, reflection at the
+    bounds) on [lower, upper].
+
+    Parameters
+    ----------
+    draws : array_like
+        Posterior draws of the parameter, all in [lower, upper].
+    lower, upper : float
+        The prior's support; the nested model fixes the parameter at ``lower``.
+    prior_density : float, optional
+        Prior density at ``lower``; default 1 / (upper - lower) (uniform).
+    min_near : int
+        The estimate is valid only with at least this many draws within two
+        KDE bandwidths of ``lower``.
+
+    Returns
+    -------
+    SavageDickey
+
+    Examples
+    --------
+    Draws piled up at the boundary (a half-normal of scale 0.01 on [0, 0.1])
+    have the density 2 / (0.01 sqrt(2 pi)) = 79.8 at 0, so ln BF
+    = ln(10 / 79.8) = -2.08 (the KDE smooths the peak a little):
+
+    >>> x = np.abs(np.random.default_rng(0).normal(0, 0.01, 20000))
+    >>> sd = savage_dickey(x)
+    >>> sd.valid, round(sd.log_bayes_factor, 1)
+    (True, -2.0)
+    """
+    from .sample import _arviz
+
+    x = np.asarray(draws, dtype=float).ravel()
+    for name, v in (("lower", lower), ("upper", upper)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
+            raise ValueError(f"{name} must be a finite number, got {v!r}")
+    if not lower < upper:
+        raise ValueError(f"need lower < upper, got [{lower}, {upper}]")
+    if x.size < 10 or not np.all(np.isfinite(x)):
+        raise ValueError("draws must be at least 10 finite numbers")
+    if np.any(x < lower) or np.any(x > upper):
+        raise ValueError(f"draws must lie in the prior's support [{lower:g}, {upper:g}]")
+    p0 = 1.0 / (upper - lower) if prior_density is None else _check_pos("prior_density",
+                                                                        prior_density)
+    min_near = _check_int("min_near", min_near, 1)
+    az = _arviz()
+    grid_len = int(min(2**16, max(512, 2 ** math.ceil(math.log2(
+        16 * (upper - lower) / max(np.std(x), 1e-12 * (upper - lower)))))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        grid, pdf, bw = az.kde(x, bound_correction=True, custom_lims=(lower, upper),
+                               grid_len=grid_len, bw_return=True)
+    dens = float(pdf[0])
+    n_near = int(np.sum(x <= lower + 2.0 * bw))
+    ln_prior = math.log(p0)
+    if n_near >= min_near and dens > 0:
+        return SavageDickey(ln_prior - math.log(dens), True,
+                            f"{n_near} of {x.size} draws within 2 bandwidths of {lower:g}",
+                            None, p0, dens, float(bw), int(x.size), n_near)
+    k = min(10, x.size)
+    xk = float(np.sort(x)[k - 1]) - lower
+    lb = ln_prior - math.log(k / (x.size * xk)) if xk > 0 else None
+    reason = (f"only {n_near} of {x.size} draws within 2 bandwidths ({2 * bw:.3g}) of {lower:g}: "
+              "the posterior density there is too small to estimate from these draws")
+    return SavageDickey(None, False, reason, lb, p0, dens, float(bw), int(x.size), n_near)
+
+
+def savage_dickey_from_posterior(posterior, model: PilotModel | None = None,
+                                 min_near: int = 50) -> SavageDickey:
+    """:func:`savage_dickey` for ``delta_abs`` from a :class:`~bayespilot.sample.Posterior`.
+
+    Valid only if the posterior was sampled with the default prior (uniform on
+    the bounds), the prior's lower bound on ``delta_abs`` is 0 (the model
+    without threshold), and enough draws lie near 0.  An invalid case comes
+    back with ``valid=False`` and the reason, not an exception.
+    """
+    from .sample import Posterior
+
+    if not isinstance(posterior, Posterior):
+        raise TypeError(f"posterior must be a bayespilot.sample.Posterior, got "
+                        f"{type(posterior).__name__}")
+    model = paper_model() if model is None else model
+    if THRESHOLD not in posterior.parameter_names:
+        raise ValueError(f"the posterior has no {THRESHOLD!r} (sampled: "
+                         f"{', '.join(posterior.parameter_names)})")
+    par = model.parameter(THRESHOLD)
+    x = posterior.draws(THRESHOLD)
+
+    def invalid(reason: str) -> SavageDickey:
+        return SavageDickey(None, False, reason, None, math.nan, math.nan, math.nan, int(x.size), 0)
+
+    prior = str(posterior.settings.get("prior", ""))
+    if f"{THRESHOLD} ~" in prior or prior.startswith("callable"):
+        return invalid(f"the posterior was sampled with a non-default prior ({prior}); "
+                       "Savage-Dickey here assumes delta_abs uniform on its bounds")
+    if par.lower != 0.0:
+        return invalid(f"the prior of {THRESHOLD} is on [{par.lower:g}, {par.upper:g}], which "
+                       "does not contain the nested value 0 at its lower bound")
+    return savage_dickey(x, lower=par.lower, upper=par.upper, min_near=min_near)
+
+
+# --- information criteria ---------------------------------------------------------------------
+def information_criteria(neg_log_lik_threshold: float, neg_log_lik_none: float, k_threshold: int,
+                         k_none: int, n: int) -> dict[str, float]:
+    """AIC and BIC of both models from their maximum-likelihood -ln L.
+
+    ``k_*`` count every estimated parameter, the output-error variance
+    included; ``n`` is the number of samples the likelihood uses.
+    ``delta_aic``/``delta_bic`` are (none - threshold): positive favours the
+    threshold.  ``log_bayes_factor_bic`` = delta_bic / 2 is the BIC
+    (Schwarz) approximation of ln BF.
+
+    Examples
+    --------
+    >>> ic = information_criteria(-100.0, -95.0, 9, 8, 1000)
+    >>> ic["delta_aic"], round(ic["delta_bic"], 3)
+    (8.0, 3.092)
+    """
+    for name, v in (("neg_log_lik_threshold", neg_log_lik_threshold),
+                    ("neg_log_lik_none", neg_log_lik_none)):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or math.isnan(v):
+            raise ValueError(f"{name} must be a number, got {v!r}")
+    k1 = _check_int("k_threshold", k_threshold, 1)
+    k0 = _check_int("k_none", k_none, 1)
+    n = _check_int("n", n, 1)
+    aic1, aic0 = 2 * k1 + 2 * neg_log_lik_threshold, 2 * k0 + 2 * neg_log_lik_none
+    bic1, bic0 = k1 * math.log(n) + 2 * neg_log_lik_threshold, k0 * math.log(n) + 2 * neg_log_lik_none
+    return {"neg_log_lik_threshold": float(neg_log_lik_threshold),
+            "neg_log_lik_none": float(neg_log_lik_none), "k_threshold": k1, "k_none": k0, "n": n,
+            "aic_threshold": float(aic1), "aic_none": float(aic0), "bic_threshold": float(bic1),
+            "bic_none": float(bic0), "delta_aic": float(aic0 - aic1),
+            "delta_bic": float(bic0 - bic1), "log_bayes_factor_bic": float((bic0 - bic1) / 2)}
+
+
+def _ml(nll: _NegLogLik, start: Mapping[str, float], threshold: bool) -> tuple[float, dict]:
+    """Maximum-likelihood -ln L from ``start`` (dynesty's best point): bounded Gauss-Newton
+    (Eq. 4 only; the pilot parameters with delta_abs held) and, with threshold, a scan of
+    delta_abs over its bounds at 1e-4 and a second refinement."""
+    from .fit.gauss_newton import refine
+
+    x = np.array([start[n] for n in nll.names])
+    best_v, best_x = nll(x), x.copy()
+    model = nll.lik.model
+    if nll.order:
+        return best_v, dict(zip(nll.names, best_x.tolist()))
+
+    def polish(x0):
+        r = refine(nll.lik, dict(zip(nll.names, x0)), hold=(THRESHOLD,), bounded=True)
+        return float(r.neg_log_lik), np.array([r.params[n] for n in nll.names])
+
+    rounds = 2 if threshold else 1
+    for _ in range(rounds):
+        v, xr = polish(best_x)
+        if v < best_v:
+            best_v, best_x = v, xr
+        if threshold:
+            j = nll.names.index(THRESHOLD)
+            par = model.parameter(THRESHOLD)
+            grid = np.arange(par.lower, par.upper + 0.5e-4, 1e-4)
+            rows = np.repeat(best_x[None, :], grid.size, axis=0)
+            rows[:, j] = grid
+            vals = nll.lik.batch(rows)
+            i = int(np.argmin(vals))
+            if vals[i] < best_v:
+                best_v, best_x = float(vals[i]), rows[i].copy()
+    return float(best_v), dict(zip(nll.names, best_x.tolist()))
+
+
+def _robust_evidence(run: Callable[[int], Evidence], n_runs: int,
+                     reference_max_log_lik: float) -> tuple[Evidence, list, bool]:
+    """ln Z of the model with threshold from ``n_runs`` nested-sampling runs that agree.
+
+    ``run(attempt)`` makes one run with its own seed.  A run whose best ln L
+    is more than MODE_TOLERANCE below ``reference_max_log_lik`` (the best
+    ln L without threshold, which the nested model cannot beat) lost the
+    main mode and is dropped, and another run is made (at most MAX_RERUNS
+    extra).  Of the runs kept, those whose ln Z lies more than 3 combined
+    standard errors below the highest are dropped too: the failure of
+    nested sampling on this likelihood is to find the main mode late,
+    which only ever lowers ln Z.  The rest are combined by inverse-variance
+    weighting; the error is the larger of the weighted one and the standard
+    error of their spread.  Returns (combined Evidence, record of every run,
+    whether any run passed the mode check).
+    """
+    kept: list[Evidence] = []
+    made: list[Evidence] = []
+    record: list[dict] = []
+    attempt = 0
+    while len(kept) < n_runs and attempt < n_runs + MAX_RERUNS:
+        ev = run(attempt)
+        made.append(ev)
+        attempt += 1
+        entry = {"attempt": attempt, "seed": ev.settings.get("seed"), "log_z": ev.log_z,
+                 "log_z_err": ev.log_z_err, "max_log_lik": ev.max_log_lik,
+                 "information": ev.information, "used": True, "why": ""}
+        record.append(entry)
+        if ev.max_log_lik < reference_max_log_lik - MODE_TOLERANCE:
+            entry.update(used=False, why="lost the main mode (best ln L below the model "
+                                         "without threshold)")
+            continue
+        kept.append(ev)
+    if not kept:
+        return ev, record, False
+    top = max(kept, key=lambda e: e.log_z)
+    good = []
+    for ev, entry in zip(kept, [e for e in record if e["used"]]):
+        if ev.log_z < top.log_z - 3.0 * math.hypot(ev.log_z_err, top.log_z_err):
+            entry.update(used=False, why="ln Z more than 3 standard errors below the highest run "
+                                         "(found the main mode late)")
+        else:
+            good.append(ev)
+    w = np.array([1.0 / e.log_z_err**2 for e in good])
+    z = np.array([e.log_z for e in good])
+    log_z = float(w @ z / w.sum())
+    err = float(math.sqrt(1.0 / w.sum()))
+    if len(good) > 1:
+        err = max(err, float(np.std(z, ddof=1) / math.sqrt(len(good))))
+    settings = dict(top.settings, runs=record, seed=good[0].settings.get("seed"))
+    combined = Evidence(log_z, err, float(np.mean([e.information for e in good])),
+                        float(max(e.max_log_lik for e in good)), top.best, top.mean,
+                        top.parameter_names, int(sum(e.n_calls for e in made)),
+                        int(sum(e.n_iter for e in made)), float(sum(e.elapsed for e in made)),
+                        settings)
+    return combined, record, True
+
+
+# --- one recording ---------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """Threshold against no threshold on one recording (see :func:`compare`).
+
+    Attributes
+    ----------
+    log_bayes_factor, log_bayes_factor_err : float
+        ln Z(threshold) - ln Z(none) and its standard error.
+    decision : {"threshold", "none", "inconclusive"}
+    evidence_threshold, evidence_none : Evidence
+    savage_dickey : SavageDickey or None
+    information_criteria : dict
+        From :func:`information_criteria`, plus the ML parameters.
+    settings : dict
+    seed : int or None
+    elapsed : float
+    source : str or None
+    """
+
+    log_bayes_factor: float
+    log_bayes_factor_err: float
+    decision: str
+    evidence_threshold: Evidence
+    evidence_none: Evidence
+    savage_dickey: SavageDickey | None
+    information_criteria: dict[str, Any]
+    settings: dict[str, Any] = field(default_factory=dict)
+    seed: int | None = None
+    elapsed: float = math.nan
+    source: str | None = None
+
+    @property
+    def category(self) -> str:
+        """Jeffreys' name for the strength of the evidence."""
+        return jeffreys_category(self.log_bayes_factor)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (the keys of the CLI's ``--json``)."""
+        ic = self.information_criteria
+        sd = self.savage_dickey
+        return {
+            "log_bayes_factor": self.log_bayes_factor,
+            "log_bayes_factor_err": self.log_bayes_factor_err,
+            "decision": self.decision,
+            "jeffreys_category": self.category,
+            "favours": "threshold" if self.log_bayes_factor > 0 else "none",
+            "log_evidence_threshold": self.evidence_threshold.log_z,
+            "log_evidence_threshold_err": self.evidence_threshold.log_z_err,
+            "log_evidence_none": self.evidence_none.log_z,
+            "log_evidence_none_err": self.evidence_none.log_z_err,
+            "savage_dickey_log_bayes_factor": None if sd is None else sd.log_bayes_factor,
+            "savage_dickey_valid": None if sd is None else sd.valid,
+            "savage_dickey": None if sd is None else sd.to_dict(),
+            "delta_aic": ic["delta_aic"], "delta_bic": ic["delta_bic"],
+            "information_criteria": ic,
+            "evidence_threshold": self.evidence_threshold.to_dict(),
+            "evidence_none": self.evidence_none.to_dict(),
+            "settings": self.settings, "seed": self.seed, "elapsed_seconds": self.elapsed,
+            "source": self.source,
+        }
+
+    def to_json(self, path: str | os.PathLike | None = None) -> str | Path:
+        """The :meth:`to_dict` as JSON text, or written to ``path`` (parents created)."""
+        text = json.dumps(self.to_dict(), indent=1, allow_nan=True)
+        if path is None:
+            return text
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text)
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Comparison":
+        sd = d.get("savage_dickey")
+        return cls(float(d["log_bayes_factor"]), float(d["log_bayes_factor_err"]), d["decision"],
+                   Evidence.from_dict(d["evidence_threshold"]),
+                   Evidence.from_dict(d["evidence_none"]),
+                   None if sd is None else SavageDickey(**sd), dict(d["information_criteria"]),
+                   dict(d.get("settings", {})), d.get("seed"),
+                   float(d.get("elapsed_seconds", math.nan)), d.get("source"))
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike) -> "Comparison":
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
+    def summary(self) -> str:
+        """A few lines for people."""
+        ic = self.information_criteria
+        e1, e0 = self.evidence_threshold, self.evidence_none
+        sd = self.savage_dickey
+        if sd is None:
+            sd_line = "Savage-Dickey: not computed"
+        elif sd.valid:
+            sd_line = f"Savage-Dickey ln BF = {sd.log_bayes_factor:+.2f} ({sd.reason})"
+        else:
+            lb = "" if sd.lower_bound is None else f"; ln BF > {sd.lower_bound:.1f}"
+            sd_line = f"Savage-Dickey: not valid ({sd.reason}{lb})"
+        return "\n".join([
+            f"threshold vs none ({self.settings.get('likelihood')} likelihood"
+            f"{', ' + self.source if self.source else ''}):",
+            f"  ln BF = {self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f}  "
+            f"({self.category}, favours {'threshold' if self.log_bayes_factor > 0 else 'none'})"
+            f"  -> decision: {self.decision}",
+            f"  ln Z threshold = {e1.log_z:.2f} +- {e1.log_z_err:.2f}, none = {e0.log_z:.2f} +- "
+            f"{e0.log_z_err:.2f} (dynesty, nlive {e1.settings.get('nlive')})",
+            f"  {sd_line}",
+            f"  -ln L (ML) threshold = {ic['neg_log_lik_threshold']:.2f}, none = "
+            f"{ic['neg_log_lik_none']:.2f}; dAIC = {ic['delta_aic']:+.2f}, dBIC = "
+            f"{ic['delta_bic']:+.2f} (none - threshold; > 0 favours threshold)",
+            f"  {self.elapsed:.1f} s"])
+
+    def __str__(self) -> str:
+        return self.summary()
+
+
+def compare(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
+            ar_order: int = 2, nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
+            runs: int = 2, seed: int | None = None, posterior: Any = None,
+            savage_dickey_samples: bool = True, sample_options: Mapping[str, Any] | None = None,
+            progress: bool = False) -> Comparison:
+    """Compare the model with threshold against the same model with ``delta_abs = 0``.
+
+    Parameters
+    ----------
+    recording : Recording
+    model : PilotModel, optional
+        The model with a free ``delta_abs`` (default: the paper's).  The model
+        without threshold is ``model.fix(delta_abs=0)``.
+    likelihood : {"eq4", "coloured"}
+    ar_order : int
+        For ``"coloured"``.
+    nlive, dlogz, sample
+        dynesty settings (:func:`nested_evidence`).
+    runs : int
+        Independent nested-sampling runs of the model with threshold, combined
+        by :func:`_robust_evidence` (the model without threshold runs once;
+        see the module docs).
+    seed : int, optional
+        Seeds the nested-sampling runs (and the emcee run, if one is made).
+    posterior : Posterior, optional
+        An emcee posterior of ``model`` on this recording for the
+        Savage-Dickey cross-check.  If None and ``savage_dickey_samples``,
+        one is sampled (:func:`bayespilot.sample.sample`, started from the
+        nested sampler's best point, ``sample_options`` passed on).
+    savage_dickey_samples : bool
+        False: no Savage-Dickey unless ``posterior`` is given.
+    sample_options : mapping, optional
+        Extra keyword arguments of :func:`~bayespilot.sample.sample`.
+    progress : bool
+
+    Returns
+    -------
+    Comparison
+
+    Raises
+    ------
+    ValueError
+        If the model has no free ``delta_abs``, or bad settings.
+    TypeError
+        Wrong argument types.
+
+    Examples
+    --------
+    >>> from bayespilot.simulate import simulate
+    >>> rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.05, seed=1,
+    ...                duration=10).recording
+    >>> c = compare(rec, nlive=50, seed=0, savage_dickey_samples=False)  # doctest: +SKIP
+    >>> c.decision  # doctest: +SKIP
+    'threshold'
+    """
+    t0 = time.perf_counter()
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    model, order = _model_and_order(model, likelihood, ar_order)
+    if THRESHOLD not in model.parameter_names:
+        raise ValueError(f"the model has no free {THRESHOLD!r} to compare against 0 "
+                         f"(free: {', '.join(model.parameter_names)})")
+    if seed is not None:
+        seed = _check_int("seed", seed, 0)
+    runs = _check_int("runs", runs, 1)
+    if sample_options is not None and not isinstance(sample_options, Mapping):
+        raise TypeError("sample_options must be a mapping of keyword arguments of sample()")
+    if posterior is not None:
+        from .sample import Posterior
+
+        if not isinstance(posterior, Posterior):
+            raise TypeError(f"posterior must be a bayespilot.sample.Posterior, got "
+                            f"{type(posterior).__name__}")
+    none_model = model.fix(**{THRESHOLD: 0.0})
+    ss = np.random.SeedSequence(seed)
+    s1, s0, s_mc = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
+    ev0 = evidence(recording, none_model, likelihood=likelihood, ar_order=ar_order, nlive=nlive,
+                   dlogz=dlogz, sample=sample, seed=s0, progress=progress)
+
+    def run_threshold(attempt: int) -> Evidence:
+        return evidence(recording, model, likelihood=likelihood, ar_order=ar_order, nlive=nlive,
+                        dlogz=dlogz, sample=sample, seed=s1 + attempt, progress=progress)
+
+    ev1, reruns, mode_ok = _robust_evidence(run_threshold, runs, ev0.max_log_lik)
+    log_bf = ev1.log_z - ev0.log_z
+    err = math.hypot(ev1.log_z_err, ev0.log_z_err)
+
+    # maximum likelihood, for the information criteria
+    nll1 = _NegLogLik(model, recording, order)
+    nll0 = _NegLogLik(none_model, recording, order)
+    v0, p0 = _ml(nll0, ev0.best, threshold=False)
+    start1 = dict(ev1.best)
+    v1, p1 = _ml(nll1, start1, threshold=True)
+    nested_start = dict(p0, **{THRESHOLD: 0.0})
+    v_nested = nll1(np.array([nested_start[n] for n in nll1.names]))
+    if v_nested < v1:  # the model with threshold contains the one without
+        v1, p1 = _ml(nll1, nested_start, threshold=True)
+        v1, p1 = min((v1, p1), (v_nested, nested_start), key=lambda t: t[0])
+    ic = information_criteria(v1, v0, len(nll1.names) + 1, len(nll0.names) + 1, nll1.n)
+    ic["ml_threshold"] = p1
+    ic["ml_none"] = p0
+
+    sd = None
+    post_info: dict[str, Any] = {}
+    if posterior is None and savage_dickey_samples:
+        from .sample import ConvergenceWarning, sample as run_sample
+
+        opts = {"max_steps": 5000, "min_steps": 500, "check_every": 250, "progress": progress}
+        opts.update(sample_options or {})
+        init = dict(p1)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            posterior = run_sample(recording, model, likelihood=likelihood, ar_order=ar_order,
+                                   init=init, seed=s_mc, **opts)
+        post_info["warnings"] = [str(w.message) for w in caught
+                                 if issubclass(w.category, ConvergenceWarning)]
+    if posterior is not None:
+        sd = savage_dickey_from_posterior(posterior, model)
+        if posterior.settings.get("likelihood") != likelihood:
+            sd = SavageDickey(None, False, f"the posterior used the "
+                              f"{posterior.settings.get('likelihood')!r} likelihood, the "
+                              f"comparison {likelihood!r}", None, sd.prior_density,
+                              sd.posterior_density, sd.bandwidth, sd.n_draws, sd.n_near)
+        post_info.update({"converged": bool(posterior.converged),
+                          "n_steps": posterior.settings.get("n_steps"),
+                          "n_draws": int(posterior.draws(THRESHOLD).size)})
+    settings = {"likelihood": likelihood, "ar_order": order, "nlive": nlive, "dlogz": dlogz,
+                "sample": sample, "model": model.name, "decision_level": DECISION_LEVEL,
+                "decision_z": DECISION_Z, "runs": runs, "n_samples": recording.n_samples,
+                "posterior": post_info or None, "entropy": str(ss.entropy),
+                "threshold_runs": reruns, "mode_check": bool(mode_ok)}
+    if not mode_ok:
+        warnings.warn(f"the nested sampler's best ln L with threshold ({ev1.max_log_lik:.1f}) is "
+                      f"below that without ({ev0.max_log_lik:.1f}) in all {len(reruns)} runs: "
+                      "they missed the main mode, so ln BF is too low; rerun with more nlive",
+                      RuntimeWarning, stacklevel=2)
+    return Comparison(float(log_bf), float(err), decide(log_bf, err), ev1, ev0, sd, ic, settings,
+                      seed, time.perf_counter() - t0, recording.source)
+
+
+# --- pooling -------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PooledComparison:
+    """Threshold against none over recordings of one condition (see :func:`pool`).
+
+    Attributes
+    ----------
+    n : int
+    log_bayes_factor, log_bayes_factor_err : float
+        Sum of the per-recording ln BF, errors in quadrature.
+    decision : str
+        :func:`decide` on the sum.
+    decisions : dict
+        Count of per-recording decisions.
+    mean_log_bayes_factor : float
+    t_statistic, t_pvalue : float
+        One-sample t-test of the per-recording ln BF against 0 (= paired
+        t-test of ln Z with against without threshold); NaN for n < 2.
+    wilcoxon_statistic, wilcoxon_pvalue : float
+        Wilcoxon signed-rank test of the same; NaN for n < 2.
+    label : str
+    """
+
+    n: int
+    log_bayes_factor: float
+    log_bayes_factor_err: float
+    decision: str
+    decisions: dict[str, int]
+    mean_log_bayes_factor: float
+    t_statistic: float
+    t_pvalue: float
+    wilcoxon_statistic: float
+    wilcoxon_pvalue: float
+    label: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def to_json(self, path: str | os.PathLike | None = None) -> str | Path:
+        """JSON text, or written to ``path``."""
+        text = json.dumps(self.to_dict(), indent=1, allow_nan=True)
+        if path is None:
+            return text
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+        return path
+
+    def summary(self) -> str:
+        counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)
+        return (f"{self.label + ': ' if self.label else ''}{self.n} recordings, sum ln BF = "
+                f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} -> "
+                f"{self.decision}; per recording: {counts}; paired t = {self.t_statistic:.2f} "
+                f"(p = {self.t_pvalue:.3g}), Wilcoxon p = {self.wilcoxon_pvalue:.3g}")
+
+
+def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") -> PooledComparison:
+    """Pool per-recording comparisons of one condition.
+
+    Parameters
+    ----------
+    results : sequence of Comparison or of their ``to_dict()``
+    label : str
+        A name for the condition, e.g. ``"FD, K_theta = 1"``.
+
+    Returns
+    -------
+    PooledComparison
+
+    Examples
+    --------
+    >>> r = [{"log_bayes_factor": v, "log_bayes_factor_err": 0.5} for v in (5.0, 7.0, 6.0)]
+    >>> p = pool(r)
+    >>> p.log_bayes_factor, p.decision
+    (18.0, 'threshold')
+    """
+    from scipy import stats
+
+    if isinstance(results, (Comparison, Mapping)) or not len(results):
+        raise ValueError("results must be a non-empty sequence of comparisons")
+    lbf, err, dec = [], [], []
+    for r in results:
+        d = r.to_dict() if isinstance(r, Comparison) else r
+        if not isinstance(d, Mapping) or "log_bayes_factor" not in d:
+            raise TypeError("each result must be a Comparison or a mapping with "
+                            "'log_bayes_factor' and 'log_bayes_factor_err'")
+        lbf.append(float(d["log_bayes_factor"]))
+        err.append(float(d.get("log_bayes_factor_err", 0.0)))
+        dec.append(d.get("decision") or decide(lbf[-1], err[-1]))
+    x = np.array(lbf)
+    total, total_err = float(x.sum()), float(math.sqrt(np.sum(np.square(err))))
+    t = p = w = wp = math.nan
+    if x.size >= 2:
+        if np.ptp(x) > 0:
+            t, p = (float(v) for v in stats.ttest_1samp(x, 0.0))
+        if np.any(x != 0):
+            wres = stats.wilcoxon(x)
+            w, wp = float(wres.statistic), float(wres.pvalue)
+    counts = {k: int(sum(1 for d in dec if d == k)) for k in DECISIONS}
+    return PooledComparison(int(x.size), total, total_err, decide(total, total_err), counts,
+                            float(x.mean()), t, p, w, wp, label)
+
+
+class _CallableModule(types.ModuleType):
+    """This module, callable: ``bayespilot.compare(...)`` is :func:`compare`."""
+
+    def __call__(self, *args, **kwargs):
+        return compare(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -1,0 +1,294 @@
+"""Model comparison (bayespilot.compare): evidences, Savage-Dickey, decisions.
+
+References are independent of the code under test: closed-form evidences of
+Gaussian likelihoods in a uniform box, the closed-form Bayes factor of a
+nested Gaussian model (a mean fixed at 0 against a mean uniform on [0, A]),
+the truncated-normal posterior of that model for Savage-Dickey, scipy's
+t-test, and hand-computed AIC/BIC.  The simulated-data tests use short
+recordings and few live points; they check the direction of the decision,
+not its calibration.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import special, stats
+
+from conftest import make_rng
+from bayespilot.compare import (Comparison, Evidence, SavageDickey, _robust_evidence, compare,
+                                decide, information_criteria,
+                                jeffreys_category, nested_evidence, pool, savage_dickey,
+                                savage_dickey_from_posterior)
+from bayespilot.model import paper_model
+from bayespilot.presets import paper_parameters
+from bayespilot.simulate import simulate
+
+
+# --- a nested Gaussian model with a closed-form Bayes factor -----------------------------------
+class NestedGaussian:
+    """y_1..y_n ~ N(a, s^2) with s known; M1: a ~ U(0, A); M0: a = 0.
+
+    Z0 = L(0); Z1 = (1/A) int_0^A L(a) da = L(0) (1/A) sqrt(2 pi) s_n exp(m^2 / (2 s_n^2))
+    [Phi((A - m)/s_n) - Phi(-m/s_n)], with m = mean(y) and s_n = s / sqrt(n).
+    The posterior of a under M1 is N(m, s_n^2) truncated to [0, A].
+    """
+
+    def __init__(self, m: float, s_n: float, A: float) -> None:
+        self.m, self.s_n, self.A = m, s_n, A
+
+    def log_lik_ratio(self, a):
+        """ln L(a) - ln L(0) (depends on the data only through m)."""
+        return (a * self.m - 0.5 * a**2) / self.s_n**2
+
+    @property
+    def log_bf(self) -> float:
+        m, s, A = self.m, self.s_n, self.A
+        mass = special.ndtr((A - m) / s) - special.ndtr(-m / s)
+        return math.log(math.sqrt(2 * math.pi) * s / A) + m**2 / (2 * s**2) + math.log(mass)
+
+    def posterior(self):
+        m, s, A = self.m, self.s_n, self.A
+        return stats.truncnorm((0 - m) / s, (A - m) / s, loc=m, scale=s)
+
+
+# --- nested sampling wrapper ----------------------------------------------------------------------
+def test_nested_evidence_gaussian_in_a_box():
+    """A correlated 3-D Gaussian likelihood, normalised, well inside a box of volume V: Z = 1/V."""
+    cov = np.array([[1.0, 0.5, 0.0], [0.5, 2.0, 0.3], [0.0, 0.3, 0.5]])
+    prec = np.linalg.inv(cov)
+    norm = -0.5 * (3 * math.log(2 * math.pi) + math.log(np.linalg.det(cov)))
+    mu = np.array([1.0, -1.0, 0.5])
+    lo, hi = np.array([-10.0, -12.0, -8.0]), np.array([10.0, 9.0, 8.0])
+
+    def ll(x):
+        d = x - mu
+        return norm - 0.5 * d @ prec @ d
+
+    ev = nested_evidence(ll, lo, hi, names=("a", "b", "c"), nlive=150, seed=3)
+    want = -math.log(np.prod(hi - lo))
+    assert abs(ev.log_z - want) < 3 * ev.log_z_err + 0.05
+    assert 0.05 < ev.log_z_err < 0.5
+    np.testing.assert_allclose([ev.mean[k] for k in "abc"], mu, atol=0.25)
+    assert ev.settings["seed"] == 3 and ev.n_calls > 150
+    # same seed, same run
+    again = nested_evidence(ll, lo, hi, names=("a", "b", "c"), nlive=150, seed=3)
+    assert again.log_z == ev.log_z
+
+
+def test_nested_bayes_factor_matches_closed_form():
+    """dynesty's ln Z1 - ln Z0 on the nested Gaussian model against the closed form.
+
+    The likelihood is in units of L(0), so ln Z0 = 0 exactly; a second,
+    irrelevant parameter b ~ U(-5, 5) in both models has a Gaussian
+    likelihood of unit integral, which adds -ln 10 to both.
+    """
+    ng = NestedGaussian(m=0.8, s_n=0.25, A=4.0)  # posterior pushed against a = 0 but not at it
+    b_norm = -0.5 * math.log(2 * math.pi * 0.3**2)
+
+    def ll1(x):
+        return ng.log_lik_ratio(x[0]) + b_norm - 0.5 * (x[1] / 0.3) ** 2
+
+    def ll0(x):
+        return b_norm - 0.5 * (x[0] / 0.3) ** 2
+
+    ev1 = nested_evidence(ll1, [0.0, -5.0], [ng.A, 5.0], nlive=200, seed=1)
+    ev0 = nested_evidence(ll0, [-5.0], [5.0], nlive=200, seed=2)
+    assert ev0.log_z == pytest.approx(-math.log(10.0), abs=3 * ev0.log_z_err + 0.05)
+    err = math.hypot(ev1.log_z_err, ev0.log_z_err)
+    assert abs((ev1.log_z - ev0.log_z) - ng.log_bf) < 3 * err + 0.05
+
+
+def _ev(log_z, err, max_log_lik, seed):
+    return Evidence(log_z, err, 40.0, max_log_lik, {}, {}, ("x",), 100, 10, 1.0, {"seed": seed})
+
+
+def test_robust_evidence_replaces_lost_runs_and_drops_late_ones():
+    """Run 1 lost the mode (best ln L below the reference), run 3 is 12 below run 2."""
+    script = [_ev(-900.0, 0.8, 50.0, 1), _ev(10.0, 0.6, 101.0, 2), _ev(-2.0, 0.8, 100.5, 3)]
+    ev, record, ok = _robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
+    assert ok and [r["used"] for r in record] == [False, True, False]
+    assert "lost the main mode" in record[0]["why"] and "below the highest" in record[2]["why"]
+    assert ev.log_z == 10.0 and ev.log_z_err == 0.6 and ev.n_calls == 300
+    # two runs that agree: inverse-variance mean; the error is at least their spread's
+    script = [_ev(10.0, 0.5, 101.0, 1), _ev(11.0, 1.0, 101.0, 2)]
+    ev, record, ok = _robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
+    assert ev.log_z == pytest.approx((10.0 / 0.25 + 11.0) / (1 / 0.25 + 1))
+    assert ev.log_z_err == pytest.approx(max(math.sqrt(1 / 5), math.sqrt(0.5) / math.sqrt(2)))
+    # every run lost the mode: not ok, the last run comes back
+    script = [_ev(-900.0 - a, 0.8, 50.0, a) for a in range(4)]
+    ev, record, ok = _robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
+    assert not ok and len(record) == 4 and ev.log_z == -903.0
+
+
+# --- Savage-Dickey ------------------------------------------------------------------------------
+@pytest.mark.parametrize("m", [-0.2, 0.1, 0.4])
+def test_savage_dickey_matches_closed_form(m):
+    """Draws of the exact posterior of the nested Gaussian: SD ratio against the closed form."""
+    ng = NestedGaussian(m=m, s_n=0.2, A=2.0)
+    x = ng.posterior().rvs(20000, random_state=make_rng(int(10 * m) + 5))
+    sd = savage_dickey(x, lower=0.0, upper=ng.A)
+    assert sd.valid and sd.n_near >= 50
+    # SD identity (exact): ln BF_10 = ln p(0) - ln p(0 | y); the KDE at the boundary adds a small bias
+    exact_density = float(ng.posterior().pdf(0.0))
+    assert math.log(1 / ng.A) - math.log(exact_density) == pytest.approx(ng.log_bf, abs=1e-9)
+    assert sd.log_bayes_factor == pytest.approx(ng.log_bf, abs=0.25)
+
+
+def test_savage_dickey_far_from_boundary_is_not_valid():
+    ng = NestedGaussian(m=1.5, s_n=0.2, A=2.0)  # ln BF ~ 27: no draws near 0
+    x = ng.posterior().rvs(4000, random_state=make_rng(2))
+    sd = savage_dickey(x, lower=0.0, upper=ng.A)
+    assert not sd.valid and sd.log_bayes_factor is None
+    assert "too small" in sd.reason
+    assert sd.lower_bound is not None and 0 < sd.lower_bound < ng.log_bf
+
+
+def test_savage_dickey_bad_input():
+    with pytest.raises(ValueError, match="support"):
+        savage_dickey([-0.1] + [0.5] * 20, lower=0.0, upper=1.0)
+    with pytest.raises(ValueError, match="lower < upper"):
+        savage_dickey([0.5] * 20, lower=1.0, upper=0.0)
+    with pytest.raises(ValueError, match="at least 10"):
+        savage_dickey([0.5, 0.2], lower=0.0, upper=1.0)
+
+
+def _fake_posterior(delta_draws, prior="uniform on the model bounds; uniform(-0.99, 0.99) on pacf_j",
+                    likelihood="eq4"):
+    """A Posterior holding given draws (the other parameters at Table 3), without sampling."""
+    from bayespilot.sample import Posterior, _arviz
+
+    model = paper_model()
+    truth = paper_parameters("FD")
+    d = np.asarray(delta_draws, float).reshape(4, -1)
+    post = {n: np.full(d.shape, truth[n]) for n in model.parameter_names}
+    post["delta_abs"] = d
+    idata = _arviz().from_dict(posterior=post)
+    return Posterior(idata, model.parameter_names, {n: 1.0 for n in model.parameter_names}, True,
+                     {"prior": prior, "likelihood": likelihood}, 0)
+
+
+def test_savage_dickey_from_posterior_validity():
+    x = np.abs(make_rng(4).normal(0, 0.004, 4000))
+    ok = savage_dickey_from_posterior(_fake_posterior(x))
+    assert ok.valid and ok.prior_density == pytest.approx(10.0)
+    # log BF = ln 10 - ln(2 / (0.004 sqrt(2 pi))) = -3.0
+    assert ok.log_bayes_factor == pytest.approx(math.log(10 * 0.004 * math.sqrt(2 * math.pi) / 2),
+                                                abs=0.15)
+    custom = savage_dickey_from_posterior(_fake_posterior(x, prior="delta_abs ~ uniform(0, 0.05)"))
+    assert not custom.valid and "non-default prior" in custom.reason
+    shifted = paper_model()
+    from dataclasses import replace
+    from bayespilot.model import Parameter
+
+    shifted = replace(shifted, parameters=tuple(
+        Parameter("delta_abs", 0.001, 0.1, 0.0075) if p.name == "delta_abs" else p
+        for p in shifted.parameters))
+    bad = savage_dickey_from_posterior(_fake_posterior(np.clip(x, 0.001, None)), shifted)
+    assert not bad.valid and "does not contain" in bad.reason
+    with pytest.raises(TypeError, match="Posterior"):
+        savage_dickey_from_posterior(x)
+
+
+# --- decisions, information criteria, pooling -----------------------------------------------------
+def test_jeffreys_and_decide():
+    ln10 = math.log(10)
+    assert [jeffreys_category(v) for v in (0.5, -1.5, 3.0, -4.0, 9.0)] == [
+        "barely worth mentioning", "substantial", "strong", "very strong", "decisive"]
+    assert decide(ln10 + 2.1, 1.0) == "threshold"
+    assert decide(ln10 + 1.9, 1.0) == "inconclusive"
+    assert decide(-ln10 - 0.5, 0.2) == "none"
+    assert decide(-ln10 - 0.5, 0.3) == "inconclusive"
+    assert decide(1.0, 0.0) == "inconclusive"
+    with pytest.raises(ValueError):
+        decide(float("nan"), 1.0)
+    with pytest.raises(ValueError):
+        decide(1.0, -1.0)
+
+
+def test_information_criteria_by_hand():
+    ic = information_criteria(-1000.0, -990.0, 9, 8, 8192)
+    assert ic["aic_threshold"] == 18 - 2000 and ic["aic_none"] == 16 - 1980
+    assert ic["delta_aic"] == pytest.approx(18.0)
+    assert ic["delta_bic"] == pytest.approx(20 - math.log(8192))
+    assert ic["log_bayes_factor_bic"] == pytest.approx(10 - 0.5 * math.log(8192))
+    with pytest.raises(ValueError, match="k_none"):
+        information_criteria(-1.0, -1.0, 9, 0, 10)
+
+
+def test_pool_against_scipy():
+    vals = [4.0, 6.5, -1.0, 3.0, 2.5]
+    errs = [0.8, 0.9, 0.7, 0.8, 0.6]
+    r = pool([{"log_bayes_factor": v, "log_bayes_factor_err": e} for v, e in zip(vals, errs)],
+             label="FD, K_theta = 1")
+    assert r.n == 5 and r.log_bayes_factor == pytest.approx(sum(vals))
+    assert r.log_bayes_factor_err == pytest.approx(math.sqrt(sum(e * e for e in errs)))
+    t = stats.ttest_1samp(vals, 0.0)
+    assert (r.t_statistic, r.t_pvalue) == pytest.approx((t.statistic, t.pvalue))
+    assert r.wilcoxon_pvalue == pytest.approx(stats.wilcoxon(vals).pvalue)
+    assert r.decision == "threshold"
+    assert r.decisions == {"threshold": 2, "none": 0, "inconclusive": 3}
+    assert "FD, K_theta = 1" in r.summary()
+    json.loads(r.to_json())
+    with pytest.raises(ValueError, match="non-empty"):
+        pool([])
+
+
+# --- on simulated recordings --------------------------------------------------------------------
+def _sim(delta_abs, seed):
+    p = paper_parameters("FD")
+    p["delta_abs"] = delta_abs
+    return simulate(params=p, task="FD", motion_gain=1.0, remnant_fraction=0.05, seed=seed,
+                    duration=15.0)
+
+
+FAST = dict(nlive=60, dlogz=1.0)
+
+
+def test_compare_prefers_a_large_threshold():
+    """delta_abs = 0.03 IPUT (about half of max|i| at K_theta = 1), F_n = 0.05: clear-cut."""
+    sim = _sim(0.03, seed=1)
+    c = compare(sim.recording, seed=0, savage_dickey_samples=False, **FAST)
+    assert c.log_bayes_factor > 10 and c.decision == "threshold"
+    assert c.evidence_threshold.mean["delta_abs"] == pytest.approx(0.03, rel=0.2)
+    ic = c.information_criteria
+    assert ic["delta_aic"] > 0 and ic["delta_bic"] > 0
+    assert ic["neg_log_lik_threshold"] <= ic["neg_log_lik_none"]
+    assert c.savage_dickey is None
+    d = json.loads(c.to_json())
+    for key in ("log_bayes_factor", "log_bayes_factor_err", "decision", "delta_aic", "delta_bic",
+                "savage_dickey_log_bayes_factor"):
+        assert key in d
+    back = Comparison.from_dict(d)
+    assert back.log_bayes_factor == c.log_bayes_factor and back.decision == c.decision
+    assert "decision: threshold" in c.summary()
+
+
+def test_compare_does_not_prefer_a_threshold_that_is_not_there():
+    """Data generated with delta_abs = 0: ln BF < 0 (the Occam factor of the extra parameter),
+    and the Savage-Dickey cross-check from a short emcee run is valid and agrees in sign."""
+    sim = _sim(0.0, seed=2)
+    c = compare(sim.recording, seed=0, sample_options=dict(n_walkers=18, max_steps=600,
+                                                          min_steps=0, check_every=200), **FAST)
+    assert c.log_bayes_factor < 0 and c.decision != "threshold"
+    sd = c.savage_dickey
+    assert isinstance(sd, SavageDickey)
+    assert sd.valid and sd.log_bayes_factor < 0
+    assert c.information_criteria["delta_bic"] < 0
+
+
+def test_compare_bad_input():
+    sim = _sim(0.0, seed=3)
+    with pytest.raises(ValueError, match="no free 'delta_abs'"):
+        compare(sim.recording, paper_model(threshold=False))
+    with pytest.raises(ValueError, match="likelihood"):
+        compare(sim.recording, likelihood="white")
+    with pytest.raises(ValueError, match="nlive"):
+        compare(sim.recording, nlive=3, savage_dickey_samples=False)
+    with pytest.raises(TypeError, match="Recording"):
+        compare("run.csv")
+    with pytest.raises(TypeError, match="Posterior"):
+        compare(sim.recording, posterior={"delta_abs": [0.0]})
