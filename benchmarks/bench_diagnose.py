@@ -1,0 +1,48 @@
+"""Time one ``diagnose`` at N = 8192 on one core (issue 5, target <= 2 min).
+
+Run:  python benchmarks/bench_diagnose.py [--repeats 1] [--bootstrap 39]
+
+Simulates task FD, K_theta = 1, K_n = 0.104 (F_n ~ 0.2, Table 4) with the
+paper's model, loads the kernels once (a short diagnose), then times the full
+diagnosis with numba limited to one thread; prints the wall time per stage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numba
+import numpy as np
+
+from bayespilot.diagnose import diagnose
+from bayespilot.simulate import simulate
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeats", type=int, default=1)
+    ap.add_argument("--bootstrap", type=int, default=39)
+    args = ap.parse_args(argv)
+    numba.set_num_threads(1)
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; "
+          f"numba threads {numba.get_num_threads()}; load {os.getloadavg()}")
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=3).recording
+    warm = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=4, duration=20.0).recording
+    diagnose(warm, n_bootstrap=1)  # compile / load every kernel once
+    ts = []
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        res = diagnose(rec, seed=0, n_bootstrap=args.bootstrap)
+        ts.append(time.perf_counter() - t0)
+    print(f"N = {rec.n_samples}, bootstrap B = {args.bootstrap}: decision {res.physics}")
+    print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
+    print("stages (last run): " + ", ".join(f"{k} {v:.1f} s"
+                                            for k, v in res.settings["timings"].items()))
+    print(f"load at the end: {os.getloadavg()}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,387 @@
+"""Diagnose model mismatch: locate it, name the missing physics, model it, show the fit improve.
+
+:func:`diagnose` runs the whole procedure on one recording and returns a
+:class:`DiagnosisResult`:
+
+1. **Fit** the paper's model (the fast estimator, Eq. 4), then re-fit it by
+   the decision likelihood: generalised least squares on the residual
+   low-passed, decimated and whitened by an AR model of the fitted residual
+   (:class:`~bayespilot.diagnose.decide.Whitened`).
+2. **Locate** where the data and the model differ (frequency, time,
+   amplitude statistics of the residual), each calibrated by a parametric
+   bootstrap of the fitted model with its own remnant
+   (:mod:`bayespilot.diagnose.locate`).
+3. **Name**: fit every entry of the catalogue
+   (:mod:`bayespilot.diagnose.catalogue`) and test it against the base model
+   (likelihood-ratio test on the decision likelihood; flat tops and the
+   censored likelihood for control saturation).  Candidates are ranked by
+   BIC and by how well the located evidence shows their signature; the
+   answer is ``"none"`` when no test passes the family-wise level ``alpha``.
+4. **Model**: the chosen extension's parameters with standard errors.
+5. **Show**: :meth:`DiagnosisResult.report` writes PNG figures, a
+   self-contained HTML report and a JSON summary.
+
+It reads the recording only (signals, K_theta, the task description and its
+forcing functions); never the ``simulation`` key of a simulated run's sidecar.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .catalogue import CATALOGUE, NAMES, Extension, get_extension
+
+__all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension"]
+
+#: Default family-wise false-alarm level of the decision.
+ALPHA = 0.01
+#: Seconds at the start of the record left out of the decision likelihood and the evidence.
+SKIP_SECONDS = 5.0
+
+
+@dataclass
+class DiagnosisResult:
+    """What :func:`diagnose` found.
+
+    Attributes
+    ----------
+    mismatch : bool
+        True if an extension of the catalogue is justified at level ``alpha``.
+    physics : str
+        The chosen catalogue name, or ``"none"``.
+    ranking : list of CandidateResult
+        Every candidate, best first.
+    where : dict of str to Evidence
+        The located evidence with bootstrap p-values.
+    base : dict
+        The base model's fit: ``params``, ``neg_log_lik`` (Eq. 4), ``vaf``,
+        ``gls_neg_log_lik`` and ``gls_params`` (decision likelihood).
+    chosen : CandidateResult or None
+        The chosen extension's fit (parameters, standard errors).
+    settings : dict
+        alpha, seed, bootstrap size, band, skip, remnant of the replicates.
+    elapsed : float
+        Wall time, s.
+    source : str or None
+    """
+
+    mismatch: bool
+    physics: str
+    ranking: list
+    where: dict
+    base: dict
+    chosen: Any
+    settings: dict
+    elapsed: float
+    source: str | None = None
+    arrays: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``base``, ... ."""
+        chosen = None
+        if self.chosen is not None:
+            chosen = {"physics": self.chosen.physics, "params": self.chosen.params,
+                      "stderr": self.chosen.stderr, "all_params": self.chosen.all_params,
+                      "delta_neg_log_lik": self.chosen.delta_neg_log_lik,
+                      "neg_log_lik_before": self.arrays.get("before_eq4_neg_log_lik"),
+                      "neg_log_lik_after": self.arrays.get("after_eq4_neg_log_lik"),
+                      "vaf_before": self.arrays.get("before_vaf"),
+                      "vaf_after": self.arrays.get("after_vaf")}
+
+        def clean(x):
+            if isinstance(x, dict):
+                return {k: clean(v) for k, v in x.items()}
+            if isinstance(x, (list, tuple)):
+                return [clean(v) for v in x]
+            if isinstance(x, (float, np.floating)):
+                return float(x) if math.isfinite(x) else None
+            if isinstance(x, np.integer):
+                return int(x)
+            return x
+
+        return clean({
+            "mismatch": self.mismatch, "physics": self.physics,
+            "ranking": [c.to_dict() for c in self.ranking],
+            "where": {k: e.to_dict() for k, e in self.where.items()},
+            "base": self.base, "chosen": chosen, "settings": self.settings,
+            "elapsed_seconds": self.elapsed, "source": self.source})
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        """The JSON summary as text; also written to ``path`` when given."""
+        text = json.dumps(self.to_dict(), indent=1)
+        if path is not None:
+            path = Path(path)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_name(path.name + ".tmp")
+            tmp.write_text(text)
+            tmp.replace(path)
+        return text
+
+    def summary(self) -> str:
+        """A readable account: the decision, the ranking, the located evidence."""
+        lines = [f"bayespilot diagnose{' ' + self.source if self.source else ''}",
+                 f"decision: {self.physics}" + (" (mismatch)" if self.mismatch else
+                                                " (no extension justified)"),
+                 f"base model: -ln L (Eq. 4) = {self.base['neg_log_lik']:.2f}, "
+                 f"VAF = {self.base['vaf']:.2f} %",
+                 f"level: alpha = {self.settings['alpha']:g} over "
+                 f"{self.settings['n_tested']} candidates",
+                 "", f"{'candidate':<24} {'d(-lnL)':>9} {'p':>9} {'dBIC':>9} {'sig':>5}  params"]
+        for c in self.ranking:
+            if not c.testable:
+                lines.append(f"{c.physics:<24} {'-':>9} {'-':>9} {'-':>9} {'-':>5}  ({c.reason})")
+                continue
+            ps = ", ".join(f"{k}={v:.4g}" for k, v in c.params.items())
+            p = f"{c.p_value:.2g}"
+            lines.append(f"{c.physics:<24} {c.delta_neg_log_lik:9.2f} {p:>9} {c.delta_bic:9.1f} "
+                         f"{c.signature_score:5.2f}  {ps}{'  *' if c.justified else ''}")
+        if self.chosen is not None:
+            lines += ["", f"fitted {self.chosen.physics}:"]
+            for k, v in self.chosen.params.items():
+                se = self.chosen.stderr.get(k, math.nan)
+                lines.append(f"  {k:<10} {v:12.5g} +- {se:.2g}")
+            after = self.arrays.get("after_vaf")
+            if after is not None:
+                lines.append(f"  VAF {self.arrays['before_vaf']:.2f} % -> {after:.2f} %, "
+                             f"-ln L (Eq. 4) {self.arrays['before_eq4_neg_log_lik']:.1f} -> "
+                             f"{self.arrays['after_eq4_neg_log_lik']:.1f} (after the first "
+                             f"{self.settings['skip_seconds']:g} s)")
+        lines += ["", "located evidence (bootstrap p-values):"]
+        for k, e in self.where.items():
+            if not math.isfinite(e.value):
+                continue
+            p = "n/a" if not math.isfinite(e.p_value) else f"{e.p_value:.3f}"
+            lines.append(f"  {k:<28} {e.value:12.4g}  p = {p}")
+        lines.append(f"time: {self.elapsed:.1f} s")
+        return "\n".join(lines)
+
+    __str__ = summary
+
+    def report(self, directory: str | Path) -> dict[str, Path]:
+        """Write PNG figures, ``report.html`` (figures embedded) and ``diagnosis.json``.
+
+        Returns the paths by name.
+        """
+        from .report import write_report
+
+        return write_report(self, directory)
+
+
+def _check(recording, alpha, n_bootstrap, skip_seconds, candidates):
+    from ..recording import Recording
+
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    if not (isinstance(alpha, (int, float)) and 0 < alpha < 1):
+        raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
+    if not isinstance(n_bootstrap, (int, np.integer)) or n_bootstrap < 0:
+        raise ValueError(f"n_bootstrap must be an integer >= 0, got {n_bootstrap!r}")
+    if not (isinstance(skip_seconds, (int, float)) and 0 <= skip_seconds < recording.duration / 2):
+        raise ValueError(f"skip_seconds must be in [0, {recording.duration / 2:g}) s, "
+                         f"got {skip_seconds!r}")
+    names = NAMES if candidates is None else tuple(candidates)
+    for n in names:
+        get_extension(n)
+    return names
+
+
+def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstrap: int = 39,
+             candidates: Sequence[str] | None = None, base_fit=None,
+             skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
+             n_starts: int = 4) -> DiagnosisResult:
+    """Locate a model mismatch, name the missing physics, fit it (see module docs).
+
+    Parameters
+    ----------
+    recording : Recording
+    seed : int or None
+        Seeds the base fit's starts and the bootstrap; the same seed gives the
+        same result.
+    alpha : float
+        Family-wise false-alarm level of the decision, split over the
+        candidates tested (Bonferroni).
+    n_bootstrap : int
+        Replicates of the parametric bootstrap behind the located evidence
+        (0: no calibration; the decision does not depend on it except through
+        the signature scores and the quantised-flat-top case).
+    candidates : sequence of str, optional
+        Catalogue names to test (default all).
+    base_fit : FitResult, optional
+        A fit of the paper's model to this recording, to skip the base fit.
+    skip_seconds : float
+        Start of the record left out of the decision likelihood and evidence
+        (the likelihood's start-up transient).
+    omega_c : float, optional
+        Cut-off of the decision likelihood's low-pass, rad/s (default 25).
+    n_starts : int
+        Starting points of the base fit.
+
+    Returns
+    -------
+    DiagnosisResult
+
+    Examples
+    --------
+    >>> from bayespilot.simulate import simulate
+    >>> rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.06, seed=1,
+    ...                duration=30.0).recording
+    >>> res = diagnose(rec, seed=0, n_bootstrap=0, candidates=["time-varying-gains"])
+    >>> res.physics in ("none", "time-varying-gains")
+    True
+    """
+    from ..fit.fast import fit_fast
+    from ..likelihood import Likelihood, vaf
+    from ..model import paper_model
+    from . import decide as D
+    from . import locate as L
+
+    names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates)
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    base_model = paper_model()
+    if base_fit is None:
+        base_fit = fit_fast(recording, base_model, seed=seed, n_starts=n_starts,
+                            profile_step=0.005)
+    start = {k: v for k, v in base_fit.params.items() if k in base_model.parameter_names}
+    timings["base_fit"] = time.perf_counter() - t0
+    skip = int(round(skip_seconds * recording.sample_rate_hz))
+    omega_c = D.OMEGA_C if omega_c is None else float(omega_c)
+    lik0 = Likelihood(base_model, recording)
+    eps0 = lik0.residual(start)
+    forcing = L.forcing_of(recording)
+    noise = D.noise_model(eps0, recording.dt, skip=skip, omega_c=omega_c)
+    wl, base = D.fit_base_gls(base_model, recording, start, noise)
+    timings["base_gls"] = time.perf_counter() - t0 - timings["base_fit"]
+
+    # -- locate
+    t1 = time.perf_counter()
+    st = L.statistics(recording, base_model, base.params, forcing, skip=skip, with_arrays=True)
+    null = None
+    boot_info: dict[str, Any] = {"replicates": 0}
+    if n_bootstrap > 0 and forcing is not None:
+        null, boot_info = L.bootstrap(recording, base_model, base.params, forcing,
+                                      st["arrays"]["residual"], n_replicates=n_bootstrap,
+                                      seed=seed, skip=skip)
+    where = L.calibrate(st["values"], null)
+    timings["locate"] = time.perf_counter() - t1
+
+    # -- name
+    t2 = time.perf_counter()
+    results = []
+    models = {}
+    for name in names:
+        ext = get_extension(name)
+        if ext.likelihood == "censored":
+            res = _saturation(recording, base_model, base, where, boot_info)
+        else:
+            res, _ = D.fit_candidate(ext, base_model, recording, base, noise)
+        sig = [where[k].p_value for k in ext.signature_keys
+               if k in where and math.isfinite(where[k].p_value)]
+        res.signature_score = float(max([-math.log10(p) for p in sig], default=0.0))
+        results.append(res)
+        models[name] = res.model
+    tested = [r for r in results if r.testable]
+    level = alpha / max(len(tested), 1)
+    for r in tested:
+        r.justified = bool(r.p_value < level)
+    justified = [r for r in tested if r.justified]
+    chosen = None
+    if justified:
+        # flat tops (probability zero under continuous noise) decide saturation;
+        # otherwise the largest BIC improvement, near-ties (< 2) broken by signature
+        chosen = max(justified, key=lambda r: (r.log_bayes_factor, r.signature_score))
+        close = [r for r in justified if math.isfinite(chosen.delta_bic)
+                 and chosen.delta_bic - r.delta_bic < 2.0]
+        if len(close) > 1:
+            chosen = max(close, key=lambda r: (r.signature_score, r.delta_bic))
+
+    def rank_key(r):
+        return (r.testable, r.justified, r.log_bayes_factor if r.testable else -math.inf)
+
+    ranking = sorted(results, key=rank_key, reverse=True)
+    if chosen is not None:
+        ranking.remove(chosen)
+        ranking.insert(0, chosen)
+    timings["name"] = time.perf_counter() - t2
+
+    # -- model and show: residual after the chosen extension
+    arrays = dict(st.get("arrays", {}))
+    sl = slice(skip, None)
+    y_before = L.steady_response(base_model, recording, base.params)
+    arrays["before_vaf"] = vaf(recording.u[sl], y_before[sl])
+    if chosen is not None and chosen.fit is not None:
+        if chosen.physics == "control-saturation":
+            y = lik0.response(chosen.fit.params)
+            y = np.clip(y, chosen.params["u_min"], chosen.params["u_max"])
+        else:
+            # periodic steady state: a slow stage (washout) has no start-up transient
+            y = L.steady_response(chosen.model, recording, chosen.fit.params)
+        arrays["after_u_hat"] = y
+        arrays["after_residual"] = recording.u - y
+        arrays["after_vaf"] = vaf(recording.u[sl], y[sl])
+        r = (recording.u - y)[sl]
+        r0 = (recording.u - y_before)[sl]
+        n = r.size
+        arrays["after_eq4_neg_log_lik"] = float(0.5 * n * math.log(np.mean(r * r)) + 0.5 * n)
+        arrays["before_eq4_neg_log_lik"] = float(0.5 * n * math.log(np.mean(r0 * r0)) + 0.5 * n)
+        if forcing is not None and forcing.periodic:
+            arrays["df_after"] = L.describing_function(y, recording.e, recording.theta_ddot_m,
+                                                       forcing)
+    arrays["forcing_frequencies"] = (forcing.target.frequencies, forcing.disturbance.frequencies) \
+        if forcing is not None else None
+    arrays["level"] = level
+    base_d = {"params": dict(base_fit.params), "neg_log_lik": float(base_fit.neg_log_lik),
+              "vaf": float(base_fit.vaf), "gls_params": dict(base.params),
+              "gls_neg_log_lik": float(base.neg_log_lik),
+              "gls_stderr": base.stderr}
+    settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
+                "seed": seed, "n_bootstrap": n_bootstrap, "bootstrap": boot_info,
+                "skip_seconds": skip_seconds, "dt": recording.dt, "noise_model": noise.to_dict(),
+                "candidates": list(names), "timings": timings,
+                "decision_likelihood": "GLS: residual low-passed, decimated and whitened by an "
+                                       "AR model of the base residual"}
+    return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
+                           where, base_d, chosen, settings, time.perf_counter() - t0,
+                           recording.source, arrays)
+
+
+def _saturation(recording, base_model, base, where, boot_info):
+    """Test and fit ``control-saturation``: flat tops and the censored likelihood."""
+    from . import decide as D
+
+    ext = get_extension("control-saturation")
+    tops = D.flat_tops(recording.u)
+    if tops["n_samples"] == 0:
+        return D.CandidateResult(ext.name, True, "no flat tops in u (no samples at a limit)",
+                                 df=0, p_value=1.0)
+    q = boot_info.get("quantum", 0.0)
+    if not q:
+        # exact repeats of the extreme value: probability 0 under continuous noise
+        p = 0.0
+        how = (f"{tops['n_samples']} samples in {tops['n_runs']} flat top(s); exact repeats "
+               f"have probability 0 under a continuous-noise model; censored likelihood fit")
+    else:
+        e = where.get("amplitude.flat_tops")
+        p = e.p_value if e is not None and math.isfinite(e.p_value) else 1.0
+        how = (f"{tops['n_samples']} samples in flat tops; u is quantised ({q:.3g}), p from "
+               f"the quantised bootstrap; censored likelihood fit")
+    fit, f_start, sigma = D.fit_censored(base_model, recording, base.params, tops)
+    d = max(0.0, f_start - fit.neg_log_lik)
+    model = ext.build(base_model).fix(u_max=max(abs(tops["hi"]), abs(tops["lo"])))
+    params = {"u_max": tops["hi"], "u_min": tops["lo"], "n_censored": float(tops["n_samples"]),
+              "sigma": sigma}
+    all_params = dict(fit.params)
+    all_params.update(u_max=tops["hi"], u_min=tops["lo"])
+    res = D.CandidateResult(ext.name, True, how, d, float(tops["n_samples"]), 0, float(p),
+                            math.inf if p == 0.0 else 2.0 * d,
+                            math.inf if p == 0.0 else d, params, fit.stderr, all_params)
+    res.fit = fit
+    res.model = model
+    return res

@@ -1,0 +1,254 @@
+"""The catalogue of physics the paper's pilot model leaves out, each a model extension.
+
+Every entry is an :class:`Extension`: a name, a function that turns a base
+:class:`~bayespilot.model.PilotModel` into the extended model through the
+model's extension point (``add_stage``, ``add_channel``,
+``with_nonlinearity``, ``with_modulation``, ``with_output``), the new
+parameters with their bounds, a short physics description, and the signature
+it should leave in the located evidence (keys of
+:func:`bayespilot.diagnose.locate.locate`).
+
+The six entries and their conventions
+-------------------------------------
+``motion-system-dynamics``
+    The platform's bandwidth and lag between the commanded motion (which the
+    recording logs as ``theta_ddot_m``) and the motion the pilot feels: a
+    second-order low-pass omega_ms^2 / (s^2 + 2 zeta_ms omega_ms s + omega_ms^2)
+    on the vestibular channel (before the threshold).
+``motion-washout``
+    High-pass filtering of the presented motion by the motion-cueing
+    algorithm: a second-order washout s^2 / (s^2 + 2 zeta_w omega_w s + omega_w^2)
+    on the vestibular channel with zeta_w fixed at 0.7 (the usual tuning) and
+    omega_w estimated.
+``otolith-channel``
+    A parallel response to the specific force at the pilot's head.  With x
+    forward, z down and nose-up pitch positive, a head at height h ABOVE the
+    pitch rotation point (h > 0 above, h < 0 below; bounds +-3 m) feels
+
+        f_x = g theta_m - h theta_ddot_m,   g = 9.81 m/s^2,
+
+    theta_m = K_theta theta from the recording's ``theta`` column.  The
+    otolith dynamics are fixed, the Young & Meiry (1968) model with unit static
+    gain, H_oto(s) = (1 + 13.2 s) / ((1 + 5.33 s)(1 + 0.66 s)).  Since the
+    channel is linear it is built as two parallel channels (one on theta_m,
+    one on theta_ddot_m) that share the gain K_ot (rad per m/s^2) and the
+    vestibular delay tau_m, and enter with the vestibular channel's minus
+    sign: u gets -K_ot H_nm e^{-tau_m s} H_oto f_x.
+``threshold-shape``
+    A threshold that is not a crisp dead zone: the softplus-rounded dead zone
+    of :class:`~bayespilot.model.SoftDeadZone` with corner width w_soft (IPUT);
+    w_soft -> 0 is the paper's dead zone.
+``time-varying-gains``
+    Pilot gains that drift during the run: K_v and K_m each multiplied by
+    1 + drift (t/T - 1/2) (:class:`~bayespilot.model.LinearDrift`).
+``control-saturation``
+    The control clipped at the device's travel limits.  u shows flat tops
+    (runs of samples at the same extreme value); those samples are censored
+    (the pilot's command was at least that large), and the extension is
+    fitted by the censored (Tobit) likelihood of
+    :mod:`bayespilot.kernels._censored`.  The limits are read from the flat
+    tops, not estimated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping
+
+from ..model import (Channel, FixedFilter, LinearDrift, MotionSystem, Parameter, PilotModel,
+                     Saturation, SecondOrderWashout, SoftDeadZone)
+
+__all__ = ["Extension", "CATALOGUE", "NAMES", "G", "OTOLITH_NUM", "OTOLITH_DEN",
+           "otolith_filter", "get_extension", "specific_force"]
+
+#: Gravity used in the specific force, m/s^2.
+G = 9.81
+#: Young & Meiry (1968) otolith model, unit static gain: (1 + 13.2 s) / ((1 + 5.33 s)(1 + 0.66 s)).
+OTOLITH_NUM = (13.2, 1.0)
+OTOLITH_DEN = (5.33 * 0.66, 5.33 + 0.66, 1.0)
+
+
+def otolith_filter() -> FixedFilter:
+    """The fixed otolith dynamics H_oto(s) (Young & Meiry 1968, unit static gain)."""
+    return FixedFilter(OTOLITH_NUM, OTOLITH_DEN)
+
+
+def specific_force(recording, h_head: float):
+    """Specific force along x at the pilot's head, f_x = g theta_m - h theta_ddot_m (m/s^2).
+
+    theta_m = K_theta theta from the recording's ``theta`` column; ``h_head``
+    is the head's height above the pitch rotation point (positive above), m.
+
+    Raises
+    ------
+    ValueError
+        If the recording has no ``theta`` column.
+    """
+    if "theta" not in recording:
+        raise ValueError("the specific force needs the recording's 'theta' column")
+    return G * recording.motion_gain * recording["theta"] - float(h_head) * recording.theta_ddot_m
+
+
+@dataclass(frozen=True)
+class Extension:
+    """One entry of the catalogue.
+
+    Attributes
+    ----------
+    name : str
+        Catalogue name, e.g. ``"motion-washout"``.
+    physics : str
+        What it models, in a sentence or two.
+    signature : str
+        What it should leave in the located evidence, in words.
+    signature_keys : tuple of str
+        Keys of the located evidence that this physics should light up.
+    build : callable
+        ``build(model) -> PilotModel``: the extended model.
+    new_parameters : tuple of str
+        Free parameters the extension adds.
+    starts : tuple of dict
+        Starting values of the new parameters for the fit (multi-start).
+    likelihood : {"gls", "censored"}
+        Which likelihood fits and tests it (see :mod:`bayespilot.diagnose.decide`).
+    needs : tuple of str
+        Recording columns it needs (e.g. ``("theta",)``).
+    refine_threshold : bool
+        Whether delta_abs is re-estimated with it (the threshold shape entry).
+    """
+
+    name: str
+    physics: str
+    signature: str
+    signature_keys: tuple[str, ...]
+    build: Callable[[PilotModel], PilotModel]
+    new_parameters: tuple[str, ...]
+    starts: tuple[Mapping[str, float], ...] = field(default_factory=tuple)
+    likelihood: str = "gls"
+    needs: tuple[str, ...] = ()
+    refine_threshold: bool = False
+
+    @property
+    def df(self) -> int:
+        """Degrees of freedom the extension adds (its free new parameters)."""
+        return len(self.new_parameters)
+
+
+def _motion_system(model: PilotModel) -> PilotModel:
+    return model.add_stage("vestibular", MotionSystem("omega_ms", "zeta_ms"), [
+        Parameter("omega_ms", 2.0, 100.0, 30.0, "rad/s", "motion-platform bandwidth"),
+        Parameter("zeta_ms", 0.4, 2.0, 0.7, "-", "motion-platform damping")])
+
+
+def _washout(model: PilotModel) -> PilotModel:
+    m = model.add_stage("vestibular", SecondOrderWashout("omega_w", "zeta_w"), [
+        Parameter("omega_w", 0.02, 5.0, 0.5, "rad/s", "washout break frequency"),
+        Parameter("zeta_w", 0.2, 2.0, 0.7, "-", "washout damping (fixed)")])
+    return m.fix(zeta_w=0.7)
+
+
+def _otolith(model: PilotModel) -> PilotModel:
+    params = [Parameter("K_ot", -5.0, 5.0, 0.0, "rad/(m/s^2)", "otolith channel gain"),
+              Parameter("h_head", -3.0, 3.0, 0.0, "m",
+                        "head height above the pitch rotation point (positive above)")]
+    tilt = Channel("otolith_tilt", "theta_m", delay="tau_m", gain=("K_ot",),
+                   stages=(otolith_filter(),), sign=-1.0, gain_const=G)
+    # -K_ot * (-h theta_ddot_m) = +K_ot h theta_ddot_m
+    trans = Channel("otolith_trans", "theta_ddot_m", delay="tau_m", gain=("K_ot", "h_head"),
+                    stages=(otolith_filter(),), sign=1.0)
+    return model.add_channel(tilt, params).add_channel(trans, params)
+
+
+def _threshold_shape(model: PilotModel) -> PilotModel:
+    return model.with_nonlinearity("vestibular", SoftDeadZone("delta_abs", "w_soft"), [
+        Parameter("w_soft", 1e-5, 0.05, 0.002, "IPUT", "corner width of the soft dead zone")])
+
+
+def _time_varying(model: PilotModel) -> PilotModel:
+    m = model.with_modulation("visual", LinearDrift("drift_v"), [
+        Parameter("drift_v", -1.5, 1.5, 0.0, "-", "relative change of K_v over the run")])
+    return m.with_modulation("vestibular", LinearDrift("drift_m"), [
+        Parameter("drift_m", -1.5, 1.5, 0.0, "-", "relative change of K_m over the run")])
+
+
+def _saturation(model: PilotModel) -> PilotModel:
+    return model.with_output(Saturation("u_max"), [
+        Parameter("u_max", 1e-6, 10.0, 1.0, "rad", "control travel limit (from the flat tops)")])
+
+
+CATALOGUE: tuple[Extension, ...] = (
+    Extension(
+        "motion-system-dynamics",
+        "The motion platform's bandwidth and lag: the pilot feels a low-passed, delayed "
+        "version of the commanded motion that the recording logs.",
+        "The motion channel's describing function loses magnitude and phase at the higher "
+        "forcing frequencies; residual power at the disturbance frequencies.",
+        ("frequency.motion_high", "frequency.power_disturbance"),
+        _motion_system, ("omega_ms", "zeta_ms"),
+        ({"omega_ms": 40.0, "zeta_ms": 0.7}, {"omega_ms": 15.0, "zeta_ms": 0.7},
+         {"omega_ms": 7.0, "zeta_ms": 0.7})),
+    Extension(
+        "motion-washout",
+        "High-pass filtering of the presented motion by the motion-cueing washout: "
+        "low-frequency motion is not presented.",
+        "The motion channel's describing function loses magnitude and gains phase lead at "
+        "the lowest forcing frequencies.",
+        ("frequency.motion_low", "frequency.power_disturbance"),
+        _washout, ("omega_w",),
+        ({"omega_w": 0.2}, {"omega_w": 0.8}, {"omega_w": 2.0})),
+    Extension(
+        "otolith-channel",
+        "A parallel response to the specific force at the pilot's head, "
+        "f_x = g theta_m - h theta_ddot_m, through the otolith dynamics.",
+        "The motion channel's describing function departs from the canal model at low "
+        "frequencies (tilt, g theta_m) and possibly high (h theta_ddot_m).",
+        ("frequency.motion_low", "frequency.motion_high", "frequency.power_disturbance"),
+        _otolith, ("K_ot", "h_head"),
+        ({"K_ot": 0.02, "h_head": 1.0}, {"K_ot": -0.02, "h_head": 1.0},
+         {"K_ot": 0.02, "h_head": -1.0}, {"K_ot": -0.02, "h_head": -1.0}),
+        needs=("theta",)),
+    Extension(
+        "threshold-shape",
+        "A threshold that is not a crisp dead zone: motion just above the threshold is "
+        "partly perceived (a soft, rounded dead zone).",
+        "The residual depends on the canal output i near +-delta_abs.",
+        ("amplitude.canal",),
+        _threshold_shape, ("w_soft",),
+        ({"w_soft": 0.001}, {"w_soft": 0.004}, {"w_soft": 0.012}),
+        refine_threshold=True),
+    Extension(
+        "time-varying-gains",
+        "Pilot gains that drift during the run (fatigue, learning): K_v and K_m change "
+        "linearly from start to end.",
+        "Local fits over segments of the run show trending gains; the residual is "
+        "non-stationary.",
+        ("time.gain_drift_visual", "time.gain_drift_motion", "time.variance_drift",
+         "time.nonstationarity"),
+        _time_varying, ("drift_v", "drift_m"),
+        ({"drift_v": 0.0, "drift_m": 0.0},)),
+    Extension(
+        "control-saturation",
+        "The control device's travel limit clips the pilot's command.",
+        "Flat tops in u (runs of samples at the same extreme value); residual conditioned on "
+        "|u| departs at the largest |u|.",
+        ("amplitude.flat_tops", "amplitude.control"),
+        _saturation, (),
+        likelihood="censored"),
+)
+
+#: The catalogue names, in order.
+NAMES: tuple[str, ...] = tuple(e.name for e in CATALOGUE)
+
+
+def get_extension(name: str) -> Extension:
+    """The catalogue entry called ``name``.
+
+    Raises
+    ------
+    ValueError
+        If there is no such entry.
+    """
+    for e in CATALOGUE:
+        if e.name == name:
+            return e
+    raise ValueError(f"unknown extension {name!r}; the catalogue has {', '.join(NAMES)}")

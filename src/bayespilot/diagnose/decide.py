@@ -1,0 +1,547 @@
+"""Fit the base model and every catalogue extension, test each, rank them, decide.
+
+The decision likelihood
+-----------------------
+Eq. 4 treats the N = 8192 samples of the output error as independent.  They
+are not: the remnant is a fourth-order low-pass process (Eq. 6), so
+neighbouring samples are almost equal, and a likelihood-ratio test on Eq. 4
+counts every sample as new information.  On correct-model data it flags
+almost everything (hugely anti-conservative).
+
+The default decision likelihood is therefore generalised least squares with
+an AR noise model (a prediction-error likelihood, :class:`Whitened`):
+
+1. the base model is fitted by Eq. 4 (the fast estimator);
+2. its residual, after the first seconds (the likelihood's start-up
+   transient), is low-passed at 25 rad/s by a causal FIR filter and
+   decimated to a Nyquist frequency of about 60 rad/s, and an AR(p) model of
+   it is estimated (least squares, order by BIC; :func:`noise_model`) and
+   held fixed;
+3. the base model and each extension are re-fitted by least squares on the
+   reduced and pre-whitened residual w = A(q) reduce(u - u_hat(theta)), with
+   the exact Jacobians of the model passed through the same filters;
+4. 2 (-ln L_base - -ln L_ext) is compared with chi2(df), df = the number of
+   parameters the extension adds, at the family-wise level ``alpha`` split
+   over the candidates tested (Bonferroni).
+
+Why the low-pass: above ~30 rad/s the remnant has almost no power (a
+fourth-order roll-off) and what is left of the residual is the likelihood's
+discretisation error (Tustin at 100 Hz against the simulator's RK4), which is
+deterministic; whitening would blow it up and let extensions fit it.  Why not
+a frequency-domain (Whittle) version: the record after the skipped start is
+not a whole number of forcing periods, so the forcing lines leak into their
+neighbours, which a drifting gain fits (tried; false alarms).
+
+For boundary nulls (a bandwidth going to infinity, a corner width going to
+zero) chi2(df) is conservative; for parameters unidentified under the null
+(the otolith head height when its gain is 0) it is an approximation.  The
+false-alarm rate is measured on simulated correct-model recordings in
+``analyses/prove_diagnose.py`` (see ``docs/diagnose.md``).
+
+``control-saturation`` is tested differently: flat tops (exact repeats of
+the extreme value) have probability zero under every continuous-noise model,
+so their presence decides it (its calibrated p-value is that of the flat-top
+statistic, see :mod:`bayespilot.diagnose.locate`), and the extension is
+fitted by the censored likelihood (:mod:`bayespilot.kernels._censored`),
+whose improvement over the base parameters is reported.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy import linalg, optimize, signal, stats
+
+from ..likelihood import Likelihood
+from ..model import PilotModel
+from ..recording import Recording
+from .catalogue import Extension
+
+__all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "CandidateResult", "fit_base_gls",
+           "fit_candidate", "flat_tops", "fit_censored"]
+
+#: Cut-off of the decision likelihood's low-pass, rad/s.
+OMEGA_C = 25.0
+#: Largest AR order considered.
+MAX_AR_ORDER = 30
+
+
+def fit_ar(x: np.ndarray, *, max_order: int = MAX_AR_ORDER, order: int | None = None
+           ) -> np.ndarray:
+    """AR(p) coefficients of a series by least squares, the order chosen by BIC.
+
+    Least squares on the lagged series (the covariance method) rather than
+    Yule-Walker: the remnant's spectrum spans tens of dB, where Yule-Walker
+    estimates are badly biased.
+
+    Parameters
+    ----------
+    x : ndarray
+        The series (1-D, finite).
+    max_order : int
+        Largest order tried.
+    order : int, optional
+        Use this order instead of choosing one.
+
+    Returns
+    -------
+    a : ndarray, shape (p,)
+        x_k = sum_j a_j x_{k-j} + w_k.
+    """
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 1 or not np.all(np.isfinite(x)):
+        raise ValueError("x must be a finite 1-D array")
+    x = x - x.mean()
+    n = x.size
+    orders = [int(order)] if order is not None else list(range(1, int(max_order) + 1))
+    if orders[-1] >= n // 4 or orders[0] < 0:
+        raise ValueError(f"AR order must be in [0, {n // 4 - 1}] for {n} samples")
+    if orders == [0]:
+        return np.zeros(0)
+    pmax = orders[-1]
+    lagged = np.column_stack([x[pmax - j - 1:n - j - 1] for j in range(pmax)])
+    y = x[pmax:]
+    best = (math.inf, np.zeros(0))
+    for p in orders:
+        a, *_ = np.linalg.lstsq(lagged[:, :p], y, rcond=None)
+        s2 = float(np.mean((y - lagged[:, :p] @ a) ** 2))
+        if not s2 > 0:
+            break
+        bic = y.size * math.log(s2) + p * math.log(y.size)
+        if bic < best[0]:
+            best = (bic, a)
+    return np.asarray(best[1])
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """How the decision likelihood pre-whitens: low-pass, decimate, AR filter.
+
+    Attributes
+    ----------
+    fir : ndarray
+        Causal FIR low-pass taps (scipy.signal.firwin), cut-off ``omega_c``.
+    decimation : int
+        Every ``decimation``-th filtered sample is kept.
+    ar : ndarray
+        AR coefficients of the filtered, decimated residual.
+    skip : int
+        Samples at the start of the record left out.
+    omega_c : float
+        Cut-off of the low-pass, rad/s.
+    """
+
+    fir: np.ndarray
+    decimation: int
+    ar: np.ndarray
+    skip: int
+    omega_c: float
+
+    def reduce(self, x: np.ndarray) -> np.ndarray:
+        """Low-pass (causal) and decimate along the first axis, after ``skip``."""
+        return signal.lfilter(self.fir, [1.0], x, axis=0)[self.skip::self.decimation]
+
+    def whiten(self, x: np.ndarray) -> np.ndarray:
+        """A(q) applied to the reduced series; the first p values dropped."""
+        p = self.ar.size
+        return signal.lfilter(np.concatenate([[1.0], -self.ar]), [1.0], self.reduce(x),
+                              axis=0)[p:]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"omega_c": self.omega_c, "decimation": self.decimation, "fir_taps": self.fir.size,
+                "ar_order": int(self.ar.size), "skip_samples": self.skip}
+
+
+def noise_model(eps: np.ndarray, dt: float, *, skip: int = 0, omega_c: float = OMEGA_C,
+                max_order: int = MAX_AR_ORDER) -> NoiseModel:
+    """The decision likelihood's noise model, estimated from a (base-model) residual.
+
+    The residual is low-passed at ``omega_c`` by a causal 61-tap FIR filter
+    and decimated so that the new Nyquist frequency is about 2.5 omega_c:
+    above the band the remnant has almost no power and the model's
+    discretisation error (0.2-0.3 % of u) would otherwise dominate the
+    whitened residual.  An AR model of the reduced residual (least squares,
+    order by BIC, :func:`fit_ar`) is the noise model.
+    """
+    if not (omega_c > 0 and math.isfinite(omega_c)):
+        raise ValueError(f"omega_c must be a positive number of rad/s, got {omega_c!r}")
+    fs = 1.0 / dt
+    f_c = omega_c / (2 * np.pi)
+    if not f_c < 0.45 * fs:
+        raise ValueError(f"omega_c = {omega_c:g} rad/s is too close to the Nyquist frequency")
+    fir = signal.firwin(61, f_c, fs=fs)
+    decim = max(1, int(math.floor(fs / (2.0 * 2.5 * f_c))))
+    nm = NoiseModel(fir, decim, np.zeros(0), int(skip), float(omega_c))
+    red = nm.reduce(np.asarray(eps, float))
+    ar = fit_ar(red, max_order=min(max_order, red.size // 5))
+    return NoiseModel(fir, decim, ar, int(skip), float(omega_c))
+
+
+class Whitened:
+    """The GLS (pre-whitened) output-error likelihood of a model on a recording.
+
+    With eps = u - u_hat(theta), the residual is reduced (low-passed and
+    decimated) and whitened by the fixed :class:`NoiseModel`,
+    w = A(q) reduce(eps), and
+
+        -ln L = m/2 ln(mean w^2) + m/2
+
+    over its m values (conditional likelihood, noise level profiled out).
+    Every step is linear, so the exact Jacobian of u_hat goes through the
+    same filters.  This is the prediction-error criterion with an AR noise
+    model, which (unlike Eq. 4's output error) stays consistent in the closed
+    loop when the noise model is right.
+
+    Parameters
+    ----------
+    model : PilotModel
+    recording : Recording
+    noise : NoiseModel
+        Its ``skip`` leaves out the start of the record: the likelihood's
+        periodic start-up (``docs/model.md``) leaves a transient of a few
+        seconds in u_hat when the record is not periodic (remnant), up to the
+        size of the remnant itself; an extension that changes the start of the
+        run (a drifting gain) would otherwise fit it.
+    """
+
+    def __init__(self, model: PilotModel, recording: Recording, noise: NoiseModel) -> None:
+        if not isinstance(noise, NoiseModel):
+            raise TypeError(f"noise must be a NoiseModel, got {type(noise).__name__}")
+        self.model = model
+        self.lik = Likelihood(model, recording)
+        self.noise = noise
+        self.u = self.lik.u
+        if noise.skip >= self.lik.n - 64 * noise.decimation:
+            raise ValueError(f"the recording ({self.lik.n} samples) is too short to skip "
+                             f"{noise.skip} samples")
+        self.m = self.whiten(self.u).size
+
+    def whiten(self, x: np.ndarray) -> np.ndarray:
+        """The whitened, reduced series (along the first axis)."""
+        return self.noise.whiten(x)
+
+    def neg_log_lik(self, params: Mapping[str, float]) -> float:
+        """GLS -ln L at ``params`` (+inf if the model is unstable there)."""
+        y = self.lik.response(params)
+        if not np.all(np.isfinite(y)):
+            return math.inf
+        w = self.whiten(self.u - y)
+        return 0.5 * self.m * math.log(max(float(np.mean(w * w)), 1e-300)) + 0.5 * self.m
+
+
+@dataclass
+class FitSummary:
+    """A GLS (or censored) fit: parameters, -ln L, covariance of the refined parameters."""
+
+    params: dict[str, float]
+    neg_log_lik: float
+    refined: tuple[str, ...]
+    cov: np.ndarray
+    nfev: int = 0
+
+    @property
+    def stderr(self) -> dict[str, float]:
+        d = np.sqrt(np.clip(np.diag(self.cov), 0, None)) if self.cov.size else np.zeros(0)
+        return {n: float(s) for n, s in zip(self.refined, d)}
+
+
+def _gls_refine(wl: Whitened, start: Mapping[str, float], names: Sequence[str], *,
+                max_nfev: int = 60) -> FitSummary:
+    """Bounded least squares on the whitened residual (trust-region reflective, exact Jacobian)."""
+    model = wl.model
+    base = dict(model.as_dict(model.free_vector(start)))
+    names = tuple(names)
+    lo = np.array([model.parameter(n).lower for n in names])
+    hi = np.array([model.parameter(n).upper for n in names])
+    big = 1e3 * (float(np.std(wl.u)) + 1e-300)
+
+    def params_of(x):
+        p = dict(base)
+        p.update(zip(names, (float(v) for v in x)))
+        return p
+
+    def resid(x):
+        y = wl.lik.response(params_of(x))
+        if not np.all(np.isfinite(y)):
+            return np.full(wl.m, big)
+        return wl.whiten(wl.u - y)
+
+    def jac(x):
+        _, J = wl.lik.jacobian(params_of(x), names)
+        if not np.all(np.isfinite(J)):
+            return np.zeros((wl.m, len(names)))
+        return -wl.whiten(J)
+
+    x0 = np.clip(np.array([base[n] for n in names]), lo, hi)
+    # keep the start strictly inside for the reflective method
+    span = hi - lo
+    x0 = np.clip(x0, lo + 1e-9 * span, hi - 1e-9 * span)
+    sol = optimize.least_squares(resid, x0, jac=jac, bounds=(lo, hi), method="trf",
+                                 x_scale="jac", max_nfev=max_nfev, xtol=1e-8, ftol=1e-9)
+    p = params_of(sol.x)
+    f = wl.neg_log_lik(p)
+    f0 = wl.neg_log_lik(params_of(x0))
+    if not np.isfinite(f) or f > f0:
+        p, f = params_of(x0), f0
+        Jw = jac(x0)
+        r = resid(x0)
+    else:
+        Jw = sol.jac
+        r = sol.fun
+    s2 = float(np.mean(r * r))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cov = s2 * linalg.pinvh(Jw.T @ Jw)
+    return FitSummary(p, float(f), names, cov, int(sol.nfev))
+
+
+def fit_base_gls(model: PilotModel, recording: Recording, start: Mapping[str, float],
+                 noise: NoiseModel, *, delta_step: float = 5e-4) -> tuple[Whitened, FitSummary]:
+    """GLS fit of the base model: refine, scan delta_abs under GLS, refine again.
+
+    delta_abs is scanned (not refined by Gauss-Newton: the crisp dead zone's
+    derivative is unreliable), on [0, upper] in steps of ``delta_step``.
+    """
+    wl = Whitened(model, recording, noise)
+    free = model.parameter_names
+    names = tuple(n for n in free if n != "delta_abs")
+    fit = _gls_refine(wl, start, names)
+    if "delta_abs" in free:
+        upper = model.parameter("delta_abs").upper
+        grid = np.arange(0.0, upper + 0.5 * delta_step, delta_step)
+        vals = np.array([wl.neg_log_lik(dict(fit.params, delta_abs=float(d))) for d in grid])
+        k = int(np.argmin(vals))
+        if vals[k] < fit.neg_log_lik:
+            fit = _gls_refine(wl, dict(fit.params, delta_abs=float(grid[k])), names)
+    return wl, fit
+
+
+@dataclass
+class CandidateResult:
+    """The test of one catalogue extension against the base model.
+
+    Attributes
+    ----------
+    physics : str
+        Catalogue name.
+    testable : bool
+        False when the recording lacks what it needs (e.g. no ``theta`` column).
+    reason : str
+        Why it is not testable, or how it was tested.
+    delta_neg_log_lik : float
+        -ln L(base) - -ln L(extension) on the decision likelihood (>= 0).
+    statistic : float
+        2 delta_neg_log_lik (GLS) or the flat-top count (saturation).
+    df : int
+    p_value : float
+        Calibrated p-value (chi2(df) on the GLS likelihood; the flat-top test
+        for saturation).
+    delta_bic : float
+        BIC(base) - BIC(extension); > 0 favours the extension.
+    log_bayes_factor : float
+        ln BF(extension : base) ~ delta_bic / 2 (Schwarz approximation).
+    params : dict
+        The extension's new parameters at the fit.
+    stderr : dict
+        Their standard errors (and those of the other refined parameters).
+    all_params : dict
+        Every parameter of the extended model at the fit.
+    signature_score : float
+        How strongly the located evidence shows this entry's signature
+        (max of -log10 p over its signature keys; 0 when nothing is located).
+    justified : bool
+        p_value < the per-candidate level.
+    """
+
+    physics: str
+    testable: bool
+    reason: str = ""
+    delta_neg_log_lik: float = 0.0
+    statistic: float = 0.0
+    df: int = 0
+    p_value: float = 1.0
+    delta_bic: float = -math.inf
+    log_bayes_factor: float = -math.inf
+    params: dict[str, float] = field(default_factory=dict)
+    stderr: dict[str, float] = field(default_factory=dict)
+    all_params: dict[str, float] = field(default_factory=dict)
+    signature_score: float = 0.0
+    justified: bool = False
+    fit: Any = None
+    model: Any = None
+
+    def to_dict(self) -> dict[str, Any]:
+        def num(x):
+            x = float(x)
+            return x if math.isfinite(x) else (None if math.isnan(x) else ("inf" if x > 0 else "-inf"))
+        return {"physics": self.physics, "testable": self.testable, "reason": self.reason,
+                "delta_neg_log_lik": num(self.delta_neg_log_lik), "statistic": num(self.statistic),
+                "df": self.df, "p_value": num(self.p_value), "delta_bic": num(self.delta_bic),
+                "log_bayes_factor": num(self.log_bayes_factor),
+                "params": {k: num(v) for k, v in self.params.items()},
+                "stderr": {k: num(v) for k, v in self.stderr.items()},
+                "all_params": {k: num(v) for k, v in self.all_params.items()},
+                "signature_score": num(self.signature_score), "justified": self.justified}
+
+
+def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
+                  base: FitSummary, noise: NoiseModel) -> tuple[CandidateResult, Whitened | None]:
+    """Fit one GLS extension from the base fit (multi-start over its new parameters) and test it."""
+    missing = [c for c in ext.needs if c not in recording]
+    if missing:
+        return CandidateResult(ext.name, False, f"needs the recording column(s) {', '.join(missing)}",
+                               df=ext.df), None
+    model = ext.build(base_model)
+    wl = Whitened(model, recording, noise)
+    names = tuple(n for n in model.parameter_names
+                  if ext.refine_threshold or n != "delta_abs")
+    best: FitSummary | None = None
+    for st in ext.starts or ({},):
+        start = dict(base.params)
+        start.update(st)
+        try:
+            f = _gls_refine(wl, start, names)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if best is None or f.neg_log_lik < best.neg_log_lik:
+            best = f
+    if best is None:
+        return CandidateResult(ext.name, False, "the fit failed from every start", df=ext.df), wl
+    d = max(0.0, base.neg_log_lik - best.neg_log_lik)
+    stat = 2.0 * d
+    p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
+    dbic = stat - ext.df * math.log(wl.m)
+    se = best.stderr
+    new = {n: best.params[n] for n in ext.new_parameters}
+    res = CandidateResult(ext.name, True, f"GLS likelihood-ratio test, chi2({ext.df})", d, stat,
+                          ext.df, p, dbic, dbic / 2.0, new,
+                          {n: se[n] for n in se}, dict(model.as_dict(model.full_vector(best.params), full=True)))
+    res.fit = best
+    res.model = model
+    return res, wl
+
+
+# --- control saturation -------------------------------------------------------------------
+def flat_tops(u: np.ndarray, *, min_run: int = 3, rtol: float = 1e-9) -> dict[str, Any]:
+    """Samples of u at its extreme values in runs of at least ``min_run`` equal samples.
+
+    Parameters
+    ----------
+    u : ndarray
+    min_run : int
+        Shortest run of equal extreme samples counted as a flat top.
+    rtol : float
+        Two samples are "equal" within ``rtol * max|u|`` (or the recording's
+        quantisation step, whichever is larger).
+
+    Returns
+    -------
+    dict with ``flags`` (int array: +1 at the upper flat tops, -1 at the
+    lower, 0 elsewhere), ``hi``, ``lo`` (the extreme values), ``n_samples``
+    (flagged samples), ``n_runs``.
+    """
+    u = np.asarray(u, dtype=float)
+    if u.ndim != 1 or u.size < min_run:
+        raise ValueError("u must be 1-D with at least min_run samples")
+    tol = rtol * float(np.max(np.abs(u)) + 1e-300)
+    flags = np.zeros(u.size, dtype=np.int64)
+    n_runs = 0
+    for sgn, ext in ((1, float(np.max(u))), (-1, float(np.min(u)))):
+        at = np.abs(u - ext) <= tol
+        # runs of consecutive True
+        d = np.diff(np.concatenate([[0], at.view(np.int8), [0]]))
+        starts = np.flatnonzero(d == 1)
+        ends = np.flatnonzero(d == -1)
+        for s, e in zip(starts, ends):
+            if e - s >= min_run:
+                flags[s:e] = sgn
+                n_runs += 1
+    return {"flags": flags, "hi": float(np.max(u)), "lo": float(np.min(u)),
+            "n_samples": int(np.count_nonzero(flags)), "n_runs": n_runs}
+
+
+def _long_run_factor(ar: np.ndarray, eps: np.ndarray) -> float:
+    """Long-run variance of an AR residual over its variance (>= 1 for positive correlation)."""
+    a = np.asarray(ar, float)
+    w = signal.lfilter(np.concatenate([[1.0], -a]), [1.0], eps)[a.size:]
+    s1 = 1.0 - a.sum()
+    if abs(s1) < 1e-12:
+        return 1.0
+    return float(max(1.0, np.var(w) / s1**2 / np.var(eps)))
+
+
+def fit_censored(base_model: PilotModel, recording: Recording, start: Mapping[str, float],
+                 tops: Mapping[str, Any]) -> tuple[FitSummary, float, float]:
+    """Censored-likelihood (Tobit) fit of the pilot parameters to a clipped control.
+
+    The model output is the unclipped command u_hat; samples flagged in
+    ``tops`` are censored at the limits.  Returns (fit, -ln L at the start
+    parameters with sigma profiled, sigma at the fit).  The covariance is
+    the inverse Hessian of -ln L times the residual's long-run variance factor
+    (from an AR model of the residual, :func:`fit_ar`): the Tobit likelihood
+    treats samples as independent, and the factor approximately accounts for
+    their correlation.
+    """
+    from ..kernels._censored import censored_neg_log_lik
+
+    lik = Likelihood(base_model, recording)
+    names = tuple(n for n in base_model.parameter_names if n != "delta_abs")
+    base = dict(base_model.as_dict(base_model.free_vector(start)))
+    flags = np.asarray(tops["flags"], dtype=np.int64)
+    lo_lim, hi_lim = float(tops["lo"]), float(tops["hi"])
+    u = lik.u
+    lo = np.array([base_model.parameter(n).lower for n in names] + [-30.0])
+    hi = np.array([base_model.parameter(n).upper for n in names] + [5.0])
+
+    def params_of(x):
+        p = dict(base)
+        p.update(zip(names, (float(v) for v in x[:-1])))
+        return p
+
+    def fun(x):
+        p = params_of(x)
+        y, J = lik.jacobian(p, names)
+        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(J))):
+            return 1e30, np.zeros_like(x)
+        sig = math.exp(x[-1])
+        v, gy, ds = censored_neg_log_lik(u, y, flags, lo_lim, hi_lim, sig)
+        g = np.concatenate([J.T @ gy, [ds * sig]])
+        return v, g
+
+    y0 = lik.response(base)
+    free = flags == 0
+    s0 = float(np.std((u - y0)[free])) + 1e-300
+    x0 = np.concatenate([[base[n] for n in names], [math.log(s0)]])
+    x0 = np.clip(x0, lo, hi)
+    # -ln L at the start parameters, sigma profiled
+    prof = optimize.minimize_scalar(lambda ls: fun(np.concatenate([x0[:-1], [ls]]))[0],
+                                    bounds=(math.log(s0) - 3, math.log(s0) + 3), method="bounded")
+    f_start = float(prof.fun)
+    x0[-1] = prof.x
+    sol = optimize.minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=list(zip(lo, hi)),
+                            options={"maxiter": 100})
+    x = sol.x if sol.fun <= f_start else x0
+    fval = float(min(sol.fun, f_start))
+    # Hessian by central differences of the analytic gradient
+    k = x.size
+    H = np.empty((k, k))
+    for j in range(k):
+        h = 1e-4 * max(abs(x[j]), 1e-2)
+        xp = x.copy()
+        xm = x.copy()
+        xp[j] += h
+        xm[j] -= h
+        H[:, j] = (fun(xp)[1] - fun(xm)[1]) / (2 * h)
+    H = 0.5 * (H + H.T)
+    eps = u - lik.response(params_of(x))
+    ar = fit_ar(eps[free], max_order=20)
+    factor = _long_run_factor(ar, eps[free]) if ar.size else 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cov = linalg.pinvh(H)[:-1, :-1] * factor
+    fit = FitSummary(params_of(x), fval, names, cov, int(sol.nfev))
+    return fit, f_start, math.exp(x[-1])

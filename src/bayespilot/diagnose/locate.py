@@ -1,0 +1,527 @@
+"""Locate a model mismatch: where a recording and its fitted model differ.
+
+Every piece of evidence is a scalar statistic of the residual eps = u - u_hat
+at the fitted parameters, with a significance calibrated by a parametric
+bootstrap (:func:`bootstrap`): the fitted model is simulated in closed loop
+with a remnant whose level and colour match the fitted residual (Eq. 6 with
+K_n and T_n estimated from it, :func:`remnant_like`), and the same statistic
+is computed on each replicate's residual at the same parameters.  The
+replicates are not refitted (a refit per replicate would not fit the time
+budget); a fitted residual is smaller at the forcing frequencies than a
+residual at fixed parameters, so the p-values are, if anything, conservative
+for the frequency statistics.  p = (1 + #{replicates >= observed}) / (B + 1).
+
+Keys of the evidence (see :data:`EVIDENCE`):
+
+frequency
+    ``frequency.visual``, ``frequency.motion_low``, ``frequency.motion_high``:
+    the two-input multisine describing-function estimate
+    (:func:`describing_function`) of the residual, i.e. the difference between
+    the nonparametric visual / motion-channel frequency responses from u and
+    those of the model (the estimator is linear in u), relative to the model's;
+    ``frequency.power_target``, ``frequency.power_disturbance``: residual
+    power at the target / disturbance frequencies over the power at the
+    neighbouring remnant-only frequencies.
+time
+    ``time.variance_drift`` (slope of the log residual variance over segments
+    of the run), ``time.nonstationarity`` (spread of the segment log
+    variances), ``time.gain_drift_visual`` and ``time.gain_drift_motion``
+    (slopes of the per-segment least-squares corrections of K_v and K_m).
+amplitude
+    ``amplitude.canal`` (residual conditioned on the delayed canal output
+    |i(t - tau_m)|: the threshold region), ``amplitude.control`` (on |u|: the
+    limits), ``amplitude.motion`` (on |theta_ddot_m|), ``amplitude.flat_tops``
+    (samples in runs of equal extreme u).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+from scipy import integrate, optimize
+
+from ..forcing import Multisine
+from ..likelihood import Likelihood
+from ..model import PilotModel
+from ..recording import Recording
+
+__all__ = ["Forcing", "forcing_of", "describing_function", "statistics", "remnant_like",
+           "task_of", "bootstrap", "Evidence", "EVIDENCE", "N_SEGMENTS"]
+
+#: Evidence keys and what each measures.
+EVIDENCE = {
+    "frequency.visual": "visual-channel describing function: departure from the model's",
+    "frequency.motion_low": "motion-channel describing function below 2 rad/s: departure",
+    "frequency.motion_high": "motion-channel describing function at 2 rad/s and above: departure",
+    "frequency.power_target": "residual power at the target frequencies / remnant-only neighbours",
+    "frequency.power_disturbance": "residual power at the disturbance frequencies / neighbours",
+    "time.variance_drift": "trend of the residual's log variance over the run",
+    "time.nonstationarity": "spread of the residual's log variance over segments",
+    "time.gain_drift_visual": "trend of local K_v corrections over segments",
+    "time.gain_drift_motion": "trend of local K_m corrections over segments",
+    "amplitude.canal": "residual conditioned on |i(t - tau_m)| (threshold region)",
+    "amplitude.control": "residual conditioned on |u| (control limits)",
+    "amplitude.motion": "residual variance conditioned on |theta_ddot_m|",
+    "amplitude.flat_tops": "samples of u in runs at its extreme values",
+}
+#: Segments of the run for the time evidence.
+N_SEGMENTS = 8
+#: Boundary between the low and high frequencies of the motion-channel evidence, rad/s.
+OMEGA_SPLIT = 2.0
+
+
+@dataclass(frozen=True)
+class Forcing:
+    """The forcing functions of a recording as the estimators need them.
+
+    Attributes
+    ----------
+    target, disturbance : Multisine
+        f_t and f_d at the recording's time axis.
+    k_target, k_disturbance : ndarray of int
+        Their DFT bins in the record (None if not whole periods).
+    f_t, f_d : ndarray
+        The signals at the recording's samples.
+    """
+
+    target: Multisine
+    disturbance: Multisine
+    k_target: np.ndarray | None
+    k_disturbance: np.ndarray | None
+    f_t: np.ndarray
+    f_d: np.ndarray
+
+    @property
+    def frequencies(self) -> np.ndarray:
+        """All forcing frequencies, rad/s."""
+        return np.concatenate([self.target.frequencies, self.disturbance.frequencies])
+
+    @property
+    def periodic(self) -> bool:
+        """True if every forcing frequency is a DFT bin of the record."""
+        return self.k_target is not None and self.k_disturbance is not None
+
+
+def _multisine_from_signal(x: np.ndarray, dt: float) -> Multisine:
+    """A multisine from a periodic signal: its DFT lines above 1e-3 of the largest."""
+    n = x.size
+    X = np.fft.rfft(x)
+    mag = np.abs(X)
+    mag[0] = 0.0
+    k = np.flatnonzero(mag > 1e-3 * mag.max()) if mag.max() > 0 else np.array([1])
+    w0 = 2 * np.pi / (n * dt)
+    amp = 2 * mag[k] / n
+    phase = np.angle(X[k]) + np.pi / 2
+    return Multisine(w0, k, amp, phase)
+
+
+def forcing_of(recording: Recording) -> Forcing | None:
+    """The recording's forcing functions: from its sidecar (``forcing``) or its f_t/f_d columns.
+
+    Returns None when neither is available.  Only the task description is
+    read, never the ``simulation`` key (what generated a simulated run).
+    """
+    meta = recording.metadata.get("forcing")
+    t = recording.t
+    if isinstance(meta, Mapping):
+        w0 = float(meta["base_frequency"])
+        ft = Multisine.from_dict(w0, meta["target"])
+        fd = Multisine.from_dict(w0, meta["disturbance"])
+    elif "f_t" in recording and "f_d" in recording:
+        ft = _multisine_from_signal(recording["f_t"], recording.dt)
+        fd = _multisine_from_signal(recording["f_d"], recording.dt)
+    else:
+        return None
+    T = recording.n_samples * recording.dt
+    kk = []
+    for f in (ft, fd):
+        k = f.frequencies * T / (2 * np.pi)
+        kk.append(np.rint(k).astype(int) if np.all(np.abs(k - np.rint(k)) < 1e-3) else None)
+    f_t = recording["f_t"] if "f_t" in recording else ft(t)
+    f_d = recording["f_d"] if "f_d" in recording else fd(t)
+    return Forcing(ft, fd, kk[0], kk[1], np.asarray(f_t), np.asarray(f_d))
+
+
+def describing_function(u: np.ndarray, e: np.ndarray, m: np.ndarray, forcing: Forcing
+                        ) -> dict[str, np.ndarray]:
+    """Two-input multisine estimate of the visual and motion-channel frequency responses.
+
+    The pilot's control is u = H_v e + H_m m (+ remnant), m = theta_ddot_m.
+    The target excites the loop at its frequencies and the disturbance at
+    others, so at each forcing frequency there is one equation per forcing
+    function: at a disturbance frequency
+    U/F_d = H_v E/F_d + H_m M/F_d from the data there, and the same with the
+    closed-loop ratios U/F_t, E/F_t, M/F_t interpolated from the neighbouring
+    target frequencies (the ratios are smooth in frequency; the signals'
+    spectra are not).  Two equations, two unknowns (van Paassen & Mulder
+    1998; Zaal et al. 2009).  Interpolation is linear in log frequency on the
+    real and imaginary parts, constant beyond the ends (``numpy.interp``).
+
+    Parameters
+    ----------
+    u, e, m : ndarray
+        Control (or any signal the estimator should explain, e.g. a residual),
+        error and motion, over whole periods of the forcing.
+    forcing : Forcing
+        With DFT bins (``forcing.periodic``).
+
+    Returns
+    -------
+    dict with ``omega`` (rad/s, sorted), ``H_v``, ``H_m`` (complex),
+    ``at`` ("t" or "d": which forcing function's frequency).
+
+    Raises
+    ------
+    ValueError
+        If the record does not hold whole periods of the forcing functions.
+    """
+    if not forcing.periodic:
+        raise ValueError("the describing-function estimate needs whole periods of the forcing "
+                         "functions in the record")
+    U, E, M = (np.fft.rfft(np.asarray(x, float)) for x in (u, e, m))
+    Ft, Fd = np.fft.rfft(forcing.f_t), np.fft.rfft(forcing.f_d)
+    kt, kd = forcing.k_target, forcing.k_disturbance
+    wt, wd = forcing.target.frequencies, forcing.disturbance.frequencies
+
+    def ratios(k, F):
+        return U[k] / F[k], E[k] / F[k], M[k] / F[k]
+
+    def interp(w_to, w_from, z):
+        lw, lf = np.log(w_to), np.log(w_from)
+        order = np.argsort(lf)
+        return (np.interp(lw, lf[order], z.real[order]) + 1j * np.interp(lw, lf[order], z.imag[order]))
+
+    rt = ratios(kt, Ft)
+    rd = ratios(kd, Fd)
+    out_w, out_v, out_m, at = [], [], [], []
+    for w_here, r_here, w_other, r_other, tag in ((wd, rd, wt, rt, "d"), (wt, rt, wd, rd, "t")):
+        ro = [interp(w_here, w_other, z) for z in r_other]
+        for j in range(w_here.size):
+            A = np.array([[r_here[1][j], r_here[2][j]], [ro[1][j], ro[2][j]]])
+            b = np.array([r_here[0][j], ro[0][j]])
+            try:
+                hv, hm = np.linalg.solve(A, b)
+            except np.linalg.LinAlgError:
+                hv, hm = np.nan + 0j, np.nan + 0j
+            out_w.append(w_here[j])
+            out_v.append(hv)
+            out_m.append(hm)
+            at.append(tag)
+    order = np.argsort(out_w)
+    return {"omega": np.asarray(out_w)[order], "H_v": np.asarray(out_v)[order],
+            "H_m": np.asarray(out_m)[order], "at": np.asarray(at)[order]}
+
+
+def steady_response(model: PilotModel, recording: Recording, params: Mapping[str, float]
+                    ) -> np.ndarray:
+    """The model's u_hat in periodic steady state: computed over the record tiled twice.
+
+    The likelihood warms its recursions up over the last 5 s only, so a slow
+    stage (a washout) starts with a transient; for the describing functions
+    (whole periods, no samples left out) the second of two tiled periods is
+    used instead.
+    """
+    n = recording.n_samples
+    sig = {k: np.tile(v, 2) for k, v in recording.signals.items()}
+    sig["t"] = np.arange(2 * n) * recording.dt
+    rec2 = Recording(sig, recording.sample_rate_hz, recording.motion_gain, recording.task,
+                     recording.metadata, recording.source)
+    return Likelihood(model, rec2).response(params)[n:]
+
+
+# --- the statistics ------------------------------------------------------------------------
+def _slope(y: np.ndarray) -> float:
+    x = np.linspace(-0.5, 0.5, y.size)
+    return float(np.polyfit(x, y, 1)[0]) if y.size > 1 else 0.0
+
+
+def _binned(eps: np.ndarray, x: np.ndarray, edges_q=(0.0, 0.5, 0.8, 0.95, 0.99, 1.0),
+            sign: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Residual mean (times sign) and variance in quantile bins of |x|."""
+    ax = np.abs(x)
+    edges = np.quantile(ax, edges_q)
+    edges[-1] = np.inf
+    idx = np.clip(np.searchsorted(edges, ax, side="right") - 1, 0, len(edges_q) - 2)
+    s = np.sign(x) if sign is None else sign
+    nb = len(edges_q) - 1
+    mean = np.zeros(nb)
+    var = np.zeros(nb)
+    cnt = np.zeros(nb)
+    for b in range(nb):
+        sel = idx == b
+        cnt[b] = sel.sum()
+        if cnt[b]:
+            mean[b] = float(np.mean(eps[sel] * s[sel]))
+            var[b] = float(np.var(eps[sel]))
+    centre = np.array([np.median(ax[idx == b]) if cnt[b] else np.nan for b in range(nb)])
+    return {"centre": centre, "mean": mean, "var": var, "count": cnt}
+
+
+def statistics(recording: Recording, model: PilotModel, params: Mapping[str, float],
+               forcing: Forcing | None, *, skip: int = 0, u: np.ndarray | None = None,
+               with_arrays: bool = False) -> dict[str, Any]:
+    """Every located statistic of a recording at the fitted ``params`` (see module docs).
+
+    Parameters
+    ----------
+    recording : Recording
+    model : PilotModel
+        The base model (the paper's two channels, ``visual`` and ``vestibular``).
+    params : mapping
+        Fitted parameters.
+    forcing : Forcing or None
+        Frequency evidence is left out without it (or without whole periods).
+    skip : int
+        Samples at the start left out of the time and amplitude evidence (the
+        likelihood's start-up transient).
+    u : ndarray, optional
+        Use this control instead of the recording's (for quantised replicates).
+    with_arrays : bool
+        Also return the arrays behind the statistics (for plots).
+
+    Returns
+    -------
+    dict
+        ``values`` (key -> float; NaN where not available) and, with
+        ``with_arrays``, ``arrays``.
+    """
+    lik = Likelihood(model, recording)
+    uu = lik.u if u is None else np.asarray(u, float)
+    y = lik.response(params)
+    eps = uu - y
+    names = [c.name for c in model.channels]
+    p = dict(params)
+    # per-channel contributions (the model is linear in the channel gains)
+    contrib = {}
+    for c in model.channels:
+        if not c.gain:
+            continue
+        others = {c2.gain[0]: 0.0 for c2 in model.channels if c2 is not c and c2.gain
+                  and c2.gain[0] != c.gain[0]}
+        contrib[c.name] = lik.response(dict(p, **others))
+    values: dict[str, float] = {k: math.nan for k in EVIDENCE}
+    arrays: dict[str, Any] = {}
+    n = eps.size
+    # -- frequency
+    if forcing is not None and forcing.periodic:
+        y_ss = steady_response(model, recording, params)
+        df_res = describing_function(uu - y_ss, recording.e, recording.theta_ddot_m, forcing)
+        df_mod = describing_function(y_ss, recording.e, recording.theta_ddot_m, forcing)
+        w = df_res["omega"]
+        low = w < OMEGA_SPLIT
+
+        def rel(dh, hm, sel):
+            den = float(np.mean(np.abs(hm[sel]) ** 2))
+            return float(np.mean(np.abs(dh[sel]) ** 2) / den) if den > 0 else math.nan
+
+        values["frequency.visual"] = rel(df_res["H_v"], df_mod["H_v"], np.ones(w.size, bool))
+        values["frequency.motion_low"] = rel(df_res["H_m"], df_mod["H_m"], low)
+        values["frequency.motion_high"] = rel(df_res["H_m"], df_mod["H_m"], ~low)
+        P = np.abs(np.fft.rfft(eps)) ** 2
+        forced = np.zeros(P.size, bool)
+        forced[forcing.k_target] = True
+        forced[forcing.k_disturbance] = True
+        forced[0] = True
+
+        def power_ratio(ks):
+            num, den = 0.0, 0.0
+            for k in ks:
+                nb = [j for j in range(k - 4, k + 5) if 0 < j < P.size and not forced[j]]
+                num += P[k]
+                den += float(np.mean(P[nb])) if nb else 0.0
+            return num / den if den > 0 else math.nan
+
+        values["frequency.power_target"] = power_ratio(forcing.k_target)
+        values["frequency.power_disturbance"] = power_ratio(forcing.k_disturbance)
+        if with_arrays:
+            arrays["df_residual"] = df_res
+            arrays["df_model"] = df_mod
+            arrays["df_data"] = describing_function(uu, recording.e, recording.theta_ddot_m,
+                                                    forcing)
+    # -- time
+    seg = np.array_split(np.arange(skip, n), N_SEGMENTS)
+    logv = np.array([math.log(max(float(np.var(eps[s])), 1e-300)) for s in seg])
+    values["time.variance_drift"] = abs(_slope(logv))
+    values["time.nonstationarity"] = float(np.std(logv))
+    corr = {}
+    for key, ch in (("visual", "visual"), ("motion", "vestibular")):
+        if ch not in contrib:
+            continue
+        cs = []
+        for s in seg:
+            X = np.column_stack([contrib[c][s] for c in contrib])
+            coef, *_ = np.linalg.lstsq(X, eps[s], rcond=None)
+            cs.append(coef[list(contrib).index(ch)])
+        corr[key] = np.asarray(cs)
+        values[f"time.gain_drift_{key}"] = abs(_slope(corr[key]))
+    # -- amplitude
+    sl = slice(skip, n)
+    e_s = eps[sl]
+    if "vestibular" in names:
+        X = lik.X[names.index("vestibular")]
+        shift = int(round(p.get("tau_m", 0.0) / recording.dt))
+        i_d = np.roll(X, shift)[sl]
+        b = _binned(e_s, i_d, edges_q=(0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0))
+        values["amplitude.canal"] = float(np.sum(b["count"] * b["mean"] ** 2) / np.var(e_s))
+        arrays["amp_canal"] = b
+        arrays["canal_delayed"] = i_d
+    b = _binned(e_s, uu[sl])
+    values["amplitude.control"] = float(np.sum(b["count"] * b["mean"] ** 2) / np.var(e_s))
+    arrays["amp_control"] = b
+    arrays["u_after_cond"] = uu[sl]
+    b = _binned(e_s, recording.theta_ddot_m[sl])
+    rv = b["var"] / np.var(e_s)
+    values["amplitude.motion"] = float(np.sum(np.log(np.maximum(rv, 1e-12)) ** 2))
+    arrays["amp_motion"] = b
+    from .decide import flat_tops
+
+    values["amplitude.flat_tops"] = float(flat_tops(uu)["n_samples"])
+    out: dict[str, Any] = {"values": values}
+    if with_arrays:
+        arrays["segments_logvar"] = logv
+        arrays["segments_gain"] = corr
+        arrays["residual"] = eps
+        arrays["u_hat"] = y
+        out["arrays"] = arrays
+    return out
+
+
+# --- the bootstrap -------------------------------------------------------------------------
+def _remnant_acf(T: float, lags: np.ndarray, dt: float) -> np.ndarray:
+    """Normalised autocorrelation of K / (T s + 1)^4 white noise at ``lags`` samples."""
+    # R(tau) = int_0^inf cos(w tau) / (1 + w^2 T^2)^4 dw, numerically (scipy.integrate)
+    w = np.linspace(0.0, 60.0 / T, 6001)
+    S = 1.0 / (1.0 + (w * T) ** 2) ** 4
+    R = integrate.simpson(np.cos(np.outer(lags * dt, w)) * S, x=w, axis=1)
+    R0 = integrate.simpson(S, x=w)
+    return R / R0
+
+
+def remnant_like(eps: np.ndarray, dt: float) -> tuple[float, float]:
+    """(K_n, T_n) of an Eq. 6 remnant with the level and colour of a residual.
+
+    T_n matches the residual's autocorrelation over the first 0.6 s of lags
+    (bounded scalar minimisation); K_n then matches its variance, using
+    var(n) = K_n^2 psd 5 / (32 T_n) for white noise of two-sided PSD
+    psd = dt (the simulator's convention) through 1 / (T_n s + 1)^4.
+    """
+    x = np.asarray(eps, float) - np.mean(eps)
+    n = x.size
+    L = max(2, int(round(0.6 / dt)))
+    lags = np.arange(1, L + 1)
+    c0 = float(x @ x) / n
+    acf = np.array([x[: n - k] @ x[k:] / n for k in lags]) / c0
+    res = optimize.minimize_scalar(lambda T: float(np.sum((_remnant_acf(T, lags, dt) - acf) ** 2)),
+                                   bounds=(0.005, 0.5), method="bounded", options={"xatol": 1e-4})
+    T_n = float(res.x)
+    K_n = math.sqrt(c0 / (dt * 5.0 / (32.0 * T_n)))
+    return K_n, T_n
+
+
+def task_of(recording: Recording, forcing: Forcing):
+    """The :class:`~bayespilot.simulate.TrackingTask` a recording describes (for replicates)."""
+    from ..simulate import TrackingTask
+
+    run_in = 0.5 * recording.duration
+
+    def back(f: Multisine) -> Multisine:  # g(t_sim) = f(t_sim - run_in)
+        return Multisine(f.base_frequency, f.n, f.amplitude,
+                         np.mod(f.phase - f.frequencies * run_in, 2 * np.pi))
+
+    num, den = recording.controlled_element
+    return TrackingTask(back(forcing.target), back(forcing.disturbance),
+                        motion_gain=recording.motion_gain,
+                        controlled_element=(tuple(num), tuple(den)),
+                        control_gain=recording.control_gain,
+                        sample_rate_hz=recording.sample_rate_hz, duration=recording.duration,
+                        run_in=run_in, task=recording.task)
+
+
+def _quantum(u: np.ndarray) -> float:
+    """The recording's quantisation step of u (0 if it is recorded at full precision)."""
+    v = np.unique(u)
+    if v.size < 3:
+        return 0.0
+    q = float(np.diff(v).min())
+    if not q > 0:
+        return 0.0
+    # quantised if every value is (close to) a whole multiple of the smallest step
+    r = v / q
+    return q if float(np.max(np.abs(r - np.rint(r)))) < 1e-3 else 0.0
+
+
+def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, float],
+              forcing: Forcing, eps: np.ndarray, *, n_replicates: int = 39, seed: int | None = 0,
+              skip: int = 0) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+    """Null distribution of every statistic from the fitted model with its own remnant.
+
+    Returns (key -> array of the B replicate values, remnant settings).
+    Replicates whose closed loop diverges are dropped.
+    """
+    from ..simulate import simulate
+
+    K_n, T_n = remnant_like(eps[skip:], recording.dt)
+    task = task_of(recording, forcing)
+    q = _quantum(recording.u)
+    seeds = np.random.SeedSequence(seed).generate_state(max(n_replicates, 1))
+    out: dict[str, list[float]] = {k: [] for k in EVIDENCE}
+    for b in range(n_replicates):
+        try:
+            sim = simulate(model, params, task=task, remnant_gain=K_n, T_n=T_n,
+                           seed=int(seeds[b]), oversample=10)
+        except RuntimeError:
+            continue
+        rep = sim.recording
+        u = np.round(rep.u / q) * q if q > 0 else None
+        vals = statistics(rep, model, params, forcing, skip=skip, u=u)["values"]
+        for k, v in vals.items():
+            out[k].append(v)
+    return ({k: np.asarray(v, float) for k, v in out.items()},
+            {"K_n": K_n, "T_n": T_n, "quantum": q, "replicates": len(out["time.nonstationarity"])})
+
+
+@dataclass
+class Evidence:
+    """One located statistic with its bootstrap calibration."""
+
+    key: str
+    value: float
+    null_mean: float = math.nan
+    null_sd: float = math.nan
+    p_value: float = math.nan
+    description: str = ""
+    replicates: int = 0
+
+    @property
+    def z(self) -> float:
+        if not (self.null_sd > 0):
+            return math.nan
+        return (self.value - self.null_mean) / self.null_sd
+
+    def to_dict(self) -> dict[str, Any]:
+        def num(x):
+            return float(x) if math.isfinite(x) else None
+        return {"key": self.key, "value": num(self.value), "null_mean": num(self.null_mean),
+                "null_sd": num(self.null_sd), "z": num(self.z), "p_value": num(self.p_value),
+                "replicates": self.replicates, "description": self.description}
+
+
+def calibrate(values: Mapping[str, float], null: Mapping[str, np.ndarray] | None
+              ) -> dict[str, Evidence]:
+    """Evidence objects: each value against its bootstrap replicates."""
+    ev = {}
+    for k, v in values.items():
+        e = Evidence(k, float(v), description=EVIDENCE.get(k, ""))
+        if null is not None and math.isfinite(v):
+            r = np.asarray(null.get(k, []), float)
+            r = r[np.isfinite(r)]
+            if r.size:
+                e.null_mean = float(r.mean())
+                e.null_sd = float(r.std(ddof=1)) if r.size > 1 else math.nan
+                e.p_value = float((1 + np.sum(r >= v)) / (r.size + 1))
+                e.replicates = int(r.size)
+        ev[k] = e
+    return ev

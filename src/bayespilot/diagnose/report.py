@@ -1,0 +1,267 @@
+"""Show a diagnosis: PNG figures, a self-contained HTML report and a JSON summary.
+
+Every plotting function takes a :class:`~bayespilot.diagnose.DiagnosisResult`
+and an optional list of axes, and returns the figure (it never calls
+``plt.show()``); :func:`write_report` writes them all.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
+           "write_report"]
+
+
+def _pyplot():
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "pdf", "svg", "ps", "cairo"):
+        try:
+            matplotlib.use("Agg")
+        except Exception:  # a backend already in use elsewhere; plotting still works
+            pass
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _align(phase: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """Shift an unwrapped phase (deg) by whole turns to lie closest to ``ref``."""
+    k = np.round(np.nanmedian(ref - phase) / 360.0)
+    return phase + 360.0 * k
+
+
+def plot_frequency_response(result, axes: Any = None):
+    """Visual and motion-channel describing functions: data, base model, extended model."""
+    plt = _pyplot()
+    arr = result.arrays
+    if axes is None:
+        fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharex=True)
+    else:
+        fig = np.ravel(axes)[0].figure
+    axes = np.asarray(axes).reshape(2, 2)
+    if "df_data" not in arr:
+        for ax in axes.ravel():
+            ax.text(0.5, 0.5, "no forcing functions over whole periods:\nno describing function",
+                    ha="center", va="center", transform=ax.transAxes)
+        return fig
+    d, mb = arr["df_data"], arr["df_model"]
+    ma = arr.get("df_after")
+    w = d["omega"]
+    for col, key, label in ((0, "H_v", "visual H_v (per rad of e)"),
+                            (1, "H_m", "motion H_m (per rad/s^2 of theta_ddot_m)")):
+        ax_m, ax_p = axes[0, col], axes[1, col]
+        ax_m.loglog(w, np.abs(d[key]), "ko", ms=4, label="data (two-input multisine estimate)")
+        ax_m.loglog(w, np.abs(mb[key]), "C0-", label="base model")
+        ph_d = np.degrees(np.unwrap(np.angle(d[key])))
+        ax_p.semilogx(w, ph_d, "ko", ms=4)
+        ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(mb[key]))), ph_d), "C0-")
+        if ma is not None:
+            ax_m.loglog(w, np.abs(ma[key]), "C3--", label=f"with {result.physics}")
+            ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(ma[key]))), ph_d), "C3--")
+        ax_m.set_title(label)
+        ax_m.set_ylabel("magnitude")
+        ax_p.set_ylabel("phase, deg")
+        ax_p.set_xlabel("omega, rad/s")
+        ax_m.grid(True, which="both", alpha=0.3)
+        ax_p.grid(True, which="both", alpha=0.3)
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle("Describing functions at the forcing frequencies")
+    fig.tight_layout()
+    return fig
+
+
+def plot_residuals(result, axes: Any = None):
+    """Residual before and after: spectrum, variance over the run, against |i| and |u|."""
+    from scipy import signal
+
+    plt = _pyplot()
+    arr = result.arrays
+    if axes is None:
+        fig, axes = plt.subplots(2, 2, figsize=(10, 6.5))
+    else:
+        fig = np.ravel(axes)[0].figure
+    axes = np.asarray(axes).reshape(2, 2)
+    fs = 1.0 / result.settings.get("dt", 0.01)
+    skip = int(round(result.settings["skip_seconds"] * fs))
+    before = arr["residual"][skip:]
+    after = arr.get("after_residual")
+    after = after[skip:] if after is not None else None
+    ax = axes[0, 0]
+    for x, lab, st in ((before, "base model", "C0-"), (after, f"with {result.physics}", "C3-")):
+        if x is None:
+            continue
+        f, P = signal.welch(x, fs=fs, nperseg=1024)
+        ax.loglog(2 * np.pi * f[1:], P[1:], st, lw=1, label=lab)
+    ff = arr.get("forcing_frequencies")
+    if ff is not None:
+        for w in ff[0]:
+            ax.axvline(w, color="0.7", lw=0.5, ls=":")
+        for w in ff[1]:
+            ax.axvline(w, color="0.85", lw=0.5, ls="--")
+    ax.set_xlabel("omega, rad/s")
+    ax.set_ylabel("residual PSD")
+    ax.set_title("residual spectrum (dotted: target, dashed: disturbance)")
+    ax.legend(fontsize=8)
+    ax = axes[0, 1]
+    nseg = 8
+    for x, lab, st in ((before, "base model", "C0o-"), (after, f"with {result.physics}", "C3s-")):
+        if x is None:
+            continue
+        v = [np.var(s) for s in np.array_split(x, nseg)]
+        ax.plot(np.arange(nseg) + 1, v, st, label=lab)
+    ax.set_xlabel("segment of the run")
+    ax.set_ylabel("residual variance")
+    ax.set_title("residual over the run")
+    for ax, key, lab in ((axes[1, 0], "amp_canal", "|i(t - tau_m)|, IPUT"),
+                         (axes[1, 1], "amp_control", "|u|, rad")):
+        b = arr.get(key)
+        if b is None:
+            ax.set_visible(False)
+            continue
+        ax.plot(b["centre"], b["mean"], "C0o-", label="base model")
+        if after is not None:
+            from .locate import _binned
+
+            # same conditioning variable, the after-residual
+            src = arr["canal_delayed"] if key == "amp_canal" else arr["u_after_cond"]
+            bb = _binned(after, src, edges_q=(0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
+                         if key == "amp_canal" else (0.0, 0.5, 0.8, 0.95, 0.99, 1.0))
+            ax.plot(bb["centre"], bb["mean"], "C3s-", label=f"with {result.physics}")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xlabel(lab)
+        ax.set_ylabel("mean residual x sign")
+        ax.set_title(f"residual conditioned on {lab.split(',')[0]}")
+    axes[1, 0].legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def plot_evidence(result, ax: Any = None):
+    """-log10 of each located statistic's bootstrap p-value."""
+    plt = _pyplot()
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+    else:
+        fig = ax.figure
+    keys = [k for k, e in result.where.items() if math.isfinite(e.value)]
+    p = [result.where[k].p_value for k in keys]
+    val = [-math.log10(x) if math.isfinite(x) and x > 0 else 0.0 for x in p]
+    ax.barh(range(len(keys)), val, color=["C3" if v >= 1.3 else "C0" for v in val])
+    ax.set_yticks(range(len(keys)))
+    ax.set_yticklabels(keys, fontsize=8)
+    ax.invert_yaxis()
+    B = result.settings["bootstrap"].get("replicates", 0)
+    if B:
+        ax.axvline(math.log10(B + 1), color="0.5", ls=":", lw=1)
+    ax.axvline(-math.log10(0.05), color="k", ls="--", lw=0.8)
+    ax.set_xlabel(f"-log10 p (parametric bootstrap, B = {B}; dashed: p = 0.05, dotted: "
+                  f"smallest possible)")
+    ax.set_title("Where the data and the base model differ")
+    fig.tight_layout()
+    return fig
+
+
+def plot_candidates(result, ax: Any = None):
+    """Fit improvement of each candidate on the decision likelihood, with the test's threshold."""
+    from scipy import stats
+
+    plt = _pyplot()
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(8, 4))
+    else:
+        fig = ax.figure
+    rows = [c for c in result.ranking if c.testable]
+    level = result.settings["level_per_candidate"]
+    names = [c.physics for c in rows]
+    d = [c.delta_neg_log_lik for c in rows]
+    ax.barh(range(len(rows)), d, color=["C3" if c.justified else "C0" for c in rows])
+    for i, c in enumerate(rows):
+        if c.df > 0:
+            crit = 0.5 * stats.chi2.isf(level, c.df)
+            ax.plot([crit, crit], [i - 0.4, i + 0.4], "k-", lw=2)
+        p = "0" if c.p_value == 0 else f"{c.p_value:.2g}"
+        ax.text(max(d[i], 0) * 1.02 + 0.1, i, f"p = {p}", va="center", fontsize=8)
+    ax.set_yticks(range(len(rows)))
+    ax.set_yticklabels(names, fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xscale("symlog", linthresh=1.0)
+    ax.set_xlabel("-ln L(base) - -ln L(extension) (black: threshold of the test)")
+    ax.set_title(f"Candidates (decision: {result.physics})")
+    fig.tight_layout()
+    return fig
+
+
+def _png(fig, path: Path) -> Path:
+    plt = _pyplot()
+    try:
+        fig.savefig(path, dpi=110)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def write_report(result, directory) -> dict[str, Path]:
+    """Write the figures, ``report.html`` and ``diagnosis.json`` to ``directory``."""
+    out = Path(directory)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {
+        "frequency_response": _png(plot_frequency_response(result), out / "frequency_response.png"),
+        "residuals": _png(plot_residuals(result), out / "residuals.png"),
+        "evidence": _png(plot_evidence(result), out / "evidence.png"),
+        "candidates": _png(plot_candidates(result), out / "candidates.png"),
+    }
+    paths["json"] = out / "diagnosis.json"
+    result.to_json(paths["json"])
+
+    def img(p):
+        data = base64.b64encode(Path(p).read_bytes()).decode("ascii")
+        return f'<img alt="{p.stem}" src="data:image/png;base64,{data}" style="max-width:100%">'
+
+    rows = []
+    for c in result.ranking:
+        if not c.testable:
+            rows.append(f"<tr><td>{html.escape(c.physics)}</td><td colspan=5>not tested: "
+                        f"{html.escape(c.reason)}</td></tr>")
+            continue
+        ps = ", ".join(f"{k} = {v:.4g} &plusmn; {c.stderr.get(k, math.nan):.2g}"
+                       for k, v in c.params.items())
+        rows.append(f"<tr{' style=&quot;font-weight:bold&quot;' if c.justified else ''}>"
+                    f"<td>{html.escape(c.physics)}</td><td>{c.delta_neg_log_lik:.2f}</td>"
+                    f"<td>{c.p_value:.3g}</td><td>{c.delta_bic:.1f}</td>"
+                    f"<td>{c.signature_score:.2f}</td><td>{ps}</td></tr>")
+    ev = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(e.description)}</td>"
+                 f"<td>{e.value:.4g}</td><td>{'' if not math.isfinite(e.p_value) else f'{e.p_value:.3f}'}</td></tr>"
+                 for k, e in result.where.items() if math.isfinite(e.value))
+    title = f"bayespilot diagnosis: {html.escape(result.physics)}"
+    page = f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title>
+<style>body{{font-family:sans-serif;max-width:1000px;margin:auto}}table{{border-collapse:collapse}}
+td,th{{border:1px solid #ccc;padding:3px 6px;font-size:90%}}</style></head><body>
+<h1>{title}</h1>
+<p>Recording: {html.escape(str(result.source))}. Mismatch: <b>{result.mismatch}</b>.
+Base model: -ln L (Eq. 4) = {result.base['neg_log_lik']:.2f}, VAF = {result.base['vaf']:.2f} %.
+Decision at family-wise level alpha = {result.settings['alpha']:g}
+({result.settings['level_per_candidate']:.2g} per candidate). Time {result.elapsed:.1f} s.</p>
+<h2>Candidates</h2>
+<table><tr><th>physics</th><th>&Delta;(-ln L)</th><th>p</th><th>&Delta;BIC</th><th>signature</th><th>parameters</th></tr>
+{''.join(rows)}</table>
+{img(paths['candidates'])}
+<h2>Where</h2>
+<table><tr><th>evidence</th><th>what</th><th>value</th><th>bootstrap p</th></tr>{ev}</table>
+{img(paths['evidence'])}
+<h2>Frequency responses</h2>{img(paths['frequency_response'])}
+<h2>Residuals before and after</h2>{img(paths['residuals'])}
+<pre>{html.escape(result.summary())}</pre>
+</body></html>
+"""
+    paths["html"] = out / "report.html"
+    paths["html"].write_text(page, encoding="utf-8")
+    return paths

@@ -1,0 +1,180 @@
+"""Tests of bayespilot.diagnose: estimators against closed forms, the censored likelihood
+against scipy.stats, the catalogue's physics, and decisions on simulated recordings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal, stats
+
+from bayespilot import presets
+from bayespilot.diagnose import DiagnosisResult, diagnose, get_extension, NAMES
+from bayespilot.diagnose.catalogue import G, OTOLITH_DEN, OTOLITH_NUM, specific_force
+from bayespilot.diagnose.decide import fit_ar, flat_tops
+from bayespilot.diagnose.locate import describing_function, forcing_of, remnant_like
+from bayespilot.kernels._censored import censored_neg_log_lik
+from bayespilot.likelihood import Likelihood
+from bayespilot.model import paper_model
+from bayespilot.simulate import remnant, simulate
+
+from conftest import make_rng
+
+
+def _linear_frf(p, w):
+    s = 1j * w
+    hnm = p["omega_nm"] ** 2 / (s ** 2 + 2 * p["zeta_nm"] * p["omega_nm"] * s + p["omega_nm"] ** 2)
+    hv = p["K_v"] * (1 + p["T_vl"] * s) * np.exp(-s * p["tau_v"]) * hnm
+    hscc = presets.K_SCC * (1 + presets.T_SCC1 * s) / (1 + presets.T_SCC2 * s)
+    hm = -p["K_m"] * np.exp(-s * p["tau_m"]) * hscc * hnm
+    return hv, hm
+
+
+def test_catalogue_has_the_six_names():
+    assert NAMES == ("motion-system-dynamics", "motion-washout", "otolith-channel",
+                     "threshold-shape", "time-varying-gains", "control-saturation")
+    with pytest.raises(ValueError, match="unknown extension"):
+        get_extension("wind")
+
+
+def test_describing_function_recovers_a_linear_pilot():
+    """Noiseless closed loop, no threshold: the two-input estimate equals the closed form."""
+    p = presets.paper_parameters("FD")
+    p["delta_abs"] = 0.0
+    rec = simulate(paper_model(), p, task="FD", motion_gain=1.0, remnant_gain=0.0, seed=0).recording
+    df = describing_function(rec.u, rec.e, rec.theta_ddot_m, forcing_of(rec))
+    hv, hm = _linear_frf(p, df["omega"])
+    ev = np.abs(df["H_v"] / hv - 1)
+    em = np.abs(df["H_m"] / hm - 1)
+    assert df["omega"].size == 24
+    # interpolation of the closed-loop ratios between neighbouring forcing frequencies
+    # is the only approximation: a few per cent, at most ~20 % at the lowest frequency
+    assert np.median(ev) < 0.05 and ev.max() < 0.1
+    assert np.median(em) < 0.06 and em.max() < 0.25
+    # the estimator is linear in u: the residual's estimate is the difference
+    half = describing_function(0.5 * rec.u, rec.e, rec.theta_ddot_m, forcing_of(rec))
+    np.testing.assert_allclose(half["H_v"], 0.5 * df["H_v"], rtol=1e-12)
+
+
+def test_describing_function_needs_whole_periods():
+    rec = simulate(task="FD", motion_gain=1.0, seed=0, duration=20.0).recording
+    fo = forcing_of(rec)
+    assert not fo.periodic
+    with pytest.raises(ValueError, match="whole periods"):
+        describing_function(rec.u, rec.e, rec.theta_ddot_m, fo)
+
+
+def test_censored_likelihood_matches_scipy():
+    rng = make_rng(3)
+    n = 400
+    y = rng.normal(0, 1, n)
+    u = y + rng.normal(0, 0.5, n)
+    hi, lo, sigma = 0.8, -1.1, 0.5
+    flags = np.where(u >= hi, 1, np.where(u <= lo, -1, 0))
+    u = np.clip(u, lo, hi)
+    v, gy, ds = censored_neg_log_lik(u, y, flags, lo, hi, sigma)
+    ref = -(stats.norm.logpdf(u[flags == 0], y[flags == 0], sigma).sum()
+            + stats.norm.logsf(hi, y[flags == 1], sigma).sum()
+            + stats.norm.logcdf(lo, y[flags == -1], sigma).sum())
+    assert v == pytest.approx(ref, rel=1e-12)
+    # gradients against central differences
+    h = 1e-6
+    for k in (int(np.argmax(flags == 1)), int(np.argmax(flags == -1)), int(np.argmax(flags == 0))):
+        yp, ym = y.copy(), y.copy()
+        yp[k] += h
+        ym[k] -= h
+        fd = (censored_neg_log_lik(u, yp, flags, lo, hi, sigma)[0]
+              - censored_neg_log_lik(u, ym, flags, lo, hi, sigma)[0]) / (2 * h)
+        assert gy[k] == pytest.approx(fd, rel=1e-5)
+    fd = (censored_neg_log_lik(u, y, flags, lo, hi, sigma + h)[0]
+          - censored_neg_log_lik(u, y, flags, lo, hi, sigma - h)[0]) / (2 * h)
+    assert ds == pytest.approx(fd, rel=1e-5)
+    # far in the tail (erfc underflows): the asymptotic branch
+    for z in (5.0, 24.9, 25.1, 40.0):
+        v1, _, _ = censored_neg_log_lik(np.array([z]), np.array([0.0]), np.array([1]), -1.0, z, 1.0)
+        assert -v1 == pytest.approx(stats.norm.logsf(z), rel=1e-6)
+
+
+def test_flat_tops_found_and_counted():
+    t = np.linspace(0, 10, 1000)
+    u = np.sin(2 * np.pi * 0.5 * t) + make_rng(1).normal(0, 0.01, t.size)
+    assert flat_tops(u)["n_samples"] == 0
+    c = np.clip(u, -0.9, 0.95)
+    ft = flat_tops(c)
+    expected = int(np.sum(u >= 0.95) + np.sum(u <= -0.9))
+    assert ft["n_samples"] == pytest.approx(expected, abs=4)  # runs shorter than 3 are not counted
+    assert ft["hi"] == pytest.approx(0.95) and ft["lo"] == pytest.approx(-0.9)
+
+
+def test_otolith_channel_is_the_specific_force_through_the_otolith():
+    """With the other channels off, u_hat = -K_ot H_nm H_oto e^{-tau_m s} (g theta_m - h theta_ddot_m)."""
+    rec = simulate(task="FD", motion_gain=0.75, remnant_gain=0.06, seed=4, duration=60.0).recording
+    model = get_extension("otolith-channel").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), K_v=0.0, K_m=0.0, tau_m=0.2, K_ot=0.3, h_head=1.5)
+    y = Likelihood(model, rec).response(p)
+    f = specific_force(rec, 1.5)
+    np.testing.assert_allclose(f, G * 0.75 * rec["theta"] - 1.5 * rec.theta_ddot_m)
+    wn, zn = p["omega_nm"], p["zeta_nm"]
+    num = -0.3 * wn ** 2 * np.polymul(OTOLITH_NUM, [1.0])
+    den = np.polymul(OTOLITH_DEN, [1.0, 2 * zn * wn, wn ** 2])
+    b, a = signal.bilinear(num, den, fs=rec.sample_rate_hz)
+    ref = signal.lfilter(b, a, np.concatenate([np.zeros(20), f[:-20]]))  # 0.2 s = 20 samples
+    late = slice(3500, None)  # after the start-up of the 5.3 s otolith pole
+    err = np.max(np.abs(y[late] - ref[late])) / np.std(ref[late])
+    assert err < 0.01
+
+
+def test_remnant_like_recovers_eq6():
+    # as the simulator makes it: on a 1 kHz grid, sampled at 100 Hz
+    n = remnant(600000, 0.001, 0.1, 0.06, make_rng(5), 0.01)[::10]
+    K_n, T_n = remnant_like(n, 0.01)
+    assert T_n == pytest.approx(0.06, rel=0.05)
+    assert K_n == pytest.approx(0.1, rel=0.05)
+
+
+def test_fit_ar_recovers_an_ar2():
+    rng = make_rng(2)
+    w = rng.standard_normal(20000)
+    x = signal.lfilter([1.0], [1.0, -1.2, 0.5], w)
+    a = fit_ar(x, order=2)
+    np.testing.assert_allclose(a, [1.2, -0.5], atol=0.02)
+
+
+def test_diagnose_rejects_bad_input():
+    rec = simulate(task="FD", seed=0, duration=20.0).recording
+    with pytest.raises(TypeError, match="Recording"):
+        diagnose(rec.u)
+    with pytest.raises(ValueError, match="alpha"):
+        diagnose(rec, alpha=0.0)
+    with pytest.raises(ValueError, match="unknown extension"):
+        diagnose(rec, candidates=["gravity"])
+
+
+@pytest.fixture(scope="module")
+def control_result():
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=21,
+                   duration=40.96).recording
+    return diagnose(rec, seed=0, n_bootstrap=0, n_starts=2)
+
+
+def test_diagnose_correct_model_says_none(control_result):
+    res = control_result
+    assert isinstance(res, DiagnosisResult)
+    assert res.physics == "none" and not res.mismatch
+    d = res.to_dict()
+    assert set(d) >= {"mismatch", "physics", "ranking", "where"}
+    assert {r["physics"] for r in d["ranking"]} == set(NAMES)
+    for r in d["ranking"]:
+        assert set(r) >= {"physics", "delta_neg_log_lik", "p_value", "params"}
+
+
+def test_diagnose_names_a_strong_washout():
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=22,
+                   duration=40.96).recording
+    res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2,
+                   candidates=["motion-washout", "time-varying-gains", "threshold-shape"])
+    assert res.physics == "motion-washout"
+    assert res.chosen.params["omega_w"] == pytest.approx(0.8, rel=0.3)
+    assert res.chosen.stderr["omega_w"] > 0
+    assert res.chosen.p_value < 1e-4
