@@ -1,0 +1,211 @@
+"""Figures of the three-step procedure, in the style of Figs. 6-9 of Pool et al. (2012).
+
+Each function takes :class:`~bayespilot.fit.result.FitResult` objects from
+:func:`~bayespilot.fit.three_step.fit_paper` (or read back with
+``FitResult.from_json``: everything is drawn from ``result.steps``) and
+returns a matplotlib Figure.
+
+- :func:`plot_step_one_thresholds` (Fig. 6): the Step I delta_abs of every GA
+  repetition, in ascending order of -ln L, one panel per condition.
+- :func:`plot_ga_convergence` (Fig. 7): -ln L and chosen parameters of the
+  best-so-far individual over the GA generations, for a few repetitions.
+- :func:`plot_step_two` (Fig. 8): -ln L of each repetition after Step I
+  (grey) and after the Gauss-Newton refinement of Step II (black), the kept
+  one circled.
+- :func:`plot_step_three` (Fig. 9): -ln L along delta_abs with the Step II
+  parameters fixed, the Step I estimates as crosses, the Step II value and the
+  final minimum as vertical lines.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from ..plots import _pyplot
+from .result import FitResult
+
+__all__ = ["plot_step_one_thresholds", "plot_ga_convergence", "plot_step_two", "plot_step_three"]
+
+#: Groen et al.'s passive pitch threshold, the grey line of Fig. 6, IPUT (= the paper's true value).
+PASSIVE_THRESHOLD = 0.0075
+
+
+def _paper_fit(result: FitResult, what: str) -> dict:
+    if not isinstance(result, FitResult):
+        raise TypeError(f"{what} needs a FitResult, got {type(result).__name__}")
+    steps = result.steps or {}
+    if result.method != "paper" or "step1" not in steps:
+        raise ValueError(f"{what} needs a fit by the paper's three-step procedure "
+                         f"(method 'paper' with its steps); got method {result.method!r}")
+    return steps
+
+
+def _grid(n: int, ncols: int | None = None):
+    ncols = ncols or min(n, 4)
+    nrows = int(np.ceil(n / ncols))
+    return nrows, ncols
+
+
+def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
+                             ncols: int | None = None, true_value: float | None = PASSIVE_THRESHOLD):
+    """Fig. 6: the Step I delta_abs of every repetition, ordered by -ln L.
+
+    Parameters
+    ----------
+    results : sequence of FitResult, or sequence of sequences of FitResult
+        One entry per panel (condition). An entry may itself be a list of fits
+        (the paper's five runs per condition), drawn as separate lines.
+    labels : sequence of str, optional
+        Panel titles.
+    ncols : int, optional
+        Panels per row (default up to 4).
+    true_value : float or None
+        Horizontal reference line (Groen et al.'s 0.0075 IPUT).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    panels = [r if isinstance(r, (list, tuple)) else [r] for r in results]
+    if not panels:
+        raise ValueError("no fits to plot")
+    if labels is not None and len(labels) != len(panels):
+        raise ValueError(f"{len(labels)} labels for {len(panels)} panels")
+    nrows, ncols = _grid(len(panels), ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.0 * ncols, 2.6 * nrows), sharey=True,
+                             squeeze=False)
+    for k, (ax, fits) in enumerate(zip(axes.flat, panels)):
+        for j, fit in enumerate(fits):
+            s1 = _paper_fit(fit, "plot_step_one_thresholds")["step1"]
+            i = s1["parameter_names"].index("delta_abs")
+            funs = np.array([r["fun"] for r in s1["runs"]])
+            deltas = np.array([r["x"][i] for r in s1["runs"]])
+            order = np.argsort(funs, kind="stable")
+            ax.plot(np.arange(1, len(order) + 1), deltas[order], "o-", ms=3, lw=0.8,
+                    label=f"run {j + 1}" if len(fits) > 1 else None)
+        if true_value is not None:
+            ax.axhline(true_value, color="0.6", lw=2, zorder=0)
+        ax.set_title(labels[k] if labels is not None else f"condition {k + 1}", fontsize=9)
+        ax.set_xlabel("GA repetition (by -ln L)")
+        if k % ncols == 0:
+            ax.set_ylabel(r"$\hat\delta_{abs}$ after Step I, IPUT")
+    for ax in list(axes.flat)[len(panels):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    return fig
+
+
+def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
+                        parameters: Sequence[str] = ("K_v", "K_m", "tau_m", "delta_abs"),
+                        repetitions: int = 3):
+    """Fig. 7: the best-so-far individual over the GA generations.
+
+    Rows are -ln L and ``parameters``; columns are the fits (conditions); each
+    panel shows ``repetitions`` GA runs as separate lines.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    results = list(results)
+    if not results:
+        raise ValueError("no fits to plot")
+    if repetitions < 1:
+        raise ValueError(f"repetitions must be >= 1, got {repetitions}")
+    rows = ["-ln L", *parameters]
+    fig, axes = plt.subplots(len(rows), len(results), figsize=(3.0 * len(results), 1.7 * len(rows)),
+                             sharex=True, squeeze=False)
+    for c, fit in enumerate(results):
+        s1 = _paper_fit(fit, "plot_ga_convergence")["step1"]
+        names = s1["parameter_names"]
+        missing = [p for p in parameters if p not in names]
+        if missing:
+            raise ValueError(f"parameter(s) {missing} not estimated in Step I ({', '.join(names)})")
+        for run in s1["runs"][:repetitions]:
+            hx = np.asarray(run["history_best_x"])
+            gen = np.arange(hx.shape[0])
+            line = axes[0, c].plot(gen, run["history_best_fun"], lw=1)[0]
+            for r, p in enumerate(parameters, start=1):
+                axes[r, c].plot(gen, hx[:, names.index(p)], lw=1, color=line.get_color())
+        axes[0, c].set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
+        axes[-1, c].set_xlabel("GA generation")
+    for r, name in enumerate(rows):
+        axes[r, 0].set_ylabel(name)
+    fig.tight_layout()
+    return fig
+
+
+def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = None):
+    """Fig. 8: -ln L per repetition after Step I (grey) and Step II (black).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    results = list(results)
+    if not results:
+        raise ValueError("no fits to plot")
+    fig, axes = plt.subplots(1, len(results), figsize=(3.0 * len(results), 2.8), squeeze=False)
+    for c, (ax, fit) in enumerate(zip(axes[0], results)):
+        steps = _paper_fit(fit, "plot_step_two")
+        before = np.array([r["fun"] for r in steps["step1"]["runs"]])
+        after = np.array([r["neg_log_lik"] for r in steps["step2"]])
+        k = np.arange(1, len(before) + 1)
+        ax.plot(k, before, "s", color="0.65", ms=4, label="Step I")
+        ax.plot(k, after, "s", color="k", ms=4, label="Step II")
+        best = steps["step2_best"]
+        ax.plot(k[best], after[best], "o", mfc="white", mec="k", ms=9, label="kept")
+        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
+        ax.set_xlabel("GA repetition")
+        if c == 0:
+            ax.set_ylabel("-ln L")
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def plot_step_three(results: Sequence[FitResult], labels: Sequence[str] | None = None):
+    """Fig. 9: -ln L along delta_abs (Step II parameters fixed) with the estimates marked.
+
+    The Step I estimates of each repetition are crosses on the curve, the
+    Step II value (the mean of the best Step I runs) an open circle and a
+    vertical line, the final minimum a filled circle and a vertical line.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    plt = _pyplot()
+    results = list(results)
+    if not results:
+        raise ValueError("no fits to plot")
+    fig, axes = plt.subplots(1, len(results), figsize=(3.0 * len(results), 2.8), squeeze=False)
+    for c, (ax, fit) in enumerate(zip(axes[0], results)):
+        steps = _paper_fit(fit, "plot_step_three")
+        if not steps.get("step3"):
+            raise ValueError("this fit has no Step III scan (fitted without threshold?)")
+        scan = steps["step3"][0]
+        grid = np.asarray(scan["grid"], dtype=float)
+        nll = np.array([np.nan if v is None else v for v in scan["neg_log_lik"]], dtype=float)
+        ax.plot(grid, nll, "k-", lw=1)
+        s1 = steps["step1"]
+        i = s1["parameter_names"].index("delta_abs")
+        d1 = np.array([r["x"][i] for r in s1["runs"]])
+        ax.plot(d1, np.interp(d1, grid, nll), "x", color="0.4", ms=6, label="Step I")
+        d2 = steps["step1_delta_abs"]
+        ax.axvline(d2, color="k", lw=0.8)
+        ax.plot(d2, np.interp(d2, grid, nll), "o", mfc="white", mec="k", ms=7, label="Step II")
+        ax.axvline(scan["best"], color="k", lw=0.8)
+        ax.plot(scan["best"], scan["best_neg_log_lik"], "ko", ms=6, label="Step III")
+        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
+        ax.set_xlabel(r"$\delta_{abs}$, IPUT")
+        if c == 0:
+            ax.set_ylabel("-ln L")
+            ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,54 @@
+"""The worked example (``bayespilot demo``, the README's main job), on a tiny study.
+
+The report's table must carry the numbers of the files written beside it:
+the fits (JSON), the posteriors (netCDF) and the comparisons (JSON).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pytest
+
+from bayespilot.cli import main
+from bayespilot.compare import Comparison, decide
+from bayespilot.fit.result import FitResult
+from bayespilot.io import read_recording
+from bayespilot.sample import Posterior
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    code = main(["-q", "demo", "--out", str(out), "--motion-gains", "1", "--duration", "20",
+                 "--max-steps", "400", "--nlive", "30", "--seed", "3"])
+    return code, out
+
+
+def test_demo_writes_the_report_and_its_files(demo):
+    code, out = demo
+    assert code == 0
+    report = (out / "report.md").read_text()
+    rows = [line for line in report.splitlines() if line.startswith("| FD_k1 |")]
+    assert len(rows) == 1
+    cells = [c.strip() for c in rows[0].strip("|").split("|")]
+    fit = FitResult.from_json(out / "fits" / "FD_k1_threshold.json")
+    fit0 = FitResult.from_json(out / "fits" / "FD_k1_none.json")
+    assert float(cells[3]) == pytest.approx(fit.params["delta_abs"], abs=5e-5)
+    assert float(cells[7]) == pytest.approx(fit.neg_log_lik, abs=0.05)
+    assert float(cells[8]) == pytest.approx(fit0.neg_log_lik, abs=0.05)
+    # the model with threshold contains the one without: the fast fit must not be worse
+    assert fit.neg_log_lik <= fit0.neg_log_lik + 1e-6
+    post = Posterior.from_netcdf(out / "posteriors" / "FD_k1.nc")
+    median = float(re.match(r"[0-9.]+", cells[4]).group(0))
+    assert median == pytest.approx(np.median(post.draws("delta_abs")), abs=5e-5)
+    cmp_ = Comparison.from_json(out / "comparisons" / "FD_k1.json")
+    assert cells[10] == cmp_.decision == decide(cmp_.log_bayes_factor, cmp_.log_bayes_factor_err)
+    pooled = json.loads((out / "pooled_comparison.json").read_text())
+    assert pooled["n"] == 1 and pooled["log_bayes_factor"] == pytest.approx(cmp_.log_bayes_factor)
+    for png in re.findall(r"\]\((figures/[^)]+\.png)\)", report):
+        assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rec = read_recording(out / "recordings" / "FD_k1")
+    assert (rec.task, rec.motion_gain, rec.n_samples) == ("FD", 1.0, 2000)
