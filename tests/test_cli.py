@@ -243,7 +243,7 @@ def test_bad_input_is_one_line_and_exit_2(case, ft_run, ft_params, tmp_path, cap
 
 # --- demo -------------------------------------------------------------------------------
 def test_demo_writes_plot_and_recording(tmp_path, capsys):
-    code, out, err = _run(capsys, "demo", "--out", tmp_path / "demo", "--seed", "2")
+    code, out, err = _run(capsys, "demo", "--quick", "--out", tmp_path / "demo", "--seed", "2")
     assert code == 0, err
     png = tmp_path / "demo" / "traces.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20_000

@@ -173,14 +173,26 @@ def _read_params(path: str, model, *, require: Sequence[str] = ()) -> dict[str, 
 
 
 def _read(path: str):
-    """A Recording from disk; any problem with it is bad input."""
+    """A Recording from disk; any problem with it is bad input.
+
+    A questionable recording (short, slowly sampled) is read, with one
+    ``bayespilot: warning: ...`` line on stderr per reason.
+    """
     from .io import read_recording
-    from .recording import RecordingError
+    from .recording import QuestionableRecordingWarning, RecordingError
 
     try:
-        return read_recording(path)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", QuestionableRecordingWarning)
+            rec = read_recording(path)
     except RecordingError as exc:
         raise UsageError(str(exc)) from None
+    for w in caught:
+        if issubclass(w.category, QuestionableRecordingWarning):
+            print(f"{PROG}: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return rec
 
 
 def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: str, motion_gain: float,
@@ -217,6 +229,8 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
         raise UsageError(str(exc)) from None
     except OSError as exc:
         where = exc.filename or out
+        if str(where).endswith(".tmp"):  # write_recording's temporary file: name the output
+            where = out
         raise CommandFailed(f"{where}: cannot write the recording ({exc.strerror or exc})") from None
     return sim, csv_path, json_path
 
@@ -295,12 +309,25 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         try:
             fit.to_json(args.json)
         except OSError as exc:
-            raise CommandFailed(f"cannot write {args.json}: {exc}") from None
+            raise CommandFailed(f"{args.json}: cannot write the fit ({exc.strerror or exc})") from None
         _say(args, f"wrote {args.json}")
     return EXIT_OK
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
+    if not args.quick:
+        from .example import run_example
+
+        try:
+            report = run_example(args.out, seed=args.seed, motion_gains=args.motion_gains,
+                                 task=args.task, duration=args.duration,
+                                 max_steps=args.max_steps, nlive=args.nlive,
+                                 progress=not args.quiet, say=lambda text: _say(args, text))
+        except OSError as exc:
+            raise CommandFailed(f"{args.out}: cannot write the example "
+                                f"({exc.strerror or exc})") from None
+        print(f"report: {report}")
+        return EXIT_OK
     from . import presets
     from .model import paper_model
     from .plots import plot_traces
@@ -385,7 +412,7 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
                f"-> {out}")
     try:
         summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
-                               progress=not args.quiet)
+                               progress=not args.quiet, connect_timeout=args.connect_timeout)
     except CampaignError as exc:
         raise CommandFailed(str(exc)) from None
     _say(args, str(summary))
@@ -426,6 +453,158 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# --- posteriors and model comparison (bayespilot.sample, bayespilot.compare) ----------------------
+def _print_warnings(caught) -> None:
+    """Warnings caught during a computation, one line each on stderr."""
+    seen = set()
+    for w in caught:
+        text = str(w.message)
+        if text not in seen:
+            seen.add(text)
+            print(f"{PROG}: warning: {text}", file=sys.stderr)
+
+
+def _read_posterior(path: str):
+    """A Posterior from a netCDF file written by 'bayespilot sample'; problems are bad input."""
+    from .sample import Posterior
+
+    p = Path(path)
+    if not p.exists():
+        raise UsageError(f"{p}: posterior file not found")
+    if p.is_dir():
+        raise UsageError(f"{p}: is a directory, not a posterior (.nc) file")
+    try:
+        return Posterior.from_netcdf(p)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+    except Exception as exc:  # netCDF4/h5netcdf/xarray raise many types for a file that is not netCDF
+        raise UsageError(f"{p}: is not a netCDF posterior written by 'bayespilot sample' "
+                         f"({type(exc).__name__})") from None
+
+
+def _write_json(path: str, obj) -> None:
+    p = Path(path)
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(json.dumps(obj, indent=1, allow_nan=True))
+    except OSError as exc:
+        raise CommandFailed(f"{p}: cannot write ({exc.strerror or exc})") from None
+
+
+def _cmd_sample(args: argparse.Namespace) -> int:
+    from .sample import sample
+
+    out = Path(args.output)
+    if out.suffix != ".nc":
+        raise UsageError(f"argument -o/--output: {out} must end in .nc (a netCDF file)")
+    rec = _read(args.recording)
+    _say(args, f"sampling the posterior of {rec.source} ({args.likelihood} likelihood, at most "
+               f"{args.max_steps} steps; starts with a maximum-likelihood fit) ...")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            post = sample(rec, likelihood=args.likelihood, seed=args.seed,
+                          max_steps=args.max_steps, min_steps=min(1000, args.max_steps),
+                          progress=not args.quiet, backend=args.backend)
+        except RuntimeError as exc:
+            raise CommandFailed(str(exc)) from None
+        except ValueError as exc:  # e.g. a backend file of another run
+            raise UsageError(str(exc)) from None
+        except OSError as exc:  # the HDF5 backend cannot be created or opened
+            raise CommandFailed(f"{args.backend}: cannot open the sampler's backend file "
+                                f"({exc.strerror or exc})") from None
+    _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
+    try:
+        post.to_netcdf(out)
+    except OSError as exc:
+        raise CommandFailed(f"{out}: cannot write the posterior ({exc.strerror or exc})") from None
+    print(post)
+    _say(args, f"wrote {out}")
+    if args.json:
+        _write_json(args.json, post.summary())
+        _say(args, f"wrote {args.json}")
+    return EXIT_OK
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from .compare import compare
+
+    posterior = _read_posterior(args.posterior) if args.posterior else None
+    rec = _read(args.recording)
+    _say(args, f"comparing the model with and without threshold on {rec.source} "
+               f"({args.likelihood} likelihood, dynesty with {args.nlive} live points) ...")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            result = compare(rec, likelihood=args.likelihood, seed=args.seed, nlive=args.nlive,
+                             posterior=posterior,
+                             savage_dickey_samples=not args.no_savage_dickey)
+        except RuntimeError as exc:
+            raise CommandFailed(str(exc)) from None
+    _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
+    print(result.summary())
+    if args.json:
+        _write_json(args.json, result.to_dict())
+        _say(args, f"wrote {args.json}")
+    return EXIT_OK
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from .plots import plot_chains, plot_marginal, plot_pair
+
+    post = _read_posterior(args.posterior)
+    out = Path(args.output)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CommandFailed(f"{out}: cannot create the folder ({exc.strerror or exc})") from None
+    truth = post.truth
+    names = post.parameter_names
+    main = "delta_abs" if "delta_abs" in names else names[0]
+    written = []
+    png = out / f"marginal_{main}.png"
+    _save_figure(plot_marginal(post, main, truth=truth.get(main)), png)
+    written.append(png)
+    pair = [n for n in ("K_m", "tau_m", "delta_abs") if n in names]
+    if pair:
+        png = out / "pair.png"
+        _save_figure(plot_pair(post, pair, truth=truth), png)
+        written.append(png)
+    png = out / "trace.png"
+    _save_figure(plot_chains(post), png)
+    written.append(png)
+    note = (f" (true {main} = {truth[main]:g} marked)" if main in truth else "")
+    _say(args, "wrote " + ", ".join(str(p) for p in written) + note)
+    return EXIT_OK
+
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    from .diagnose import NAMES, diagnose
+
+    rec = _read(args.recording)
+    _say(args, f"diagnosing {rec.source}: base fit, located evidence ({args.bootstrap} bootstrap "
+               f"replicates), {len(NAMES)} catalogue extensions ...")
+    try:
+        res = diagnose(rec, seed=args.seed, n_bootstrap=args.bootstrap, alpha=args.alpha)
+    except ValueError as exc:  # e.g. a recording too short for the analysis
+        raise UsageError(str(exc)) from None
+    print(res.summary())
+    if args.json:
+        try:
+            res.to_json(args.json)
+        except OSError as exc:
+            raise CommandFailed(f"cannot write {args.json}: {exc.strerror or exc}") from None
+        _say(args, f"wrote {args.json}")
+    if args.report:
+        try:
+            paths = res.report(args.report)
+        except OSError as exc:
+            raise CommandFailed(f"{args.report}: cannot write the report "
+                                f"({exc.strerror or exc})") from None
+        _say(args, f"wrote {paths['html']} (with {', '.join(p.name for k, p in paths.items() if k not in ('html',))})")
+    return EXIT_OK
+
 # --- the parser ------------------------------------------------------------------------
 TOP_EPILOG = f"""\
 Estimates pilot-model parameters and motion-perception thresholds from
@@ -437,6 +616,9 @@ Examples:
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
   bayespilot loglik out/run --params params.json
   bayespilot fit out/run --json out/run-fit.json
+  bayespilot sample out/run -o out/run-post.nc --json out/run-post.json
+  bayespilot plot out/run-post.nc -o out/run-plots
+  bayespilot compare out/run --json out/run-compare.json
 
 A recording is two files with one stem, STEM.csv (signals) and STEM.json
 (what the run was); see docs/recording-format.md.
@@ -444,7 +626,8 @@ A recording is two files with one stem, STEM.csv (signals) and STEM.json
 Exit codes:
   0  success
   1  runtime failure (the simulated loop diverged, the model is unstable at
-     the given parameters, an output file could not be written)
+     the given parameters, an output file could not be written, the dask
+     scheduler could not be reached)
   2  bad input or usage (a missing, unreadable or invalid recording or
      parameter file, an unknown parameter name, an out-of-range value)
 Errors are one line on stderr: 'bayespilot: error: <message>'.
@@ -463,7 +646,7 @@ the others keep their Table 3 values for the task. Values must lie within the
 bounds of Table 1. For example:
   {"K_m": 0.3, "delta_abs": 0.02}
 
-Example:
+Examples:
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
   bayespilot simulate --task FD --motion-gain 0.5 --params mine.json --duration 40 -o out/short
 """
@@ -479,7 +662,7 @@ K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs
   {"K_v": 1.057, "T_vl": 0.409, "tau_v": 0.279, "K_m": 0.532, "tau_m": 0.203,
    "omega_nm": 12.0, "zeta_nm": 0.22, "delta_abs": 0.0075}
 
-Example:
+Examples:
   bayespilot loglik out/run --params params.json
   bayespilot loglik out/run.csv --params params.json --no-threshold --initial rest
 """
@@ -491,23 +674,31 @@ JSON (--json) has "params" (the 8 names), "neg_log_lik", "vaf", "method",
 "seed", the settings, and the details of every step (GA repetitions with their
 histories, Gauss-Newton refinements, the threshold scan).
 
-Example:
+Examples:
   bayespilot fit out/run --json out/run-fit.json
   bayespilot fit out/run --method fast --no-threshold --seed 2
 """
 
 DEMO_EPILOG = """\
-Runs the main job on a built-in example: simulates one run of task FD at
-K_theta = 1 with remnant fraction F_n = 0.2 and the Table 3 parameters of
-Pool et al. (2012); writes it to DIR/recording.csv + .json; reads it back and
-prints -ln L at the paper's parameters for the model with and without the
-threshold, and the VAF; plots e, u, theta_ddot_m and the canal output i with the threshold
-band +-delta_abs to DIR/traces.png. Takes a few seconds (the first run also
-compiles the numerical kernels).
+Runs the main job on a built-in example, the worked example of the docs: simulates
+a small study (one 81.92 s run of task FD per motion gain K_theta, 0.5 and 1
+by default, remnant fraction 0.15, the Table 3 pilot of Pool et al. 2012),
+writes the runs as recordings and reads them back, fits each by maximum
+likelihood with and without threshold, samples the posterior with emcee,
+compares the models with and without threshold by nested sampling, and writes
+DIR/report.md with a table and figures (and the fits, posteriors and
+comparisons beside it). A few minutes on a laptop; the first run also
+compiles the numerical kernels.
 
-Example:
+--quick instead simulates one run (FD, K_theta = 1, F_n = 0.2) to
+DIR/recording.csv + .json, prints -ln L at the paper's parameters with and
+without threshold and the VAF, and plots the traces to DIR/traces.png, in
+seconds.
+
+Examples:
   bayespilot demo
-  bayespilot demo --out /tmp/demo --seed 7
+  bayespilot demo --out /tmp/demo --seed 7 --motion-gains 0.25,0.5,0.75,1
+  bayespilot demo --quick
 """
 
 
@@ -527,18 +718,93 @@ DIR/summary.csv and DIR/summary.md (mu, sigma and N50 of delta_abs per cell
 beside the paper's, with a binomial check) and DIR/delta_abs_histograms.png.
 The full study is 8000 fits (4000 with threshold, 4000 without).
 
-Example:
+Examples:
   bayespilot replicate --realizations 100 --out replication
   bayespilot replicate --realizations 5 --method fast --tasks FD --motion-gains 0.25,1 \\
       --remnant-fractions 0,0.2 --out quick --workers 2
   bayespilot replicate --realizations 100 --out replication --scheduler tcp://10.0.0.5:8786
 """
 
+SAMPLE_EPILOG = """\
+Samples the posterior of K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm and
+delta_abs with emcee (priors uniform on the Table 1 bounds), starting from a
+fast maximum-likelihood fit, until the chain is 50 autocorrelation times long
+(or --max-steps), and writes it as ArviZ InferenceData to POST.nc (netCDF:
+the draws, the sample statistics lp and acceptance, and the settings as
+attributes; for a simulated recording also the true values). Prints mean,
+median, 90% HDI, R-hat, ESS and the autocorrelation time of each parameter.
+'coloured' models the output error as an AR(2) process (its partial
+autocorrelations pacf_1, pacf_2 are sampled too); 'eq4' treats it as white.
+
+The summary JSON (--json) has one object per parameter name with mean,
+median, hdi_90 ([low, high]), r_hat, ess_bulk, ess_tail and tau.
+A run that stops at --max-steps before converging warns and still writes.
+
+Examples:
+  bayespilot sample out/run -o out/run-post.nc --json out/run-post.json
+  bayespilot sample out/run -o out/run-col.nc --likelihood coloured --max-steps 5000
+"""
+
+COMPARE_EPILOG = """\
+Compares the pilot model with threshold (delta_abs uniform on [0, 0.1]) and
+without (delta_abs = 0) on one recording: the log Bayes factor ln BF =
+ln Z(threshold) - ln Z(none) from nested sampling (dynesty) with its standard
+error, a Savage-Dickey cross-check from an emcee posterior (sampled here, or
+given with --posterior; valid only where the posterior has draws near
+delta_abs = 0), and AIC/BIC from the maximum-likelihood fits. The decision is
+'threshold' if ln BF - 2 err > ln 10, 'none' if ln BF + 2 err < -ln 10, and
+'inconclusive' otherwise (Jeffreys' "strong" evidence; see docs/comparison.md).
+
+The JSON (--json) has log_bayes_factor, log_bayes_factor_err, decision,
+jeffreys_category, savage_dickey_log_bayes_factor, savage_dickey_valid,
+delta_aic, delta_bic (none - threshold: > 0 favours the threshold), both
+evidences and the settings.
+
+Examples:
+  bayespilot compare out/run --json out/run-compare.json
+  bayespilot compare out/run --posterior out/run-post.nc --seed 1
+"""
+
+PLOT_EPILOG = """\
+Plots a posterior written by 'bayespilot sample' into DIR:
+marginal_delta_abs.png (histogram with the 90% HDI, the median and, for a
+simulated recording, the true value), pair.png (K_m, tau_m, delta_abs) and
+trace.png (every walker and the log posterior against the step).
+
+Examples:
+  bayespilot plot out/run-post.nc -o out/run-plots
+"""
+
+DIAGNOSE_EPILOG = """\
+Locates where a recording and the fitted pilot model differ, names the physics
+the model leaves out, fits it, and shows the fit improve. Steps: the fast
+fit of the paper's model; located evidence (frequency, time, amplitude) with
+p-values from a parametric bootstrap (--bootstrap replicates of the fitted
+model with its own remnant); every catalogue extension (motion-system-dynamics,
+motion-washout, otolith-channel, threshold-shape, time-varying-gains,
+control-saturation) fitted and tested by a likelihood-ratio test on a
+pre-whitened (GLS) likelihood, or by its flat tops and the censored likelihood
+for control-saturation. The answer is 'none' when no extension passes the
+family-wise level --alpha. Reads only the recording. About a minute at
+N = 8192 (see docs/diagnose.md).
+
+The JSON (--json) has mismatch, physics (a catalogue name or 'none'), ranking
+(physics, delta_neg_log_lik, p_value, delta_bic, params, stderr per
+candidate), where (each located statistic with its bootstrap p-value), base,
+chosen and the settings. --report DIR writes frequency_response.png,
+residuals.png, evidence.png, candidates.png, diagnosis.json and report.html
+(self-contained, figures embedded).
+
+Examples:
+  bayespilot diagnose out/run --json out/run-diagnosis.json
+  bayespilot diagnose out/run --report out/run-diagnosis --seed 1
+"""
+
 def _common(parser: argparse.ArgumentParser, *, sub: bool) -> None:
     """-q/-v, on the top-level parser and (so they work after the command) on each subcommand."""
     parser.add_argument("-q", "--quiet", action="store_true",
                         default=argparse.SUPPRESS if sub else False,
-                        help="print only the results (no summaries, no VAF line)")
+                        help="print only the results (no progress bars, summaries or VAF line)")
     parser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS if sub else 0,
                         help="print details (parameters, model, recording) to stderr, and the "
                              "traceback of an unexpected error")
@@ -619,10 +885,21 @@ def build_parser() -> argparse.ArgumentParser:
                         help="simulate, evaluate and plot a built-in example",
                         description="The main job of bayespilot on a built-in example.")
     p.add_argument("--out", default="bayespilot-demo", metavar="DIR",
-                   help="directory for recording.csv, recording.json and traces.png "
-                        "(default bayespilot-demo/)")
+                   help="output directory (default bayespilot-demo/)")
     p.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the remnant noise, an integer >= 0 (default 0)")
+                   help="seed of the remnant noise, fits and samplers, an integer >= 0 "
+                        "(default 0)")
+    p.add_argument("--quick", action="store_true",
+                   help="one simulated run, -ln L at the paper's parameters and a plot only")
+    p.add_argument("--task", type=_task_name, default="FD", help="FD or FT (default FD)")
+    p.add_argument("--motion-gains", type=_csv_of(_positive, "numbers > 0"), default=(0.5, 1.0),
+                   metavar="K,K", help="K_theta of the runs, one run each (default 0.5,1)")
+    p.add_argument("--duration", type=_positive, default=None, metavar="S",
+                   help="measurement time of each run, s (default 81.92)")
+    p.add_argument("--max-steps", type=_count, default=6000, metavar="N",
+                   help="cap on the emcee chain length per run (default 6000)")
+    p.add_argument("--nlive", type=_count, default=150, metavar="N",
+                   help="live points of the nested sampler (default 150)")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_demo)
 
@@ -640,6 +917,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: a local cluster)")
     p.add_argument("--workers", type=_count, metavar="N",
                    help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--connect-timeout", type=_positive, default=10.0, metavar="S",
+                   help="seconds to wait for --scheduler and its first worker before giving up "
+                        "with exit code 1 (default 10)")
     p.add_argument("--method", choices=("paper", "fast"), default="paper",
                    help="'paper': the three-step procedure (default); 'fast': multi-start "
                         "least squares with a profile over delta_abs")
@@ -660,6 +940,74 @@ def build_parser() -> argparse.ArgumentParser:
                         "population=80 for the paper method, n_starts=4 for the fast one")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_replicate)
+
+    p = subs.add_parser("sample", formatter_class=fmt, epilog=SAMPLE_EPILOG,
+                        help="sample the posterior of the pilot parameters (emcee)",
+                        description="Posterior of the pilot-model parameters with emcee.")
+    p.add_argument("recording", metavar="REC",
+                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    p.add_argument("-o", "--output", required=True, metavar="POST.nc",
+                   help="the posterior as a netCDF file (ArviZ InferenceData)")
+    p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
+                   help="'eq4': white output error (the paper's Eq. 4, default); 'coloured': "
+                        "AR(2) output error")
+    p.add_argument("--json", metavar="SUMMARY",
+                   help="write the per-parameter summary to this JSON file")
+    p.add_argument("--seed", type=_seed, default=0, metavar="S",
+                   help="seed of the initial fit and the sampler (default 0)")
+    p.add_argument("--max-steps", type=_count, default=20000, metavar="N",
+                   help="stop after N steps even if not converged (default 20000)")
+    p.add_argument("--backend", metavar="FILE.h5",
+                   help="emcee HDF5 file: a run interrupted or stopped at --max-steps resumes "
+                        "from it")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_sample)
+
+    p = subs.add_parser("compare", formatter_class=fmt, epilog=COMPARE_EPILOG,
+                        help="Bayes factor of the model with threshold against the one without",
+                        description="Model comparison: with against without threshold.")
+    p.add_argument("recording", metavar="REC",
+                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    p.add_argument("--json", metavar="OUT", help="write the result to this JSON file")
+    p.add_argument("--seed", type=_seed, default=0, metavar="S",
+                   help="seed of the nested sampler and the sampler (default 0)")
+    p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
+                   help="'eq4' (default) or 'coloured' (AR(2) output error)")
+    p.add_argument("--nlive", type=_whole_number(20), default=200, metavar="N",
+                   help="live points of each nested-sampling run (default 200)")
+    p.add_argument("--posterior", metavar="POST.nc",
+                   help="posterior from 'bayespilot sample' for the Savage-Dickey check "
+                        "(default: sample one)")
+    p.add_argument("--no-savage-dickey", action="store_true",
+                   help="skip the Savage-Dickey check (no emcee run)")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_compare)
+
+    p = subs.add_parser("plot", formatter_class=fmt, epilog=PLOT_EPILOG,
+                        help="plot a posterior: marginal of delta_abs, pair plot, traces",
+                        description="Plots of a posterior written by 'bayespilot sample'.")
+    p.add_argument("posterior", metavar="POST.nc", help="netCDF file from 'bayespilot sample'")
+    p.add_argument("-o", "--output", required=True, metavar="DIR",
+                   help="folder for the PNG files (created if missing)")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_plot)
+
+    p = subs.add_parser("diagnose", formatter_class=fmt, epilog=DIAGNOSE_EPILOG,
+                        help="locate a model mismatch, name the missing physics, fit it",
+                        description="Diagnose model mismatch on one recording.")
+    p.add_argument("recording", metavar="REC",
+                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    p.add_argument("--json", metavar="OUT", help="write the diagnosis to this JSON file")
+    p.add_argument("--report", metavar="DIR",
+                   help="write PNG figures, report.html and diagnosis.json to this folder")
+    p.add_argument("--seed", type=_seed, default=0, metavar="S",
+                   help="seed of the base fit's starts and the bootstrap (default 0)")
+    p.add_argument("--bootstrap", type=_whole_number(0), default=39, metavar="B",
+                   help="bootstrap replicates for the located evidence (default 39; 0: none)")
+    p.add_argument("--alpha", type=_fraction, default=0.01, metavar="A",
+                   help="family-wise false-alarm level of the decision (default 0.01)")
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_diagnose)
     return parser
 
 

@@ -1,0 +1,440 @@
+"""Bad input, everywhere a user can give it.
+
+A corpus over every command of the ``bayespilot`` CLI and the main public
+functions: missing files, unreadable or inconsistent recordings
+(``tests/data/malformed``), misspelled or out-of-range parameters, priors
+outside the bounds, an unreachable dask scheduler.  The CLI must exit with 1
+or 2 and one line ``bayespilot: error: ...`` on stderr, without a traceback;
+the functions must raise a specific exception whose message names the
+problem.  Also here: the warnings for questionable (valid but unusual)
+recordings, and the CLI's help, version and exit-code conventions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import subprocess
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+from scipy import stats
+
+from bayespilot import presets
+from bayespilot.cli import build_parser, main
+from bayespilot.io import read_mat, read_recording, write_recording
+from bayespilot.recording import (QuestionableRecordingWarning, Recording, RecordingError,
+                                  questionable)
+
+MALFORMED = Path(__file__).parent / "data" / "malformed"
+CASES = sorted({p.name.split(".")[0] for p in MALFORMED.iterdir() if p.suffix in (".csv", ".json")})
+
+
+def _run(capsys, *argv):
+    """main(argv) -> (exit code, stdout, stderr)."""
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _one_error_line(err: str, out: str = "") -> str:
+    """The single 'bayespilot: error: ...' line of stderr (asserting there is exactly one)."""
+    assert "Traceback" not in err and "Traceback" not in out
+    errors = [line for line in err.splitlines() if line.startswith("bayespilot: error: ")]
+    others = [line for line in err.splitlines()
+              if line.strip() and not line.startswith(("bayespilot: error: ",
+                                                       "bayespilot: warning: "))]
+    assert len(errors) == 1 and not others, err
+    return errors[0]
+
+
+def _recording(duration: float, rate: float = 100.0, **meta) -> Recording:
+    t = np.arange(int(round(duration * rate))) / rate
+    x = np.sin(2 * np.pi * 0.3 * t)
+    return Recording({"t": t, "e": x, "u": 0.5 * x, "theta_ddot_m": np.cos(t)}, rate, 1.0, "FD",
+                     meta)
+
+
+@pytest.fixture(scope="module")
+def run10(tmp_path_factory):
+    """A 10-s simulated FD run on disk (valid, but shorter than the paper's: it warns)."""
+    d = tmp_path_factory.mktemp("run")
+    assert main(["simulate", "--duration", "10", "--seed", "1", "--remnant-fraction", "0.1",
+                 "-o", str(d / "run"), "-q"]) == 0
+    return d / "run"
+
+
+@pytest.fixture(scope="module")
+def params(tmp_path_factory):
+    p = tmp_path_factory.mktemp("params") / "fd.json"
+    p.write_text(json.dumps(presets.paper_parameters("FD")))
+    return p
+
+
+def _write(path: Path, text: str) -> Path:
+    path.write_text(text)
+    return path
+
+
+# --- every command: help, unknown options, missing arguments -------------------------------
+def _subcommands() -> list[str]:
+    parser = build_parser()
+    for action in parser._actions:  # argparse keeps the subparsers here
+        if isinstance(action, argparse._SubParsersAction):
+            return sorted(action.choices)
+    raise AssertionError("the CLI has no subcommands")
+
+
+def test_the_commands_we_know_are_there():
+    assert {"simulate", "loglik", "fit", "demo", "replicate"} <= set(_subcommands())
+
+
+@pytest.mark.parametrize("command", _subcommands())
+def test_every_command_has_help_with_examples(command, capsys):
+    code, out, err = _run(capsys, command, "--help")
+    assert code == 0 and not err
+    assert "Examples:" in out
+    assert "--quiet" in out and "--verbose" in out
+
+
+@pytest.mark.parametrize("command", _subcommands())
+def test_every_command_refuses_an_unknown_option(command, capsys):
+    code, out, err = _run(capsys, command, "--no-such-option")
+    assert code == 2
+    line = _one_error_line(err, out)
+    assert "--no-such-option" in line or "required" in line
+
+
+def test_top_level_help_documents_exit_codes_and_version(capsys):
+    code, out, _ = _run(capsys, "--help")
+    assert code == 0
+    assert "Exit codes" in out
+    for text in ("0  success", "1  ", "2  bad input or usage", "--version", "--quiet", "--verbose"):
+        assert text in out
+    code, out, _ = _run(capsys, "--version")
+    assert code == 0 and out.startswith("bayespilot ")
+
+
+@pytest.mark.parametrize("argv", [[], ["fitt"], ["-q", "-v", "demo"], ["--verbose", "--quiet"]],
+                         ids=["no command", "misspelled command", "quiet and verbose",
+                              "quiet and verbose, no command"])
+def test_usage_errors_exit_2(argv, capsys):
+    code, out, err = _run(capsys, *argv)
+    assert code == 2
+    _one_error_line(err, out)
+
+
+# --- recordings that cannot be read ------------------------------------------------------------
+@pytest.mark.parametrize("case", CASES)
+def test_cli_refuses_each_malformed_recording(case, params, capsys):
+    for argv in (["fit", MALFORMED / case, "--method", "fast"],
+                 ["loglik", MALFORMED / case, "--params", params]):
+        code, out, err = _run(capsys, *argv)
+        assert code == 2, (argv, err)
+        line = _one_error_line(err, out)
+        assert case in line  # names the file
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_api_refuses_each_malformed_recording(case):
+    with pytest.raises(RecordingError, match=case):
+        read_recording(MALFORMED / case)
+
+
+def _cli_bad(d: Path, run: Path, p: Path) -> dict[str, tuple[list, int, str]]:
+    """name -> (argv, exit code, text the one error line must contain)."""
+    not_mat = _write(d / "not.mat", "this is not a MATLAB file\n")
+    kvv = _write(d / "kvv.json", '{"K_vv": 1.0}')
+    wide = _write(d / "wide.json", json.dumps({**presets.paper_parameters("FD"), "zeta_nm": 5.0}))
+    (d / "adir").mkdir(exist_ok=True)
+    (d / "afile").write_text("")
+    # the posterior commands, where they exist (they are being added to the CLI)
+    optional = {
+        "sample": {"sample: missing recording": (["sample", d / "nothere", "-o", d / "p.nc"], 2,
+                                                 "file not found"),
+                   "sample: malformed recording": (["sample", MALFORMED / "nan_value", "-o",
+                                                    d / "p.nc"], 2, "NaN in column 'e'"),
+                   "sample: unknown likelihood": (["sample", run, "-o", d / "p.nc",
+                                                   "--likelihood", "eq5"], 2, "--likelihood"),
+                   "sample: backend in a missing folder": (
+                       ["sample", run, "-o", d / "p.nc", "--max-steps", "10", "--backend",
+                        d / "none" / "b.h5"], 1, "cannot open the sampler's backend file")},
+        "compare": {"compare: missing recording": (["compare", d / "nothere"], 2,
+                                                   "file not found"),
+                    "compare: malformed recording": (["compare", MALFORMED / "inf_value"], 2,
+                                                     "infinite value"),
+                    "compare: missing posterior": (["compare", run, "--posterior",
+                                                    d / "none.nc"], 2, "not found")},
+        "plot": {"plot: missing posterior": (["plot", d / "none.nc", "-o", d / "plots"], 2,
+                                             "not found"),
+                 "plot: a recording, not a posterior": (["plot", f"{run}.json", "-o",
+                                                         d / "plots"], 2, "not a netCDF")},
+        "diagnose": {"diagnose: missing recording": (["diagnose", d / "nothere"], 2,
+                                                     "not found"),
+                     "diagnose: malformed recording": (["diagnose", MALFORMED / "t_not_zero"],
+                                                       2, "t must start at 0")},
+    }
+    commands = set(_subcommands())
+    extra = {k: v for command, cases in optional.items() if command in commands
+             for k, v in cases.items()}
+    return extra | {
+        # missing files
+        "fit: missing recording": (["fit", d / "nothere"], 2, "file not found"),
+        "loglik: missing recording": (["loglik", d / "nothere", "--params", p], 2, "not found"),
+        "loglik: missing parameter file": (["loglik", run, "--params", d / "none.json"], 2,
+                                           "parameter file not found"),
+        "simulate: missing parameter file": (["simulate", "-o", d / "x", "--params",
+                                              d / "none.json"], 2, "not found"),
+        "loglik: recording is a directory": (["loglik", d / "adir", "--params", p], 2, "adir"),
+        "fit: not a MATLAB file": (["fit", not_mat], 2, "not a readable MATLAB"),
+        "loglik: sidecar given as parameters": (["loglik", run, "--params", f"{run}.json"], 2,
+                                                "unknown parameter name(s) 'format'"),
+        # misspelled and out-of-range parameters
+        "simulate: misspelled parameter": (["simulate", "-o", d / "x", "--params", kvv], 2,
+                                           "unknown parameter name(s) 'K_vv'"),
+        "loglik: misspelled parameter": (["loglik", run, "--params", kvv], 2, "'K_vv'"),
+        "loglik: parameter out of range": (["loglik", run, "--params", wide], 2,
+                                           "zeta_nm = 5 is outside its range"),
+        "simulate: negative motion gain": (["simulate", "-o", d / "x", "--motion-gain", "-1"], 2,
+                                           "--motion-gain"),
+        "simulate: remnant fraction 1": (["simulate", "-o", d / "x", "--remnant-fraction", "1"],
+                                         2, "--remnant-fraction"),
+        "simulate: unknown task": (["simulate", "-o", d / "x", "--task", "FX"], 2, "--task"),
+        "fit: unknown method": (["fit", run, "--method", "slow"], 2, "--method"),
+        "fit: negative seed": (["fit", run, "--seed", "-3"], 2, "--seed"),
+        "demo: seed not a number": (["demo", "--seed", "x"], 2, "--seed"),
+        "loglik: unknown initial": (["loglik", run, "--params", p, "--initial", "cold"], 2,
+                                    "--initial"),
+        "replicate: no realizations": (["replicate", "--out", d / "r", "--realizations", "0"], 2,
+                                       "--realizations"),
+        "replicate: unknown task": (["replicate", "--out", d / "r", "--tasks", "FD,FX"], 2,
+                                    "--tasks"),
+        "replicate: negative motion gain": (["replicate", "--out", d / "r", "--motion-gains",
+                                             "1,-0.5"], 2, "--motion-gains"),
+        "replicate: misspelled fit option": (["replicate", "--out", d / "r", "--fit-option",
+                                              "repetitons=2"], 2, "'repetitons'"),
+        "replicate: scheduler and workers": (["replicate", "--out", d / "r", "--scheduler",
+                                              "tcp://127.0.0.1:1", "--workers", "2"], 2,
+                                             "not both"),
+        # outputs that cannot be written: the run fails (exit 1)
+        "simulate: output below a file": (["simulate", "-o", d / "afile" / "x", "--duration",
+                                           "2"], 1, "cannot write the recording"),
+        "demo: output dir is a file": (["demo", "--out", d / "afile"], 1,
+                                       "cannot write the example"),
+    }
+
+
+def _cli_case_names() -> list[str]:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as d:
+        return sorted(_cli_bad(Path(d), Path(d) / "run", Path(d) / "p.json"))
+
+
+@pytest.mark.parametrize("case", _cli_case_names())
+def test_cli_bad_input_is_one_clear_line(case, run10, params, tmp_path, capsys):
+    argv, expected_code, expected = _cli_bad(tmp_path, run10, params)[case]
+    code, out, err = _run(capsys, *argv)
+    assert code == expected_code, err
+    assert expected in _one_error_line(err, out)
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_fit_json_to_a_directory_fails_with_one_line(run10, tmp_path, capsys):
+    (tmp_path / "adir").mkdir()
+    code, out, err = _run(capsys, "fit", run10, "--method", "fast", "--json", tmp_path / "adir",
+                          "-q")
+    assert code == 1
+    line = _one_error_line(err, out)
+    assert "adir: cannot write the fit" in line and "Errno" not in line
+
+
+# --- an unreachable dask scheduler -----------------------------------------------------------
+def test_cli_unreachable_scheduler_fails_with_one_line(tmp_path):
+    # a subprocess with a generous limit, so that a hang fails the test instead of the CI run
+    proc = subprocess.run(
+        [sys.executable, "-m", "bayespilot.cli", "replicate", "--realizations", "1", "--tasks",
+         "FD", "--motion-gains", "1", "--remnant-fractions", "0", "--method", "fast",
+         "--duration", "5", "--out", str(tmp_path / "r"), "--scheduler", "tcp://127.0.0.1:1",
+         "--connect-timeout", "1", "-q"],
+        capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 1, proc.stderr
+    line = _one_error_line(proc.stderr, proc.stdout)
+    assert "cannot reach the dask scheduler at 'tcp://127.0.0.1:1'" in line
+    assert not list((tmp_path / "r").glob("*.json"))
+
+
+@pytest.mark.parametrize("address", ["tcp://127.0.0.1:1", "not-an-address::"])
+def test_api_unreachable_scheduler_raises_campaign_error(address, tmp_path):
+    from bayespilot.campaign import CampaignError, paper_study, run_campaign
+
+    jobs = paper_study(1, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.0,),
+                       method="fast", duration=5)
+    with pytest.raises(CampaignError, match="cannot reach the dask scheduler"):
+        run_campaign(jobs, tmp_path / "r", scheduler=address, connect_timeout=1, progress=False,
+                     warm_cache=False)
+
+
+# --- the public functions ---------------------------------------------------------------------
+def _sim_params():
+    return presets.paper_parameters("FD")
+
+
+def _api_cases():
+    from bayespilot.campaign import Job, paper_study, run_campaign
+    from bayespilot.fit.fast import fit_fast
+    from bayespilot.fit.three_step import fit_paper
+    from bayespilot.likelihood import Likelihood, neg_log_lik
+    from bayespilot.model import paper_model
+    from bayespilot.plots import plot_traces
+    from bayespilot.sample import sample
+    from bayespilot.simulate import simulate
+
+    rec = _recording(2.0)
+    quick = dict(progress=False, max_steps=10, min_steps=5, check_every=5, n_walkers=18)
+    truth = _sim_params()
+    extra = {}
+    if importlib.util.find_spec("bayespilot.compare") is not None:
+        from bayespilot.compare import compare, nested_evidence
+
+        extra |= {
+            "compare: path instead of Recording": (lambda: compare("out/run"), TypeError,
+                                                   "must be a Recording"),
+            "compare: unknown likelihood": (lambda: compare(rec, likelihood="eq5"), ValueError,
+                                            "likelihood must be one of"),
+            "nested_evidence: empty prior box": (lambda: nested_evidence(lambda x: 0.0, [1.0],
+                                                                         [0.0]),
+                                                 ValueError, "lower < upper"),
+        }
+    if importlib.util.find_spec("bayespilot.diagnose") is not None:
+        from bayespilot.diagnose import diagnose
+
+        extra["diagnose: path instead of Recording"] = (lambda: diagnose("out/run"), TypeError,
+                                                        "must be a Recording")
+    return extra | {
+        "read_recording: not a path": (lambda: read_recording(123), TypeError, "str or os.PathLike"),
+        "read_recording: missing": (lambda: read_recording("/nonexistent/run"), RecordingError,
+                                    "file not found"),
+        "read_mat: missing": (lambda: read_mat("/nonexistent/run.mat"), RecordingError,
+                              "file not found"),
+        "Recording: NaN": (lambda: Recording({"t": [0, .01], "e": [0, np.nan], "u": [0, 0],
+                                              "theta_ddot_m": [0, 0]}, 100.0, 1.0),
+                           RecordingError, "non-finite"),
+        "Recording: missing column": (lambda: Recording({"t": [0, .01], "e": [0, 0]}, 100.0, 1.0),
+                                      RecordingError, "missing required column"),
+        "Recording: unknown task": (lambda: Recording(rec.signals, 100.0, 1.0, "XY"),
+                                    RecordingError, "task must be one of"),
+        "Recording: rate disagrees with t": (lambda: Recording(rec.signals, 50.0, 1.0),
+                                             RecordingError, "disagrees with sample_rate_hz"),
+        "write_recording: .mat output": (lambda: write_recording(rec, "/tmp/x.mat"),
+                                         RecordingError, ".mat"),
+        "paper_parameters: unknown task": (lambda: presets.paper_parameters("XX"), ValueError,
+                                           "task must be"),
+        "simulate: misspelled parameter": (lambda: simulate(params={"K_vv": 1.0}, duration=2),
+                                           ValueError, "unknown parameter(s) 'K_vv'"),
+        "simulate: NaN parameter": (lambda: simulate(params={"K_v": float("nan")}, duration=2),
+                                    ValueError, "K_v must be finite"),
+        "simulate: remnant fraction 1.5": (lambda: simulate(remnant_fraction=1.5, duration=2),
+                                           ValueError, "remnant_fraction"),
+        "simulate: negative duration": (lambda: simulate(duration=-1), ValueError, "duration"),
+        "model.fix: misspelled": (lambda: paper_model().fix(K_vv=1.0), ValueError, "'K_vv'"),
+        "neg_log_lik: misspelled": (lambda: neg_log_lik(paper_model(), rec, {**truth, "K_vv": 1}),
+                                    ValueError, "'K_vv'"),
+        "Likelihood: wrong vector length": (lambda: Likelihood(paper_model(), rec)
+                                            .neg_log_lik([1.0, 2.0]), ValueError, "expected 8"),
+        "Likelihood: misspelled initial": (lambda: Likelihood(paper_model(), rec,
+                                                              initial="periodc"),
+                                           ValueError, "initial must be one of"),
+        "Likelihood: path instead of Recording": (lambda: Likelihood(paper_model(), "out/run"),
+                                                  TypeError, "must be a Recording"),
+        "fit_fast: path instead of Recording": (lambda: fit_fast("out/run"), TypeError,
+                                                "must be a Recording"),
+        "fit_fast: no starts": (lambda: fit_fast(rec, n_starts=0), ValueError, "n_starts"),
+        "fit_paper: n_best > repetitions": (lambda: fit_paper(rec, repetitions=2, n_best=3),
+                                            ValueError, "n_best"),
+        "sample: prior for a misspelled name": (
+            lambda: sample(rec, init=truth, prior={"K_vv": stats.norm(1, 0.1)}, **quick),
+            ValueError, "unknown parameter(s) 'K_vv'"),
+        "sample: prior outside the bounds": (
+            lambda: sample(rec, init=truth, prior={"delta_abs": stats.uniform(0.2, 0.1)}, **quick),
+            ValueError, "outside the bounds of delta_abs"),
+        "sample: prior not a distribution": (
+            lambda: sample(rec, init=truth, prior={"K_v": 3.0}, **quick), TypeError,
+            "scipy.stats distribution"),
+        "sample: misspelled init": (lambda: sample(rec, init={"K_vv": 1.0}, **quick), ValueError,
+                                    "'K_vv'"),
+        "sample: unknown likelihood": (lambda: sample(rec, init=truth, likelihood="eq5", **quick),
+                                       ValueError, "likelihood must be one of"),
+        "Job: misspelled fit option": (lambda: Job("FD", 1.0, 0.2, 0,
+                                                   fit_kwargs={"repetitons": 2}),
+                                       ValueError, "'repetitons'"),
+        "Job: remnant fraction 1": (lambda: Job("FD", 1.0, 1.0, 0), ValueError,
+                                    "remnant_fraction"),
+        "paper_study: no realizations": (lambda: paper_study(0), ValueError, "realizations"),
+        "run_campaign: zero workers": (lambda: run_campaign([], "/tmp/unused", workers=0),
+                                       ValueError, "workers"),
+        "plot_traces: path instead of Recording": (lambda: plot_traces("out/run"), TypeError,
+                                                   "Recording"),
+    }
+
+
+@pytest.mark.parametrize("case", sorted(_api_cases()))
+def test_api_bad_input_raises_a_specific_exception(case):
+    call, exc_type, text = _api_cases()[case]
+    with pytest.raises(exc_type) as info:
+        call()
+    assert text in str(info.value)
+    assert str(info.value).count("\n") == 0  # one line
+
+
+# --- questionable recordings: read, with a warning ------------------------------------------------
+def test_short_recording_warns_with_the_reason_at_the_callers_line(tmp_path):
+    write_recording(_recording(10.0), tmp_path / "short")
+    with pytest.warns(QuestionableRecordingWarning, match="10 s long, much shorter than the "
+                                                          "81.92 s") as caught:
+        rec = read_recording(tmp_path / "short")
+    assert rec.n_samples == 1000  # still read
+    assert caught[0].filename == __file__
+    assert str(tmp_path / "short") in str(caught[0].message)
+
+
+def test_low_sample_rate_warns(tmp_path):
+    write_recording(_recording(60.0, rate=40.0), tmp_path / "slow")
+    with pytest.warns(QuestionableRecordingWarning, match="40 Hz, under 50 Hz"):
+        read_recording(tmp_path / "slow")
+
+
+def test_short_and_slow_mat_file_warns_twice(tmp_path):
+    r = _recording(20.0, rate=25.0)
+    scipy.io.savemat(tmp_path / "run.mat", {**{k: v for k, v in r.signals.items()},
+                                            "sample_rate_hz": 25.0, "motion_gain": 1.0,
+                                            "task": "FD"})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        read_recording(tmp_path / "run.mat")
+    messages = [str(w.message) for w in caught if w.category is QuestionableRecordingWarning]
+    assert len(messages) == 2
+    assert any("20 s long" in m for m in messages) and any("25 Hz" in m for m in messages)
+
+
+@pytest.mark.parametrize("duration,rate", [(30.0, 100.0), (81.92, 100.0), (60.0, 50.0)])
+def test_ordinary_recordings_do_not_warn(duration, rate, tmp_path):
+    write_recording(_recording(duration, rate), tmp_path / "ok")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        read_recording(tmp_path / "ok")
+    assert not [w for w in caught if w.category is QuestionableRecordingWarning]
+    assert questionable(_recording(duration, rate)) == []
+
+
+def test_cli_prints_the_warning_as_one_line_and_goes_on(run10, params, capsys):
+    code, out, err = _run(capsys, "loglik", run10, "--params", params, "-q")
+    assert code == 0 and out.startswith("-ln L = ")
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("bayespilot: warning: ")
+    assert "10 s long" in lines[0]
