@@ -1,0 +1,251 @@
+"""Calibration of the posterior credible intervals (issue 4, item 3).
+
+Run:  python analyses/calibration.py [--chunk N] [--per-task 100] [--report-only]
+
+Simulates recordings at F_n = 0.2, K_theta = 1 for both tasks (FD, FT; Table 3
+truth, the paper's T0 = 81.92 s), fits each once with the fast estimator, and
+samples the posterior from that fit under both likelihoods: ``eq4`` (white
+output error, Eq. 4) and ``coloured`` (AR(2) output error).  For every
+parameter it records whether the central (equal-tailed) 50 % and 90 % credible
+intervals contain the truth, and prints the fraction that do with a 95 %
+binomial (Wilson) interval, beside the nominal level and the band within
+which a calibrated method's fraction falls 95 % of the time.
+
+Resumable: one JSON per (recording, likelihood) in
+``analyses/results/calibration/`` (e.g. ``FD_r007_coloured.json``) and one per
+recording for the shared fit; ``--chunk N`` does the next N recordings that
+are unfinished (recordings alternate between tasks, so any prefix is
+balanced), then prints the table from everything on disk and writes
+``docs/figures/calibration_coverage.png`` and ``.../calibration/summary.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "analyses" / "results" / "calibration"
+FIGURE = ROOT / "docs" / "figures" / "calibration_coverage.png"
+TASKS = ("FD", "FT")
+LIKELIHOODS = ("eq4", "coloured")
+F_N, K_THETA = 0.2, 1.0
+LEVELS = (0.5, 0.9)
+NAMES = ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm", "delta_abs")
+
+
+def seed_of(task: str, r: int) -> int:
+    """Seed of realization r of a task (disjoint from the replication campaign's seeds)."""
+    return 4_000_000 + 100_000 * TASKS.index(task) + r
+
+
+def jobs(per_task: int):
+    for r in range(per_task):
+        for task in TASKS:
+            yield task, r
+
+
+def _path(task: str, r: int, what: str) -> Path:
+    return OUT / f"{task}_r{r:03d}_{what}.json"
+
+
+def _write(path: Path, obj) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=1, allow_nan=True))
+    tmp.replace(path)
+
+
+def run_one(task: str, r: int, likelihoods, max_steps: int) -> None:
+    from bayespilot.fit.fast import fit_fast
+    from bayespilot.fit.result import FitResult
+    from bayespilot.presets import paper_parameters
+    from bayespilot.sample import ConvergenceWarning, sample
+    from bayespilot.simulate import simulate
+
+    truth = paper_parameters(task)
+    sim = simulate(task=task, motion_gain=K_THETA, remnant_fraction=F_N, seed=seed_of(task, r))
+    rec = sim.recording
+    fit_path = _path(task, r, "fit")
+    if fit_path.exists():
+        fit = FitResult.from_dict(json.loads(fit_path.read_text()))
+    else:
+        fit = fit_fast(rec, seed=r, n_starts=4)
+        _write(fit_path, fit.to_dict(full=False))
+    for lik in likelihoods:
+        path = _path(task, r, lik)
+        if path.exists():
+            continue
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            post = sample(rec, likelihood=lik, init=fit, seed=r, max_steps=max_steps,
+                          progress=False)
+        q = {}
+        for n in NAMES:
+            x = post.draws(n)
+            q[n] = {str(p): float(v) for p, v in
+                    zip((0.05, 0.25, 0.5, 0.75, 0.95), np.quantile(x, (0.05, 0.25, 0.5, 0.75, 0.95)))}
+            q[n]["hdi_50"] = list(post.credible_interval(n, 0.5))
+            q[n]["hdi_90"] = list(post.credible_interval(n, 0.9))
+        _write(path, {"task": task, "realization": r, "seed": seed_of(task, r), "likelihood": lik,
+                      "truth": truth, "quantiles": q, "converged": post.converged,
+                      "tau": post.tau, "n_steps": post.settings["n_steps"],
+                      "n_draws": int(post.draws("K_v").size),
+                      "acceptance": post.settings["acceptance_fraction"],
+                      "seconds": time.perf_counter() - t0, "fit_seconds": fit.elapsed,
+                      "remnant_fraction": sim.remnant_fraction})
+        print(f"  {task} r{r:03d} {lik:>8}: {post.settings['n_steps']} steps, "
+              f"{'converged' if post.converged else 'NOT converged'}, "
+              f"{time.perf_counter() - t0:.0f} s", flush=True)
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion k/n."""
+    if n == 0:
+        return (math.nan, math.nan)
+    p = k / n
+    d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / d
+    return (c - h, c + h)
+
+
+def load():
+    rows = []
+    for p in sorted(OUT.glob("*_r*_*.json")):
+        if p.name.endswith("_fit.json"):
+            continue
+        rows.append(json.loads(p.read_text()))
+    return rows
+
+
+def coverage(rows, lik: str, task: str | None = None, kind: str = "central"):
+    """{name: {level: (k, n)}} for rows of one likelihood (and task)."""
+    sel = [r for r in rows if r["likelihood"] == lik and (task is None or r["task"] == task)]
+    out = {}
+    for name in NAMES:
+        out[name] = {}
+        for level in LEVELS:
+            k = 0
+            for r in sel:
+                q = r["quantiles"][name]
+                if kind == "central":
+                    lo, hi = q[str(round(0.5 - level / 2, 2))], q[str(round(0.5 + level / 2, 2))]
+                else:
+                    lo, hi = q[f"hdi_{int(level * 100)}"]
+                k += lo <= r["truth"][name] <= hi
+            out[name][level] = (k, len(sel))
+    return out
+
+
+def report(rows) -> dict:
+    summary = {}
+    for lik in LIKELIHOODS:
+        n_all = sum(1 for r in rows if r["likelihood"] == lik)
+        if not n_all:
+            continue
+        conv = sum(1 for r in rows if r["likelihood"] == lik and r["converged"])
+        secs = [r["seconds"] for r in rows if r["likelihood"] == lik]
+        print(f"\n{lik} likelihood: {n_all} recordings ({sum(1 for r in rows if r['likelihood'] == lik and r['task'] == 'FD')} FD, "
+              f"{sum(1 for r in rows if r['likelihood'] == lik and r['task'] == 'FT')} FT), "
+              f"{conv} converged, median {np.median(secs):.0f} s per posterior")
+        band = {lv: 1.96 * math.sqrt(lv * (1 - lv) / n_all) for lv in LEVELS}
+        print(f"{'parameter':<10} | {'50% coverage [95% CI]':>24} | {'90% coverage [95% CI]':>24} |"
+              f" FD 50/90 | FT 50/90")
+        cov = coverage(rows, lik)
+        per = {t: coverage(rows, lik, t) for t in TASKS}
+        summary[lik] = {"n": n_all, "converged": conv, "nominal_band": band, "parameters": {}}
+        for name in NAMES:
+            cells = []
+            entry = {}
+            for lv in LEVELS:
+                k, n = cov[name][lv]
+                lo, hi = wilson(k, n)
+                flag = "" if abs(k / n - lv) <= band[lv] else "*"
+                cells.append(f"{k / n:5.2f}{flag:1} [{lo:4.2f}, {hi:4.2f}] ({k:>3}/{n})")
+                entry[str(lv)] = {"k": k, "n": n, "fraction": k / n, "wilson_95": [lo, hi],
+                                  "within_band": not flag}
+            pt = " | ".join("{:.2f}/{:.2f}".format(*(per[t][name][lv][0] / max(per[t][name][lv][1], 1)
+                                                     for lv in LEVELS)) for t in TASKS)
+            print(f"{name:<10} | {cells[0]:>24} | {cells[1]:>24} | {pt}")
+            summary[lik]["parameters"][name] = entry
+        print(f"(* outside the band nominal +- 1.96 sqrt(p(1-p)/n): 50%: +-{band[0.5]:.3f}, "
+              f"90%: +-{band[0.9]:.3f})")
+    return summary
+
+
+def figure(rows, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    liks = [lk for lk in LIKELIHOODS if any(r["likelihood"] == lk for r in rows)]
+    fig, axes = plt.subplots(1, len(liks), figsize=(5.2 * len(liks), 3.8), sharey=True,
+                             squeeze=False, layout="constrained")
+    x = np.arange(len(NAMES))
+    for a, lik in zip(axes[0], liks):
+        cov = coverage(rows, lik)
+        n = cov[NAMES[0]][LEVELS[0]][1]
+        for j, (lv, col) in enumerate(zip(LEVELS, ("C0", "C1"))):
+            band = 1.96 * math.sqrt(lv * (1 - lv) / n)
+            a.axhspan(lv - band, lv + band, color=col, alpha=0.15, lw=0)
+            a.axhline(lv, color=col, lw=0.8, ls="--")
+            f = np.array([cov[nm][lv][0] / n for nm in NAMES])
+            ci = np.array([wilson(cov[nm][lv][0], n) for nm in NAMES])
+            a.errorbar(x + (j - 0.5) * 0.2, f, yerr=[f - ci[:, 0], ci[:, 1] - f], fmt="o",
+                       color=col, ms=4, capsize=2, label=f"{int(lv * 100)}% intervals")
+        a.set_xticks(x, NAMES, rotation=45, ha="right")
+        a.set_ylim(0, 1.02)
+        a.set_title(f"{lik} likelihood, {n} recordings", fontsize="medium")
+        a.grid(True, axis="y", lw=0.3, alpha=0.6)
+    axes[0, 0].set_ylabel("fraction of intervals holding the truth")
+    axes[0, 0].legend(loc="lower left", fontsize="small")
+    fig.suptitle(f"Coverage of central credible intervals (F_n = {F_N}, K_theta = {K_THETA:g}, "
+                 "FD and FT; bars: 95% Wilson CI, bands: nominal +- binomial 95%)",
+                 fontsize="medium")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--per-task", type=int, default=100, help="recordings per task (default 100)")
+    ap.add_argument("--chunk", type=int, default=None,
+                    help="do at most this many unfinished recordings, then report")
+    ap.add_argument("--likelihoods", default="eq4,coloured")
+    ap.add_argument("--max-steps", type=int, default=6000)
+    ap.add_argument("--report-only", action="store_true")
+    args = ap.parse_args(argv)
+    liks = tuple(args.likelihoods.split(","))
+    done = 0
+    if not args.report_only:
+        for task, r in jobs(args.per_task):
+            if all(_path(task, r, lk).exists() for lk in liks):
+                continue
+            if args.chunk is not None and done >= args.chunk:
+                break
+            run_one(task, r, liks, args.max_steps)
+            done += 1
+    rows = load()
+    if not rows:
+        print("no results yet")
+        return 0
+    summary = report(rows)
+    _write(OUT / "summary.json", summary)
+    figure(rows, FIGURE)
+    print(f"\nwrote {FIGURE.relative_to(ROOT)} and {(OUT / 'summary.json').relative_to(ROOT)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,338 @@
+"""Prove ``bayespilot diagnose`` on concealed physics (issue 5, item 6).
+
+For every catalogue entry the simulator generates recordings with that
+physics at several effect sizes, in both tasks (FD, FT), at K_theta 0.75 and
+1 and remnant levels F_n 0.1 and 0.25 (K_n from Table 4), plus controls with
+the paper's model and no extra physics.  ``diagnose`` then runs blind on each
+recording (it reads the recording only; the truth stays in this script's
+result files).  Each case is one JSON in ``analyses/results/diagnose/``, so
+the script resumes where it stopped and can run in chunks.
+
+A case is "concealed" when the base model's fit looks ordinary: its VAF and
+its residual RMS lie within 3 standard deviations of those of the controls of
+the same task and remnant level.
+
+Run (from the repository root):
+
+    nice -n 10 python analyses/prove_diagnose.py --chunk 20     # next 20 cases
+    python analyses/prove_diagnose.py --summarize              # table + figures
+
+The case list is ordered round-robin over the entries and the controls (with
+the conditions shuffled by a fixed seed), so any prefix of it is a balanced
+subset.  The summary prints the confusion matrix (truth x decision) and, per
+entry, the rate of correct naming against the effect size; it writes
+``analyses/results/diagnose/summary.json``, ``docs/figures/diagnose_detection.png``
+and ``docs/figures/diagnose_confusion.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import math
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "analyses" / "results" / "diagnose"
+FIG = ROOT / "docs" / "figures"
+
+#: Effect sizes per entry, smallest effect first: (label, parameters).
+EFFECTS = {
+    "motion-system-dynamics": [("omega_ms=16", {"omega_ms": 16.0, "zeta_ms": 0.7}),
+                               ("omega_ms=10", {"omega_ms": 10.0, "zeta_ms": 0.7}),
+                               ("omega_ms=6", {"omega_ms": 6.0, "zeta_ms": 0.7})],
+    "motion-washout": [("omega_w=0.15", {"omega_w": 0.15}), ("omega_w=0.3", {"omega_w": 0.3}),
+                       ("omega_w=0.6", {"omega_w": 0.6})],
+    "otolith-channel": [("K_ot=0.01", {"K_ot": 0.01, "h_head": 1.0}),
+                        ("K_ot=0.02", {"K_ot": 0.02, "h_head": 1.0}),
+                        ("K_ot=0.04", {"K_ot": 0.04, "h_head": 1.0})],
+    "threshold-shape": [("w_soft=0.004", {"w_soft": 0.004}), ("w_soft=0.01", {"w_soft": 0.01}),
+                        ("w_soft=0.02", {"w_soft": 0.02})],
+    "time-varying-gains": [("drift=0.3", {"drift_v": 0.3, "drift_m": 0.3}),
+                           ("drift=0.6", {"drift_v": 0.6, "drift_m": 0.6}),
+                           ("drift=1.0", {"drift_v": 1.0, "drift_m": 1.0})],
+    # the limit clips this fraction of the samples of the same run without a limit
+    "control-saturation": [("clip=0.3%", {"clip": 0.003}), ("clip=1%", {"clip": 0.01}),
+                           ("clip=3%", {"clip": 0.03})],
+}
+CONDITIONS = list(itertools.product(("FD", "FT"), (0.75, 1.0), (0.1, 0.25)))
+#: Bootstrap replicates per diagnosis here (the decision does not depend on them).
+N_BOOTSTRAP = 9
+
+
+def cases() -> list[dict]:
+    """Every case, round-robin over entries and controls, conditions shuffled (seeded)."""
+    rng = np.random.default_rng(20240605)
+    per: dict[str, list[dict]] = {}
+    for entry, sizes in EFFECTS.items():
+        lst = [{"truth": entry, "effect": lab, "extra": ex, "task": t, "K_theta": k, "F_n": f}
+               for (lab, ex) in sizes for (t, k, f) in CONDITIONS]
+        per[entry] = [lst[i] for i in rng.permutation(len(lst))]
+    ctl = [{"truth": "none", "effect": "control", "extra": {}, "task": t, "K_theta": k, "F_n": f}
+           for r in range(3) for (t, k, f) in CONDITIONS]
+    per["none"] = [ctl[i] for i in rng.permutation(len(ctl))]
+    order = []
+    for i in range(max(len(v) for v in per.values())):
+        for key in ("none", *EFFECTS):
+            if i < len(per[key]):
+                order.append(per[key][i])
+    for j, c in enumerate(order):
+        c["id"] = j
+        c["seed"] = 1000 + j
+    return order
+
+
+def case_key(c: dict) -> str:
+    return (f"{c['id']:04d}_{c['truth']}_{c['effect'].replace('=', '').replace('%', 'pc')}_"
+            f"{c['task']}_k{c['K_theta']:g}_fn{c['F_n']:g}")
+
+
+def simulate_case(c: dict):
+    from bayespilot import presets
+    from bayespilot.diagnose import get_extension
+    from bayespilot.model import paper_model
+    from bayespilot.simulate import simulate
+
+    task, k, fn = c["task"], c["K_theta"], c["F_n"]
+    kn = presets.TABLE4_K_N[(task, fn)][presets.MOTION_GAINS.index(k)]
+    params = presets.paper_parameters(task)
+    model = paper_model()
+    extra = dict(c["extra"])
+    if c["truth"] == "control-saturation":
+        free = simulate(model, params, task=task, motion_gain=k, remnant_gain=kn, seed=c["seed"])
+        extra = {"u_max": float(np.quantile(np.abs(free.recording.u), 1.0 - extra["clip"]))}
+    if c["truth"] != "none":
+        model = get_extension(c["truth"]).build(model)
+        params.update(extra)
+    sim = simulate(model, params, task=task, motion_gain=k, remnant_gain=kn, seed=c["seed"])
+    return sim, extra
+
+
+def run_case(c: dict) -> dict:
+    from bayespilot.diagnose import diagnose
+    from bayespilot.recording import Recording
+
+    sim, extra = simulate_case(c)
+    rec = sim.recording
+    # blind: only what a lab recording would have (the simulator's notes go too)
+    meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+    rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
+    t0 = time.perf_counter()
+    res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP)
+    el = time.perf_counter() - t0
+    resid = res.arrays["residual"]
+    return {"case": {k: v for k, v in c.items()}, "true_params": extra,
+            "remnant_fraction": float(np.var(sim.remnant) / np.var(rec.u)),
+            "decision": res.physics, "mismatch": res.mismatch,
+            "base_vaf": res.base["vaf"], "residual_rms": float(np.sqrt(np.mean(resid ** 2))),
+            "ranking": [{"physics": r.physics, "delta_neg_log_lik": r.delta_neg_log_lik,
+                         "p_value": r.p_value, "params": r.params} for r in res.ranking],
+            "chosen_params": res.chosen.params if res.chosen else None,
+            "chosen_stderr": res.chosen.stderr if res.chosen else None,
+            "elapsed_seconds": el}
+
+
+def run(chunk: int | None) -> None:
+    import numba
+
+    numba.set_num_threads(1)
+    OUT.mkdir(parents=True, exist_ok=True)
+    todo = [c for c in cases() if not (OUT / f"{case_key(c)}.json").exists()]
+    if chunk is not None:
+        todo = todo[:chunk]
+    print(f"{len(todo)} case(s) to run", flush=True)
+    for c in todo:
+        path = OUT / f"{case_key(c)}.json"
+        try:
+            r = run_case(c)
+        except Exception as exc:  # keep going; the error is recorded and retried next time
+            (OUT / f"{case_key(c)}.error.txt").write_text(f"{type(exc).__name__}: {exc}\n")
+            print(f"{case_key(c)}: ERROR {exc}", flush=True)
+            continue
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(r, indent=1, default=float))
+        tmp.replace(path)
+        print(f"{case_key(c)}: {r['decision']} ({r['elapsed_seconds']:.0f} s)", flush=True)
+
+
+def load() -> list[dict]:
+    return [json.loads(p.read_text()) for p in sorted(OUT.glob("[0-9]*.json"))]
+
+
+def summarize() -> dict:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rs = load()
+    if not rs:
+        print("no results yet")
+        return {}
+    # concealment against controls of the same task and remnant level
+    ctl: dict[tuple, list] = {}
+    for r in rs:
+        if r["case"]["truth"] == "none":
+            ctl.setdefault((r["case"]["task"], r["case"]["F_n"]), []).append(r)
+    for r in rs:
+        cs = ctl.get((r["case"]["task"], r["case"]["F_n"]), [])
+        if len(cs) >= 2:
+            ok = True
+            for key in ("base_vaf", "residual_rms"):
+                v = np.array([c[key] for c in cs])
+                ok &= abs(r[key] - v.mean()) <= 3 * max(v.std(ddof=1), 1e-12)
+            r["concealed"] = bool(ok)
+        else:
+            r["concealed"] = None
+    labels = ["none", *EFFECTS]
+    cols = labels
+    conf = {t: {d: 0 for d in cols} for t in labels}
+    conf_c = {t: {d: 0 for d in cols} for t in labels}
+    for r in rs:
+        t, d = r["case"]["truth"], r["decision"]
+        conf[t][d] += 1
+        if r["concealed"] is not False:
+            conf_c[t][d] += 1
+    short = {"none": "none", "motion-system-dynamics": "msd", "motion-washout": "wash",
+             "otolith-channel": "oto", "threshold-shape": "thr", "time-varying-gains": "tvg",
+             "control-saturation": "sat"}
+
+    def table(cf, title):
+        lines = [title, f"{'truth / decision':<24}" + "".join(f"{short[c]:>6}" for c in cols)
+                 + f"{'n':>6}{'correct':>9}"]
+        for t in labels:
+            n = sum(cf[t].values())
+            if not n:
+                continue
+            lines.append(f"{t:<24}" + "".join(f"{cf[t][c]:>6}" for c in cols)
+                         + f"{n:>6}{cf[t][t] / n:>9.0%}")
+        return "\n".join(lines)
+
+    print(table(conf, "Confusion matrix, all cases (rows: truth; columns: decision)"))
+    print()
+    print(table(conf_c, "Confusion matrix, concealed cases and controls"))
+    ent = [r for r in rs if r["case"]["truth"] != "none" and r["concealed"] is not False]
+    n_ok = sum(r["decision"] == r["case"]["truth"] for r in ent)
+    n_ctl = sum(1 for r in rs if r["case"]["truth"] == "none")
+    fa = sum(1 for r in rs if r["case"]["truth"] == "none" and r["decision"] != "none")
+    print(f"\nconcealed cases named correctly: {n_ok}/{len(ent)}"
+          + (f" = {n_ok / len(ent):.0%}" if ent else ""))
+    print(f"false alarms on controls: {fa}/{n_ctl}")
+    n_conc = sum(1 for r in rs if r["case"]["truth"] != "none" and r["concealed"])
+    n_ent = sum(1 for r in rs if r["case"]["truth"] != "none")
+    print(f"cases concealed (VAF and residual RMS within 3 sd of the controls): {n_conc}/{n_ent}")
+    curves = {}
+    print("\nDetection (correct naming) by effect size, all cases:")
+    for e, sizes in EFFECTS.items():
+        row = []
+        for lab, _ in sizes:
+            sel = [r for r in rs if r["case"]["truth"] == e and r["case"]["effect"] == lab]
+            k = sum(r["decision"] == e for r in sel)
+            conc = sum(1 for r in sel if r["concealed"])
+            row.append((lab, k, len(sel), conc))
+        curves[e] = row
+        print(f"  {e:<24} " + "   ".join(f"{lab}: {k}/{n} (concealed {c})" for lab, k, n, c in row))
+    times = [r["elapsed_seconds"] for r in rs]
+    print(f"\ndiagnose time per case: median {np.median(times):.0f} s, max {np.max(times):.0f} s "
+          f"(B = {N_BOOTSTRAP}, one numba thread, shared machine)")
+    # figures
+    FIG.mkdir(parents=True, exist_ok=True)
+    fig, axes = plt.subplots(2, 3, figsize=(11, 6), sharey=True)
+    for ax, (e, row) in zip(axes.ravel(), curves.items()):
+        x = np.arange(len(row))
+        rate = [k / n if n else np.nan for _, k, n, _ in row]
+        ax.plot(x, rate, "o-")
+        for xi, (_, k, n, c) in zip(x, row):
+            ax.annotate(f"{k}/{n}", (xi, rate[xi] if n else 0), textcoords="offset points",
+                        xytext=(0, 6), ha="center", fontsize=8)
+        ax.set_xticks(x)
+        ax.set_xticklabels([lab for lab, *_ in row], fontsize=8)
+        ax.set_ylim(-0.05, 1.15)
+        ax.set_title(e, fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("rate named correctly")
+    axes[1, 0].set_ylabel("rate named correctly")
+    fig.suptitle("diagnose: detection against effect size (smallest effect left)")
+    fig.tight_layout()
+    fig.savefig(FIG / "diagnose_detection.png", dpi=110)
+    plt.close(fig)
+    fig, ax = plt.subplots(figsize=(7, 5))
+    M = np.array([[conf[t][d] for d in cols] for t in labels], float)
+    rows = M.sum(axis=1, keepdims=True)
+    ax.imshow(M / np.maximum(rows, 1), cmap="Blues", vmin=0, vmax=1)
+    for i in range(len(labels)):
+        for j in range(len(cols)):
+            if M[i, j]:
+                ax.text(j, i, int(M[i, j]), ha="center", va="center", fontsize=9)
+    ax.set_xticks(range(len(cols)))
+    ax.set_xticklabels([short[c] for c in cols])
+    ax.set_yticks(range(len(labels)))
+    ax.set_yticklabels(labels, fontsize=8)
+    ax.set_xlabel("decision")
+    ax.set_ylabel("truth")
+    ax.set_title("diagnose: confusion matrix (counts)")
+    fig.tight_layout()
+    fig.savefig(FIG / "diagnose_confusion.png", dpi=110)
+    plt.close(fig)
+    summary = {"n_cases": len(rs), "confusion": conf, "confusion_concealed": conf_c,
+               "concealed_named_correctly": [n_ok, len(ent)], "false_alarms": [fa, n_ctl],
+               "detection_curves": {e: [{"effect": lab, "correct": k, "n": n, "concealed": c}
+                                        for lab, k, n, c in row] for e, row in curves.items()},
+               "median_seconds": float(np.median(times))}
+    (OUT / "summary.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+def example() -> None:
+    """The walk-through of docs/diagnose.md: a concealed washout, diagnosed blind.
+
+    Writes the recording to analyses/results/diagnose/example/ and the report's
+    figures to docs/figures/diagnose_example_*.png.
+    """
+    import shutil
+
+    from bayespilot.diagnose import diagnose
+    from bayespilot.io import read_recording, write_recording
+    from bayespilot.recording import Recording
+
+    c = {"truth": "motion-washout", "effect": "omega_w=0.3", "extra": {"omega_w": 0.3},
+         "task": "FD", "K_theta": 1.0, "F_n": 0.1, "seed": 777, "id": -1}
+    sim, _ = simulate_case(c)
+    rec = sim.recording
+    meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+    ex = OUT / "example"
+    write_recording(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta),
+                    ex / "washout_run")
+    res = diagnose(read_recording(ex / "washout_run"), seed=0)
+    print(res.summary())
+    paths = res.report(ex / "report")
+    FIG.mkdir(parents=True, exist_ok=True)
+    for key in ("frequency_response", "residuals", "evidence", "candidates"):
+        shutil.copy(paths[key], FIG / f"diagnose_example_{key}.png")
+    (ex / "summary.txt").write_text(res.summary() + "\n")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--chunk", type=int, default=None, help="run at most N unfinished cases")
+    ap.add_argument("--summarize", action="store_true", help="only print and plot the summary")
+    ap.add_argument("--example", action="store_true",
+                    help="diagnose the docs' example (a concealed washout) and write its figures")
+    args = ap.parse_args(argv)
+    if args.example:
+        example()
+        return 0
+    if not args.summarize:
+        run(args.chunk)
+    summarize()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
