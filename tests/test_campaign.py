@@ -63,6 +63,36 @@ def test_job_key_seeds_and_validation():
     assert len(jobs) == 3 * 2 * 4 * 5 * 2 and len({x.key for x in jobs}) == len(jobs)
 
 
+def test_table4_remnant_gains_are_the_papers():
+    """remnant="table4" takes K_n from Table 4 for the cell (the paper's own gains)."""
+    j = Job("FD", 0.25, 0.3, 0, remnant="table4")
+    assert j.key == "FD_k0.25_fn0.3_r000_thr_paper_kn4"
+    assert j.remnant_gain == 0.370  # Table 4, FD, F_n = 0.3, K_theta = 0.25
+    assert Job("FT", 1.0, 0.1, 0, remnant="table4").remnant_gain == 0.057
+    assert Job("FT", 1.0, 0.0, 0, remnant="table4").remnant_gain == 0.0
+    assert Job("FD", 1.0, 0.2, 0).remnant_gain is None  # calibrated per realization
+    # the same realization sees the same noise sequence either way
+    assert j.remnant_seed == Job("FD", 0.25, 0.3, 0).remnant_seed
+    assert Job.from_dict(json.loads(json.dumps(j.to_dict()))) == j
+    with pytest.raises(ValueError, match="Table 4 lists no remnant gain"):
+        Job("FD", 0.3, 0.2, 0, remnant="table4")
+    with pytest.raises(ValueError, match="Table 4 lists no remnant gain"):
+        Job("FD", 1.0, 0.15, 0, remnant="table4")
+    with pytest.raises(ValueError, match="remnant must be"):
+        Job("FD", 1.0, 0.2, 0, remnant="tabel4")
+    jobs = paper_study(1, remnant="table4")
+    assert {x.remnant for x in jobs} == {"table4"} and all(x.key.endswith("_kn4") for x in jobs)
+
+
+def test_run_job_with_table4_gain_uses_it():
+    from bayespilot.campaign import run_job
+
+    job = Job("FD", 1.0, 0.2, 0, method="fast", fit_kwargs=TINY, duration=4.0, remnant="table4")
+    res = run_job(job)
+    assert res["K_n"] == pytest.approx(0.104)  # Table 4, FD, F_n = 0.2, K_theta = 1
+    assert 0.0 < res["F_n"] < 0.6 and res["remnant"] == "table4"
+
+
 # --- the campaign --------------------------------------------------------------------------
 def test_campaign_writes_skips_and_redoes(tmp_path):
     out = tmp_path / "c"

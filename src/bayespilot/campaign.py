@@ -142,12 +142,21 @@ class Job:
         JSON-serialisable.
     duration : float or None
         Measurement time of the simulated run, s (None: the paper's 81.92 s).
+    remnant : {"fraction", "table4"}
+        How the remnant gain K_n is set: ``"fraction"`` calibrates K_n on each
+        realization so that it reaches F_n exactly; ``"table4"`` uses the gain
+        the paper lists for the cell in its Table 4, the same for every
+        realization, as the paper did ("The values of K_n used to achieve
+        these remnant fractions ... are listed in Table 4"); the fraction each
+        realization then reaches is recorded.  ``"table4"`` needs a cell of
+        Table 4 (F_n 0.1, 0.2, 0.25, 0.3; K_theta 0.25, 0.5, 0.75, 1) or F_n = 0.
 
     Attributes
     ----------
     key : str
         Stable name of the job and of its result file, e.g.
-        ``FD_k1_fn0.2_r007_thr_paper`` (``_T20`` appended for a 20-s run).
+        ``FD_k1_fn0.2_r007_thr_paper`` (``_kn4`` appended for Table 4 gains,
+        ``_T20`` for a 20-s run).
     remnant_seed, fit_seed : int
 
     Examples
@@ -156,6 +165,8 @@ class Job:
     'FD_k1_fn0.2_r007_thr_paper'
     >>> Job("FT", 0.25, 0.0, 12, threshold=False, method="fast", duration=20).key
     'FT_k0.25_fn0_r012_nothr_fast_T20'
+    >>> Job("FD", 0.25, 0.3, 0, remnant="table4").key
+    'FD_k0.25_fn0.3_r000_thr_paper_kn4'
     """
 
     task: str
@@ -166,6 +177,7 @@ class Job:
     method: str = "paper"
     fit_kwargs: dict[str, Any] = field(default_factory=dict, hash=False)
     duration: float | None = None
+    remnant: str = "fraction"
 
     def __post_init__(self) -> None:
         if self.task not in _TASK_CODE:
@@ -207,11 +219,33 @@ class Job:
                     or not (math.isfinite(d) and d > 0):
                 raise ValueError(f"duration must be a positive number of seconds or None, got {d!r}")
             object.__setattr__(self, "duration", float(d))
+        if self.remnant not in ("fraction", "table4"):
+            raise ValueError(f"remnant must be 'fraction' or 'table4', got {self.remnant!r}")
+        if self.remnant == "table4" and self.remnant_fraction > 0:
+            self.remnant_gain  # a cell that Table 4 does not list raises here
+
+    @property
+    def remnant_gain(self) -> float | None:
+        """K_n of Table 4 for this cell (``remnant="table4"``), 0 for F_n = 0, else None."""
+        if self.remnant != "table4":
+            return None
+        if self.remnant_fraction == 0:
+            return 0.0
+        row = presets.TABLE4_K_N.get((self.task, self.remnant_fraction))
+        gains = tuple(presets.MOTION_GAINS)
+        if row is None or self.motion_gain not in gains:
+            raise ValueError(f"Table 4 lists no remnant gain for {self.task}, F_n = "
+                             f"{self.remnant_fraction:g}, K_theta = {self.motion_gain:g} "
+                             f"(it has F_n 0.1, 0.2, 0.25, 0.3 and K_theta "
+                             f"{', '.join(f'{g:g}' for g in gains)}); use remnant='fraction'")
+        return float(row[gains.index(self.motion_gain)])
 
     @property
     def key(self) -> str:
         k = (f"{self.task}_k{self.motion_gain:g}_fn{self.remnant_fraction:g}_r{self.realization:03d}"
              f"_{'thr' if self.threshold else 'nothr'}_{self.method}")
+        if self.remnant == "table4":
+            k += "_kn4"
         return k if self.duration is None else f"{k}_T{self.duration:g}"
 
     @property
@@ -228,20 +262,22 @@ class Job:
         return {"task": self.task, "motion_gain": self.motion_gain,
                 "remnant_fraction": self.remnant_fraction, "realization": self.realization,
                 "threshold": self.threshold, "method": self.method,
-                "fit_kwargs": dict(self.fit_kwargs), "duration": self.duration}
+                "fit_kwargs": dict(self.fit_kwargs), "duration": self.duration,
+                "remnant": self.remnant}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Job":
         return cls(d["task"], d["motion_gain"], d["remnant_fraction"], d["realization"],
                    d.get("threshold", True), d.get("method", "paper"), d.get("fit_kwargs", {}),
-                   d.get("duration"))
+                   d.get("duration"), d.get("remnant", "fraction"))
 
 
 def paper_study(realizations: int = 100, tasks: Sequence[str] = ("FD", "FT"),
                 motion_gains: Sequence[float] = presets.MOTION_GAINS,
                 remnant_fractions: Sequence[float] = (0.0, 0.1, 0.2, 0.25, 0.3),
                 threshold: bool | Sequence[bool] = (True, False), method: str = "paper", *,
-                duration: float | None = None, **fit_kwargs: Any) -> list[Job]:
+                duration: float | None = None, remnant: str = "fraction",
+                **fit_kwargs: Any) -> list[Job]:
     """The jobs of the simulation study of Section III.B.2 (Figs. 14 and 15).
 
     Parameters
@@ -255,6 +291,9 @@ def paper_study(realizations: int = 100, tasks: Sequence[str] = ("FD", "FT"),
     method : {"paper", "fast"}
     duration : float, optional
         Shorter simulated runs (s), for smoke tests.
+    remnant : {"fraction", "table4"}
+        K_n calibrated to F_n per realization, or the paper's Table 4 gains
+        (see :class:`Job`).
     **fit_kwargs
         Options of the fit function, e.g. ``repetitions=2`` (see :class:`Job`).
 
@@ -279,7 +318,7 @@ def paper_study(realizations: int = 100, tasks: Sequence[str] = ("FD", "FT"),
                       ("remnant_fractions", remnant_fractions), ("threshold", thresholds)):
         if isinstance(seq, str) or len(seq) == 0:
             raise ValueError(f"{name} must be a non-empty sequence, got {seq!r}")
-    return [Job(task, k, fn, r, thr, method, dict(fit_kwargs), duration)
+    return [Job(task, k, fn, r, thr, method, dict(fit_kwargs), duration, remnant)
             for r in range(int(realizations)) for task in tasks for k in motion_gains
             for fn in remnant_fractions for thr in thresholds]
 
@@ -329,9 +368,12 @@ def run_job(job: Job) -> dict[str, Any]:
     if not isinstance(job, Job):
         raise TypeError(f"job must be a Job, got {type(job).__name__}")
     t0 = time.perf_counter()
-    sim = simulate(task=job.task, motion_gain=job.motion_gain,
-                   remnant_fraction=job.remnant_fraction or None, seed=job.remnant_seed,
-                   duration=job.duration)
+    if job.remnant == "table4":
+        noise = {"remnant_gain": job.remnant_gain}
+    else:
+        noise = {"remnant_fraction": job.remnant_fraction or None}
+    sim = simulate(task=job.task, motion_gain=job.motion_gain, seed=job.remnant_seed,
+                   duration=job.duration, **noise)
     fit = _fit_function(job.method)(sim.recording, threshold=job.threshold, seed=job.fit_seed,
                                     **job.fit_kwargs)
     out: dict[str, Any] = {"key": job.key, **job.to_dict(), "job": job.to_dict(),

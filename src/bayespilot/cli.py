@@ -391,6 +391,11 @@ def _fit_option(text: str) -> tuple[str, object]:
     return name.strip(), parsed
 
 
+_FITS = {"both": (True, False), "threshold": (True,), "none": (False,)}
+_FITS_SAID = {"both": "with and without threshold", "threshold": "with threshold",
+              "none": "without threshold"}
+
+
 def _cmd_replicate(args: argparse.Namespace) -> int:
     from .campaign import (CampaignError, load_results, paper_study, run_campaign, summarise,
                            summary_markdown, write_summary_csv)
@@ -400,15 +405,18 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
                          "not both")
     try:
         jobs = paper_study(args.realizations, tasks=args.tasks, motion_gains=args.motion_gains,
-                           remnant_fractions=args.remnant_fractions, threshold=(True, False),
-                           method=args.method, duration=args.duration, **dict(args.fit_option))
-    except ValueError as exc:  # e.g. an option the fit function does not take
-        raise UsageError(f"argument --fit-option: {exc}") from None
+                           remnant_fractions=args.remnant_fractions,
+                           threshold=_FITS[args.fits], method=args.method,
+                           duration=args.duration, remnant=args.remnant,
+                           **dict(args.fit_option))
+    except ValueError as exc:  # an option the fit function does not take, a cell Table 4 lacks
+        arg = "--remnant" if "Table 4" in str(exc) else "--fit-option"
+        raise UsageError(f"argument {arg}: {exc}") from None
     out = Path(args.out)
     where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
     _say(args, f"{len(jobs)} fits ({args.method} method, {args.realizations} realization(s) x "
                f"{len(args.tasks)} task(s) x {len(args.motion_gains)} K_theta x "
-               f"{len(args.remnant_fractions)} F_n, with and without threshold) on {where} "
+               f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on {where} "
                f"-> {out}")
     try:
         summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
@@ -705,7 +713,9 @@ Examples:
 REPLICATE_EPILOG = """\
 Replicates the simulation study of Section III.B.2 (Figs. 14 and 15): for each
 task, K_theta, remnant fraction F_n and realization, simulates a run with the
-Table 3 parameters and fits it with and without threshold. The fits run in
+Table 3 parameters (remnant gain K_n from the paper's Table 4 by default, as
+the paper did; --remnant fraction calibrates K_n to F_n on each realization
+instead) and fits it with and without threshold (--fits). The fits run in
 parallel on dask.distributed: a local cluster (--workers, default one per
 core) or an existing one (--scheduler tcp://host:8786). Seeds follow from the
 task, K_theta, F_n and realization number, so a rerun gives the same fits.
@@ -931,6 +941,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--remnant-fractions", type=_csv_of(_fraction, "numbers in [0, 1)"),
                    default=(0.0, 0.1, 0.2, 0.25, 0.3), metavar="LIST",
                    help="comma-separated F_n values (default 0,0.1,0.2,0.25,0.3)")
+    p.add_argument("--remnant", choices=("table4", "fraction"), default="table4",
+                   help="'table4': the remnant gain K_n of the paper's Table 4 for the cell, "
+                        "the same for every realization (default, as the paper did); "
+                        "'fraction': K_n calibrated so that each realization reaches F_n")
+    p.add_argument("--fits", choices=tuple(_FITS), default="both",
+                   help="fit each run with and without threshold ('both', default), "
+                        "or only one of the two")
     p.add_argument("--duration", type=_positive, default=None, metavar="S",
                    help="measurement time of each simulated run in seconds (default 81.92; "
                         "shorter for a quick check)")
