@@ -237,7 +237,7 @@ def test_replicate_cli(tmp_path, capsys):
                  "--workers", "1", "--out", str(out), "-q"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
-    assert len(list(out.glob("FD_k1_fn0_r000_*_fast_T4.json"))) == 2
+    assert len(list(out.glob("FD_k1_fn0_r000_*_fast_kn4_T4.json"))) == 2
     rows = list(csv.DictReader((out / "summary.csv").open()))
     assert {(r["threshold"], r["n"]) for r in rows} == {("True", "1"), ("False", "1")}
     assert "paper mu" in (out / "summary.md").read_text()
