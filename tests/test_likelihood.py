@@ -397,3 +397,69 @@ def test_discard_is_validated(fd_sim, model):
     for bad in (-0.1, float("nan"), 1e6, "2", True):
         with pytest.raises(ValueError, match="discard"):
             Likelihood(model, fd_sim.recording, discard=bad)
+
+
+# --- an AR noise model (prediction-error criterion) ------------------------------------------
+def _naive_whitened_nll(eps, a):
+    """Eq. 4 on w_k = eps_k - sum_j a_j eps_{k-j}, k >= p: plain NumPy, loop over lags."""
+    p = len(a)
+    w = eps[p:].copy()
+    for j in range(1, p + 1):
+        w -= a[j - 1] * eps[p - j:len(eps) - j]
+    n = w.size
+    return 0.5 * n * np.log(np.mean(w**2)) + 0.5 * n
+
+
+@pytest.mark.parametrize("discard", [0.0, 1.37])
+def test_whitened_likelihood_matches_naive(fd_rec, model, discard):
+    from bayespilot.noise import ARNoise
+
+    rec = fd_rec
+    a = np.array([1.6, -0.9, 0.2, 0.05])
+    lik = Likelihood(model, rec, discard=discard, noise=ARNoise(a))
+    skip = lik.skip
+    assert lik.n_terms == rec.n_samples - skip - a.size
+    rows = []
+    for params in (FD, CASES["fractional_delays"], CASES["other_dynamics"], CASES["no_threshold"]):
+        eps = (rec.u - _naive(rec, params, "periodic", lik.warm))[skip:]
+        ref = _naive_whitened_nll(eps, a)
+        got = lik.neg_log_lik(params)
+        assert got == pytest.approx(ref, rel=1e-9, abs=0)
+        # the Gauss-Newton residual is the same whitened series
+        r = lik.fit_residual(params)
+        assert r.size == lik.n_terms
+        assert 0.5 * r.size * np.log(np.mean(r**2)) + 0.5 * r.size == pytest.approx(got, rel=1e-12)
+        rows.append(model.free_vector(params))
+    batch = lik.batch(np.array(rows))
+    np.testing.assert_array_equal(batch, [lik.neg_log_lik(model.as_dict(x)) for x in rows])
+    # an order-0 noise model is Eq. 4
+    white = Likelihood(model, rec, discard=discard, noise=ARNoise([]))
+    assert white.neg_log_lik(FD) == Likelihood(model, rec, discard=discard).neg_log_lik(FD)
+
+
+def test_whitened_jacobian_matches_finite_differences(fd_sim, model):
+    from bayespilot.noise import ARNoise
+
+    rec = fd_sim.recording
+    lik = Likelihood(model, rec, discard=0.5, noise=ARNoise([1.2, -0.4]))
+    names = ("K_v", "tau_v", "K_m", "omega_nm")
+    p = dict(CASES["fractional_delays"])
+    J = lik.fit_jacobian(p, names)
+    assert J.shape == (lik.n_terms, len(names))
+    for k, name in enumerate(names):
+        h = 1e-6 * max(1.0, abs(p[name]))
+        d = (lik.fit_residual(dict(p, **{name: p[name] + h}))
+             - lik.fit_residual(dict(p, **{name: p[name] - h}))) / (2 * h)
+        np.testing.assert_allclose(J[:, k], d, rtol=1e-5, atol=1e-7 * np.abs(d).max())
+
+
+def test_noise_model_is_validated(fd_sim, model):
+    from bayespilot.noise import ARNoise
+
+    with pytest.raises(TypeError, match="noise"):
+        Likelihood(model, fd_sim.recording, noise=[0.5])
+    with pytest.raises(ValueError, match="finite"):
+        ARNoise([0.5, np.nan])
+    short = fd_sim.recording.n_samples // 4
+    with pytest.raises(ValueError, match="noise model needs"):
+        Likelihood(model, fd_sim.recording, noise=ARNoise(np.zeros(short)))

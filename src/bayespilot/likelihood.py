@@ -24,8 +24,10 @@ import numpy as np
 from scipy import signal
 
 from .kernels import _blocks as B
+from .kernels import _coloured as C
 from .kernels import _response as R
 from .model import FixedFilter, PilotModel
+from .noise import ARNoise
 from .recording import Recording
 
 __all__ = ["Likelihood", "PerfectFitWarning", "channel_inputs", "neg_log_lik", "model_response", "vaf"]
@@ -139,6 +141,15 @@ class Likelihood:
         known, and the first 1-2 s of the residual carry that start-up error;
         ``discard=2`` removes it (``docs/faithfulness.md``, part E).  At most
         half the record.
+    noise : ARNoise, optional
+        A model of the output error.  None (default): white, Eq. 4 as the
+        paper has it.  An :class:`~bayespilot.noise.ARNoise`: Eq. 4 applied
+        to the whitened residual w = A(q) eps, conditional on its first p
+        samples (a prediction-error criterion; see :mod:`bayespilot.noise`
+        for why closed-loop data need it).  Everything that uses the
+        likelihood (:meth:`neg_log_lik`, :meth:`batch`, and through
+        :meth:`fit_residual` and :meth:`fit_jacobian` the Gauss-Newton
+        fitters) then works on w.
 
     Examples
     --------
@@ -151,7 +162,8 @@ class Likelihood:
     """
 
     def __init__(self, model: PilotModel, recording: Recording, *, initial: str = "periodic",
-                 warmup: float = 5.0, discard: float = 0.0) -> None:
+                 warmup: float = 5.0, discard: float = 0.0,
+                 noise: ARNoise | None = None) -> None:
         if not isinstance(model, PilotModel):
             raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
         if not isinstance(recording, Recording):
@@ -162,6 +174,8 @@ class Likelihood:
                 or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
             raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
                              f"(half the record), got {discard!r}")
+        if noise is not None and not isinstance(noise, ARNoise):
+            raise TypeError(f"noise must be None or an ARNoise, got {type(noise).__name__}")
         self.model = model
         self.recording = recording
         self.initial = initial
@@ -176,6 +190,13 @@ class Likelihood:
         #: Samples at the start left out of Eq. 4, and the slice of the samples kept.
         self.skip = int(round(discard * recording.sample_rate_hz))
         self.used = slice(self.skip, None)
+        self.noise = noise
+        #: AR coefficients of the noise model (empty: white, Eq. 4).
+        self._a = np.ascontiguousarray(noise.a if noise is not None else np.zeros(0))
+        if self.n - self.skip <= 4 * self._a.size:
+            raise ValueError(f"an AR({self._a.size}) noise model needs more than "
+                             f"{4 * self._a.size} samples after the discarded lead-in, "
+                             f"this record has {self.n - self.skip}")
         # Floor of the output-error variance: a residual 1e-12 of rms(u).
         self.s2_floor = 1e-24 * float(np.mean(self.u**2)) + 1e-300
         self._plan = model.plan
@@ -203,6 +224,23 @@ class Likelihood:
         """Output error eps = u - u_hat over the whole record (Eq. 4 uses ``eps[self.used]``)."""
         return self.u - self.response(params)
 
+    @property
+    def n_terms(self) -> int:
+        """N of Eq. 4: the samples kept, less the p a noise model conditions on."""
+        return self.n - self.skip - self._a.size
+
+    def fit_residual(self, params) -> np.ndarray:
+        """The residual whose sum of squares -ln L is increasing in: eps over the samples
+        kept, whitened by the noise model if there is one (length :attr:`n_terms`)."""
+        eps = self.residual(params)[self.used]
+        return eps if self.noise is None else self.noise.whiten(eps)
+
+    def fit_jacobian(self, params, names: Sequence[str] | None = None) -> np.ndarray:
+        """d :meth:`fit_residual` / d parameter, shape (:attr:`n_terms`, len(names)), exact
+        (the model's sensitivities, passed through the same whitening filter)."""
+        J = -self.jacobian(params, names)[1][self.used]
+        return J if self.noise is None else self.noise.whiten(J)
+
     def neg_log_lik(self, params) -> float:
         """-ln L (Eq. 4, s2 profiled); +inf for an unstable parameter vector.
 
@@ -213,10 +251,16 @@ class Likelihood:
         y = np.empty(self.n)
         q = np.empty(self.n)
         v = np.empty(self.n)
-        Qp = np.empty((self.X.shape[0], self.n + 2 * self.pad))
-        val, floored = R.neg_log_lik_one(theta, self.X, self.u, *self._args(), self.dt,
-                                         self.periodic, self.warm, self.s2_floor, y, q, v, Qp,
-                                         self.pad, self.skip)
+        if self._a.size:
+            val, floored = C.neg_log_lik_whitened_one(theta, self._a, self.X, self.u,
+                                                      *self._args(), self.dt, self.periodic,
+                                                      self.warm, self.s2_floor, y, q, v,
+                                                      self.skip)
+        else:
+            Qp = np.empty((self.X.shape[0], self.n + 2 * self.pad))
+            val, floored = R.neg_log_lik_one(theta, self.X, self.u, *self._args(), self.dt,
+                                             self.periodic, self.warm, self.s2_floor, y, q, v,
+                                             Qp, self.pad, self.skip)
         if floored:
             warnings.warn("the model reproduces u to round-off; the output-error variance was "
                           "floored, so -ln L is a finite bound, not an optimum", PerfectFitWarning,
@@ -276,9 +320,15 @@ class Likelihood:
             out = np.empty(m)
         floored = np.zeros(m, dtype=np.bool_)
         n_chunks = max(1, min(m, numba.get_num_threads()))
-        R.neg_log_lik_batch(free, self._free_idx, self._base, self.X, self.u, *self._args(),
-                            self.dt, self.periodic, self.warm, self.s2_floor, n_chunks,
-                            self.pad, out, floored, self.skip)
+        if self._a.size:
+            C.neg_log_lik_whitened_batch(free, self._free_idx, self._base, self._a, self.X,
+                                         self.u, *self._args(), self.dt, self.periodic,
+                                         self.warm, self.s2_floor, n_chunks, out, floored,
+                                         self.skip)
+        else:
+            R.neg_log_lik_batch(free, self._free_idx, self._base, self.X, self.u, *self._args(),
+                                self.dt, self.periodic, self.warm, self.s2_floor, n_chunks,
+                                self.pad, out, floored, self.skip)
         out[~np.isfinite(out)] = np.inf
         return out
 

@@ -58,6 +58,7 @@ from scipy import linalg, optimize, signal, stats
 
 from ..likelihood import Likelihood
 from ..model import PilotModel
+from ..noise import MAX_AR_ORDER, fit_ar
 from ..recording import Recording
 from .catalogue import Extension
 
@@ -66,55 +67,6 @@ __all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "Can
 
 #: Cut-off of the decision likelihood's low-pass, rad/s.
 OMEGA_C = 25.0
-#: Largest AR order considered.
-MAX_AR_ORDER = 30
-
-
-def fit_ar(x: np.ndarray, *, max_order: int = MAX_AR_ORDER, order: int | None = None
-           ) -> np.ndarray:
-    """AR(p) coefficients of a series by least squares, the order chosen by BIC.
-
-    Least squares on the lagged series (the covariance method) rather than
-    Yule-Walker: the remnant's spectrum spans tens of dB, where Yule-Walker
-    estimates are badly biased.
-
-    Parameters
-    ----------
-    x : ndarray
-        The series (1-D, finite).
-    max_order : int
-        Largest order tried.
-    order : int, optional
-        Use this order instead of choosing one.
-
-    Returns
-    -------
-    a : ndarray, shape (p,)
-        x_k = sum_j a_j x_{k-j} + w_k.
-    """
-    x = np.asarray(x, dtype=float)
-    if x.ndim != 1 or not np.all(np.isfinite(x)):
-        raise ValueError("x must be a finite 1-D array")
-    x = x - x.mean()
-    n = x.size
-    orders = [int(order)] if order is not None else list(range(1, int(max_order) + 1))
-    if orders[-1] >= n // 4 or orders[0] < 0:
-        raise ValueError(f"AR order must be in [0, {n // 4 - 1}] for {n} samples")
-    if orders == [0]:
-        return np.zeros(0)
-    pmax = orders[-1]
-    lagged = np.column_stack([x[pmax - j - 1:n - j - 1] for j in range(pmax)])
-    y = x[pmax:]
-    best = (math.inf, np.zeros(0))
-    for p in orders:
-        a, *_ = np.linalg.lstsq(lagged[:, :p], y, rcond=None)
-        s2 = float(np.mean((y - lagged[:, :p] @ a) ** 2))
-        if not s2 > 0:
-            break
-        bic = y.size * math.log(s2) + p * math.log(y.size)
-        if bic < best[0]:
-            best = (bic, a)
-    return np.asarray(best[1])
 
 
 @dataclass(frozen=True)

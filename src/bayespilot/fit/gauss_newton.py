@@ -6,7 +6,9 @@ optimiser is ``scipy.optimize.least_squares(method="lm")`` (Levenberg-
 Marquardt: Gauss-Newton with a trust region), unconstrained as in the paper;
 the Jacobian comes from the forward sensitivity equations of the discrete
 model (:meth:`bayespilot.likelihood.Likelihood.jacobian`), not finite
-differences.
+differences.  With a noise model in the likelihood the residual is the
+whitened one (:meth:`~bayespilot.likelihood.Likelihood.fit_residual`), which
+makes this a prediction-error fit.
 """
 
 from __future__ import annotations
@@ -86,9 +88,9 @@ def refine(likelihood: Likelihood, start: Mapping[str, float], *, hold: Sequence
     names = tuple(n for n in model.parameter_names if n not in set(hold))
     if not names:
         raise ValueError("nothing to refine: every free parameter is held")
-    used = likelihood.used  # the samples Eq. 4 uses (all unless a lead-in is discarded)
-    u = likelihood.u[used]
-    big = 1e3 * (float(np.std(u)) + 1e-300)
+    # The residual Eq. 4 sums (the samples kept, whitened when the likelihood has a noise model).
+    m = likelihood.n_terms
+    big = 1e3 * (float(np.std(likelihood.u)) + 1e-300)
 
     def params_of(x):
         p = dict(start_full)
@@ -96,16 +98,16 @@ def refine(likelihood: Likelihood, start: Mapping[str, float], *, hold: Sequence
         return p
 
     def residual(x):
-        y = likelihood.response(params_of(x))[used]
-        if not np.all(np.isfinite(y)):
-            return np.full(u.shape, big)
-        return u - y
+        r = likelihood.fit_residual(params_of(x))
+        if not np.all(np.isfinite(r)):
+            return np.full(m, big)
+        return r
 
     def jac(x):
-        J = likelihood.jacobian(params_of(x), names)[1][used]
+        J = likelihood.fit_jacobian(params_of(x), names)
         if not np.all(np.isfinite(J)):
-            return np.zeros((u.size, len(names)))
-        return -J
+            return np.zeros((m, len(names)))
+        return J
 
     x0 = np.array([start_full[n] for n in names])
     f0 = likelihood.neg_log_lik(start_full)

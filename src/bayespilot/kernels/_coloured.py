@@ -50,16 +50,77 @@ def pacf_to_ar(r, a, work):
 
 @njit
 def whitened_sse(u, y, a, skip=0):
-    """sum_{k >= skip + p} w_k^2 with eps = u - y and w_k = eps_k - sum_j a_j eps_{k-j}."""
+    """sum_{k >= skip + p} w_k^2 with eps = u - y and w_k = eps_k - sum_j a_j eps_{k-j}.
+
+    Overwrites ``y`` with eps (the caller's work buffer), so each eps is
+    formed once rather than p + 1 times.
+    """
     n = u.shape[0]
     p = a.shape[0]
+    for k in range(skip, n):
+        y[k] = u[k] - y[k]
     sse = 0.0
     for k in range(skip + p, n):
-        w = u[k] - y[k]
+        w = y[k]
         for j in range(p):
-            w -= a[j] * (u[k - 1 - j] - y[k - 1 - j])
+            w -= a[j] * y[k - 1 - j]
         sse += w * w
     return sse
+
+
+@njit
+def neg_log_lik_whitened_one(theta, a, X, u, ch_int, ch_float, st_int, st_const, out_int, dt,
+                             periodic, warm, s2_floor, y, q, v, skip=0):
+    """-ln L of an output error with the fixed AR(p) model ``a``, for one full ``theta``.
+
+    Eq. 4 on the whitened residual w_k = eps_k - sum_j a_j eps_{k-j} over
+    k >= skip + p (conditional on the p samples before).  ``y``, ``q``, ``v``
+    are work buffers of the record's length.  Returns (value, floored); +inf
+    for an unstable ``theta`` or a non-finite result.
+    """
+    n = u.shape[0]
+    p = a.shape[0]
+    if n <= skip + p:
+        return np.inf, False
+    ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
+                       warm, y, q, v)
+    if not ok:
+        return np.inf, False
+    sse = whitened_sse(u, y, a, skip)
+    return neg_log_lik_from_sse(sse, n - skip - p, s2_floor)
+
+
+@pjit
+def neg_log_lik_whitened_batch(free, free_idx, base, a, X, u, ch_int, ch_float, st_int,
+                               st_const, out_int, dt, periodic, warm, s2_floor, n_chunks, out,
+                               floored, skip=0):
+    """-ln L with the fixed AR model ``a`` for every row of ``free``, in parallel over rows.
+
+    Rows are dealt to ``n_chunks`` threads in turn (as ``_response.neg_log_lik_batch``);
+    each thread allocates its work buffers once.
+    """
+    m = free.shape[0]
+    n = u.shape[0]
+    for ch in numba.prange(n_chunks):
+        y = np.empty(n)
+        q = np.empty(n)
+        v = np.empty(n)
+        theta = base.copy()
+        for r in range(ch, m, n_chunks):
+            finite = True
+            for j in range(free_idx.shape[0]):
+                x = free[r, j]
+                finite = finite and math.isfinite(x)
+                theta[free_idx[j]] = x
+            if not finite:
+                out[r] = np.inf
+                floored[r] = False
+                continue
+            val, fl = neg_log_lik_whitened_one(theta, a, X, u, ch_int, ch_float, st_int,
+                                               st_const, out_int, dt, periodic, warm, s2_floor,
+                                               y, q, v, skip)
+            out[r] = val
+            floored[r] = fl
 
 
 @njit
@@ -74,19 +135,12 @@ def neg_log_lik_coloured_one(theta, r, X, u, ch_int, ch_float, st_int, st_const,
     autocorrelation outside (-1, 1), or a non-finite result.
     """
     p = r.shape[0]
-    n = u.shape[0]
     for j in range(p):
         if not (abs(r[j]) < 1.0):
             return np.inf, False
-    if n <= skip + p:
-        return np.inf, False
-    ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
-                       warm, y, q, v)
-    if not ok:
-        return np.inf, False
     pacf_to_ar(r, a, work)
-    sse = whitened_sse(u, y, a, skip)
-    return neg_log_lik_from_sse(sse, n - skip - p, s2_floor)
+    return neg_log_lik_whitened_one(theta, a, X, u, ch_int, ch_float, st_int, st_const, out_int,
+                                    dt, periodic, warm, s2_floor, y, q, v, skip)
 
 
 @pjit

@@ -1,0 +1,52 @@
+"""The AR output-error model (bayespilot.noise) against scipy.signal and known processes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from conftest import make_rng
+from bayespilot.noise import ARNoise, fit_ar
+
+
+def _ar_process(a, n, seed):
+    """x_k = sum_j a_j x_{k-j} + w_k, w ~ N(0, 1), by scipy.signal.lfilter (burn-in dropped)."""
+    w = make_rng(seed).standard_normal(n + 2000)
+    return signal.lfilter([1.0], np.r_[1.0, -np.asarray(a)], w)[2000:], w[2000:]
+
+
+def test_fit_ar_recovers_known_coefficients_and_order():
+    a = [1.5, -0.9, 0.3]
+    x, _ = _ar_process(a, 40000, 1)
+    est = fit_ar(x)  # order by BIC
+    assert est.size == 3
+    # least-squares AR estimates have standard error ~ 1/sqrt(n) = 0.005 here
+    np.testing.assert_allclose(est, a, atol=0.03)
+    np.testing.assert_allclose(fit_ar(x, order=3), est, atol=1e-3)  # same fit, 27 fewer rows
+
+
+def test_whitening_recovers_the_innovations():
+    a = [1.2, -0.5]
+    x, w = _ar_process(a, 5000, 2)
+    got = ARNoise(a).whiten(x)
+    np.testing.assert_allclose(got, w[2:], rtol=0, atol=1e-10)
+    # on columns, as for a Jacobian
+    X = np.column_stack([x, 2 * x])
+    np.testing.assert_allclose(ARNoise(a).whiten(X)[:, 1], 2 * got, rtol=1e-12)
+
+
+def test_from_residual_round_trip_and_errors():
+    x, _ = _ar_process([0.8], 4000, 3)
+    noise = ARNoise.from_residual(x, order=1)
+    assert noise.order == 1 and abs(noise.a[0] - 0.8) < 0.05
+    back = ARNoise.from_dict(noise.to_dict())
+    np.testing.assert_array_equal(back.a, noise.a)
+    with pytest.raises(ValueError, match="not an AR noise model"):
+        ARNoise.from_dict({"kind": "white"})
+    with pytest.raises(ValueError, match="finite 1-D"):
+        fit_ar(np.array([1.0, np.inf, 2.0]))
+    with pytest.raises(ValueError, match="AR order"):
+        fit_ar(x[:40], order=20)
+    with pytest.raises(ValueError, match="more than 3 samples"):
+        ARNoise([0.1, 0.1, 0.1]).whiten(np.ones(3))
