@@ -70,7 +70,18 @@ def test_sample_warns_when_not_converged(run_dir, capsys):
     assert "warning: the chain reached max_steps = 60" in err
     assert "Traceback" not in err
     post = Posterior.from_netcdf(run_dir / "p2.nc")
-    assert post.parameter_names[-2:] == ("pacf_1", "pacf_2") and not post.converged
+    # the default coloured likelihood holds its AR model (order by BIC) fixed
+    assert post.parameter_names[-1] == "delta_abs" and not post.converged
+    assert post.settings["noise"]["order"] >= 1 and post.settings["ar"] == "fixed"
+
+
+def test_sample_coloured_with_sampled_ar(run_dir, capsys):
+    code, out, err = _run(capsys, "sample", run_dir / "run", "-o", run_dir / "p3.nc",
+                          "--max-steps", "40", "--likelihood", "coloured", "--ar", "sampled",
+                          "--ar-order", "3", "-q")
+    assert code == 0, err
+    post = Posterior.from_netcdf(run_dir / "p3.nc")
+    assert post.parameter_names[-3:] == ("pacf_1", "pacf_2", "pacf_3")
 
 
 def test_plot_writes_three_figures(sampled, tmp_path, capsys):

@@ -280,12 +280,34 @@ def test_compare_does_not_prefer_a_threshold_that_is_not_there():
     assert c.information_criteria["delta_bic"] < 0
 
 
+def test_compare_coloured_uses_one_noise_model_for_both():
+    """likelihood="coloured": one AR model (from a prediction-error fit of the threshold model)
+    whitens both models' residuals; the large threshold is still found."""
+    sim = _sim(0.03, seed=1)
+    c = compare(sim.recording, likelihood="coloured", seed=0, savage_dickey_samples=False,
+                **FAST)
+    noise = c.settings["noise"]
+    assert noise["kind"] == "ar" and noise["order"] >= 1 and c.settings["discard_seconds"] == 2.0
+    assert c.evidence_threshold.settings["noise"] == noise == c.evidence_none.settings["noise"]
+    assert c.decision == "threshold"
+    # the maximum -ln L of the information criteria is the whitened likelihood's
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.noise import ARNoise
+
+    lik = Likelihood(paper_model(), sim.recording, discard=2.0, noise=ARNoise(noise["a"]))
+    ml = c.information_criteria["ml_threshold"]
+    assert lik.neg_log_lik(ml) == pytest.approx(c.information_criteria["neg_log_lik_threshold"],
+                                                rel=1e-9)
+
+
 def test_compare_bad_input():
     sim = _sim(0.0, seed=3)
     with pytest.raises(ValueError, match="no free 'delta_abs'"):
         compare(sim.recording, paper_model(threshold=False))
     with pytest.raises(ValueError, match="likelihood"):
         compare(sim.recording, likelihood="white")
+    with pytest.raises(ValueError, match="ar must be"):
+        compare(sim.recording, likelihood="coloured", ar="free")
     with pytest.raises(ValueError, match="nlive"):
         compare(sim.recording, nlive=3, savage_dickey_samples=False)
     with pytest.raises(TypeError, match="Recording"):

@@ -19,6 +19,7 @@ from scipy import stats
 from conftest import make_rng
 from bayespilot.kernels import _coloured as C
 from bayespilot.likelihood import Likelihood
+from bayespilot.noise import ARNoise
 from bayespilot.sample import (ConvergenceWarning, Posterior, _LogPosterior, _Prior, _run_emcee,
                                pacf_from_residual, pacf_names, sample)
 from bayespilot.simulate import simulate
@@ -87,8 +88,8 @@ def short_sim():
 @pytest.fixture(scope="module")
 def coloured_run(short_sim):
     with pytest.warns(ConvergenceWarning):
-        return sample(short_sim.recording, likelihood="coloured", init=short_sim.params, seed=5,
-                      **SHORT)
+        return sample(short_sim.recording, likelihood="coloured", ar="sampled", discard=0.0,
+                      init=short_sim.params, seed=5, **SHORT)
 
 
 # --- (a) the sampler loop on a known posterior ----------------------------------------------
@@ -276,8 +277,8 @@ def test_plots_return_figures(coloured_run, short_sim):
 ])
 def test_bad_priors_raise(short_sim, prior, match):
     with pytest.raises(ValueError, match=match):
-        sample(short_sim.recording, likelihood="coloured", prior=prior, init=short_sim.params,
-               **SHORT)
+        sample(short_sim.recording, likelihood="coloured", ar="sampled", prior=prior,
+               init=short_sim.params, **SHORT)
 
 
 def test_bad_settings_raise(short_sim):
@@ -316,3 +317,51 @@ def test_bayespilot_sample_is_callable(short_sim):
     s = post.summary()["K_v"]
     assert s["tau"] == post.tau["K_v"] and s["ess_tail"] > 0
     assert post.truth == {}  # simulate() output carries no truth in its metadata
+
+
+# --- (h) the coloured likelihood with a fixed (plug-in) AR model ---------------------------------
+def test_fixed_ar_coloured_run(short_sim, model, tmp_path):
+    """Default coloured sampling: only the pilot parameters are sampled; the AR model (order by
+    BIC from the residual at init) and the 2-s lead-in are recorded; a resumed chain keeps the
+    noise model it was written with."""
+    rec = short_sim.recording
+    kw = dict(SHORT, n_walkers=16, max_steps=60, min_steps=0, check_every=30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        post = sample(rec, likelihood="coloured", init=short_sim.params, seed=2, **kw)
+        h5 = tmp_path / "c.h5"
+        sample(rec, likelihood="coloured", init=short_sim.params, seed=2, backend=h5,
+               **dict(kw, max_steps=30))
+        resumed = sample(rec, likelihood="coloured", init=short_sim.params, seed=2, backend=h5,
+                         **kw)
+    assert post.parameter_names == model.parameter_names
+    noise = post.settings["noise"]
+    assert noise["kind"] == "ar" and 3 <= noise["order"] <= 30
+    assert post.settings["ar_order"] == noise["order"] and post.settings["discard_seconds"] == 2.0
+    # the AR model is the BIC fit of the residual at init over the samples kept
+    lik = Likelihood(model, rec, discard=2.0)
+    want = ARNoise.from_residual(lik.residual(short_sim.params)[lik.used])
+    np.testing.assert_allclose(noise["a"], want.a, rtol=1e-9, atol=1e-12)
+    assert resumed.settings["noise"] == noise and resumed.settings["init"] == "resumed"
+    for n in post.parameter_names:
+        np.testing.assert_array_equal(post.idata.posterior[n].values,
+                                      resumed.idata.posterior[n].values)
+    # the sampled log posterior is the whitened likelihood plus the uniform prior
+    wl = Likelihood(model, rec, discard=2.0, noise=ARNoise(noise["a"]))
+    x = np.array([float(post.idata.posterior[n].values[0, -1]) for n in model.parameter_names])
+    lo, hi = model.bounds
+    lp = float(post.idata.sample_stats["lp"].values[0, -1])
+    assert lp == pytest.approx(-wl.neg_log_lik(x) - np.sum(np.log(hi - lo)), rel=1e-9, abs=1e-6)
+
+
+def test_fixed_ar_settings_raise(short_sim):
+    rec = short_sim.recording
+    with pytest.raises(ValueError, match="ar must be"):
+        sample(rec, likelihood="coloured", ar="both", init=short_sim.params, **SHORT)
+    with pytest.raises(ValueError, match="ar_order"):
+        sample(rec, likelihood="coloured", ar_order=99, init=short_sim.params, **SHORT)
+    with pytest.raises(ValueError, match="discard"):
+        sample(rec, likelihood="coloured", discard=20.0, init=short_sim.params, **SHORT)
+    with pytest.raises(ValueError, match="pacf_1"):  # not sampled with a fixed AR model
+        sample(rec, likelihood="coloured", prior={"pacf_1": stats.uniform(0, 0.5)},
+               init=short_sim.params, **SHORT)

@@ -17,9 +17,13 @@ recording, three ways:
    -ln L = N/2 ln(sum eps^2) + const: the profiled form of Eq. 4 up to a
    constant that is the same for both models (same N), so it cancels in the
    Bayes factor (the improper prior is shared by both models, which is what
-   makes the ratio well defined).  ``likelihood="coloured"`` uses the AR(p)
-   output-error model of :mod:`bayespilot.sample`, with the partial
-   autocorrelations uniform on (-0.99, 0.99) in both models.
+   makes the ratio well defined).  ``likelihood="coloured"`` uses the AR
+   output-error model of :mod:`bayespilot.sample`: by default (``ar="fixed"``)
+   one AR model, estimated from a prediction-error fit of the model with
+   threshold (:func:`~bayespilot.fit.fast.fit_fast`, ``noise="ar"``), whitens
+   the residual of both models, so that both are judged by the same noise
+   model; with ``ar="sampled"`` the partial autocorrelations are uniform on
+   (-0.99, 0.99) in both models.
 
 2. **Savage-Dickey ratio** from an emcee posterior of the model with
    threshold: for nested models whose other priors do not depend on
@@ -78,6 +82,7 @@ import numpy as np
 
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
+from .noise import ARNoise
 from .recording import Recording
 
 __all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested_evidence",
@@ -307,25 +312,39 @@ def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequen
                     int(res["niter"]), time.perf_counter() - t0, settings)
 
 
-def _model_and_order(model: PilotModel | None, likelihood: str, ar_order: int):
-    from .sample import LIKELIHOODS
+def _model_and_order(model: PilotModel | None, likelihood: str, ar: str,
+                     ar_order: int | None):
+    """The model, and p of the sampled partial autocorrelations (0 unless ar="sampled")."""
+    from .sample import AR_MODES, LIKELIHOODS
 
     model = paper_model() if model is None else model
     if not isinstance(model, PilotModel):
         raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
     if likelihood not in LIKELIHOODS:
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
-    order = _check_int("ar_order", ar_order, 1) if likelihood == "coloured" else 0
-    return model, order
+    if ar not in AR_MODES:
+        raise ValueError(f"ar must be one of {AR_MODES}, got {ar!r}")
+    if ar_order is not None:
+        _check_int("ar_order", ar_order, 0 if ar == "fixed" else 1)
+    if likelihood != "coloured" or ar == "fixed":
+        return model, 0
+    return model, 2 if ar_order is None else int(ar_order)
+
+
+def _check_noise(noise):
+    if noise is not None and not isinstance(noise, ARNoise):
+        raise TypeError(f"noise must be None or an ARNoise, got {type(noise).__name__}")
+    return noise
 
 
 class _NegLogLik:
     """-ln L of one vector [free pilot parameters, pacf_1..pacf_p] (Eq. 4 or AR-coloured)."""
 
-    def __init__(self, model: PilotModel, recording: Recording, order: int) -> None:
+    def __init__(self, model: PilotModel, recording: Recording, order: int,
+                 noise: ARNoise | None = None, discard: float = 0.0) -> None:
         from .sample import PACF_BOUND, _LogPosterior, _Prior, pacf_names
 
-        self.lik = Likelihood(model, recording)
+        self.lik = Likelihood(model, recording, noise=noise, discard=discard)
         self.order = order
         self.names = model.parameter_names + pacf_names(order)
         lo, hi = model.bounds
@@ -345,12 +364,14 @@ class _NegLogLik:
 
     @property
     def n(self) -> int:
-        return self.lik.n - self.order
+        return self.lik.n_terms - self.order
 
 
 def evidence(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
-             ar_order: int = 2, nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
-             seed: int | None = None, progress: bool = False) -> Evidence:
+             ar: str = "fixed", ar_order: int | None = None, noise: ARNoise | None = None,
+             discard: float = 0.0, nlive: int = 200, dlogz: float = 0.5,
+             sample: str = "rwalk", seed: int | None = None,
+             progress: bool = False) -> Evidence:
     """ln Z of ``model`` on ``recording`` with priors uniform on the model bounds (dynesty).
 
     Parameters
@@ -361,9 +382,17 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
     likelihood : {"eq4", "coloured"}
         As in :func:`bayespilot.sample.sample` (variance marginalised with the
         Jeffreys prior; see the module docs).
-    ar_order : int
-        AR order of the ``"coloured"`` likelihood; the partial
-        autocorrelations are uniform on (-0.99, 0.99).
+    ar : {"fixed", "sampled"}
+        For ``"coloured"``: the AR model ``noise`` held fixed, or sampled.
+    ar_order : int, optional
+        For ``"coloured"``: the order of the AR model (``ar="sampled"``: its
+        partial autocorrelations are uniform on (-0.99, 0.99); default 2;
+        ``ar="fixed"``: the order estimated when ``noise`` is not given).
+    noise : ARNoise, optional
+        For ``"coloured"`` with ``ar="fixed"``: the AR model.  Default: estimated
+        from a prediction-error fit of ``model`` (:func:`~bayespilot.fit.fast.fit_fast`).
+    discard : float
+        Seconds at the start left out of the likelihood.
     nlive, dlogz, sample, seed, progress
         See :func:`nested_evidence`.
 
@@ -373,11 +402,16 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    model, order = _model_and_order(model, likelihood, ar_order)
-    nll = _NegLogLik(model, recording, order)
+    model, order = _model_and_order(model, likelihood, ar, ar_order)
+    noise = _check_noise(noise) if likelihood == "coloured" and ar == "fixed" else None
+    if likelihood == "coloured" and ar == "fixed" and noise is None:
+        noise = _fit_noise(recording, model, seed, ar_order, discard)
+    nll = _NegLogLik(model, recording, order, noise, discard)
     ev = nested_evidence(nll.log_lik, nll.lower, nll.upper, names=nll.names, nlive=nlive,
                          dlogz=dlogz, sample=sample, seed=seed, progress=progress)
-    ev.settings.update({"likelihood": likelihood, "ar_order": order, "model": model.name,
+    ev.settings.update({"likelihood": likelihood, "ar": ar, "ar_order": order,
+                        "noise": None if noise is None else noise.to_dict(),
+                        "discard_seconds": discard, "model": model.name,
                         "fixed": {k: float(v) for k, v in model.fixed.items()}})
     return ev
 
@@ -771,8 +805,17 @@ class Comparison:
         return self.summary()
 
 
+def _fit_noise(recording: Recording, model: PilotModel, seed, order, discard) -> ARNoise:
+    """The AR model of a prediction-error fit of ``model`` (:func:`~bayespilot.fit.fast.fit_fast`)."""
+    from .fit.fast import fit_fast
+
+    fit = fit_fast(recording, model, seed=seed, noise="ar", noise_order=order, discard=discard)
+    return ARNoise.from_dict(fit.settings["noise"])
+
+
 def compare(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
-            ar_order: int = 2, nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
+            ar: str = "fixed", ar_order: int | None = None, discard: float | None = None,
+            nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
             runs: int = 2, seed: int | None = None, posterior: Any = None,
             savage_dickey_samples: bool = True, sample_options: Mapping[str, Any] | None = None,
             progress: bool = False) -> Comparison:
@@ -785,8 +828,13 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         The model with a free ``delta_abs`` (default: the paper's).  The model
         without threshold is ``model.fix(delta_abs=0)``.
     likelihood : {"eq4", "coloured"}
-    ar_order : int
-        For ``"coloured"``.
+    ar, ar_order
+        For ``"coloured"``: as in :func:`bayespilot.sample.sample` (with
+        ``ar="fixed"`` one AR model, from a prediction-error fit of the model
+        with threshold, serves both models).
+    discard : float, optional
+        Seconds at the start left out of the likelihood; default 0 for
+        ``"eq4"``, :data:`bayespilot.sample.COLOURED_DISCARD` for ``"coloured"``.
     nlive, dlogz, sample
         dynesty settings (:func:`nested_evidence`).
     runs : int
@@ -829,7 +877,11 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     t0 = time.perf_counter()
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    model, order = _model_and_order(model, likelihood, ar_order)
+    model, order = _model_and_order(model, likelihood, ar, ar_order)
+    if discard is None:
+        from .sample import COLOURED_DISCARD
+
+        discard = COLOURED_DISCARD if likelihood == "coloured" else 0.0
     if THRESHOLD not in model.parameter_names:
         raise ValueError(f"the model has no free {THRESHOLD!r} to compare against 0 "
                          f"(free: {', '.join(model.parameter_names)})")
@@ -847,20 +899,24 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     none_model = model.fix(**{THRESHOLD: 0.0})
     ss = np.random.SeedSequence(seed)
     s1, s0, s_mc = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
-    ev0 = evidence(recording, none_model, likelihood=likelihood, ar_order=ar_order, nlive=nlive,
-                   dlogz=dlogz, sample=sample, seed=s0, progress=progress)
+    noise = None
+    if likelihood == "coloured" and ar == "fixed":  # one noise model for both
+        noise = _fit_noise(recording, model, s_mc, ar_order, discard)
+    lik_opts = dict(likelihood=likelihood, ar=ar, ar_order=ar_order, noise=noise, discard=discard)
+    ev0 = evidence(recording, none_model, **lik_opts, nlive=nlive, dlogz=dlogz, sample=sample,
+                   seed=s0, progress=progress)
 
     def run_threshold(attempt: int) -> Evidence:
-        return evidence(recording, model, likelihood=likelihood, ar_order=ar_order, nlive=nlive,
-                        dlogz=dlogz, sample=sample, seed=s1 + attempt, progress=progress)
+        return evidence(recording, model, **lik_opts, nlive=nlive, dlogz=dlogz, sample=sample,
+                        seed=s1 + attempt, progress=progress)
 
     ev1, reruns, mode_ok = _robust_evidence(run_threshold, runs, ev0.max_log_lik)
     log_bf = ev1.log_z - ev0.log_z
     err = math.hypot(ev1.log_z_err, ev0.log_z_err)
 
     # maximum likelihood, for the information criteria
-    nll1 = _NegLogLik(model, recording, order)
-    nll0 = _NegLogLik(none_model, recording, order)
+    nll1 = _NegLogLik(model, recording, order, noise, discard)
+    nll0 = _NegLogLik(none_model, recording, order, noise, discard)
     v0, p0 = _ml(nll0, ev0.best, threshold=False)
     start1 = dict(ev1.best)
     v1, p1 = _ml(nll1, start1, threshold=True)
@@ -883,8 +939,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         init = dict(p1)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
-            posterior = run_sample(recording, model, likelihood=likelihood, ar_order=ar_order,
-                                   init=init, seed=s_mc, **opts)
+            posterior = run_sample(recording, model, **lik_opts, init=init, seed=s_mc, **opts)
         post_info["warnings"] = [str(w.message) for w in caught
                                  if issubclass(w.category, ConvergenceWarning)]
     if posterior is not None:
@@ -897,7 +952,9 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         post_info.update({"converged": bool(posterior.converged),
                           "n_steps": posterior.settings.get("n_steps"),
                           "n_draws": int(posterior.draws(THRESHOLD).size)})
-    settings = {"likelihood": likelihood, "ar_order": order, "nlive": nlive, "dlogz": dlogz,
+    settings = {"likelihood": likelihood, "ar": ar, "ar_order": order,
+                "noise": None if noise is None else noise.to_dict(), "discard_seconds": discard,
+                "nlive": nlive, "dlogz": dlogz,
                 "sample": sample, "model": model.name, "decision_level": DECISION_LEVEL,
                 "decision_z": DECISION_Z, "runs": runs, "n_samples": recording.n_samples,
                 "posterior": post_info or None, "entropy": str(ss.entropy),

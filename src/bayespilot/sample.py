@@ -12,15 +12,24 @@ either
     the paper's Eq. 4: white output error, variance profiled out
     (:meth:`bayespilot.likelihood.Likelihood.batch`); or
 ``"coloured"``
-    the output error as a stationary AR(p) process whose innovations are white,
+    the output error as an AR(p) process whose innovations are white,
     conditional on the first p samples, innovation variance profiled out
-    (``kernels/_coloured.py``).  The AR model is sampled through its partial
+    (:mod:`bayespilot.noise`, ``kernels/_coloured.py``).  By default
+    (``ar="fixed"``) the AR model is estimated once, with its order by BIC,
+    from the residual of a prediction-error maximum-likelihood fit
+    (:func:`~bayespilot.fit.fast.fit_fast` with ``noise="ar"``) and held
+    fixed while the pilot parameters are sampled (a plug-in, empirical-Bayes
+    noise model: the remnant needs an order near 10 at 100 Hz, which would
+    more than double the sampled dimensions).  With ``ar="sampled"`` a
+    low-order AR model is sampled with the rest through its partial
     autocorrelations ``pacf_1 ... pacf_p`` in (-1, 1), which keeps it
-    stationary.  The remnant of Eq. 6 is far from white at 100 Hz, so this is
-    the likelihood whose credible intervals can be taken at face value.
+    stationary; the calibration study in ``docs/posteriors.md`` shows why it
+    is not the default.  The first ``discard`` seconds (2 by default) are left
+    out of the coloured likelihood: the model's start-up error there is not
+    remnant.
 
-Priors: uniform on the model bounds (Table 1) and uniform(-0.99, 0.99) on the
-partial autocorrelations unless given.  The run stops when the chain is longer
+Priors: uniform on the model bounds (Table 1) and, for ``ar="sampled"``,
+uniform(-0.99, 0.99) on the partial autocorrelations, unless given.  The run stops when the chain is longer
 than ``tau_factor`` integrated autocorrelation times and the estimate of tau
 has settled (emcee's documented recipe), or at ``max_steps`` with a
 :class:`ConvergenceWarning`.  The result is a :class:`Posterior` holding an
@@ -48,13 +57,18 @@ from .fit.result import FitResult
 from .kernels import _coloured as C
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
+from .noise import MAX_AR_ORDER, ARNoise
 from .recording import Recording
 
-__all__ = ["sample", "Posterior", "ConvergenceWarning", "LIKELIHOODS", "PACF_BOUND",
-           "pacf_names", "pacf_from_residual"]
+__all__ = ["sample", "Posterior", "ConvergenceWarning", "LIKELIHOODS", "AR_MODES", "PACF_BOUND",
+           "COLOURED_DISCARD", "pacf_names", "pacf_from_residual"]
 
 #: Likelihoods :func:`sample` can use.
 LIKELIHOODS = ("eq4", "coloured")
+#: How the coloured likelihood treats its AR model: estimated once and held, or sampled.
+AR_MODES = ("fixed", "sampled")
+#: Seconds left out at the start by the coloured likelihood unless ``discard`` is given.
+COLOURED_DISCARD = 2.0
 #: Default prior on each partial autocorrelation: uniform(-PACF_BOUND, PACF_BOUND).
 PACF_BOUND = 0.99
 #: Half-width of the initial ball of walkers, as a fraction of each parameter's bound range.
@@ -363,7 +377,7 @@ class _LogPosterior:
         n_chunks = max(1, min(m, numba.get_num_threads()))
         C.neg_log_lik_coloured_batch(rows, self.n_model, self.free_idx, self.base, lik.X, lik.u,
                                      *lik._args(), lik.dt, lik.periodic, lik.warm, lik.s2_floor,
-                                     n_chunks, out, floored)
+                                     n_chunks, out, floored, lik.skip)
         out[~np.isfinite(out)] = np.inf
         return out
 
@@ -505,6 +519,23 @@ def _open_backend(path, fingerprint: dict, n_walkers: int, ndim: int):
     return backend, iteration > 0
 
 
+def _stored_fingerprint(path) -> dict | None:
+    """The fingerprint a bayespilot chain in the HDF5 file ``path`` was written with, if any."""
+    path = Path(path)
+    if not path.is_file():
+        return None
+    try:
+        import h5py
+
+        with h5py.File(str(path), "r") as f:
+            g = f.get(_BACKEND_GROUP)
+            stored = None if g is None else g.attrs.get(_FINGERPRINT_ATTR)
+            iteration = 0 if g is None else int(g.attrs.get("iteration", 0))
+    except OSError:
+        return None  # not HDF5: _open_backend says so
+    return json.loads(stored) if stored is not None and iteration > 0 else None
+
+
 def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str, order: int,
                  prior: _Prior, n_walkers: int, lik: Likelihood) -> dict:
     h = hashlib.sha256()
@@ -514,7 +545,8 @@ def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str
     return {"recording_sha256": h.hexdigest(), "model": model.name,
             "parameter_names": list(names), "fixed": {k: float(v) for k, v in model.fixed.items()},
             "likelihood": likelihood, "ar_order": order, "prior": prior.description,
-            "n_walkers": n_walkers}
+            "n_walkers": n_walkers, "discard_seconds": lik.discard,
+            "noise": None if lik.noise is None else lik.noise.to_dict()}
 
 
 # --- the chain as InferenceData ----------------------------------------------------------------
@@ -609,7 +641,9 @@ def _initial_ensemble(center, prior: _Prior, logpost: _LogPosterior, n_walkers: 
 
 
 def sample(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
-           ar_order: int = 2, init: FitResult | Mapping[str, float] | None = None,
+           ar: str = "fixed", ar_order: int | None = None, noise: ARNoise | None = None,
+           discard: float | None = None,
+           init: FitResult | Mapping[str, float] | None = None,
            n_walkers: int | None = None, max_steps: int = 20000, min_steps: int = 1000,
            check_every: int = 500, tau_factor: float = 50.0, tau_rtol: float = 0.05,
            seed: int | None = None, progress: bool = True,
@@ -623,13 +657,28 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     model : PilotModel, optional
         Default :func:`~bayespilot.model.paper_model` (with threshold).
     likelihood : {"eq4", "coloured"}
-        White output error (Eq. 4) or AR(``ar_order``)-coloured output error.
-    ar_order : int
-        p of the AR residual model (``"coloured"`` only; >= 1).
+        White output error (Eq. 4) or AR-coloured output error (module docs).
+    ar : {"fixed", "sampled"}
+        ``"coloured"`` only: the AR model estimated once and held fixed
+        (default), or sampled with the pilot parameters.
+    ar_order : int, optional
+        p of the AR model (``"coloured"`` only).  Default: chosen by BIC (up to
+        :data:`~bayespilot.noise.MAX_AR_ORDER`) for ``ar="fixed"``, 2 for
+        ``ar="sampled"``.
+    noise : ARNoise, optional
+        ``"coloured"`` with ``ar="fixed"`` only: use this AR model rather than
+        estimating one (e.g. to judge several runs by one noise model).
+    discard : float, optional
+        Seconds at the start left out of the likelihood (see
+        :class:`~bayespilot.likelihood.Likelihood`).  Default 0 for ``"eq4"``
+        (the paper's Eq. 4) and :data:`COLOURED_DISCARD` for ``"coloured"``.
     init : FitResult or mapping, optional
         Centre of the initial ball.  Default: :func:`~bayespilot.fit.fast.fit_fast`
-        with ``seed``.  The partial autocorrelations start at the Yule-Walker
-        estimate from the residual at ``init``.
+        with ``seed`` (a prediction-error fit, ``noise="ar"``, for ``"coloured"``).
+        For ``ar="fixed"`` the AR model is the one of a ``FitResult`` that has
+        one (``settings["noise"]``), else estimated from the residual at
+        ``init``; for ``ar="sampled"`` the partial autocorrelations start at
+        their Yule-Walker estimate from that residual.
     n_walkers : int, optional
         Default 4 x the number of sampled parameters (at least 2 x).
     max_steps, min_steps, check_every : int
@@ -691,7 +740,25 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
     if likelihood not in LIKELIHOODS:
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
-    order = _check_int("ar_order", ar_order, 1) if likelihood == "coloured" else 0
+    if ar not in AR_MODES:
+        raise ValueError(f"ar must be one of {AR_MODES}, got {ar!r}")
+    fixed_ar = likelihood == "coloured" and ar == "fixed"
+    if noise is not None and not (fixed_ar and isinstance(noise, ARNoise)):
+        raise ValueError("noise is an ARNoise for likelihood='coloured' with ar='fixed' only, "
+                         f"got {type(noise).__name__} with likelihood={likelihood!r}, ar={ar!r}")
+    if ar_order is not None:
+        _check_int("ar_order", ar_order, 0 if fixed_ar else 1)
+        if fixed_ar and ar_order > MAX_AR_ORDER:
+            raise ValueError(f"ar_order must be at most {MAX_AR_ORDER}, got {ar_order}")
+    # p of the sampled partial autocorrelations (0 unless ar="sampled")
+    order = (2 if ar_order is None else ar_order) if likelihood == "coloured" and not fixed_ar else 0
+    if discard is None:
+        discard = COLOURED_DISCARD if likelihood == "coloured" else 0.0
+    if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
+        raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
+                         f"(half the record), got {discard!r}")
+    discard = float(discard)
     max_steps = _check_int("max_steps", max_steps, 1)
     min_steps = _check_int("min_steps", min_steps, 0)
     check_every = _check_int("check_every", check_every, 1)
@@ -718,14 +785,29 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         pri.lo[len(m_lo):] = np.nextafter(-1.0, 0.0)
         pri.hi[len(m_lo):] = np.nextafter(1.0, 0.0)
 
-    lik = Likelihood(model, recording)
-    logpost = _LogPosterior(lik, order, pri)
     ss = np.random.SeedSequence(seed)
     ball_ss, mcmc_ss = ss.spawn(2)
+    init_how = "given" if init is not None else None
+    if fixed_ar and noise is None:
+        stored = _stored_fingerprint(backend) if backend is not None else None
+        if stored is not None and stored.get("noise"):
+            noise = ARNoise.from_dict(stored["noise"])  # resuming: the chain's own noise model
+        else:
+            if init is None:
+                from .fit.fast import fit_fast
+
+                init = fit_fast(recording, model, seed=seed, noise="ar", noise_order=ar_order,
+                                discard=discard)
+                init_how = "fit_fast"
+            noise = _noise_at(init, model, recording, discard, ar_order)
+    lik = Likelihood(model, recording, discard=discard, noise=noise)
+    logpost = _LogPosterior(lik, order, pri)
 
     settings: dict[str, Any] = {
         "true_parameters": _true_parameters(recording, names),
-        "likelihood": likelihood, "ar_order": order, "n_walkers": n_walkers,
+        "likelihood": likelihood, "ar": ar if likelihood == "coloured" else None,
+        "ar_order": noise.order if noise is not None else order, "discard_seconds": discard,
+        "noise": None if noise is None else noise.to_dict(), "n_walkers": n_walkers,
         "max_steps": max_steps, "min_steps": min_steps, "check_every": check_every,
         "tau_factor": tau_factor, "tau_rtol": tau_rtol, "prior": pri.description,
         "backend": None if backend is None else str(backend), "model": model.name,
@@ -745,10 +827,9 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         if init is None:
             from .fit.fast import fit_fast
 
-            init = fit_fast(recording, model, seed=seed)
-            settings["init"] = "fit_fast"
-        else:
-            settings["init"] = "given"
+            init = fit_fast(recording, model, seed=seed, discard=discard, noise=noise)
+            init_how = "fit_fast"
+        settings["init"] = init_how
         params = dict(init.params) if isinstance(init, FitResult) else dict(init)
         given_r = {k: params.pop(k) for k in list(params) if k.startswith("pacf_")}
         centre_model = model.free_vector(params)
@@ -756,7 +837,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         if order and set(pacf_names(order)) <= set(given_r):
             r0 = np.array([float(given_r[k]) for k in pacf_names(order)])
         elif order:
-            eps = lik.residual(model.as_dict(centre_model))
+            eps = lik.residual(model.as_dict(centre_model))[lik.used]
             r0 = pacf_from_residual(eps, order) if np.all(np.isfinite(eps)) else np.zeros(order)
         else:
             r0 = np.zeros(0)
@@ -790,6 +871,23 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
             "settings": settings, "seed": seed}
     idata, meta = _to_idata(run.sampler, names, run.tau, meta)
     return Posterior(idata, tuple(names), tau, bool(run.converged), meta["settings"], seed)
+
+
+def _noise_at(init, model: PilotModel, recording: Recording, discard: float,
+              order: int | None) -> ARNoise:
+    """The AR noise model of ``init``: its own if it is a fit that has one, else estimated
+    from the residual at its parameters (order by BIC unless given)."""
+    if isinstance(init, FitResult) and isinstance(init.settings.get("noise"), Mapping) \
+            and (order is None or init.settings["noise"].get("order") == order):
+        return ARNoise.from_dict(init.settings["noise"])
+    params = dict(init.params) if isinstance(init, FitResult) else dict(init)
+    params = {k: v for k, v in params.items() if not k.startswith("pacf_")}
+    lik = Likelihood(model, recording, discard=discard)
+    centre = np.clip(model.free_vector(params), *model.bounds)
+    eps = lik.residual(model.as_dict(centre))[lik.used]
+    if not np.all(np.isfinite(eps)):
+        raise ValueError("the model is unstable at init; give a starting point where it is not")
+    return ARNoise.from_residual(eps, order=order)
 
 
 class _CallableModule(types.ModuleType):
