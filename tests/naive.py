@@ -78,6 +78,17 @@ def periodic_filter(b, a, x, warm):
     return signal.lfilter([1.0], a, fir)[warm:]
 
 
+def steady_filter(b, a, x):
+    """Filter b/a of a periodic x in its periodic steady state: x repeated until the
+    start-up transient has decayed below 1e-17 of itself, the last period kept."""
+    b = np.asarray(b, float) / a[0]
+    a = np.asarray(a, float) / a[0]
+    n = x.size
+    rho = max(np.abs(np.roots(a))) if a.size > 1 else 0.0
+    periods = 2 if rho == 0 else 2 + int(np.ceil(np.log(1e-17) / (n * np.log(rho))))
+    return signal.lfilter(b, a, np.tile(x, periods))[-n:]
+
+
 def filt(num, den, x, dt, initial, warm):
     """Tustin discretisation of num/den applied to x under the given initial condition."""
     b, a = signal.bilinear(num, den, fs=1.0 / dt)
@@ -112,7 +123,10 @@ def channel_signals(params, e, theta_ddot_m, dt, initial="rest", warm=0, extra_v
     x = i
     for make in extra_vestibular:
         num, den = make(params)
-        x = filt(num, den, x, dt, initial, warm)
+        if initial == "rest":
+            x = filt(num, den, x, dt, initial, warm)
+        else:  # a parametric stage starts from its periodic steady state
+            x = steady_filter(*signal.bilinear(num, den, fs=1.0 / dt), x)
     o = dead_zone(x, params["delta_abs"])
     d_v = delay(np.asarray(e, float), params["tau_v"], dt, initial)
     d_m = delay(o, params["tau_m"], dt, initial)

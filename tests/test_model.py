@@ -104,10 +104,13 @@ def test_washout_response_matches_naive_rest(fd_sim):
 
 
 def test_washout_response_matches_naive_periodic(fd_sim, fd_rec):
-    """Periodic warm start of a first-order parametric stage (a regression test: Tustin
-    of a first-order stage must stay first order, with no cancelled pole at z = -1)."""
+    """Periodic steady state of a first-order parametric stage (a regression test: Tustin
+    of a first-order stage must stay first order, with no cancelled pole at z = -1), slow
+    ones included (omega_w = 0.02 rad/s: a 50-s time constant, which a warm-up over the
+    record's last seconds would leave as a start-up transient)."""
     m = washout_model()
-    for params in (dict(FD, omega_w=0.5), dict(FD, omega_w=7.3, tau_m=0.0042)):
+    for params in (dict(FD, omega_w=0.5), dict(FD, omega_w=7.3, tau_m=0.0042),
+                   dict(FD, omega_w=0.02)):
         # without theta the whole chain is the documented periodic one ...
         lik = Likelihood(m, fd_rec, initial="periodic")
         ref = naive.naive_response(params, fd_rec.e, fd_rec.theta_ddot_m, fd_rec.dt, "periodic",
@@ -177,3 +180,19 @@ def test_bad_parameter_and_channel_definitions():
         Channel("c", "pitch", delay="tau_v")
     with pytest.raises(ValueError, match="duplicate channel"):
         paper_model().add_channel(Channel("visual", "e", delay="tau_v"))
+
+
+@pytest.mark.parametrize("omega_w", [0.05, 2.0])
+def test_stage_jacobian_in_periodic_steady_state(fd_rec, omega_w):
+    """d u_hat / d omega_w (and a pilot parameter) from the tangent kernel, whose stage starts
+    from the periodic steady state of the pair (y, dy), against central differences."""
+    m = washout_model()
+    lik = Likelihood(m, fd_rec, initial="periodic")
+    p = dict(FD, omega_w=omega_w)
+    names = ("omega_w", "K_m")
+    _, J = lik.jacobian(p, names)
+    for k, name in enumerate(names):
+        h = 1e-6 * max(1.0, abs(p[name]))
+        d = (lik.response(dict(p, **{name: p[name] + h}))
+             - lik.response(dict(p, **{name: p[name] - h}))) / (2 * h)
+        np.testing.assert_allclose(J[:, k], d, rtol=1e-5, atol=1e-6 * np.abs(d).max())

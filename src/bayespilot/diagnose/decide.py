@@ -366,10 +366,14 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
     d = max(0.0, base.neg_log_lik - best.neg_log_lik)
     stat = 2.0 * d
     p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
+    if ext.boundary_null and ext.df == 1:
+        p *= 0.5  # chi-bar-squared: 0.5 chi2(0) + 0.5 chi2(1) (Self & Liang 1987)
     dbic = stat - ext.df * math.log(wl.m)
     se = best.stderr
     new = {n: best.params[n] for n in ext.new_parameters}
-    res = CandidateResult(ext.name, True, f"GLS likelihood-ratio test, chi2({ext.df})", d, stat,
+    how = (f"GLS likelihood-ratio test, 0.5 chi2(0) + 0.5 chi2(1) (boundary null)"
+           if ext.boundary_null and ext.df == 1 else f"GLS likelihood-ratio test, chi2({ext.df})")
+    res = CandidateResult(ext.name, True, how, d, stat,
                           ext.df, p, dbic, dbic / 2.0, new,
                           {n: se[n] for n in se}, dict(model.as_dict(model.full_vector(best.params), full=True)))
     res.fit = best

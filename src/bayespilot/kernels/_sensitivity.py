@@ -23,7 +23,7 @@ from ._blocks import (MOD_LINEAR, MOD_NONE, NL_DEADZONE, NL_NONE, NL_SATURATION,
                       NL_SOFT_DEADZONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
                       STAGE_LOWPASS1, STAGE_LOWPASS2, STAGE_NONE, modulation, nonlinearity,
                       param_or, stable, stage_tf, tustin)
-from ._response import (_tap, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
+from ._response import (_tap, periodic_state, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
                         CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_NSTAGES, CHF_GAIN_CONST, CHF_SIGN,
                         OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1, OUT_OMEGA, OUT_ZETA)
 
@@ -114,7 +114,11 @@ def nonlinearity_tangent(kind, x, p0, p1, dx, dp0, dp1):
 
 @njit
 def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic, warm, y, dy):
-    """A biquad and its tangent: y = F(x), dy = F(dx) + (dF) x."""
+    """A biquad and its tangent: y = F(x), dy = F(dx) + (dF) x.
+
+    Periodic: the four output states (y and dy, two each) start from their
+    exact periodic steady state, as in ``_response._filter_biquad``.
+    """
     n = x.shape[0]
     x1 = 0.0
     x2 = 0.0
@@ -124,15 +128,9 @@ def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic
     dx2 = 0.0
     dy1 = 0.0
     dy2 = 0.0
-    if periodic:
-        start = n - warm if warm < n else 0
-        if start > 0:
-            x1 = x[start - 1]
-            dx1 = dx[start - 1]
-            if start >= 2:
-                x2 = x[start - 2]
-                dx2 = dx[start - 2]
-        for k in range(start, n):
+    if periodic and n >= 2:
+        x1, x2, dx1, dx2 = x[n - 1], x[n - 2], dx[n - 1], dx[n - 2]
+        for k in range(n):
             xk = x[k]
             dxk = dx[k]
             yk = B0 * xk + B1 * x1 + B2 * x2 - A1 * y1 - A2 * y2
@@ -140,6 +138,11 @@ def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic
                    + B0 * dxk + B1 * dx1 + B2 * dx2 - A1 * dy1 - A2 * dy2)
             x2, x1, y2, y1 = x1, xk, y1, yk
             dx2, dx1, dy2, dy1 = dx1, dxk, dy1, dyk
+        T = np.array([[-A1, -A2, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0],
+                      [-dA1, -dA2, -A1, -A2], [0.0, 0.0, 1.0, 0.0]])
+        z = periodic_state(T, np.array([y1, y2, dy1, dy2]), n)
+        y1, y2, dy1, dy2 = z[0], z[1], z[2], z[3]
+        x1, x2, dx1, dx2 = x[n - 1], x[n - 2], dx[n - 1], dx[n - 2]
     for k in range(n):
         xk = x[k]
         dxk = dx[k]
