@@ -51,7 +51,7 @@ def _by_recording(results: list[dict]) -> dict[tuple, dict[bool, dict]]:
 def _jobs(method: str) -> list[Job]:
     return paper_study(100, tasks=("FD", "FT"), motion_gains=presets.MOTION_GAINS,
                        remnant_fractions=presets.REMNANT_FRACTIONS, threshold=(True, False),
-                       method=method)
+                       method=method, remnant="table4")
 
 
 def main(argv=None) -> int:
