@@ -83,6 +83,7 @@ import numpy as np
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
+from .sample import likelihood_options
 from .recording import Recording
 
 __all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested_evidence",
@@ -312,25 +313,6 @@ def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequen
                     int(res["niter"]), time.perf_counter() - t0, settings)
 
 
-def _model_and_order(model: PilotModel | None, likelihood: str, ar: str,
-                     ar_order: int | None):
-    """The model, and p of the sampled partial autocorrelations (0 unless ar="sampled")."""
-    from .sample import AR_MODES, LIKELIHOODS
-
-    model = paper_model() if model is None else model
-    if not isinstance(model, PilotModel):
-        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
-    if likelihood not in LIKELIHOODS:
-        raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
-    if ar not in AR_MODES:
-        raise ValueError(f"ar must be one of {AR_MODES}, got {ar!r}")
-    if ar_order is not None:
-        _check_int("ar_order", ar_order, 0 if ar == "fixed" else 1)
-    if likelihood != "coloured" or ar == "fixed":
-        return model, 0
-    return model, 2 if ar_order is None else int(ar_order)
-
-
 def _check_noise(noise):
     if noise is not None and not isinstance(noise, ARNoise):
         raise TypeError(f"noise must be None or an ARNoise, got {type(noise).__name__}")
@@ -402,7 +384,7 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    model, order = _model_and_order(model, likelihood, ar, ar_order)
+    model, order = likelihood_options(model, likelihood, ar, ar_order)
     noise = _check_noise(noise) if likelihood == "coloured" and ar == "fixed" else None
     if likelihood == "coloured" and ar == "fixed" and noise is None:
         noise = _fit_noise(recording, model, seed, ar_order, discard)
@@ -877,7 +859,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     t0 = time.perf_counter()
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    model, order = _model_and_order(model, likelihood, ar, ar_order)
+    model, order = likelihood_options(model, likelihood, ar, ar_order)
     if discard is None:
         from .sample import COLOURED_DISCARD
 

@@ -605,6 +605,29 @@ def _true_parameters(recording: Recording, names) -> dict[str, float] | None:
     return out or None
 
 
+def likelihood_options(model: PilotModel | None, likelihood: str, ar: str,
+                       ar_order: int | None) -> tuple[PilotModel, int]:
+    """Validate the likelihood settings shared by :func:`sample` and :mod:`bayespilot.compare`.
+
+    Returns the model (default: the paper's) and p, the number of sampled
+    partial autocorrelations (0 unless ``likelihood="coloured"`` with
+    ``ar="sampled"``, where it is ``ar_order`` or 2).
+    """
+    model = paper_model() if model is None else model
+    if not isinstance(model, PilotModel):
+        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+    if likelihood not in LIKELIHOODS:
+        raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
+    if ar not in AR_MODES:
+        raise ValueError(f"ar must be one of {AR_MODES}, got {ar!r}")
+    sampled = likelihood == "coloured" and ar == "sampled"
+    if ar_order is not None:
+        _check_int("ar_order", ar_order, 1 if sampled else 0)
+        if not sampled and ar_order > MAX_AR_ORDER:
+            raise ValueError(f"ar_order must be at most {MAX_AR_ORDER}, got {ar_order}")
+    return model, ((2 if ar_order is None else int(ar_order)) if sampled else 0)
+
+
 def _check_int(name, v, lo):
     if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
         raise ValueError(f"{name} must be an integer >= {lo}, got {v!r}")
@@ -735,23 +758,11 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     t0 = time.perf_counter()
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    model = paper_model() if model is None else model
-    if not isinstance(model, PilotModel):
-        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
-    if likelihood not in LIKELIHOODS:
-        raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
-    if ar not in AR_MODES:
-        raise ValueError(f"ar must be one of {AR_MODES}, got {ar!r}")
+    model, order = likelihood_options(model, likelihood, ar, ar_order)
     fixed_ar = likelihood == "coloured" and ar == "fixed"
     if noise is not None and not (fixed_ar and isinstance(noise, ARNoise)):
         raise ValueError("noise is an ARNoise for likelihood='coloured' with ar='fixed' only, "
                          f"got {type(noise).__name__} with likelihood={likelihood!r}, ar={ar!r}")
-    if ar_order is not None:
-        _check_int("ar_order", ar_order, 0 if fixed_ar else 1)
-        if fixed_ar and ar_order > MAX_AR_ORDER:
-            raise ValueError(f"ar_order must be at most {MAX_AR_ORDER}, got {ar_order}")
-    # p of the sampled partial autocorrelations (0 unless ar="sampled")
-    order = (2 if ar_order is None else ar_order) if likelihood == "coloured" and not fixed_ar else 0
     if discard is None:
         discard = COLOURED_DISCARD if likelihood == "coloured" else 0.0
     if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
