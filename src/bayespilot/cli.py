@@ -616,6 +616,24 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 # --- the parser ------------------------------------------------------------------------
+def _recording_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("recording", metavar="REC",
+                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+
+
+def _likelihood_arguments(p: argparse.ArgumentParser) -> None:
+    """--likelihood, --ar and --ar-order, as sample() and compare() take them."""
+    p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
+                   help="'eq4': white output error (the paper's Eq. 4, default); 'coloured': "
+                        "AR output error (a prediction-error likelihood)")
+    p.add_argument("--ar", choices=("fixed", "sampled"), default="fixed",
+                   help="'coloured' only: the AR model estimated once from a prediction-error "
+                        "fit and held (default), or sampled with the pilot parameters")
+    p.add_argument("--ar-order", type=_whole_number(0), default=None, metavar="P",
+                   help="'coloured' only: order of the AR model (default: by BIC for --ar "
+                        "fixed, 2 for --ar sampled)")
+
+
 TOP_EPILOG = f"""\
 Estimates pilot-model parameters and motion-perception thresholds from
 manual-tracking recordings, after Pool et al. (2012), J. Guidance, Control,
@@ -868,8 +886,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = subs.add_parser("loglik", formatter_class=fmt, epilog=LOGLIK_EPILOG,
                         help="print -ln L (Eq. 4) of a recording at given parameters",
                         description="Evaluate the negative log-likelihood of Eq. 4.")
-    p.add_argument("recording", metavar="REC",
-                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    _recording_argument(p)
     p.add_argument("--params", required=True, metavar="FILE.json",
                    help="JSON object with the pilot parameters by name (see below)")
     p.add_argument("--no-threshold", action="store_true",
@@ -883,8 +900,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = subs.add_parser("fit", formatter_class=fmt, epilog=FIT_EPILOG,
                         help="maximum-likelihood fit of the pilot model to a recording",
                         description="Fit the multimodal pilot model (with or without threshold).")
-    p.add_argument("recording", metavar="REC",
-                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    _recording_argument(p)
     p.add_argument("--no-threshold", action="store_true",
                    help="fit the model without threshold (delta_abs fixed at 0)")
     p.add_argument("--method", choices=("paper", "fast"), default="paper",
@@ -969,19 +985,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = subs.add_parser("sample", formatter_class=fmt, epilog=SAMPLE_EPILOG,
                         help="sample the posterior of the pilot parameters (emcee)",
                         description="Posterior of the pilot-model parameters with emcee.")
-    p.add_argument("recording", metavar="REC",
-                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    _recording_argument(p)
     p.add_argument("-o", "--output", required=True, metavar="POST.nc",
                    help="the posterior as a netCDF file (ArviZ InferenceData)")
-    p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
-                   help="'eq4': white output error (the paper's Eq. 4, default); 'coloured': "
-                        "AR output error (a prediction-error likelihood)")
-    p.add_argument("--ar", choices=("fixed", "sampled"), default="fixed",
-                   help="'coloured' only: the AR model estimated once from a prediction-error "
-                        "fit and held (default), or sampled with the pilot parameters")
-    p.add_argument("--ar-order", type=_whole_number(0), default=None, metavar="P",
-                   help="'coloured' only: order of the AR model (default: by BIC for --ar "
-                        "fixed, 2 for --ar sampled)")
+    _likelihood_arguments(p)
     p.add_argument("--json", metavar="SUMMARY",
                    help="write the per-parameter summary to this JSON file")
     p.add_argument("--seed", type=_seed, default=0, metavar="S",
@@ -997,18 +1004,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = subs.add_parser("compare", formatter_class=fmt, epilog=COMPARE_EPILOG,
                         help="Bayes factor of the model with threshold against the one without",
                         description="Model comparison: with against without threshold.")
-    p.add_argument("recording", metavar="REC",
-                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    _recording_argument(p)
     p.add_argument("--json", metavar="OUT", help="write the result to this JSON file")
     p.add_argument("--seed", type=_seed, default=0, metavar="S",
                    help="seed of the nested sampler and the sampler (default 0)")
-    p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
-                   help="'eq4' (default) or 'coloured' (AR output error, one AR model for both "
-                        "models)")
-    p.add_argument("--ar", choices=("fixed", "sampled"), default="fixed",
-                   help="'coloured' only: the AR model held fixed (default) or sampled")
-    p.add_argument("--ar-order", type=_whole_number(0), default=None, metavar="P",
-                   help="'coloured' only: order of the AR model (default: BIC, or 2 if sampled)")
+    _likelihood_arguments(p)
     p.add_argument("--nlive", type=_whole_number(20), default=200, metavar="N",
                    help="live points of each nested-sampling run (default 200)")
     p.add_argument("--posterior", metavar="POST.nc",
@@ -1031,8 +1031,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = subs.add_parser("diagnose", formatter_class=fmt, epilog=DIAGNOSE_EPILOG,
                         help="locate a model mismatch, name the missing physics, fit it",
                         description="Diagnose model mismatch on one recording.")
-    p.add_argument("recording", metavar="REC",
-                   help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
+    _recording_argument(p)
     p.add_argument("--json", metavar="OUT", help="write the diagnosis to this JSON file")
     p.add_argument("--report", metavar="DIR",
                    help="write PNG figures, report.html and diagnosis.json to this folder")
