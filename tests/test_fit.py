@@ -133,3 +133,35 @@ def test_cli_fit_json(sim, tmp_path, capsys):
     assert d["method"] == "fast" and d["seed"] == 3
     assert np.isfinite(d["neg_log_lik"]) and 0 < d["vaf"] <= 100
     assert main(["fit", str(tmp_path / "missing")]) == 2
+
+
+def test_fast_prediction_error_fit(sim):
+    """noise="ar": the AR model is the BIC fit of the final residual; -ln L is that whitened
+    likelihood at the returned parameters; the threshold is still found."""
+    from bayespilot.noise import ARNoise
+
+    f = fit_fast(sim.recording, seed=0, n_starts=3, profile_step=0.005, noise="ar", discard=2.0)
+    nz = f.settings["noise"]
+    assert nz["kind"] == "ar" and nz["order"] >= 1 and f.settings["discard"] == 2.0
+    lik = Likelihood(paper_model(), sim.recording, discard=2.0, noise=ARNoise(nz["a"]))
+    assert lik.neg_log_lik(f.params) == pytest.approx(f.neg_log_lik, rel=1e-12)
+    assert f.params["delta_abs"] == pytest.approx(0.0075, abs=0.003)
+    # the AR model was re-estimated at the refined parameters' starting point (the profile's
+    # best), so re-estimating it at the final parameters changes it little
+    white = Likelihood(paper_model(), sim.recording, discard=2.0)
+    again = ARNoise.from_residual(white.residual(f.params)[white.used], order=len(nz["a"]))
+    assert np.max(np.abs(again.a - np.array(nz["a"]))) < 0.05
+    with pytest.raises(ValueError, match="noise must be"):
+        fit_fast(sim.recording, noise="pink")
+    with pytest.raises(ValueError, match="noise_order"):
+        fit_fast(sim.recording, noise="ar", noise_order=-1)
+
+
+def test_cli_fit_prediction_error(sim, tmp_path, capsys):
+    write_recording(sim.recording, tmp_path / "run")
+    out = tmp_path / "pem.json"
+    assert main(["fit", str(tmp_path / "run"), "--method", "fast", "--noise", "ar", "--json",
+                 str(out), "-q"]) == 0
+    assert json.loads(out.read_text())["settings"]["noise"]["kind"] == "ar"
+    assert main(["fit", str(tmp_path / "run"), "--noise", "ar"]) == 2  # not with --method paper
+    assert "--method fast" in capsys.readouterr().err

@@ -293,6 +293,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from .fit.fast import fit_fast
     from .fit.three_step import fit_paper
 
+    if args.noise == "ar" and args.method != "fast":
+        raise UsageError("argument --noise: 'ar' (a prediction-error fit) goes with --method fast")
     rec = _read(args.recording)
     threshold = not args.no_threshold
     if args.method == "paper":
@@ -300,8 +302,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
                    f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
         fit = fit_paper(rec, threshold=threshold, seed=args.seed, progress=not args.quiet)
     else:
-        _say(args, f"fitting {rec.source} with the fast estimator ...")
-        fit = fit_fast(rec, threshold=threshold, seed=args.seed)
+        _say(args, f"fitting {rec.source} with the fast estimator"
+                   + (" (prediction error: AR noise model)" if args.noise == "ar" else "") + " ...")
+        fit = fit_fast(rec, threshold=threshold, seed=args.seed,
+                       **({"noise": "ar", "discard": 2.0} if args.noise == "ar" else {}))
     if not math.isfinite(fit.neg_log_lik):
         raise CommandFailed("the fit did not reach a finite -ln L")
     print(fit.summary())
@@ -702,9 +706,15 @@ JSON (--json) has "params" (the 8 names), "neg_log_lik", "vaf", "method",
 "seed", the settings, and the details of every step (GA repetitions with their
 histories, Gauss-Newton refinements, the threshold scan).
 
+In closed-loop tracking the remnant also drives e, which biases Eq. 4's
+output-error fit; --method fast --noise ar makes a prediction-error fit
+instead (the residual whitened by an AR model; its -ln L is on the whitened
+residual and the AR model is in the JSON's settings).
+
 Examples:
   bayespilot fit out/run --json out/run-fit.json
   bayespilot fit out/run --method fast --no-threshold --seed 2
+  bayespilot fit out/run --method fast --noise ar --json out/run-pem.json
 """
 
 DEMO_EPILOG = """\
@@ -907,6 +917,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="'paper': the three-step procedure of Pool et al. (GA, Gauss-Newton, "
                         "scan; default); 'fast': multi-start least squares with a profile over "
                         "delta_abs")
+    p.add_argument("--noise", choices=("white", "ar"), default="white",
+                   help="'white': Eq. 4 as the paper has it (default); 'ar': a prediction-error "
+                        "fit, the residual whitened by an AR model and the first 2 s left out "
+                        "(with --method fast; see docs/fitting.md)")
     p.add_argument("--seed", type=_seed, default=0, metavar="S",
                    help="seed of the genetic algorithm / starting points (default 0)")
     p.add_argument("--json", metavar="OUT",
