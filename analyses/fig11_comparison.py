@@ -1,6 +1,7 @@
 """The paper's Fig. 11 (with against without threshold) redone as a Bayesian model comparison.
 
-Run:  python analyses/fig11_comparison.py [--realizations 2] [--chunk N] [--null] [--report-only]
+Run:  python analyses/fig11_comparison.py [--realizations 2] [--chunk N] [--null]
+                                          [--likelihood coloured|eq4] [--report-only]
 
 Fig. 11 of Pool et al. (2012) compares the mean final -ln L of the model with
 and without threshold over the 40 experimental data sets of each condition
@@ -13,9 +14,13 @@ the pooled sum of ln BF per condition with its decision, and the paired
 t-test of the per-recording ln BF; beside it, the paper's style of test on
 our maximum-likelihood -ln L (two-sample t-test with against without) and the
 paper's numbers.  ``--null`` adds recordings simulated with delta_abs = 0 (no
-threshold) for the same conditions.
+threshold) for the same conditions.  The likelihood is the prediction-error
+(``coloured``) one by default: under Eq. 4, 8192 correlated samples count as
+independent and every Bayes factor is overconfident.
 
-Resumable: one JSON per comparison in ``analyses/results/fig11/``.
+Resumable: one JSON per comparison in ``analyses/results/fig11/`` (the
+likelihood in its name, e.g. ``FD_k1_d0.0075_r000_coloured.json``; the
+first four, without a suffix, used Eq. 4).
 """
 
 from __future__ import annotations
@@ -40,11 +45,11 @@ def seed_of(task, k, delta, r) -> int:
         (5_000 if delta == 0 else 0) + r
 
 
-def _path(task, k, delta, r) -> Path:
-    return OUT / f"{task}_k{k:g}_d{delta:g}_r{r:03d}.json"
+def _path(task, k, delta, r, lik) -> Path:
+    return OUT / f"{task}_k{k:g}_d{delta:g}_r{r:03d}{'' if lik == 'eq4' else '_' + lik}.json"
 
 
-def run_one(task, k, delta, r, nlive, savage_dickey) -> None:
+def run_one(task, k, delta, r, nlive, savage_dickey, lik) -> None:
     from bayespilot.compare import compare
     from bayespilot.presets import paper_parameters
     from bayespilot.simulate import simulate
@@ -54,11 +59,12 @@ def run_one(task, k, delta, r, nlive, savage_dickey) -> None:
     sim = simulate(params=p, task=task, motion_gain=k, remnant_fraction=F_N,
                    seed=seed_of(task, k, delta, r))
     t0 = time.perf_counter()
-    c = compare(sim.recording, seed=r, nlive=nlive, savage_dickey_samples=savage_dickey)
+    c = compare(sim.recording, likelihood=lik, seed=r, nlive=nlive,
+                savage_dickey_samples=savage_dickey)
     d = c.to_dict()
     d.update({"task": task, "K_theta": k, "true_delta_abs": delta, "realization": r,
-              "F_n": F_N, "sim_seed": seed_of(task, k, delta, r)})
-    path = _path(task, k, delta, r)
+              "F_n": F_N, "sim_seed": seed_of(task, k, delta, r), "likelihood": lik})
+    path = _path(task, k, delta, r, lik)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(d, indent=1, allow_nan=True))
     print(f"  {task} K={k:g} delta={delta:g} r{r}: ln BF = {c.log_bayes_factor:+.2f} +- "
@@ -112,7 +118,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--realizations", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=None)
-    ap.add_argument("--nlive", type=int, default=200)
+    ap.add_argument("--nlive", type=int, default=150)
+    ap.add_argument("--likelihood", choices=("coloured", "eq4"), default="coloured")
     ap.add_argument("--null", action="store_true", help="also delta_abs = 0 recordings")
     ap.add_argument("--gains", default="0.25,0.5,0.75,1")
     ap.add_argument("--savage-dickey", action="store_true", help="also sample for Savage-Dickey")
@@ -126,19 +133,22 @@ def main(argv=None) -> int:
             for delta in deltas:
                 for k in gains:
                     for task in TASKS:
-                        if _path(task, k, delta, r).exists():
+                        if _path(task, k, delta, r, args.likelihood).exists():
                             continue
                         if args.chunk is not None and done >= args.chunk:
                             break
-                        run_one(task, k, delta, r, args.nlive, args.savage_dickey)
+                        run_one(task, k, delta, r, args.nlive, args.savage_dickey,
+                                args.likelihood)
                         done += 1
-    rows = [json.loads(p.read_text()) for p in sorted(OUT.glob("*.json")) if p.name != "summary.json"]
+    rows = [d for d in (json.loads(p.read_text()) for p in sorted(OUT.glob("*_r[0-9]*.json")))
+            if d.get("likelihood", "eq4") == args.likelihood]
     if not rows:
         print("no results yet")
         return 0
     summary = report(rows)
-    (OUT / "summary.json").write_text(json.dumps(summary, indent=1, allow_nan=True))
-    print(f"\nwrote {(OUT / 'summary.json').relative_to(ROOT)}")
+    out = OUT / f"summary_{args.likelihood}.json"
+    out.write_text(json.dumps(summary, indent=1, allow_nan=True))
+    print(f"\nwrote {out.relative_to(ROOT)}")
     return 0
 
 
