@@ -326,6 +326,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             report = run_example(args.out, seed=args.seed, motion_gains=args.motion_gains,
                                  task=args.task, duration=args.duration,
                                  max_steps=args.max_steps, nlive=args.nlive,
+                                 likelihood=args.likelihood,
                                  progress=not args.quiet, say=lambda text: _say(args, text))
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
@@ -725,8 +726,9 @@ writes the runs as recordings and reads them back, fits each by maximum
 likelihood with and without threshold, samples the posterior with emcee,
 compares the models with and without threshold by nested sampling, and writes
 DIR/report.md with a table and figures (and the fits, posteriors and
-comparisons beside it). A few minutes on a laptop; the first run also
-compiles the numerical kernels.
+comparisons beside it). All three use the coloured (prediction-error)
+likelihood unless --likelihood eq4. A few minutes on a laptop; the first run
+also compiles the numerical kernels.
 
 --quick instead simulates one run (FD, K_theta = 1, F_n = 0.2) to
 DIR/recording.csv + .json, prints -ln L at the paper's parameters with and
@@ -948,6 +950,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="cap on the emcee chain length per run (default 6000)")
     p.add_argument("--nlive", type=_count, default=150, metavar="N",
                    help="live points of the nested sampler (default 150)")
+    p.add_argument("--likelihood", choices=("coloured", "eq4"), default="coloured",
+                   help="'coloured': the prediction-error likelihood (default); 'eq4': the "
+                        "paper's Eq. 4, for the fits, posteriors and comparisons")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_demo)
 

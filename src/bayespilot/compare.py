@@ -827,7 +827,8 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         Seeds the nested-sampling runs (and the emcee run, if one is made).
     posterior : Posterior, optional
         An emcee posterior of ``model`` on this recording for the
-        Savage-Dickey cross-check.  If None and ``savage_dickey_samples``,
+        Savage-Dickey cross-check (for ``"coloured"`` with ``ar="fixed"``, its AR
+        model is used for the comparison too).  If None and ``savage_dickey_samples``,
         one is sampled (:func:`bayespilot.sample.sample`, started from the
         nested sampler's best point, ``sample_options`` passed on).
     savage_dickey_samples : bool
@@ -883,7 +884,11 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     s1, s0, s_mc = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
     noise = None
     if likelihood == "coloured" and ar == "fixed":  # one noise model for both
-        noise = _fit_noise(recording, model, s_mc, ar_order, discard)
+        given = posterior.settings.get("noise") if posterior is not None else None
+        if isinstance(given, Mapping) and posterior.settings.get("likelihood") == "coloured":
+            noise = ARNoise.from_dict(given)  # the posterior's, so that all three agree
+        else:
+            noise = _fit_noise(recording, model, s_mc, ar_order, discard)
     lik_opts = dict(likelihood=likelihood, ar=ar, ar_order=ar_order, noise=noise, discard=discard)
     ev0 = evidence(recording, none_model, **lik_opts, nlive=nlive, dlogz=dlogz, sample=sample,
                    seed=s0, progress=progress)

@@ -8,9 +8,11 @@ few minutes on a laptop:
    delta_abs = 0.0075 IPUT, remnant fraction F_n) and write each as a
    recording (CSV + JSON sidecar), then read it back as a user's file;
 2. fit each with the fast maximum-likelihood estimator, with and without
-   threshold (:func:`bayespilot.fit.fast.fit_fast`);
-3. sample the posterior from the fit with emcee (:func:`bayespilot.sample.sample`)
-   and save it as netCDF;
+   threshold (:func:`bayespilot.fit.fast.fit_fast`), by default as
+   prediction-error fits that share one AR model of the output error;
+3. sample the posterior from the fit with emcee (:func:`bayespilot.sample.sample`,
+   by default the coloured likelihood, whose intervals are calibrated in
+   ``docs/posteriors.md``) and save it as netCDF;
 4. compare the models with and without threshold by nested sampling
    (:func:`bayespilot.compare.compare`), per run and pooled;
 5. write ``report.md`` with a table and the figures (traces, delta_abs
@@ -43,8 +45,8 @@ def _save(fig, path: Path) -> None:
 def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
                 motion_gains: Sequence[float] = (0.5, 1.0), task: str = "FD",
                 remnant_fraction: float = 0.15, duration: float | None = None,
-                max_steps: int = 6000, nlive: int = 150, progress: bool = True,
-                say: Callable[[str], None] = print) -> Path:
+                max_steps: int = 6000, nlive: int = 150, likelihood: str = "coloured",
+                progress: bool = True, say: Callable[[str], None] = print) -> Path:
     """Run the worked example and write its report.
 
     Parameters
@@ -66,6 +68,10 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
         Cap on the emcee chain length per run.
     nlive : int
         Live points of the nested sampler.
+    likelihood : {"coloured", "eq4"}
+        The likelihood of the fits, posteriors and comparisons: the
+        prediction-error one (an AR model of the output error, estimated once
+        per run and shared by all three; default) or the paper's Eq. 4.
     progress : bool
         Progress bars of the sampler.
     say : callable
@@ -95,8 +101,13 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
     from .sample import sample
     from .simulate import simulate
 
+    from .noise import ARNoise
+    from .sample import COLOURED_DISCARD
+
     if task not in ("FD", "FT"):
         raise ValueError(f"task must be 'FD' or 'FT', got {task!r}")
+    if likelihood not in ("coloured", "eq4"):
+        raise ValueError(f"likelihood must be 'coloured' or 'eq4', got {likelihood!r}")
     gains = [float(k) for k in motion_gains]
     if not gains or any(not (k > 0) for k in gains):
         raise ValueError(f"motion_gains must be positive numbers, got {motion_gains!r}")
@@ -120,18 +131,26 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
             _save(plot_traces(rec, canal=sim.channels["vestibular"]["pre"],
                               delta_abs=truth["delta_abs"]), dirs["figures"] / "traces.png")
         say(f"[{i + 1}/{len(gains)}] {name}: fitting with and without threshold ...")
-        fit = fit_fast(rec, threshold=True, seed=s)
-        fit0 = fit_fast(rec, threshold=False, seed=s)
+        opts: dict = {}
+        if likelihood == "coloured":
+            # one AR noise model (from a prediction-error fit) for both fits, the posterior
+            # and the comparison, so that all are judged by the same likelihood
+            pem = fit_fast(rec, threshold=True, seed=s, noise="ar", discard=COLOURED_DISCARD)
+            opts = {"noise": ARNoise.from_dict(pem.settings["noise"]),
+                    "discard": COLOURED_DISCARD}
+        fit = fit_fast(rec, threshold=True, seed=s, **opts)
+        fit0 = fit_fast(rec, threshold=False, seed=s, **opts)
         fit.to_json(dirs["fits"] / f"{name}_threshold.json")
         fit0.to_json(dirs["fits"] / f"{name}_none.json")
         say(f"[{i + 1}/{len(gains)}] {name}: sampling the posterior (emcee) ...")
-        post = sample(rec, init=fit, seed=s, max_steps=max_steps,
+        post = sample(rec, likelihood=likelihood, init=fit, seed=s, max_steps=max_steps,
                       min_steps=min(1000, max_steps), check_every=min(500, max_steps),
                       progress=progress)
         post.to_netcdf(dirs["posteriors"] / f"{name}.nc")
         posteriors.append(post)
         say(f"[{i + 1}/{len(gains)}] {name}: comparing threshold against none (dynesty) ...")
-        cmp_ = compare(rec, seed=s, nlive=nlive, posterior=post, progress=progress)
+        cmp_ = compare(rec, likelihood=likelihood, seed=s, nlive=nlive, posterior=post,
+                       progress=progress)
         cmp_.to_json(dirs["comparisons"] / f"{name}.json")
         comparisons.append(cmp_)
         d = post.draws("delta_abs")
@@ -153,13 +172,14 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
                                                            allow_nan=True))
     elapsed = time.perf_counter() - t_start
     report = out / "report.md"
-    report.write_text(_report(rows, pooled, truth, task, gains, elapsed), encoding="utf-8")
+    report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood),
+                      encoding="utf-8")
     say(f"wrote {report} ({elapsed:.0f} s)")
     plt.close("all")
     return report
 
 
-def _report(rows, pooled, truth, task, gains, elapsed) -> str:
+def _report(rows, pooled, truth, task, gains, elapsed, likelihood) -> str:
     from .compare import DECISION_LEVEL, DECISION_Z
 
     true_d = truth["delta_abs"]
@@ -169,9 +189,12 @@ def _report(rows, pooled, truth, task, gains, elapsed) -> str:
         f"{len(rows)} simulated runs of the {task} task of Pool et al. (2012), one per motion gain "
         f"K_theta ({', '.join(f'{k:g}' for k in gains)}), with the Table 3 pilot "
         f"(true delta_abs = {true_d} IPUT). Each was fitted by maximum likelihood (fast "
-        "estimator) with and without threshold, sampled with emcee from that fit (Eq. 4 "
-        "likelihood, uniform priors on the Table 1 bounds), and the two models were compared by "
-        f"nested sampling (dynesty). Made in {elapsed:.0f} s by `bayespilot demo`.",
+        "estimator) with and without threshold, sampled with emcee from that fit (uniform priors "
+        "on the Table 1 bounds), and the two models were compared by nested sampling (dynesty), "
+        + ("all with the coloured (prediction-error) likelihood: the output error whitened by "
+           "one AR model per run, estimated from a prediction-error fit, the first 2 s left out. "
+           if likelihood == "coloured" else "all with the paper's Eq. 4 likelihood. ")
+        + f"Made in {elapsed:.0f} s by `bayespilot demo`.",
         "",
         "| run | K_theta | F_n | delta_abs ML | posterior median | 90 % HDI | P(within +-50 %) "
         "| -ln L with | -ln L without | ln BF | decision |",
