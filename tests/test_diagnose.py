@@ -178,3 +178,27 @@ def test_diagnose_names_a_strong_washout():
     assert res.chosen.params["omega_w"] == pytest.approx(0.8, rel=0.3)
     assert res.chosen.stderr["omega_w"] > 0
     assert res.chosen.p_value < 1e-4
+
+
+def test_profiled_noise_model_is_the_least_squares_ar_of_the_fits_residual():
+    """profile_noise: the AR coefficients are refitted (same order) to the residual of the fit
+    they whiten, so the GLS -ln L of the base is at least as low as with the start's AR."""
+    from bayespilot.diagnose import decide as D
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=23,
+                   duration=40.96).recording
+    model = paper_model()
+    start = presets.paper_parameters("FD")
+    eps = Likelihood(model, rec).residual(start)
+    noise = D.noise_model(eps, rec.dt, skip=500)
+    wl, base = D.fit_base_gls(model, rec, start, noise)
+    names = tuple(n for n in model.parameter_names if n != "delta_abs")
+    prof, noise2 = D.refit_with_noise(model, rec, base, noise, names, rounds=1)
+    assert noise2.ar.size == noise.ar.size and noise2.decimation == noise.decimation
+    want = fit_ar(noise.reduce(Likelihood(model, rec).residual(base.params)),
+                  order=noise.ar.size)
+    np.testing.assert_allclose(noise2.ar, want, rtol=1e-12)
+    assert prof.neg_log_lik <= D.Whitened(model, rec, noise2).neg_log_lik(base.params) + 1e-9
+    res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, profile_noise=True,
+                   candidates=["time-varying-gains"])
+    assert res.physics == "none"

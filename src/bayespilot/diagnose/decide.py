@@ -109,7 +109,7 @@ class NoiseModel:
 
 
 def noise_model(eps: np.ndarray, dt: float, *, skip: int = 0, omega_c: float = OMEGA_C,
-                max_order: int = MAX_AR_ORDER) -> NoiseModel:
+                max_order: int = MAX_AR_ORDER, order: int | None = None) -> NoiseModel:
     """The decision likelihood's noise model, estimated from a (base-model) residual.
 
     The residual is low-passed at ``omega_c`` by a causal 61-tap FIR filter
@@ -117,7 +117,7 @@ def noise_model(eps: np.ndarray, dt: float, *, skip: int = 0, omega_c: float = O
     above the band the remnant has almost no power and the model's
     discretisation error (0.2-0.3 % of u) would otherwise dominate the
     whitened residual.  An AR model of the reduced residual (least squares,
-    order by BIC, :func:`fit_ar`) is the noise model.
+    order by BIC, :func:`fit_ar`, unless ``order`` is given) is the noise model.
     """
     if not (omega_c > 0 and math.isfinite(omega_c)):
         raise ValueError(f"omega_c must be a positive number of rad/s, got {omega_c!r}")
@@ -129,8 +129,34 @@ def noise_model(eps: np.ndarray, dt: float, *, skip: int = 0, omega_c: float = O
     decim = max(1, int(math.floor(fs / (2.0 * 2.5 * f_c))))
     nm = NoiseModel(fir, decim, np.zeros(0), int(skip), float(omega_c))
     red = nm.reduce(np.asarray(eps, float))
-    ar = fit_ar(red, max_order=min(max_order, red.size // 5))
+    ar = fit_ar(red, max_order=min(max_order, red.size // 5), order=order)
     return NoiseModel(fir, decim, ar, int(skip), float(omega_c))
+
+
+def reestimate(noise: NoiseModel, eps: np.ndarray) -> NoiseModel:
+    """The same low-pass, decimation and AR order, the AR coefficients refitted to ``eps``."""
+    ar = fit_ar(noise.reduce(np.asarray(eps, float)), order=noise.ar.size)
+    return NoiseModel(noise.fir, noise.decimation, ar, noise.skip, noise.omega_c)
+
+
+def refit_with_noise(model: PilotModel, recording: Recording, fit: "FitSummary",
+                     noise: NoiseModel, names: Sequence[str], rounds: int = 2
+                     ) -> tuple["FitSummary", NoiseModel]:
+    """Profile the noise model too: refit the AR coefficients to the fit's residual and the
+    parameters ``names`` under them, ``rounds`` times (a prediction-error fit in which the
+    noise model is estimated with the pilot model rather than held at the base model's).
+
+    Without this the AR model of the *base* residual whitens whatever the base model misses
+    as if it were remnant, which takes power from the test of an extension.
+    """
+    lik = Likelihood(model, recording)
+    for _ in range(rounds):
+        eps = lik.residual(fit.params)
+        if not np.all(np.isfinite(eps)):
+            break
+        noise = reestimate(noise, eps)
+        fit = _gls_refine(Whitened(model, recording, noise), fit.params, names)
+    return fit, noise
 
 
 class Whitened:
@@ -341,8 +367,13 @@ class CandidateResult:
 
 
 def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
-                  base: FitSummary, noise: NoiseModel) -> tuple[CandidateResult, Whitened | None]:
-    """Fit one GLS extension from the base fit (multi-start over its new parameters) and test it."""
+                  base: FitSummary, noise: NoiseModel, *, profile_noise: bool = False
+                  ) -> tuple[CandidateResult, Whitened | None]:
+    """Fit one GLS extension from the base fit (multi-start over its new parameters) and test it.
+
+    ``profile_noise``: re-estimate the AR coefficients at the extension's fit
+    (:func:`refit_with_noise`); ``base`` must then have been profiled the same way.
+    """
     missing = [c for c in ext.needs if c not in recording]
     if missing:
         return CandidateResult(ext.name, False, f"needs the recording column(s) {', '.join(missing)}",
@@ -363,6 +394,9 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
             best = f
     if best is None:
         return CandidateResult(ext.name, False, "the fit failed from every start", df=ext.df), wl
+    if profile_noise:
+        best, noise = refit_with_noise(model, recording, best, noise, names)
+        wl = Whitened(model, recording, noise)
     d = max(0.0, base.neg_log_lik - best.neg_log_lik)
     stat = 2.0 * d
     p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
