@@ -106,6 +106,12 @@ def _save_figure(fig, png: Path) -> None:
         plt.close(fig)
 
 
+def _progress(args: argparse.Namespace) -> bool:
+    """Whether to draw progress bars: not with --quiet, and only on a terminal (a bar
+    redrawn with carriage returns is noise in a log file or a pipe)."""
+    return not args.quiet and sys.stderr.isatty()
+
+
 def _say(args: argparse.Namespace, text: str) -> None:
     """An informational line on stdout, unless --quiet."""
     if not args.quiet:
@@ -300,7 +306,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if args.method == "paper":
         _say(args, f"fitting {rec.source} with the paper's three-step procedure "
                    f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
-        fit = fit_paper(rec, threshold=threshold, seed=args.seed, progress=not args.quiet)
+        fit = fit_paper(rec, threshold=threshold, seed=args.seed, progress=_progress(args))
     else:
         _say(args, f"fitting {rec.source} with the fast estimator"
                    + (" (prediction error: AR noise model)" if args.noise == "ar" else "") + " ...")
@@ -327,7 +333,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                                  task=args.task, duration=args.duration,
                                  max_steps=args.max_steps, nlive=args.nlive,
                                  likelihood=args.likelihood,
-                                 progress=not args.quiet, say=lambda text: _say(args, text))
+                                 progress=_progress(args), say=lambda text: _say(args, text))
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
                                 f"({exc.strerror or exc})") from None
@@ -425,7 +431,7 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
                f"-> {out}")
     try:
         summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
-                               progress=not args.quiet, connect_timeout=args.connect_timeout)
+                               progress=_progress(args), connect_timeout=args.connect_timeout)
     except CampaignError as exc:
         raise CommandFailed(str(exc)) from None
     _say(args, str(summary))
@@ -519,7 +525,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
             post = sample(rec, likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
                           seed=args.seed,
                           max_steps=args.max_steps, min_steps=min(1000, args.max_steps),
-                          progress=not args.quiet, backend=args.backend)
+                          progress=_progress(args), backend=args.backend)
         except RuntimeError as exc:
             raise CommandFailed(str(exc)) from None
         except ValueError as exc:  # e.g. a backend file of another run
@@ -601,7 +607,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     _say(args, f"diagnosing {rec.source}: base fit, located evidence ({args.bootstrap} bootstrap "
                f"replicates), {len(NAMES)} catalogue extensions ...")
     try:
-        res = diagnose(rec, seed=args.seed, n_bootstrap=args.bootstrap, alpha=args.alpha)
+        res = diagnose(rec, seed=args.seed, n_bootstrap=args.bootstrap, alpha=args.alpha,
+                       progress=_progress(args))
     except ValueError as exc:  # e.g. a recording too short for the analysis
         raise UsageError(str(exc)) from None
     print(res.summary())

@@ -195,7 +195,8 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates):
 def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstrap: int = 39,
              candidates: Sequence[str] | None = None, base_fit=None,
              skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
-             n_starts: int = 4, profile_noise: bool = False) -> DiagnosisResult:
+             n_starts: int = 4, profile_noise: bool = False,
+             progress: bool = False) -> DiagnosisResult:
     """Locate a model mismatch, name the missing physics, fit it (see module docs).
 
     Parameters
@@ -228,6 +229,9 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         residual, which whitens part of what the base model misses.  More
         power at about 30 % more time; off by default until the proof study
         has measured its false-alarm rate.
+    progress : bool
+        Show a tqdm bar over the stages (base fit, located evidence, each
+        candidate).
 
     Returns
     -------
@@ -251,6 +255,10 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=2 + len(names), desc="diagnose", unit="stage", disable=not progress)
+    bar.set_postfix_str("base fit")
     base_model = paper_model()
     if base_fit is None:
         base_fit = fit_fast(recording, base_model, seed=seed, n_starts=n_starts,
@@ -269,6 +277,8 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
                                          tuple(n for n in base_model.parameter_names
                                                if n != "delta_abs"))
     timings["base_gls"] = time.perf_counter() - t0 - timings["base_fit"]
+    bar.update(1)
+    bar.set_postfix_str(f"located evidence ({n_bootstrap} bootstrap replicates)")
 
     # -- locate
     t1 = time.perf_counter()
@@ -281,6 +291,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
                                       seed=seed, skip=skip)
     where = L.calibrate(st["values"], null)
     timings["locate"] = time.perf_counter() - t1
+    bar.update(1)
 
     # -- name
     t2 = time.perf_counter()
@@ -288,6 +299,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     models = {}
     for name in names:
         ext = get_extension(name)
+        bar.set_postfix_str(name)
         if ext.likelihood == "censored":
             res = _saturation(recording, base_model, base, where, boot_info)
         else:
@@ -298,6 +310,8 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         res.signature_score = float(max([-math.log10(p) for p in sig], default=0.0))
         results.append(res)
         models[name] = res.model
+        bar.update(1)
+    bar.close()
     tested = [r for r in results if r.testable]
     level = alpha / max(len(tested), 1)
     for r in tested:
