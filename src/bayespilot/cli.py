@@ -633,6 +633,11 @@ def _recording_argument(p: argparse.ArgumentParser) -> None:
                    help="the recording: its stem (out/run), its .csv or .json path, or a .mat file")
 
 
+def _seed_argument(p: argparse.ArgumentParser, help: str) -> None:
+    """``--seed S`` (an integer >= 0, default 0), as every stochastic command has it."""
+    p.add_argument("--seed", type=_seed, default=0, metavar="S", help=help)
+
+
 def _likelihood_arguments(p: argparse.ArgumentParser) -> None:
     """--likelihood, --ar and --ar-order, as sample() and compare() take them."""
     p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
@@ -893,8 +898,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "calibrated to reach it on this run (default 0: no remnant)")
     rem.add_argument("--remnant-gain", type=_nonnegative, default=None, metavar="K",
                      help="remnant gain K_n >= 0 of Eq. 6, instead of --remnant-fraction")
-    p.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the remnant noise, an integer >= 0 (default 0)")
+    _seed_argument(p, "seed of the remnant noise, an integer >= 0 (default 0)")
     p.add_argument("--duration", type=_positive, default=None, metavar="S",
                    help="measurement time in seconds (default 81.92, the paper's T0)")
     p.add_argument("--params", metavar="FILE.json",
@@ -930,8 +934,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="'white': Eq. 4 as the paper has it (default); 'ar': a prediction-error "
                         "fit, the residual whitened by an AR model and the first 2 s left out "
                         "(with --method fast; see docs/fitting.md)")
-    p.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the genetic algorithm / starting points (default 0)")
+    _seed_argument(p, "seed of the genetic algorithm / starting points (default 0)")
     p.add_argument("--json", metavar="OUT",
                    help="write the result (params, neg_log_lik, vaf, method, seed and every "
                         "step) to this JSON file")
@@ -943,9 +946,8 @@ def build_parser() -> argparse.ArgumentParser:
                         description="The main job of bayespilot on a built-in example.")
     p.add_argument("--out", default="bayespilot-demo", metavar="DIR",
                    help="output directory (default bayespilot-demo/)")
-    p.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the remnant noise, fits and samplers, an integer >= 0 "
-                        "(default 0)")
+    _seed_argument(p, "seed of the remnant noise, fits and samplers, an integer >= 0 "
+                   "(default 0)")
     p.add_argument("--quick", action="store_true",
                    help="one simulated run, -ln L at the paper's parameters and a plot only")
     p.add_argument("--task", type=_task_name, default="FD", help="FD or FT (default FD)")
@@ -1017,8 +1019,7 @@ def build_parser() -> argparse.ArgumentParser:
     _likelihood_arguments(p)
     p.add_argument("--json", metavar="SUMMARY",
                    help="write the per-parameter summary to this JSON file")
-    p.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the initial fit and the sampler (default 0)")
+    _seed_argument(p, "seed of the initial fit and the sampler (default 0)")
     p.add_argument("--max-steps", type=_count, default=20000, metavar="N",
                    help="stop after N steps even if not converged (default 20000)")
     p.add_argument("--backend", metavar="FILE.h5",
@@ -1032,8 +1033,7 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Model comparison: with against without threshold.")
     _recording_argument(p)
     p.add_argument("--json", metavar="OUT", help="write the result to this JSON file")
-    p.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the nested sampler and the sampler (default 0)")
+    _seed_argument(p, "seed of the nested sampler and the sampler (default 0)")
     _likelihood_arguments(p)
     p.add_argument("--nlive", type=_whole_number(20), default=200, metavar="N",
                    help="live points of each nested-sampling run (default 200)")
@@ -1061,8 +1061,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="OUT", help="write the diagnosis to this JSON file")
     p.add_argument("--report", metavar="DIR",
                    help="write PNG figures, report.html and diagnosis.json to this folder")
-    p.add_argument("--seed", type=_seed, default=0, metavar="S",
-                   help="seed of the base fit's starts and the bootstrap (default 0)")
+    _seed_argument(p, "seed of the base fit's starts and the bootstrap (default 0)")
     p.add_argument("--bootstrap", type=_whole_number(0), default=39, metavar="B",
                    help="bootstrap replicates for the located evidence (default 39; 0: none)")
     p.add_argument("--alpha", type=_fraction, default=0.01, metavar="A",
