@@ -80,6 +80,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from ._files import dumps, write_text_atomic
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
@@ -733,15 +734,8 @@ class Comparison:
 
     def to_json(self, path: str | os.PathLike | None = None) -> str | Path:
         """The :meth:`to_dict` as JSON text, or written to ``path`` (parents created)."""
-        text = json.dumps(self.to_dict(), indent=1, allow_nan=True)
-        if path is None:
-            return text
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text)
-        tmp.replace(path)
-        return path
+        text = dumps(self.to_dict())
+        return text if path is None else write_text_atomic(path, text)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Comparison":
@@ -995,13 +989,8 @@ class PooledComparison:
 
     def to_json(self, path: str | os.PathLike | None = None) -> str | Path:
         """JSON text, or written to ``path``."""
-        text = json.dumps(self.to_dict(), indent=1, allow_nan=True)
-        if path is None:
-            return text
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
-        return path
+        text = dumps(self.to_dict())
+        return text if path is None else write_text_atomic(path, text)
 
     def summary(self) -> str:
         counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)

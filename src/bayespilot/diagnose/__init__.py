@@ -36,6 +36,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .._files import write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
 
 __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension"]
@@ -117,11 +118,7 @@ class DiagnosisResult:
         """The JSON summary as text; also written to ``path`` when given."""
         text = json.dumps(self.to_dict(), indent=1)
         if path is not None:
-            path = Path(path)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_name(path.name + ".tmp")
-            tmp.write_text(text)
-            tmp.replace(path)
+            write_text_atomic(path, text)
         return text
 
     def summary(self) -> str:

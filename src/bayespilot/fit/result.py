@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .._files import dumps, write_text_atomic
 from .. import presets
 
 __all__ = ["FitResult"]
@@ -66,12 +67,7 @@ class FitResult:
 
     def to_json(self, path: str | Path, *, full: bool = True) -> Path:
         """Write :meth:`to_dict` to ``path`` (parent folders created)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(json.dumps(self.to_dict(full=full), indent=1, allow_nan=True))
-        tmp.replace(path)
-        return path
+        return write_text_atomic(path, dumps(self.to_dict(full=full)))
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
