@@ -84,7 +84,7 @@ def report(rows) -> dict:
         print(f"{'cell':<9} | {'paper: -lnL with / without, t, p':>36} | n | "
               f"{'ours: mean -lnL with / without':>31} | {'t, p':>11} | "
               f"{'sum ln BF':>15} | {'pooled':>12} | {'per recording (thr/none/inc)':>28} | "
-              f"paired t p")
+              f"paired t p | P(plateau) per recording")
         for k in GAINS:
             for task in TASKS:
                 sel = [r for r in rows if r["task"] == task and r["K_theta"] == k
@@ -102,14 +102,19 @@ def report(rows) -> dict:
                 pl = pool(sel, label=f"{task} {k:g}")
                 dec = pl.decisions
                 paired = "-" if math.isnan(pl.t_pvalue) else f"{pl.t_pvalue:.3g}"
+                plateau = [r.get("plateau_probability") for r in sel]
+                pl_txt = "/".join("-" if v is None else f"{v:.2f}" for v in plateau)
                 print(f"{task} {k:<6g} | {pw:>9.1f} / {pn:>9.1f}, {pt:.3f}, {pp:.2f} | "
                       f"{len(sel)} | {np.mean(ic1):>14.1f} / {np.mean(ic0):>14.1f} | {t_txt:>11} | "
                       f"{pl.log_bayes_factor:+7.1f} +- {pl.log_bayes_factor_err:4.1f} | "
                       f"{pl.decision:>12} | {dec['threshold']:>10}/{dec['none']}/{dec['inconclusive']:<15}"
-                      f" | {paired}")
+                      f" | {paired:>10} | {pl_txt}"
+                      + (f"\n{'':<9}   pooled: {pl.decision_note}" if pl.decision_note else ""))
                 out[f"{task}_k{k:g}_d{delta:g}"] = dict(pl.to_dict(), mean_nll_threshold=float(
                     np.mean(ic1)), mean_nll_none=float(np.mean(ic0)),
                     log_bayes_factors=[r["log_bayes_factor"] for r in sel],
+                    decisions_per_recording=[r["decision"] for r in sel],
+                    plateau_probabilities=plateau,
                     paper=[pw, pn, pt, pp])
     return out
 

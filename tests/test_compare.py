@@ -19,7 +19,8 @@ import pytest
 from scipy import special, stats
 
 from conftest import make_rng
-from bayespilot.compare import (Comparison, Evidence, SavageDickey, _robust_evidence, compare,
+from bayespilot.compare import (PLATEAU_LEVEL, Comparison, Evidence, SavageDickey,
+                                _guarded_decision, _robust_evidence, compare,
                                 decide, information_criteria,
                                 jeffreys_category, nested_evidence, pool, savage_dickey,
                                 savage_dickey_from_posterior)
@@ -77,6 +78,15 @@ def test_nested_evidence_gaussian_in_a_box():
     # same seed, same run
     again = nested_evidence(ll, lo, hi, names=("a", "b", "c"), nlive=150, seed=3)
     assert again.log_z == ev.log_z
+    # posterior probabilities from the weighted draws: P(b >= mu_b) = 1/2,
+    # P(c >= mu_c + sd_c) = 1 - Phi(1)
+    assert ev.probability("b", -1.0) == pytest.approx(0.5, abs=0.08)
+    assert ev.probability("c", 0.5 + math.sqrt(0.5)) == pytest.approx(stats.norm.sf(1.0), abs=0.06)
+    d = ev.to_dict()
+    assert "samples" not in d and "weights" not in d
+    json.dumps(d)
+    back = Evidence.from_dict(d)
+    assert back.log_z == ev.log_z and back.probability("b", 0.0) is None
 
 
 def test_nested_bayes_factor_matches_closed_form():
@@ -219,6 +229,36 @@ def test_information_criteria_by_hand():
         information_criteria(-1.0, -1.0, 9, 0, 10)
 
 
+def test_guarded_decision():
+    """A lost mode cannot support "none"; a plateau-borne "threshold" is inconclusive."""
+    assert _guarded_decision(-8.0, 0.5, True, None) == ("none", "")
+    d, why = _guarded_decision(-8.0, 0.5, False, None)
+    assert d == "inconclusive" and "lower bound" in why
+    assert _guarded_decision(8.0, 0.5, False, 0.1) == ("threshold", "")  # a lower bound > level
+    d, why = _guarded_decision(8.0, 0.5, True, PLATEAU_LEVEL + 0.01)
+    assert d == "inconclusive" and "switched off" in why
+    assert _guarded_decision(8.0, 0.5, True, PLATEAU_LEVEL) == ("threshold", "")
+    assert _guarded_decision(1.0, 0.5, False, 0.9) == ("inconclusive", "")
+
+
+def test_pool_guards():
+    """Three recordings at +3 +- 0.5 (sum 9: "threshold"; one alone: not); two on the plateau."""
+    def rec(v, pp, mode=True):
+        return {"log_bayes_factor": v, "log_bayes_factor_err": 0.5, "plateau_probability": pp,
+                "settings": {"mode_check": mode}}
+
+    assert pool([rec(3.0, 0.1)] * 3).decision == "threshold"
+    r = pool([rec(3.0, 0.9), rec(3.0, 0.8), rec(3.0, 0.1)])
+    assert r.decision == "inconclusive" and "2 of 3" in r.decision_note
+    assert "plateau" in r.summary()
+    # the recordings off the plateau decide for the threshold on their own: kept
+    assert pool([rec(3.0, 0.9), rec(8.0, 0.1)]).decision == "threshold"
+    # "none" carried by recordings whose nested sampling lost the mode
+    r = pool([rec(-3.5, None, False), rec(-3.5, None, False), rec(-1.0, None)])
+    assert r.decision == "inconclusive" and "lost the main mode" in r.decision_note
+    assert pool([rec(-3.5, None), rec(-3.5, None), rec(-1.0, None)]).decision == "none"
+
+
 def test_pool_against_scipy():
     vals = [4.0, 6.5, -1.0, 3.0, 2.5]
     errs = [0.8, 0.9, 0.7, 0.8, 0.6]
@@ -258,12 +298,17 @@ def test_compare_prefers_a_large_threshold():
     assert ic["delta_aic"] > 0 and ic["delta_bic"] > 0
     assert ic["neg_log_lik_threshold"] <= ic["neg_log_lik_none"]
     assert c.savage_dickey is None
+    # max|i| from the recording against the simulator's own canal output (finer step)
+    i_max = float(np.max(np.abs(sim.channels["vestibular"]["pre"])))
+    assert c.settings["max_threshold_input"] == pytest.approx(i_max, rel=0.05)
+    assert c.plateau_probability is not None and c.plateau_probability < 0.05
     d = json.loads(c.to_json())
     for key in ("log_bayes_factor", "log_bayes_factor_err", "decision", "delta_aic", "delta_bic",
                 "savage_dickey_log_bayes_factor"):
         assert key in d
     back = Comparison.from_dict(d)
     assert back.log_bayes_factor == c.log_bayes_factor and back.decision == c.decision
+    assert back.plateau_probability == c.plateau_probability
     assert "decision: threshold" in c.summary()
 
 

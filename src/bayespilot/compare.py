@@ -56,6 +56,21 @@ mentioning", < ln 10 = 2.30 "substantial", < ln 10^(3/2) = 3.45 "strong",
 needs at least "strong" evidence (|ln BF| > ln 10) that holds with the
 estimate's uncertainty: ln BF - 2 err > ln 10 gives ``"threshold"``,
 ln BF + 2 err < -ln 10 gives ``"none"``, anything else ``"inconclusive"``.
+Two guards follow (:func:`_guarded_decision`), both found on the Fig. 11
+study (docs/comparison.md):
+
+- The plateau.  With uniform priors the plateau above max|i| holds a large
+  share of the prior volume of the model with threshold (K_m and tau_m are
+  free there and change nothing).  Where the motion channel adds little to
+  the fit (small K_theta) that volume alone gives ln BF of +2 to +4 with no
+  threshold in the data: the Bayes factor then weighs "motion channel off"
+  against "motion channel on, linear", not a threshold.  So a "threshold"
+  decision needs the posterior probability of the plateau,
+  P(delta_abs >= max|i|) (:attr:`Comparison.plateau_probability`), to be
+  at most :data:`PLATEAU_LEVEL`; otherwise it is "inconclusive".
+- A lost mode.  If every run with threshold missed the main mode, ln Z with
+  threshold and so ln BF are only lower bounds: they can support
+  "threshold" but not "none".
 
 :func:`pool` combines recordings of one condition: the sum of the log Bayes
 factors (all recordings with a threshold against all without, each with its
@@ -110,6 +125,9 @@ DECISIONS = ("threshold", "none", "inconclusive")
 MODE_TOLERANCE = 2.0
 #: Extra runs (each with a new seed) :func:`compare` makes to replace runs that lost the mode.
 MAX_RERUNS = 2
+#: Posterior probability (model with threshold) of ``delta_abs`` above max|i| beyond which the
+#: evidence for the threshold is evidence for a switched-off motion channel (see :func:`compare`).
+PLATEAU_LEVEL = 0.5
 
 
 def _check_int(name: str, v, lo: int) -> int:
@@ -194,6 +212,11 @@ class Evidence:
         Wall time, s.
     settings : dict
         nlive, dlogz, sample, bound, seed, the bounds.
+    samples, weights : ndarray or None
+        The nested-sampling draws, shape (n, n_parameters), and their
+        normalised importance weights, for posterior probabilities such as
+        :attr:`Comparison.plateau_probability`.  Kept in memory only: not in
+        :meth:`to_dict` (None after :meth:`from_dict`).
     """
 
     log_z: float
@@ -207,15 +230,26 @@ class Evidence:
     n_iter: int
     elapsed: float
     settings: dict[str, Any] = field(default_factory=dict)
+    samples: np.ndarray | None = field(default=None, repr=False, compare=False)
+    weights: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def probability(self, name: str, lower: float) -> float | None:
+        """Posterior probability that parameter ``name`` is >= ``lower`` (None without samples)."""
+        if self.samples is None or self.weights is None:
+            return None
+        col = self.parameter_names.index(name)
+        return float(np.sum(self.weights[self.samples[:, col] >= lower]))
 
     def to_dict(self) -> dict[str, Any]:
-        d = asdict(self)
+        d = {k: v for k, v in self.__dict__.items() if k not in ("samples", "weights")}
+        d["best"], d["mean"] = dict(self.best), dict(self.mean)
+        d["settings"] = dict(self.settings)
         d["parameter_names"] = list(self.parameter_names)
         return d
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Evidence":
-        d = dict(d)
+        d = {k: v for k, v in d.items() if k not in ("samples", "weights")}
         d["parameter_names"] = tuple(d["parameter_names"])
         return cls(**d)
 
@@ -311,7 +345,7 @@ def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequen
     return Evidence(logz, logz_err, info, float(logl[ib]),
                     {n: float(v) for n, v in zip(names, samples[ib])},
                     {n: float(v) for n, v in zip(names, w @ samples)}, names, int(n_calls),
-                    int(res["niter"]), time.perf_counter() - t0, settings)
+                    int(res["niter"]), time.perf_counter() - t0, settings, samples, w)
 
 
 def _check_noise(noise):
@@ -662,11 +696,16 @@ def _robust_evidence(run: Callable[[int], Evidence], n_runs: int,
     if len(good) > 1:
         err = max(err, float(np.std(z, ddof=1) / math.sqrt(len(good))))
     settings = dict(top.settings, runs=record, seed=good[0].settings.get("seed"))
+    with_draws = [e for e in good if e.samples is not None]
+    samples = weights = None
+    if with_draws:  # each run's posterior counts equally
+        samples = np.concatenate([e.samples for e in with_draws])
+        weights = np.concatenate([e.weights / len(with_draws) for e in with_draws])
     combined = Evidence(log_z, err, float(np.mean([e.information for e in good])),
                         float(max(e.max_log_lik for e in good)), top.best, top.mean,
                         top.parameter_names, int(sum(e.n_calls for e in made)),
                         int(sum(e.n_iter for e in made)), float(sum(e.elapsed for e in made)),
-                        settings)
+                        settings, samples, weights)
     return combined, record, True
 
 
@@ -688,6 +727,12 @@ class Comparison:
     seed : int or None
     elapsed : float
     source : str or None
+    plateau_probability : float or None
+        Posterior probability, under the model with threshold, that
+        ``delta_abs`` is at or above max|i| (:func:`threshold_input_max`),
+        where the dead zone switches the motion channel off.  Above
+        :data:`PLATEAU_LEVEL` a "threshold" decision is made "inconclusive"
+        (``settings["decision_note"]`` says why).
     """
 
     log_bayes_factor: float
@@ -701,6 +746,7 @@ class Comparison:
     seed: int | None = None
     elapsed: float = math.nan
     source: str | None = None
+    plateau_probability: float | None = None
 
     @property
     def category(self) -> str:
@@ -715,6 +761,8 @@ class Comparison:
             "log_bayes_factor": self.log_bayes_factor,
             "log_bayes_factor_err": self.log_bayes_factor_err,
             "decision": self.decision,
+            "decision_note": self.settings.get("decision_note", ""),
+            "plateau_probability": self.plateau_probability,
             "jeffreys_category": self.category,
             "favours": "threshold" if self.log_bayes_factor > 0 else "none",
             "log_evidence_threshold": self.evidence_threshold.log_z,
@@ -745,7 +793,8 @@ class Comparison:
                    Evidence.from_dict(d["evidence_none"]),
                    None if sd is None else SavageDickey(**sd), dict(d["information_criteria"]),
                    dict(d.get("settings", {})), d.get("seed"),
-                   float(d.get("elapsed_seconds", math.nan)), d.get("source"))
+                   float(d.get("elapsed_seconds", math.nan)), d.get("source"),
+                   d.get("plateau_probability"))
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "Comparison":
@@ -768,7 +817,8 @@ class Comparison:
             f"{', ' + self.source if self.source else ''}):",
             f"  ln BF = {self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f}  "
             f"({self.category}, favours {'threshold' if self.log_bayes_factor > 0 else 'none'})"
-            f"  -> decision: {self.decision}",
+            f"  -> decision: {self.decision}"
+            + (f" ({self.settings['decision_note']})" if self.settings.get("decision_note") else ""),
             f"  ln Z threshold = {e1.log_z:.2f} +- {e1.log_z_err:.2f}, none = {e0.log_z:.2f} +- "
             f"{e0.log_z_err:.2f} (dynesty, nlive {e1.settings.get('nlive')})",
             f"  {sd_line}",
@@ -779,6 +829,41 @@ class Comparison:
 
     def __str__(self) -> str:
         return self.summary()
+
+
+def threshold_input_max(model: PilotModel, recording: Recording) -> float | None:
+    """max|i| of the input of the dead zone on ``delta_abs`` over the recording.
+
+    For ``delta_abs`` at or above this value the dead zone passes nothing and
+    the channel is switched off: the plateau of the likelihood.  None when no
+    channel has a hard :class:`~bayespilot.model.DeadZone` on ``delta_abs`` or
+    when that channel has stages with free parameters (its input then depends
+    on them).
+    """
+    from .likelihood import channel_inputs
+    from .model import DeadZone, FixedFilter
+
+    for c, ch in enumerate(model.channels):
+        nl = ch.nonlinearity
+        if isinstance(nl, DeadZone) and nl.delta == THRESHOLD:
+            if not all(isinstance(st, FixedFilter) for st in ch.stages):
+                return None
+            return float(np.max(np.abs(channel_inputs(model, recording)[c])))
+    return None
+
+
+def _guarded_decision(log_bf: float, err: float, mode_ok: bool,
+                      plateau: float | None) -> tuple[str, str]:
+    """:func:`decide`, then two guards; returns (decision, why it was changed or "")."""
+    d = decide(log_bf, err)
+    if d == "none" and not mode_ok:
+        return "inconclusive", ("every nested-sampling run with threshold lost the main mode, so "
+                                "ln BF is only a lower bound and cannot favour 'none'")
+    if d == "threshold" and plateau is not None and plateau > PLATEAU_LEVEL:
+        return "inconclusive", (f"P(delta_abs >= max|i|) = {plateau:.2f}: the evidence is for the "
+                                "motion channel switched off by the dead zone, which a threshold "
+                                "and an unused channel explain alike")
+    return d, ""
 
 
 def _fit_noise(recording: Recording, model: PilotModel, seed, order, discard) -> ARNoise:
@@ -945,8 +1030,12 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
                       f"below that without ({ev0.max_log_lik:.1f}) in all {len(reruns)} runs: "
                       "they missed the main mode, so ln BF is too low; rerun with more nlive",
                       RuntimeWarning, stacklevel=2)
-    return Comparison(float(log_bf), float(err), decide(log_bf, err), ev1, ev0, sd, ic, settings,
-                      seed, time.perf_counter() - t0, recording.source)
+    i_max = threshold_input_max(model, recording)
+    plateau = None if i_max is None else ev1.probability(THRESHOLD, i_max)
+    decision, why = _guarded_decision(log_bf, err, mode_ok, plateau)
+    settings.update(max_threshold_input=i_max, decision_note=why)
+    return Comparison(float(log_bf), float(err), decision, ev1, ev0, sd, ic, settings,
+                      seed, time.perf_counter() - t0, recording.source, plateau)
 
 
 # --- pooling -------------------------------------------------------------------------------------
@@ -960,7 +1049,11 @@ class PooledComparison:
     log_bayes_factor, log_bayes_factor_err : float
         Sum of the per-recording ln BF, errors in quadrature.
     decision : str
-        :func:`decide` on the sum.
+        :func:`decide` on the sum, with the guards of :func:`compare`: a
+        "threshold" must also hold on the sum over the recordings whose
+        ``plateau_probability`` is at most :data:`PLATEAU_LEVEL`, and a
+        "none" on the sum over those whose nested sampling kept the main
+        mode; otherwise "inconclusive".
     decisions : dict
         Count of per-recording decisions.
     mean_log_bayes_factor : float
@@ -970,6 +1063,8 @@ class PooledComparison:
     wilcoxon_statistic, wilcoxon_pvalue : float
         Wilcoxon signed-rank test of the same; NaN for n < 2.
     label : str
+    decision_note : str
+        Why a guard changed the decision ("" if none did).
     """
 
     n: int
@@ -983,6 +1078,7 @@ class PooledComparison:
     wilcoxon_statistic: float
     wilcoxon_pvalue: float
     label: str = ""
+    decision_note: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -996,7 +1092,8 @@ class PooledComparison:
         counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)
         return (f"{self.label + ': ' if self.label else ''}{self.n} recordings, sum ln BF = "
                 f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} -> "
-                f"{self.decision}; per recording: {counts}; paired t = {self.t_statistic:.2f} "
+                f"{self.decision}{' (' + self.decision_note + ')' if self.decision_note else ''}"
+                f"; per recording: {counts}; paired t = {self.t_statistic:.2f} "
                 f"(p = {self.t_pvalue:.3g}), Wilcoxon p = {self.wilcoxon_pvalue:.3g}")
 
 
@@ -1024,7 +1121,7 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
 
     if isinstance(results, (Comparison, Mapping)) or not len(results):
         raise ValueError("results must be a non-empty sequence of comparisons")
-    lbf, err, dec = [], [], []
+    lbf, err, dec, on_plateau, lost_mode = [], [], [], [], []
     for r in results:
         d = r.to_dict() if isinstance(r, Comparison) else r
         if not isinstance(d, Mapping) or "log_bayes_factor" not in d:
@@ -1033,6 +1130,10 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
         lbf.append(float(d["log_bayes_factor"]))
         err.append(float(d.get("log_bayes_factor_err", 0.0)))
         dec.append(d.get("decision") or decide(lbf[-1], err[-1]))
+        pp = d.get("plateau_probability")
+        on_plateau.append(pp is not None and pp > PLATEAU_LEVEL)
+        settings = d.get("settings") or {}
+        lost_mode.append(settings.get("mode_check") is False)
     x = np.array(lbf)
     total, total_err = float(x.sum()), float(math.sqrt(np.sum(np.square(err))))
     t = p = w = wp = math.nan
@@ -1043,8 +1144,23 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
             wres = stats.wilcoxon(x)
             w, wp = float(wres.statistic), float(wres.pvalue)
     counts = {k: int(sum(1 for d in dec if d == k)) for k in DECISIONS}
-    return PooledComparison(int(x.size), total, total_err, decide(total, total_err), counts,
-                            float(x.mean()), t, p, w, wp, label)
+    decision, note = decide(total, total_err), ""
+
+    def holds(keep: list[bool]) -> bool:
+        k = np.array(keep)
+        return k.any() and decide(float(x[k].sum()),
+                                  float(math.sqrt(np.sum(np.square(np.array(err)[k]))))) == decision
+
+    if decision == "threshold" and any(on_plateau) and not holds([not v for v in on_plateau]):
+        decision, note = "inconclusive", (f"{sum(on_plateau)} of {x.size} recordings favour the "
+                                          "threshold through the plateau (motion channel switched "
+                                          "off); the others do not decide for it")
+    elif decision == "none" and any(lost_mode) and not holds([not v for v in lost_mode]):
+        decision, note = "inconclusive", (f"in {sum(lost_mode)} of {x.size} recordings nested "
+                                          "sampling lost the main mode; the others do not decide "
+                                          "for 'none'")
+    return PooledComparison(int(x.size), total, total_err, decision, counts,
+                            float(x.mean()), t, p, w, wp, label, note)
 
 
 class _CallableModule(types.ModuleType):
