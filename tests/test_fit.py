@@ -105,6 +105,26 @@ def test_paper_fit_small_is_reproducible_and_serialises(sim, tmp_path):
     back = FitResult.from_json(path)
     assert back.params == a.params and back.neg_log_lik == a.neg_log_lik
     assert "K_v" in a.summary() and "-ln L" in a.summary()
+    # Figs. 6-9 from the fit and from its JSON copy: the plotted points are the steps' numbers
+    import matplotlib.pyplot as plt
+
+    from bayespilot.fit.figures import (plot_ga_convergence, plot_step_one_thresholds,
+                                        plot_step_three, plot_step_two)
+
+    fig = plot_step_two([a, back], labels=["a", "back"])
+    assert len(fig.axes) == 2
+    for ax in fig.axes:
+        grey, black = ax.get_lines()[:2]
+        np.testing.assert_allclose(grey.get_ydata(), funs)
+        np.testing.assert_allclose(black.get_ydata(), [r["neg_log_lik"] for r in steps["step2"]])
+    fig3 = plot_step_three([back])
+    xs = np.concatenate([ln.get_xdata() for ln in fig3.axes[0].get_lines()])
+    assert a.params["delta_abs"] in xs
+    for f in (fig, fig3, plot_step_one_thresholds([a]), plot_ga_convergence([a])):
+        plt.close(f)
+    for plot in (plot_step_two, plot_step_three):
+        with pytest.raises(ValueError, match="no fits"):
+            plot([])
 
 
 def test_paper_fit_without_threshold_has_no_step_three(sim):

@@ -139,6 +139,16 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     return fig
 
 
+def _one_row(results: Sequence[FitResult]):
+    """The fits as a list and a figure with one panel per fit in a row (Figs. 8 and 9)."""
+    results = list(results)
+    if not results:
+        raise ValueError("no fits to plot")
+    fig, axes = _pyplot().subplots(1, len(results), figsize=(3.0 * len(results), 2.8),
+                                   squeeze=False)
+    return results, fig, axes
+
+
 def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = None):
     """Fig. 8: -ln L per repetition after Step I (grey) and Step II (black).
 
@@ -146,11 +156,7 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
-    results = list(results)
-    if not results:
-        raise ValueError("no fits to plot")
-    fig, axes = plt.subplots(1, len(results), figsize=(3.0 * len(results), 2.8), squeeze=False)
+    results, fig, axes = _one_row(results)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):
         steps = _paper_fit(fit, "plot_step_two")
         before = np.array([r["fun"] for r in steps["step1"]["runs"]])
@@ -180,11 +186,7 @@ def plot_step_three(results: Sequence[FitResult], labels: Sequence[str] | None =
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
-    results = list(results)
-    if not results:
-        raise ValueError("no fits to plot")
-    fig, axes = plt.subplots(1, len(results), figsize=(3.0 * len(results), 2.8), squeeze=False)
+    results, fig, axes = _one_row(results)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):
         steps = _paper_fit(fit, "plot_step_three")
         if not steps.get("step3"):
