@@ -207,6 +207,8 @@ def _cli_bad(d: Path, run: Path, p: Path) -> dict[str, tuple[list, int, str]]:
         "simulate: unknown task": (["simulate", "-o", d / "x", "--task", "FX"], 2, "--task"),
         "fit: unknown method": (["fit", run, "--method", "slow"], 2, "--method"),
         "fit: negative seed": (["fit", run, "--seed", "-3"], 2, "--seed"),
+        "fit: --iterate with fast": (["fit", run, "--method", "fast", "--iterate"], 2,
+                                     "--iterate"),
         "demo: seed not a number": (["demo", "--seed", "x"], 2, "--seed"),
         "loglik: unknown initial": (["loglik", run, "--params", p, "--initial", "cold"], 2,
                                     "--initial"),

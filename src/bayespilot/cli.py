@@ -301,12 +301,15 @@ def _cmd_fit(args: argparse.Namespace) -> int:
 
     if args.noise == "ar" and args.method != "fast":
         raise UsageError("argument --noise: 'ar' (a prediction-error fit) goes with --method fast")
+    if args.iterate and args.method != "paper":
+        raise UsageError("argument --iterate: it repeats Steps II and III of --method paper")
     rec = _read(args.recording)
     threshold = not args.no_threshold
     if args.method == "paper":
         _say(args, f"fitting {rec.source} with the paper's three-step procedure "
                    f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
-        fit = fit_paper(rec, threshold=threshold, seed=args.seed, progress=_progress(args))
+        fit = fit_paper(rec, threshold=threshold, seed=args.seed, iterate=args.iterate,
+                        progress=_progress(args))
     else:
         _say(args, f"fitting {rec.source} with the fast estimator"
                    + (" (prediction error: AR noise model)" if args.noise == "ar" else "") + " ...")
@@ -661,6 +664,7 @@ Examples:
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
   bayespilot loglik out/run --params params.json
   bayespilot fit out/run --json out/run-fit.json
+  bayespilot fit out/run --iterate --json out/run-fit.json
   bayespilot sample out/run -o out/run-post.nc --json out/run-post.json
   bayespilot plot out/run-post.nc -o out/run-plots
   bayespilot compare out/run --json out/run-compare.json
@@ -726,6 +730,7 @@ residual and the AR model is in the JSON's settings).
 
 Examples:
   bayespilot fit out/run --json out/run-fit.json
+  bayespilot fit out/run --iterate --json out/run-fit.json
   bayespilot fit out/run --method fast --no-threshold --seed 2
   bayespilot fit out/run --method fast --noise ar --json out/run-pem.json
 """
@@ -934,6 +939,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="'white': Eq. 4 as the paper has it (default); 'ar': a prediction-error "
                         "fit, the residual whitened by an AR model and the first 2 s left out "
                         "(with --method fast; see docs/fitting.md)")
+    p.add_argument("--iterate", action="store_true",
+                   help="repeat Steps II and III until delta_abs and -ln L stop changing "
+                        "(with --method paper; the paper runs them once, which stops short on "
+                        "remnant-free or low-remnant records, see docs/fitting.md)")
     _seed_argument(p, "seed of the genetic algorithm / starting points (default 0)")
     p.add_argument("--json", metavar="OUT",
                    help="write the result (params, neg_log_lik, vaf, method, seed and every "
