@@ -22,8 +22,9 @@ from conftest import make_rng
 from bayespilot.compare import (PLATEAU_LEVEL, Comparison, Evidence, SavageDickey,
                                 _guarded_decision, _robust_evidence, compare,
                                 decide, information_criteria,
-                                jeffreys_category, nested_evidence, pool, savage_dickey,
-                                savage_dickey_from_posterior)
+                                jeffreys_category, nested_evidence, plateau_onset, pool,
+                                savage_dickey, savage_dickey_from_posterior,
+                                threshold_input_max)
 from bayespilot.model import paper_model
 from bayespilot.presets import paper_parameters
 from bayespilot.simulate import simulate
@@ -236,9 +237,28 @@ def test_guarded_decision():
     assert d == "inconclusive" and "lower bound" in why
     assert _guarded_decision(8.0, 0.5, False, 0.1) == ("threshold", "")  # a lower bound > level
     d, why = _guarded_decision(8.0, 0.5, True, PLATEAU_LEVEL + 0.01)
-    assert d == "inconclusive" and "switched off" in why
+    assert d == "inconclusive" and "switches the motion channel off" in why
     assert _guarded_decision(8.0, 0.5, True, PLATEAU_LEVEL) == ("threshold", "")
     assert _guarded_decision(1.0, 0.5, False, 0.9) == ("inconclusive", "")
+    d, why = _guarded_decision(8.0, 0.5, True, 0.8, onset=0.0317)
+    assert d == "inconclusive" and "0.0317" in why and "1%" in why
+
+
+def test_plateau_onset_is_the_99th_percentile_of_the_dead_zone_input():
+    """plateau_onset against np.quantile of channel_inputs; None without a dead zone."""
+    from bayespilot.likelihood import channel_inputs
+
+    sim = _sim(0.0, seed=5)
+    model = paper_model()
+    i = np.abs(channel_inputs(model, sim.recording)[1])
+    assert plateau_onset(model, sim.recording) == pytest.approx(np.quantile(i, 0.99), rel=1e-12)
+    assert plateau_onset(model, sim.recording, 0.0) == pytest.approx(i.max(), rel=1e-12)
+    assert threshold_input_max(model, sim.recording) == pytest.approx(i.max(), rel=1e-12)
+    # 1 % of the samples lie above the onset (to within one sample)
+    n_above = int(np.sum(i > plateau_onset(model, sim.recording)))
+    assert abs(n_above - 0.01 * i.size) <= 1
+    with pytest.raises(ValueError, match="active_fraction"):
+        plateau_onset(model, sim.recording, 1.0)
 
 
 def test_pool_guards():
@@ -301,6 +321,10 @@ def test_compare_prefers_a_large_threshold():
     # max|i| from the recording against the simulator's own canal output (finer step)
     i_max = float(np.max(np.abs(sim.channels["vestibular"]["pre"])))
     assert c.settings["max_threshold_input"] == pytest.approx(i_max, rel=0.05)
+    # the plateau onset: the 99th percentile of the same |i| (1 % of the samples pass)
+    onset = float(np.quantile(np.abs(sim.channels["vestibular"]["pre"]), 0.99))
+    assert c.settings["plateau_onset"] == pytest.approx(onset, rel=0.05)
+    assert c.settings["plateau_onset"] < c.settings["max_threshold_input"]
     assert c.plateau_probability is not None and c.plateau_probability < 0.05
     d = json.loads(c.to_json())
     for key in ("log_bayes_factor", "log_bayes_factor_err", "decision", "delta_aic", "delta_bic",

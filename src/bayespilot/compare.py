@@ -65,9 +65,14 @@ study (docs/comparison.md):
   the fit (small K_theta) that volume alone gives ln BF of +2 to +4 with no
   threshold in the data: the Bayes factor then weighs "motion channel off"
   against "motion channel on, linear", not a threshold.  So a "threshold"
-  decision needs the posterior probability of the plateau,
-  P(delta_abs >= max|i|) (:attr:`Comparison.plateau_probability`), to be
-  at most :data:`PLATEAU_LEVEL`; otherwise it is "inconclusive".
+  decision needs the posterior probability of the plateau to be at most
+  :data:`PLATEAU_LEVEL`; otherwise it is "inconclusive".  The plateau
+  starts where the dead zone passes fewer than :data:`PLATEAU_ACTIVE_FRACTION`
+  of the samples (:func:`plateau_onset`), not at max|i|: a threshold that
+  lets through a handful of peaks of |i| (with a large K_m) fits a few
+  remnant events, not a perception threshold, and gave a false "threshold"
+  on Fig. 11 data simulated without one
+  (:attr:`Comparison.plateau_probability` is P(delta_abs >= onset)).
 - A lost mode.  If every run with threshold missed the main mode, ln Z with
   threshold and so ln BF are only lower bounds: they can support
   "threshold" but not "none".
@@ -105,7 +110,8 @@ from .recording import Recording
 __all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested_evidence",
            "evidence", "savage_dickey", "savage_dickey_from_posterior", "information_criteria",
            "decide", "jeffreys_category", "compare", "pool", "JEFFREYS", "DECISION_LEVEL",
-           "DECISION_Z", "THRESHOLD"]
+           "DECISION_Z", "THRESHOLD", "threshold_input_max", "plateau_onset", "PLATEAU_LEVEL",
+           "PLATEAU_ACTIVE_FRACTION"]
 
 #: The nested parameter: the model without threshold has it fixed at 0.
 THRESHOLD = "delta_abs"
@@ -125,9 +131,13 @@ DECISIONS = ("threshold", "none", "inconclusive")
 MODE_TOLERANCE = 2.0
 #: Extra runs (each with a new seed) :func:`compare` makes to replace runs that lost the mode.
 MAX_RERUNS = 2
-#: Posterior probability (model with threshold) of ``delta_abs`` above max|i| beyond which the
-#: evidence for the threshold is evidence for a switched-off motion channel (see :func:`compare`).
+#: Posterior probability (model with threshold) of ``delta_abs`` above the plateau onset
+#: (:func:`plateau_onset`) beyond which the evidence for the threshold is evidence for a
+#: switched-off or nearly silent motion channel (see :func:`compare`).
 PLATEAU_LEVEL = 0.5
+#: The plateau starts at the level of |i| that the dead zone's input exceeds in only this
+#: fraction of the samples (1 %: under 0.82 s of an 81.92 s run), see :func:`plateau_onset`.
+PLATEAU_ACTIVE_FRACTION = 0.01
 
 
 def _check_int(name: str, v, lo: int) -> int:
@@ -729,8 +739,9 @@ class Comparison:
     source : str or None
     plateau_probability : float or None
         Posterior probability, under the model with threshold, that
-        ``delta_abs`` is at or above max|i| (:func:`threshold_input_max`),
-        where the dead zone switches the motion channel off.  Above
+        ``delta_abs`` is at or above the plateau onset (:func:`plateau_onset`),
+        where the dead zone passes less than 1 % of the samples or switches
+        the motion channel off.  Above
         :data:`PLATEAU_LEVEL` a "threshold" decision is made "inconclusive"
         (``settings["decision_note"]`` says why).
     """
@@ -831,6 +842,20 @@ class Comparison:
         return self.summary()
 
 
+def _threshold_input(model: PilotModel, recording: Recording) -> np.ndarray | None:
+    """|i|, the magnitude of the input of the dead zone on ``delta_abs``, or None."""
+    from .likelihood import channel_inputs
+    from .model import DeadZone, FixedFilter
+
+    for c, ch in enumerate(model.channels):
+        nl = ch.nonlinearity
+        if isinstance(nl, DeadZone) and nl.delta == THRESHOLD:
+            if not all(isinstance(st, FixedFilter) for st in ch.stages):
+                return None
+            return np.abs(channel_inputs(model, recording)[c])
+    return None
+
+
 def threshold_input_max(model: PilotModel, recording: Recording) -> float | None:
     """max|i| of the input of the dead zone on ``delta_abs`` over the recording.
 
@@ -840,29 +865,51 @@ def threshold_input_max(model: PilotModel, recording: Recording) -> float | None
     when that channel has stages with free parameters (its input then depends
     on them).
     """
-    from .likelihood import channel_inputs
-    from .model import DeadZone, FixedFilter
-
-    for c, ch in enumerate(model.channels):
-        nl = ch.nonlinearity
-        if isinstance(nl, DeadZone) and nl.delta == THRESHOLD:
-            if not all(isinstance(st, FixedFilter) for st in ch.stages):
-                return None
-            return float(np.max(np.abs(channel_inputs(model, recording)[c])))
-    return None
+    i = _threshold_input(model, recording)
+    return None if i is None else float(np.max(i))
 
 
-def _guarded_decision(log_bf: float, err: float, mode_ok: bool,
-                      plateau: float | None) -> tuple[str, str]:
+def plateau_onset(model: PilotModel, recording: Recording,
+                  active_fraction: float = PLATEAU_ACTIVE_FRACTION) -> float | None:
+    """The ``delta_abs`` above which the dead zone passes under ``active_fraction`` of the samples.
+
+    The (1 - ``active_fraction``) quantile of |i|, the input of the dead zone,
+    over the recording.  Above it the motion channel acts on a few peaks
+    only (at 0.01, under 82 of 8192 samples), which a large K_m can turn into
+    a fit of a few remnant events; at max|i| (``active_fraction`` = 0) it is
+    switched off.  :func:`compare` treats both as the plateau.  None where
+    :func:`threshold_input_max` is None.
+
+    Parameters
+    ----------
+    model : PilotModel
+    recording : Recording
+    active_fraction : float
+        Fraction of the samples, in [0, 1).
+
+    Returns
+    -------
+    float or None
+    """
+    if not 0.0 <= active_fraction < 1.0:
+        raise ValueError(f"active_fraction must be in [0, 1), got {active_fraction!r}")
+    i = _threshold_input(model, recording)
+    return None if i is None else float(np.quantile(i, 1.0 - active_fraction))
+
+
+def _guarded_decision(log_bf: float, err: float, mode_ok: bool, plateau: float | None,
+                      onset: float | None = None) -> tuple[str, str]:
     """:func:`decide`, then two guards; returns (decision, why it was changed or "")."""
     d = decide(log_bf, err)
     if d == "none" and not mode_ok:
         return "inconclusive", ("every nested-sampling run with threshold lost the main mode, so "
                                 "ln BF is only a lower bound and cannot favour 'none'")
     if d == "threshold" and plateau is not None and plateau > PLATEAU_LEVEL:
-        return "inconclusive", (f"P(delta_abs >= max|i|) = {plateau:.2f}: the evidence is for the "
-                                "motion channel switched off by the dead zone, which a threshold "
-                                "and an unused channel explain alike")
+        where = "the plateau" if onset is None else f"{onset:.4g}"
+        return "inconclusive", (f"P(delta_abs >= {where}) = {plateau:.2f}: above it the dead zone "
+                                f"passes under {PLATEAU_ACTIVE_FRACTION:.0%} of the samples or "
+                                "switches the motion channel off, which a threshold, a few fitted "
+                                "remnant peaks and an unused channel explain alike")
     return d, ""
 
 
@@ -1031,9 +1078,11 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
                       "they missed the main mode, so ln BF is too low; rerun with more nlive",
                       RuntimeWarning, stacklevel=2)
     i_max = threshold_input_max(model, recording)
-    plateau = None if i_max is None else ev1.probability(THRESHOLD, i_max)
-    decision, why = _guarded_decision(log_bf, err, mode_ok, plateau)
-    settings.update(max_threshold_input=i_max, decision_note=why)
+    onset = plateau_onset(model, recording)
+    plateau = None if onset is None else ev1.probability(THRESHOLD, onset)
+    decision, why = _guarded_decision(log_bf, err, mode_ok, plateau, onset)
+    settings.update(max_threshold_input=i_max, plateau_onset=onset,
+                    plateau_active_fraction=PLATEAU_ACTIVE_FRACTION, decision_note=why)
     return Comparison(float(log_bf), float(err), decision, ev1, ev0, sd, ic, settings,
                       seed, time.perf_counter() - t0, recording.source, plateau)
 
@@ -1153,8 +1202,9 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
 
     if decision == "threshold" and any(on_plateau) and not holds([not v for v in on_plateau]):
         decision, note = "inconclusive", (f"{sum(on_plateau)} of {x.size} recordings favour the "
-                                          "threshold through the plateau (motion channel switched "
-                                          "off); the others do not decide for it")
+                                          "threshold through the plateau (motion channel off or "
+                                          "passing under 1 % of the samples); the others do not "
+                                          "decide for it")
     elif decision == "none" and any(lost_mode) and not holds([not v for v in lost_mode]):
         decision, note = "inconclusive", (f"in {sum(lost_mode)} of {x.size} recordings nested "
                                           "sampling lost the main mode; the others do not decide "
