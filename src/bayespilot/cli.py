@@ -782,6 +782,7 @@ Examples:
   bayespilot replicate --realizations 5 --method fast --tasks FD --motion-gains 0.25,1 \\
       --remnant-fractions 0,0.2 --out quick --workers 2
   bayespilot replicate --realizations 100 --out replication --scheduler tcp://10.0.0.5:8786
+  bayespilot replicate --realizations 8 --fits threshold --out iterated --fit-option iterate=true
 """
 
 SAMPLE_EPILOG = """\
