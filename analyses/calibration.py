@@ -31,6 +31,8 @@ recording for the shared fit; ``--chunk N`` does the next N recordings that
 are unfinished (recordings alternate between tasks, so any prefix is
 balanced), then prints the table from everything on disk and writes
 ``docs/figures/calibration_coverage.png`` and ``.../calibration/summary.json``.
+A higher ``--max-steps`` than a chain on disk stopped at redoes that chain if
+it had not converged, so the cap of the whole study can be raised afterwards.
 """
 
 from __future__ import annotations
@@ -38,7 +40,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import time
 import warnings
 from pathlib import Path
@@ -81,6 +82,20 @@ def _write(path: Path, obj) -> None:
     tmp.replace(path)
 
 
+def _finished(task: str, r: int, lik: str, max_steps: int) -> bool:
+    """Whether a posterior is on disk that this run would not redo.
+
+    A chain that stopped at a lower cap than ``max_steps`` without converging
+    is redone: sampling is seeded, so the rerun repeats its steps and goes on,
+    and the study is then the one run with the higher cap throughout.
+    """
+    path = _path(task, r, lik)
+    if not path.exists():
+        return False
+    d = json.loads(path.read_text())
+    return bool(d["converged"]) or d["n_steps"] >= max_steps
+
+
 def run_one(task: str, r: int, likelihoods, max_steps: int) -> None:
     from bayespilot.fit.fast import fit_fast
     from bayespilot.fit.result import FitResult
@@ -101,7 +116,7 @@ def run_one(task: str, r: int, likelihoods, max_steps: int) -> None:
 
     for lik in likelihoods:
         path = _path(task, r, lik)
-        if path.exists():
+        if _finished(task, r, lik, max_steps):
             continue
         # the output-error fit for Eq. 4 (and AR(2)); a prediction-error fit for the AR model
         fit = (fit_of("fitpem", noise="ar", discard=2.0) if lik == "coloured"
@@ -249,14 +264,16 @@ def main(argv=None) -> int:
                     help="do at most this many unfinished recordings, then report")
     ap.add_argument("--likelihoods", default="eq4,coloured",
                     help="comma-separated, of eq4, coloured, ar2 (default eq4,coloured)")
-    ap.add_argument("--max-steps", type=int, default=6000)
+    ap.add_argument("--max-steps", type=int, default=6000,
+                    help="cap on the steps of each chain (default 6000); raising it redoes "
+                         "the chains that stopped at a lower cap without converging")
     ap.add_argument("--report-only", action="store_true")
     args = ap.parse_args(argv)
     liks = tuple(args.likelihoods.split(","))
     done = 0
     if not args.report_only:
         for task, r in jobs(args.per_task):
-            if all(_path(task, r, lk).exists() for lk in liks):
+            if all(_finished(task, r, lk, args.max_steps) for lk in liks):
                 continue
             if args.chunk is not None and done >= args.chunk:
                 break
