@@ -377,6 +377,8 @@ def test_compare_bad_input():
         compare(sim.recording, likelihood="white")
     with pytest.raises(ValueError, match="ar must be"):
         compare(sim.recording, likelihood="coloured", ar="free")
+    with pytest.raises(ValueError, match=r"ar must be one of \('fixed', 'sampled'\)"):
+        compare(sim.recording, likelihood="coloured", ar="profiled")  # sample() only
     with pytest.raises(ValueError, match="nlive"):
         compare(sim.recording, nlive=3, savage_dickey_samples=False)
     with pytest.raises(TypeError, match="Recording"):

@@ -365,3 +365,79 @@ def test_fixed_ar_settings_raise(short_sim):
     with pytest.raises(ValueError, match="pacf_1"):  # not sampled with a fixed AR model
         sample(rec, likelihood="coloured", prior={"pacf_1": stats.uniform(0, 0.5)},
                init=short_sim.params, **SHORT)
+
+
+# --- (i) the coloured likelihood with the AR model profiled out ----------------------------------
+def naive_ar_fit(eps, p):
+    """Least-squares AR(p) coefficients of eps (numpy lstsq, no mean removed: the output
+    error of the likelihood has mean zero by model) and the residual sum of squares."""
+    n = eps.size
+    if p == 0:
+        return np.zeros(0), float(eps @ eps)
+    lagged = np.column_stack([eps[p - 1 - j:n - 1 - j] for j in range(p)])
+    coef, *_ = np.linalg.lstsq(lagged, eps[p:], rcond=None)
+    w = eps[p:] - lagged @ coef
+    return coef, float(w @ w)
+
+
+def naive_profiled_sse(eps, p):
+    return naive_ar_fit(eps, p)[1]
+
+
+@pytest.mark.parametrize("p, lo", [(0, 0), (1, 0), (3, 5), (9, 0), (9, 17), (25, 3)])
+def test_profiled_ar_sse_matches_lstsq(p, lo):
+    rng = make_rng(40 + p)
+    x = np.cumsum(rng.standard_normal(2000)) * 0.05 + rng.standard_normal(2000)
+    acc, A, b = np.empty(p + 1), np.empty((max(p, 1), max(p, 1))), np.empty(max(p, 1))
+    got = C.profiled_ar_sse(x, lo, x.size, p, acc, A, b)
+    assert got == pytest.approx(naive_profiled_sse(x[lo:], p), rel=1e-9)
+
+
+def test_profiled_ar_sse_degenerate_segment_is_finite():
+    """A zero output error (a perfect fit) gives 0, not NaN."""
+    p = 4
+    x = np.zeros(300)
+    acc, A, b = np.empty(p + 1), np.empty((p, p)), np.empty(p)
+    assert C.profiled_ar_sse(x, 0, x.size, p, acc, A, b) == 0.0
+
+
+def test_profiled_likelihood_is_the_fixed_one_minimised_over_the_ar_model(short_sim, model):
+    """At the parameters where the fixed AR model was fitted the two agree; anywhere else the
+    profile is lower (it re-minimises over a), and it equals the fixed likelihood with the AR
+    model refitted there."""
+    rec = short_sim.recording
+    lik = Likelihood(model, rec, discard=2.0)
+    p = 6
+    noise = ARNoise(naive_ar_fit(lik.residual(short_sim.params)[lik.used], p)[0])
+    fixed = Likelihood(model, rec, discard=2.0, noise=noise)
+    lo, hi = model.bounds
+    pri = _Prior(model.parameter_names, lo, hi, lo, hi, None)
+    prof = _LogPosterior(lik, 0, pri, profiled=p)
+    x0 = model.free_vector(short_sim.params)
+    moved = x0 * np.array([1.08, 0.9, 1.03, 0.85, 1.05, 0.95, 1.1, 1.0])
+    got = prof.neg_log_lik(np.vstack([x0, moved]))
+    assert got[0] == pytest.approx(fixed.neg_log_lik(x0), rel=1e-9)
+    assert got[1] < fixed.neg_log_lik(moved) - 1.0
+    refit = ARNoise(naive_ar_fit(lik.residual(model.as_dict(moved))[lik.used], p)[0])
+    want = Likelihood(model, rec, discard=2.0, noise=refit).neg_log_lik(moved)
+    assert got[1] == pytest.approx(want, rel=1e-9)
+
+
+def test_profiled_ar_run_widens_the_gains(short_sim, model):
+    """ar="profiled" samples the pilot parameters only, records its order, and its posterior of
+    K_m (whose information the noise model shares in closed loop) is wider than the fixed-AR one
+    from the same start and seed."""
+    rec = short_sim.recording
+    kw = dict(SHORT, n_walkers=32, max_steps=1500, min_steps=1500, check_every=500)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        fixed = sample(rec, likelihood="coloured", init=short_sim.params, seed=3, **kw)
+        prof = sample(rec, likelihood="coloured", ar="profiled", init=short_sim.params, seed=3,
+                      **kw)
+    assert prof.parameter_names == model.parameter_names
+    assert prof.settings["ar"] == "profiled" and prof.settings["noise"] is None
+    assert prof.settings["ar_order"] == fixed.settings["ar_order"]
+    assert np.std(prof.draws("K_m")) > 1.03 * np.std(fixed.draws("K_m"))
+    with pytest.raises(ValueError, match="ar='fixed' only"):
+        sample(rec, likelihood="coloured", ar="profiled", noise=ARNoise([0.5]),
+               init=short_sim.params, **SHORT)

@@ -641,20 +641,24 @@ def _seed_argument(p: argparse.ArgumentParser, help: str) -> None:
     p.add_argument("--seed", type=_seed, default=0, metavar="S", help=help)
 
 
-def _likelihood_arguments(p: argparse.ArgumentParser) -> None:
-    """--likelihood, --ar and --ar-order, as sample() and compare() take them."""
+def _likelihood_arguments(p: argparse.ArgumentParser, profiled: bool = False) -> None:
+    """--likelihood, --ar and --ar-order, as sample() and compare() take them (``profiled``:
+    the command offers --ar profiled, which sample() has and the evidence has not)."""
     p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
                    help="'eq4': white output error (the paper's Eq. 4, default); 'coloured': "
                         "AR output error (a prediction-error likelihood)")
-    p.add_argument("--ar", choices=("fixed", "sampled"), default="fixed",
+    p.add_argument("--ar", choices=("fixed", "sampled", "profiled") if profiled
+                   else ("fixed", "sampled"), default="fixed",
                    help="'coloured' only: the AR model estimated once from a prediction-error "
-                        "fit and held (default), or sampled with the pilot parameters")
+                        "fit and held (default), or sampled with the pilot parameters"
+                        + (", or re-estimated at every parameter vector (profiled)"
+                           if profiled else ""))
     p.add_argument("--ar-order", type=_whole_number(0), default=None, metavar="P",
                    help="'coloured' only: order of the AR model (default: by BIC for --ar "
-                        "fixed, 2 for --ar sampled)")
+                        "fixed" + (" and profiled" if profiled else "") + ", 2 for --ar sampled)")
 
 
-TOP_EPILOG = f"""\
+TOP_EPILOG = """\
 Estimates pilot-model parameters and motion-perception thresholds from
 manual-tracking recordings, after Pool et al. (2012), J. Guidance, Control,
 and Dynamics 35(3), 749-763.
@@ -797,9 +801,11 @@ median, 90% HDI, R-hat, ESS and the autocorrelation time of each parameter.
 models it as an AR process: by default (--ar fixed) of an order chosen by BIC,
 estimated once from a prediction-error fit and held while the pilot
 parameters are sampled, with the first 2 s left out; with --ar sampled its
-partial autocorrelations pacf_1..pacf_P are sampled too. In closed-loop
-tracking the output error is the coloured remnant: see docs/posteriors.md for
-how the two likelihoods' intervals are calibrated.
+partial autocorrelations pacf_1..pacf_P are sampled too; with --ar profiled
+it is re-fitted by least squares at every parameter vector, which widens the
+gains' intervals by what the noise model shares with them in closed loop. In
+closed-loop tracking the output error is the coloured remnant: see
+docs/posteriors.md for how the likelihoods' intervals are calibrated.
 
 The summary JSON (--json) has one object per parameter name with mean,
 median, hdi_90 ([low, high]), r_hat, ess_bulk, ess_tail and tau.
@@ -809,6 +815,7 @@ Examples:
   bayespilot sample out/run -o out/run-post.nc --json out/run-post.json
   bayespilot sample out/run -o out/run-col.nc --likelihood coloured --max-steps 5000
   bayespilot sample out/run -o out/run-ar2.nc --likelihood coloured --ar sampled --ar-order 2
+  bayespilot sample out/run -o out/run-prof.nc --likelihood coloured --ar profiled
 """
 
 COMPARE_EPILOG = """\
@@ -1026,7 +1033,7 @@ def build_parser() -> argparse.ArgumentParser:
     _recording_argument(p)
     p.add_argument("-o", "--output", required=True, metavar="POST.nc",
                    help="the posterior as a netCDF file (ArviZ InferenceData)")
-    _likelihood_arguments(p)
+    _likelihood_arguments(p, profiled=True)
     p.add_argument("--json", metavar="SUMMARY",
                    help="write the per-parameter summary to this JSON file")
     _seed_argument(p, "seed of the initial fit and the sampler (default 0)")

@@ -105,6 +105,10 @@ from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
 from .sample import likelihood_options
+
+#: The AR treatments the evidence supports (a profiled AR model is :func:`sample`'s only:
+#: a profile likelihood is not a density to integrate for ln Z).
+EVIDENCE_AR_MODES = ("fixed", "sampled")
 from .recording import Recording
 
 __all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested_evidence",
@@ -429,7 +433,7 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    model, order = likelihood_options(model, likelihood, ar, ar_order)
+    model, order = likelihood_options(model, likelihood, ar, ar_order, EVIDENCE_AR_MODES)
     noise = _check_noise(noise) if likelihood == "coloured" and ar == "fixed" else None
     if likelihood == "coloured" and ar == "fixed" and noise is None:
         noise = _fit_noise(recording, model, seed, ar_order, discard)
@@ -986,7 +990,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     t0 = time.perf_counter()
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    model, order = likelihood_options(model, likelihood, ar, ar_order)
+    model, order = likelihood_options(model, likelihood, ar, ar_order, EVIDENCE_AR_MODES)
     if discard is None:
         from .sample import COLOURED_DISCARD
 

@@ -24,7 +24,13 @@ either
     low-order AR model is sampled with the rest through its partial
     autocorrelations ``pacf_1 ... pacf_p`` in (-1, 1), which keeps it
     stationary; the calibration study in ``docs/posteriors.md`` shows why it
-    is not the default.  The first ``discard`` seconds (2 by default) are left
+    is not the default.  With ``ar="profiled"`` the AR model (order by BIC
+    at the initial fit, or ``ar_order``) is re-estimated by least squares
+    from the output error at every parameter vector, i.e. maximised out (a
+    profile likelihood; the Laplace determinant of integrating it out is
+    neglected).  In closed loop the remnant also drives the model's inputs,
+    so a noise model held fixed makes the gains' intervals too narrow;
+    profiling widens them where that coupling is (``docs/posteriors.md``).  The first ``discard`` seconds (2 by default) are left
     out of the coloured likelihood: the model's start-up error there is not
     remnant.
 
@@ -65,8 +71,9 @@ __all__ = ["sample", "Posterior", "ConvergenceWarning", "LIKELIHOODS", "AR_MODES
 
 #: Likelihoods :func:`sample` can use.
 LIKELIHOODS = ("eq4", "coloured")
-#: How the coloured likelihood treats its AR model: estimated once and held, or sampled.
-AR_MODES = ("fixed", "sampled")
+#: How the coloured likelihood treats its AR model: estimated once and held, sampled, or
+#: re-estimated (profiled out) at every parameter vector.
+AR_MODES = ("fixed", "sampled", "profiled")
 #: Seconds left out at the start by the coloured likelihood unless ``discard`` is given.
 COLOURED_DISCARD = 2.0
 #: Default prior on each partial autocorrelation: uniform(-PACF_BOUND, PACF_BOUND).
@@ -356,9 +363,10 @@ class _Prior:
 class _LogPosterior:
     """log p(rows | u) for an (M, ndim) array, all rows in one parallel kernel call."""
 
-    def __init__(self, lik: Likelihood, order: int, prior: _Prior) -> None:
+    def __init__(self, lik: Likelihood, order: int, prior: _Prior, profiled: int = 0) -> None:
         self.lik = lik
         self.order = order
+        self.profiled = int(profiled)
         self.prior = prior
         self.n_model = lik.model.n_free
         self.free_idx = lik.model.free_index
@@ -368,13 +376,19 @@ class _LogPosterior:
 
     def neg_log_lik(self, rows: np.ndarray) -> np.ndarray:
         rows = np.ascontiguousarray(rows, dtype=float)
-        if self.order == 0:
-            return self.lik.batch(rows)
         m = rows.shape[0]
         out = np.empty(m)
         floored = np.zeros(m, dtype=np.bool_)
         lik = self.lik
         n_chunks = max(1, min(m, numba.get_num_threads()))
+        if self.profiled:
+            C.neg_log_lik_profiled_batch(rows, self.free_idx, self.base, self.profiled, lik.X,
+                                         lik.u, *lik._args(), lik.dt, lik.periodic, lik.warm,
+                                         lik.s2_floor, n_chunks, out, floored, lik.skip)
+            out[~np.isfinite(out)] = np.inf
+            return out
+        if self.order == 0:
+            return self.lik.batch(rows)
         C.neg_log_lik_coloured_batch(rows, self.n_model, self.free_idx, self.base, lik.X, lik.u,
                                      *lik._args(), lik.dt, lik.periodic, lik.warm, lik.s2_floor,
                                      n_chunks, out, floored, lik.skip)
@@ -537,7 +551,7 @@ def _stored_fingerprint(path) -> dict | None:
 
 
 def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str, order: int,
-                 prior: _Prior, n_walkers: int, lik: Likelihood) -> dict:
+                 prior: _Prior, n_walkers: int, lik: Likelihood, profiled: int = 0) -> dict:
     h = hashlib.sha256()
     for arr in (lik.u, lik.X):
         h.update(np.ascontiguousarray(arr, dtype=float).tobytes())
@@ -546,7 +560,8 @@ def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str
             "parameter_names": list(names), "fixed": {k: float(v) for k, v in model.fixed.items()},
             "likelihood": likelihood, "ar_order": order, "prior": prior.description,
             "n_walkers": n_walkers, "discard_seconds": lik.discard,
-            "noise": None if lik.noise is None else lik.noise.to_dict()}
+            "noise": None if lik.noise is None else lik.noise.to_dict(),
+            **({"profiled_ar_order": profiled} if profiled else {})}
 
 
 # --- the chain as InferenceData ----------------------------------------------------------------
@@ -606,20 +621,21 @@ def _true_parameters(recording: Recording, names) -> dict[str, float] | None:
 
 
 def likelihood_options(model: PilotModel | None, likelihood: str, ar: str,
-                       ar_order: int | None) -> tuple[PilotModel, int]:
+                       ar_order: int | None, modes: tuple[str, ...] = AR_MODES
+                       ) -> tuple[PilotModel, int]:
     """Validate the likelihood settings shared by :func:`sample` and :mod:`bayespilot.compare`.
 
     Returns the model (default: the paper's) and p, the number of sampled
     partial autocorrelations (0 unless ``likelihood="coloured"`` with
-    ``ar="sampled"``, where it is ``ar_order`` or 2).
+    ``ar="sampled"``, where it is ``ar_order`` or 2; a profiled AR model is not sampled).
     """
     model = paper_model() if model is None else model
     if not isinstance(model, PilotModel):
         raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
     if likelihood not in LIKELIHOODS:
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
-    if ar not in AR_MODES:
-        raise ValueError(f"ar must be one of {AR_MODES}, got {ar!r}")
+    if ar not in modes:
+        raise ValueError(f"ar must be one of {modes}, got {ar!r}")
     sampled = likelihood == "coloured" and ar == "sampled"
     if ar_order is not None:
         _check_int("ar_order", ar_order, 1 if sampled else 0)
@@ -681,13 +697,14 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         Default :func:`~bayespilot.model.paper_model` (with threshold).
     likelihood : {"eq4", "coloured"}
         White output error (Eq. 4) or AR-coloured output error (module docs).
-    ar : {"fixed", "sampled"}
+    ar : {"fixed", "sampled", "profiled"}
         ``"coloured"`` only: the AR model estimated once and held fixed
-        (default), or sampled with the pilot parameters.
+        (default), sampled with the pilot parameters, or re-estimated at every
+        parameter vector (module docs).
     ar_order : int, optional
         p of the AR model (``"coloured"`` only).  Default: chosen by BIC (up to
-        :data:`~bayespilot.noise.MAX_AR_ORDER`) for ``ar="fixed"``, 2 for
-        ``ar="sampled"``.
+        :data:`~bayespilot.noise.MAX_AR_ORDER`) for ``ar="fixed"`` and
+        ``"profiled"`` (at the initial fit), 2 for ``ar="sampled"``.
     noise : ARNoise, optional
         ``"coloured"`` with ``ar="fixed"`` only: use this AR model rather than
         estimating one (e.g. to judge several runs by one noise model).
@@ -759,7 +776,11 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     model, order = likelihood_options(model, likelihood, ar, ar_order)
-    fixed_ar = likelihood == "coloured" and ar == "fixed"
+    profiled_ar = likelihood == "coloured" and ar == "profiled"
+    fixed_ar = likelihood == "coloured" and (ar == "fixed" or profiled_ar)
+    if noise is not None and profiled_ar:
+        raise ValueError("noise is an ARNoise for ar='fixed' only; ar='profiled' estimates "
+                         "the AR model at every parameter vector")
     if noise is not None and not (fixed_ar and isinstance(noise, ARNoise)):
         raise ValueError("noise is an ARNoise for likelihood='coloured' with ar='fixed' only, "
                          f"got {type(noise).__name__} with likelihood={likelihood!r}, ar={ar!r}")
@@ -803,6 +824,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         stored = _stored_fingerprint(backend) if backend is not None else None
         if stored is not None and stored.get("noise"):
             noise = ARNoise.from_dict(stored["noise"])  # resuming: the chain's own noise model
+        elif profiled_ar and stored is not None and stored.get("profiled_ar_order"):
+            noise = ARNoise(np.zeros(int(stored["profiled_ar_order"])))  # resuming: its order
         else:
             if init is None:
                 from .fit.fast import fit_fast
@@ -811,13 +834,22 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
                                 discard=discard)
                 init_how = "fit_fast"
             noise = _noise_at(init, model, recording, discard, ar_order)
+    profiled = 0
+    if profiled_ar:
+        # the initial AR model gives the order (BIC unless given) and nothing else
+        profiled = max(1, noise.order)
+        noise = None
     lik = Likelihood(model, recording, discard=discard, noise=noise)
-    logpost = _LogPosterior(lik, order, pri)
+    if profiled and lik.n - lik.skip <= 4 * profiled:
+        raise ValueError(f"an AR({profiled}) noise model needs more than {4 * profiled} samples "
+                         f"after the discarded lead-in, this record has {lik.n - lik.skip}")
+    logpost = _LogPosterior(lik, order, pri, profiled)
 
     settings: dict[str, Any] = {
         "true_parameters": _true_parameters(recording, names),
         "likelihood": likelihood, "ar": ar if likelihood == "coloured" else None,
-        "ar_order": noise.order if noise is not None else order, "discard_seconds": discard,
+        "ar_order": noise.order if noise is not None else (profiled or order),
+        "discard_seconds": discard,
         "noise": None if noise is None else noise.to_dict(), "n_walkers": n_walkers,
         "max_steps": max_steps, "min_steps": min_steps, "check_every": check_every,
         "tau_factor": tau_factor, "tau_rtol": tau_rtol, "prior": pri.description,
@@ -828,7 +860,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
 
     bk, resuming = None, False
     if backend is not None:
-        fp = _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik)
+        fp = _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik, profiled)
         bk, resuming = _open_backend(backend, fp, n_walkers, ndim)
 
     p0 = None
@@ -861,7 +893,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     if bk is not None and not resuming:
         bk.reset(n_walkers, ndim)  # a new (or emptied) chain, tagged with this run
         _write_backend_attr(bk, _FINGERPRINT_ATTR, json.dumps(
-            _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik)))
+            _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik,
+                         profiled)))
     run = _run_emcee(logpost, p0, n_walkers=n_walkers, ndim=ndim, max_steps=max_steps,
                      min_steps=min_steps, check_every=check_every, tau_factor=tau_factor,
                      tau_rtol=tau_rtol, random_state=rs, progress=progress, backend=bk)

@@ -16,6 +16,15 @@ stationary AR(p) models (Barndorff-Nielsen & Schou 1973, Monahan 1984):
 
     a^(k)_k = r_k,   a^(k)_j = a^(k-1)_j - r_k a^(k-1)_{k-j}   (j < k).
 
+With the AR model *profiled* (``neg_log_lik_profiled_*``) the coefficients
+are not parameters at all: at every theta they are the least-squares AR(p)
+fit to that theta's output error, so -ln L is the minimum over a of the
+expression above.  Holding a fitted AR model fixed ignores that in closed
+loop the remnant also drives the model's inputs, so the pilot's gains and
+the noise model share information (Ljung, *System Identification*, 2nd ed.,
+Sec. 13.4); maximising the noise model out restores that coupling to first
+order at the cost of p + 1 lagged sums per evaluation.
+
 u_hat comes from :func:`._response.response_into` (the general path), so every
 model the package can compile can be sampled with either likelihood.
 """
@@ -66,6 +75,159 @@ def whitened_sse(u, y, a, skip=0):
             w -= a[j] * y[k - 1 - j]
         sse += w * w
     return sse
+
+
+@njit
+def whitened_sum(e, lo, n, a):
+    """sum_{k >= lo + p} w_k^2 with w_k = e_k - sum_j a_j e_{k-1-j} (``e`` left unchanged)."""
+    p = a.shape[0]
+    sse = 0.0
+    for k in range(lo + p, n):
+        w = e[k]
+        for j in range(p):
+            w -= a[j] * e[k - 1 - j]
+        sse += w * w
+    return sse
+
+
+@njit
+def profiled_ar_sse(e, lo, n, p, acc, A, b):
+    """min over a of sum_{k >= lo + p} (e_k - sum_j a_j e_{k-1-j})^2: the residual sum of
+    squares of the least-squares (covariance-method) AR(p) fit to ``e[lo:n]``.
+
+    ``acc`` (length p + 1), ``A`` (p x p) and ``b`` (p) are work buffers; on
+    return ``b[:p]`` holds the coefficients.  The
+    normal equations come from the p + 1 lagged sums over the whole segment,
+    less their few end terms, so the cost is (p + 1) passes' worth of
+    multiply-adds, done in one pass with independent accumulators.  A
+    relative ridge of 1e-12 on the diagonal keeps a degenerate segment (a
+    perfect fit) finite; the Cholesky solve is written out because p is at
+    most a few tens and a LAPACK call per evaluation would cost more.
+    """
+    m = n - lo
+    for l in range(p + 1):
+        acc[l] = 0.0
+    # R(l) = sum_{t=0}^{m-1-l} e_t e_{t+l}, all lags in one pass
+    for t in range(lo, n - p):
+        et = e[t]
+        for l in range(p + 1):
+            acc[l] += et * e[t + l]
+    for t in range(max(lo, n - p), n):
+        et = e[t]
+        for l in range(n - t):
+            acc[l] += et * e[t + l]
+    # A_ij = sum_{k=p}^{m-1} e_{k-1-i} e_{k-1-j} (offsets from lo); with i <= j, l = j - i:
+    # R(l) less the terms t < p - 1 - j and t > m - 2 - j
+    for i in range(p):
+        for j in range(i, p):
+            l = j - i
+            s = acc[l]
+            for t in range(0, p - 1 - j):
+                s -= e[lo + t] * e[lo + t + l]
+            for t in range(m - 1 - j, m - l):
+                s -= e[lo + t] * e[lo + t + l]
+            A[i, j] = s
+            A[j, i] = s
+    # b_i = sum_{k=p}^{m-1} e_k e_{k-1-i}: R(i + 1) less the terms t < p - 1 - i
+    for i in range(p):
+        s = acc[i + 1]
+        for t in range(0, p - 1 - i):
+            s -= e[lo + t] * e[lo + t + i + 1]
+        b[i] = s
+    yy = acc[0]
+    for t in range(p):
+        yy -= e[lo + t] * e[lo + t]
+    if p == 0:
+        return yy if yy > 0.0 else 0.0
+    ridge = 1e-12 * acc[0] + 1e-300
+    # Cholesky A = L L^T in place (lower triangle), then yy - |L^{-1} b|^2
+    for j in range(p):
+        d = A[j, j] + ridge
+        for k in range(j):
+            d -= A[j, k] * A[j, k]
+        if not (d > 0.0):
+            return yy if yy > 0.0 else 0.0
+        d = math.sqrt(d)
+        A[j, j] = d
+        for i in range(j + 1, p):
+            s = A[i, j]
+            for k in range(j):
+                s -= A[i, k] * A[j, k]
+            A[i, j] = s / d
+    # a = L^-T L^-1 b (into b)
+    for i in range(p):
+        s = b[i]
+        for k in range(i):
+            s -= A[i, k] * b[k]
+        b[i] = s / A[i, i]
+    for i in range(p - 1, -1, -1):
+        s = b[i]
+        for k in range(i + 1, p):
+            s -= A[k, i] * b[k]
+        b[i] = s / A[i, i]
+    # The sum of squares of the whitened residual itself, not yy - b'A^-1 b: the lags of a
+    # remnant sampled at 100 Hz are nearly collinear, and that difference of two nearly equal
+    # numbers lost 5 digits; the sum of squares is stationary in a, so the error of a from
+    # the normal equations enters it only to second order.
+    return whitened_sum(e, lo, n, b[:p])
+
+
+@njit
+def neg_log_lik_profiled_one(theta, p, X, u, ch_int, ch_float, st_int, st_const, out_int, dt,
+                             periodic, warm, s2_floor, y, q, v, acc, A, b, skip=0):
+    """-ln L of an AR(p) output error with the AR coefficients profiled out, for one ``theta``.
+
+    As :func:`neg_log_lik_whitened_one`, with the whitening filter the
+    least-squares AR(p) fit to this theta's output error over k >= skip
+    (:func:`profiled_ar_sse`).  ``acc``, ``A``, ``b`` are work buffers of
+    sizes p + 1, (p, p), p.
+    """
+    n = u.shape[0]
+    if n <= skip + 4 * p:
+        return np.inf, False
+    ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
+                       warm, y, q, v)
+    if not ok:
+        return np.inf, False
+    for k in range(skip, n):
+        y[k] = u[k] - y[k]
+    sse = profiled_ar_sse(y, skip, n, p, acc, A, b)
+    return neg_log_lik_from_sse(sse, n - skip - p, s2_floor)
+
+
+@pjit
+def neg_log_lik_profiled_batch(free, free_idx, base, p, X, u, ch_int, ch_float, st_int,
+                               st_const, out_int, dt, periodic, warm, s2_floor, n_chunks, out,
+                               floored, skip=0):
+    """-ln L with the AR(p) model profiled out, for every row of ``free``, in parallel over rows.
+
+    Rows are dealt to ``n_chunks`` threads in turn (as ``neg_log_lik_whitened_batch``).
+    """
+    m = free.shape[0]
+    n = u.shape[0]
+    for ch in numba.prange(n_chunks):
+        y = np.empty(n)
+        q = np.empty(n)
+        v = np.empty(n)
+        acc = np.empty(p + 1)
+        A = np.empty((max(p, 1), max(p, 1)))
+        b = np.empty(max(p, 1))
+        theta = base.copy()
+        for r in range(ch, m, n_chunks):
+            finite = True
+            for j in range(free_idx.shape[0]):
+                x = free[r, j]
+                finite = finite and math.isfinite(x)
+                theta[free_idx[j]] = x
+            if not finite:
+                out[r] = np.inf
+                floored[r] = False
+                continue
+            val, fl = neg_log_lik_profiled_one(theta, p, X, u, ch_int, ch_float, st_int,
+                                               st_const, out_int, dt, periodic, warm, s2_floor,
+                                               y, q, v, acc, A, b, skip)
+            out[r] = val
+            floored[r] = fl
 
 
 @njit
