@@ -27,7 +27,6 @@ import time
 import warnings
 
 import numba
-import numpy as np
 
 from bayespilot.compare import evidence
 from bayespilot.fit.fast import fit_fast

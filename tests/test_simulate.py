@@ -4,7 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from scipy import integrate, signal
+from scipy import integrate
 
 from bayespilot import presets
 from bayespilot.forcing import Multisine

@@ -23,7 +23,6 @@ import numba
 import numpy as np
 from scipy import signal
 
-from .kernels import _blocks as B
 from .kernels import _coloured as C
 from .kernels import _response as R
 from .model import FixedFilter, PilotModel

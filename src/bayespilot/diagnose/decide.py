@@ -405,7 +405,7 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
     dbic = stat - ext.df * math.log(wl.m)
     se = best.stderr
     new = {n: best.params[n] for n in ext.new_parameters}
-    how = (f"GLS likelihood-ratio test, 0.5 chi2(0) + 0.5 chi2(1) (boundary null)"
+    how = ("GLS likelihood-ratio test, 0.5 chi2(0) + 0.5 chi2(1) (boundary null)"
            if ext.boundary_null and ext.df == 1 else f"GLS likelihood-ratio test, chi2({ext.df})")
     res = CandidateResult(ext.name, True, how, d, stat,
                           ext.df, p, dbic, dbic / 2.0, new,
