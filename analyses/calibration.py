@@ -62,6 +62,9 @@ OPTIONS = {"eq4": {"likelihood": "eq4"},
            "coloured": {"likelihood": "coloured"},
            "profiled": {"likelihood": "coloured", "ar": "profiled"},
            "ar2": {"likelihood": "coloured", "ar": "sampled", "ar_order": 2, "discard": 0.0}}
+#: Panel titles of the figure.
+LABELS = {"eq4": "Eq. 4", "coloured": "coloured, AR fixed", "profiled": "coloured, AR profiled",
+          "ar2": "coloured, AR(2) sampled"}
 F_N, K_THETA = 0.2, 1.0
 LEVELS = (0.5, 0.9)
 NAMES = ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm", "delta_abs")
@@ -252,7 +255,7 @@ def figure(rows, path: Path) -> None:
                        color=col, ms=4, capsize=2, label=f"{int(lv * 100)}% intervals")
         a.set_xticks(x, NAMES, rotation=45, ha="right")
         a.set_ylim(0, 1.02)
-        a.set_title(f"{lik} likelihood, {n} recordings", fontsize="medium")
+        a.set_title(f"{LABELS[lik]}: {n} recordings", fontsize="medium")
         a.grid(True, axis="y", lw=0.3, alpha=0.6)
     axes[0, 0].set_ylabel("fraction of intervals holding the truth")
     axes[0, 0].legend(loc="lower left", fontsize="small")
@@ -270,7 +273,8 @@ def main(argv=None) -> int:
     ap.add_argument("--chunk", type=int, default=None,
                     help="do at most this many unfinished recordings, then report")
     ap.add_argument("--likelihoods", default="eq4,coloured",
-                    help="comma-separated, of eq4, coloured, profiled, ar2 (default eq4,coloured)")
+                    help="comma-separated, of eq4, coloured, profiled, ar2 "
+                         "(default eq4,coloured)")
     ap.add_argument("--max-steps", type=int, default=6000,
                     help="cap on the steps of each chain (default 6000); raising it redoes "
                          "the chains that stopped at a lower cap without converging")
