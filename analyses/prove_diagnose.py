@@ -16,6 +16,8 @@ Run (from the repository root):
 
     nice -n 10 python analyses/prove_diagnose.py --chunk 20     # next 20 cases
     python analyses/prove_diagnose.py --summarize              # table + figures
+    python analyses/prove_diagnose.py --profile-noise --shard 0/2   # the same study with
+    python analyses/prove_diagnose.py --profile-noise --shard 1/2   # profile_noise=True, 2 cores
 
 The case list is ordered round-robin over the entries and the controls (with
 the conditions shuffled by a fixed seed), so any prefix of it is a balanced
@@ -39,6 +41,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "analyses" / "results" / "diagnose"
 FIG = ROOT / "docs" / "figures"
+#: Appended to the figure names (``--profile-noise`` writes its own).
+FIG_SUFFIX = ""
+#: diagnose(profile_noise=...) of the study (``--profile-noise`` sets it).
+PROFILE_NOISE = False
 
 #: Effect sizes per entry, smallest effect first: (label, parameters).
 EFFECTS = {
@@ -123,7 +129,7 @@ def run_case(c: dict) -> dict:
     meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
     rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
     t0 = time.perf_counter()
-    res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP)
+    res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP, profile_noise=PROFILE_NOISE)
     el = time.perf_counter() - t0
     resid = res.arrays["residual"]
     return {"case": {k: v for k, v in c.items()}, "true_params": extra,
@@ -137,12 +143,14 @@ def run_case(c: dict) -> dict:
             "elapsed_seconds": el}
 
 
-def run(chunk: int | None) -> None:
+def run(chunk: int | None, shard: tuple[int, int] = (0, 1)) -> None:
     import numba
 
     numba.set_num_threads(1)
     OUT.mkdir(parents=True, exist_ok=True)
-    todo = [c for c in cases() if not (OUT / f"{case_key(c)}.json").exists()]
+    k, n = shard
+    todo = [c for c in cases()
+            if c["id"] % n == k and not (OUT / f"{case_key(c)}.json").exists()]
     if chunk is not None:
         todo = todo[:chunk]
     print(f"{len(todo)} case(s) to run", flush=True)
@@ -259,7 +267,7 @@ def summarize() -> dict:
     axes[1, 0].set_ylabel("rate named correctly")
     fig.suptitle("diagnose: detection against effect size (smallest effect left)")
     fig.tight_layout()
-    fig.savefig(FIG / "diagnose_detection.png", dpi=110)
+    fig.savefig(FIG / f"diagnose_detection{FIG_SUFFIX}.png", dpi=110)
     plt.close(fig)
     fig, ax = plt.subplots(figsize=(7, 5))
     M = np.array([[conf[t][d] for d in cols] for t in labels], float)
@@ -277,15 +285,46 @@ def summarize() -> dict:
     ax.set_ylabel("truth")
     ax.set_title("diagnose: confusion matrix (counts)")
     fig.tight_layout()
-    fig.savefig(FIG / "diagnose_confusion.png", dpi=110)
+    fig.savefig(FIG / f"diagnose_confusion{FIG_SUFFIX}.png", dpi=110)
     plt.close(fig)
     summary = {"n_cases": len(rs), "confusion": conf, "confusion_concealed": conf_c,
                "concealed_named_correctly": [n_ok, len(ent)], "false_alarms": [fa, n_ctl],
                "detection_curves": {e: [{"effect": lab, "correct": k, "n": n, "concealed": c}
                                         for lab, k, n, c in row] for e, row in curves.items()},
                "median_seconds": float(np.median(times))}
+    if PROFILE_NOISE:
+        summary["paired_with_default"] = paired_with_default(rs)
     (OUT / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
+
+
+def paired_with_default(rs: list[dict]) -> dict:
+    """Decisions of this (profile-noise) study beside the default study's on the same cases."""
+    base = ROOT / "analyses" / "results" / "diagnose"
+    out = {"cases": 0, "same": 0, "gained": [], "lost": [], "changed_wrong": []}
+    for r in rs:
+        path = base / f"{case_key(r['case'])}.json"
+        if not path.exists():
+            continue
+        d = json.loads(path.read_text())
+        truth, old, new = r["case"]["truth"], d["decision"], r["decision"]
+        out["cases"] += 1
+        key = case_key(r["case"])
+        if old == new:
+            out["same"] += 1
+        elif new == truth:
+            out["gained"].append(key)
+        elif old == truth:
+            out["lost"].append(key)
+        else:
+            out["changed_wrong"].append(key)
+    print(f"\nPaired with the default study on {out['cases']} cases: same decision "
+          f"{out['same']}, newly correct {len(out['gained'])}, newly wrong {len(out['lost'])}, "
+          f"wrong either way but different {len(out['changed_wrong'])}")
+    for k in ("gained", "lost", "changed_wrong"):
+        for key in out[k]:
+            print(f"  {k}: {key}")
+    return out
 
 
 def example() -> None:
@@ -323,12 +362,28 @@ def main(argv=None) -> int:
     ap.add_argument("--summarize", action="store_true", help="only print and plot the summary")
     ap.add_argument("--example", action="store_true",
                     help="diagnose the docs' example (a concealed washout) and write its figures")
+    ap.add_argument("--profile-noise", action="store_true",
+                    help="diagnose with profile_noise=True (the AR noise model re-estimated "
+                         "with each fit); results in analyses/results/diagnose_profile_noise/, "
+                         "figures with the suffix _profile_noise")
+    ap.add_argument("--shard", default="0/1", metavar="K/N",
+                    help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
     args = ap.parse_args(argv)
+    global OUT, FIG_SUFFIX, PROFILE_NOISE
+    if args.profile_noise:
+        OUT = ROOT / "analyses" / "results" / "diagnose_profile_noise"
+        FIG_SUFFIX, PROFILE_NOISE = "_profile_noise", True
+    try:
+        k, n = (int(v) for v in args.shard.split("/"))
+        if not 0 <= k < n:
+            raise ValueError
+    except ValueError:
+        ap.error(f"--shard: K/N with 0 <= K < N, got {args.shard!r}")
     if args.example:
         example()
         return 0
     if not args.summarize:
-        run(args.chunk)
+        run(args.chunk, (k, n))
     summarize()
     return 0
 
