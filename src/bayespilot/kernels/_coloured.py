@@ -78,6 +78,17 @@ def whitened_sse(u, y, a, skip=0):
 
 
 @njit
+def load_row(theta, free, r, free_idx):
+    """Put row ``r`` of ``free`` into ``theta`` at ``free_idx``; False if any value is not finite."""
+    finite = True
+    for j in range(free_idx.shape[0]):
+        x = free[r, j]
+        finite = finite and math.isfinite(x)
+        theta[free_idx[j]] = x
+    return finite
+
+
+@njit
 def whitened_sum(e, lo, n, a):
     """sum_{k >= lo + p} w_k^2 with w_k = e_k - sum_j a_j e_{k-1-j} (``e`` left unchanged)."""
     p = a.shape[0]
@@ -214,12 +225,7 @@ def neg_log_lik_profiled_batch(free, free_idx, base, p, X, u, ch_int, ch_float, 
         b = np.empty(max(p, 1))
         theta = base.copy()
         for r in range(ch, m, n_chunks):
-            finite = True
-            for j in range(free_idx.shape[0]):
-                x = free[r, j]
-                finite = finite and math.isfinite(x)
-                theta[free_idx[j]] = x
-            if not finite:
+            if not load_row(theta, free, r, free_idx):
                 out[r] = np.inf
                 floored[r] = False
                 continue
@@ -269,12 +275,7 @@ def neg_log_lik_whitened_batch(free, free_idx, base, a, X, u, ch_int, ch_float, 
         v = np.empty(n)
         theta = base.copy()
         for r in range(ch, m, n_chunks):
-            finite = True
-            for j in range(free_idx.shape[0]):
-                x = free[r, j]
-                finite = finite and math.isfinite(x)
-                theta[free_idx[j]] = x
-            if not finite:
+            if not load_row(theta, free, r, free_idx):
                 out[r] = np.inf
                 floored[r] = False
                 continue
