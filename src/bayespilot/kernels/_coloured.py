@@ -65,16 +65,9 @@ def whitened_sse(u, y, a, skip=0):
     formed once rather than p + 1 times.
     """
     n = u.shape[0]
-    p = a.shape[0]
     for k in range(skip, n):
         y[k] = u[k] - y[k]
-    sse = 0.0
-    for k in range(skip + p, n):
-        w = y[k]
-        for j in range(p):
-            w -= a[j] * y[k - 1 - j]
-        sse += w * w
-    return sse
+    return whitened_sum(y, skip, n, a)
 
 
 @njit
