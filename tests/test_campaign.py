@@ -148,6 +148,33 @@ def test_unreachable_scheduler_fails_quickly(tmp_path):
         run_campaign(_jobs(), tmp_path, scheduler="tcp://127.0.0.1:9", workers=2)
 
 
+def test_local_cluster_start_is_retried_once(tmp_path, monkeypatch):
+    """A LocalCluster that fails to start once is retried; failing twice is one CampaignError."""
+    import distributed
+
+    real = distributed.LocalCluster
+    calls = []
+
+    def flaky(fail_times):
+        def make(*args, **kwargs):
+            calls.append(1)
+            if len(calls) <= fail_times:
+                raise AssertionError
+            return real(*args, **kwargs)
+        return make
+
+    monkeypatch.setattr(distributed, "LocalCluster", flaky(2))
+    with pytest.raises(CampaignError, match=r"cannot start a local dask cluster with 1 workers "
+                                            r"\(AssertionError\)"):
+        run_campaign(_jobs(), tmp_path / "a", workers=1, progress=False)
+    assert len(calls) == 2
+    calls.clear()
+    monkeypatch.setattr(distributed, "LocalCluster", flaky(1))
+    jobs = _jobs()[:1]
+    run_campaign(jobs, tmp_path / "b", workers=1, progress=False)
+    assert len(calls) == 2 and len(list((tmp_path / "b").glob("*.json"))) >= 1
+
+
 # --- summarise -----------------------------------------------------------------------------
 def _synthetic(task, fn, k, deltas, thr=True, method="paper", nll=None):
     nll = np.arange(len(deltas)) * -3.0 if nll is None else nll
