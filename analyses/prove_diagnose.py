@@ -39,7 +39,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "analyses" / "results" / "diagnose"
+#: The default study's results; ``--profile-noise`` writes beside them.
+DEFAULT_OUT = ROOT / "analyses" / "results" / "diagnose"
+OUT = DEFAULT_OUT
 FIG = ROOT / "docs" / "figures"
 #: Appended to the figure names (``--profile-noise`` writes its own).
 FIG_SUFFIX = ""
@@ -300,16 +302,15 @@ def summarize() -> dict:
 
 def paired_with_default(rs: list[dict]) -> dict:
     """Decisions of this (profile-noise) study beside the default study's on the same cases."""
-    base = ROOT / "analyses" / "results" / "diagnose"
     out = {"cases": 0, "same": 0, "gained": [], "lost": [], "changed_wrong": []}
     for r in rs:
-        path = base / f"{case_key(r['case'])}.json"
+        key = case_key(r["case"])
+        path = DEFAULT_OUT / f"{key}.json"
         if not path.exists():
             continue
         d = json.loads(path.read_text())
         truth, old, new = r["case"]["truth"], d["decision"], r["decision"]
         out["cases"] += 1
-        key = case_key(r["case"])
         if old == new:
             out["same"] += 1
         elif new == truth:

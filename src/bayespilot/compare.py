@@ -105,11 +105,11 @@ from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
 from .sample import likelihood_options
+from .recording import Recording
 
 #: The AR treatments the evidence supports (a profiled AR model is :func:`sample`'s only:
 #: a profile likelihood is not a density to integrate for ln Z).
 EVIDENCE_AR_MODES = ("fixed", "sampled")
-from .recording import Recording
 
 __all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested_evidence",
            "evidence", "savage_dickey", "savage_dickey_from_posterior", "information_criteria",

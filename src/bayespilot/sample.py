@@ -30,9 +30,9 @@ either
     profile likelihood; the Laplace determinant of integrating it out is
     neglected).  In closed loop the remnant also drives the model's inputs,
     so a noise model held fixed makes the gains' intervals too narrow;
-    profiling widens them where that coupling is (``docs/posteriors.md``).  The first ``discard`` seconds (2 by default) are left
-    out of the coloured likelihood: the model's start-up error there is not
-    remnant.
+    profiling widens them where that coupling is (``docs/posteriors.md``).
+    The first ``discard`` seconds (2 by default) are left out of the
+    coloured likelihood: the model's start-up error there is not remnant.
 
 Priors: uniform on the model bounds (Table 1) and, for ``ar="sampled"``,
 uniform(-0.99, 0.99) on the partial autocorrelations, unless given.  The run stops when the chain is longer
@@ -376,6 +376,8 @@ class _LogPosterior:
 
     def neg_log_lik(self, rows: np.ndarray) -> np.ndarray:
         rows = np.ascontiguousarray(rows, dtype=float)
+        if self.order == 0 and not self.profiled:
+            return self.lik.batch(rows)
         m = rows.shape[0]
         out = np.empty(m)
         floored = np.zeros(m, dtype=np.bool_)
@@ -387,8 +389,6 @@ class _LogPosterior:
                                          lik.s2_floor, n_chunks, out, floored, lik.skip)
             out[~np.isfinite(out)] = np.inf
             return out
-        if self.order == 0:
-            return self.lik.batch(rows)
         C.neg_log_lik_coloured_batch(rows, self.n_model, self.free_idx, self.base, lik.X, lik.u,
                                      *lik._args(), lik.dt, lik.periodic, lik.warm, lik.s2_floor,
                                      n_chunks, out, floored, lik.skip)
@@ -777,7 +777,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     model, order = likelihood_options(model, likelihood, ar, ar_order)
     profiled_ar = likelihood == "coloured" and ar == "profiled"
-    fixed_ar = likelihood == "coloured" and (ar == "fixed" or profiled_ar)
+    fixed_ar = likelihood == "coloured" and ar == "fixed"
     if noise is not None and profiled_ar:
         raise ValueError("noise is an ARNoise for ar='fixed' only; ar='profiled' estimates "
                          "the AR model at every parameter vector")
@@ -820,12 +820,13 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     ss = np.random.SeedSequence(seed)
     ball_ss, mcmc_ss = ss.spawn(2)
     init_how = "given" if init is not None else None
-    if fixed_ar and noise is None:
+    profiled = 0  # the order of a profiled AR model (0: none)
+    if (fixed_ar or profiled_ar) and noise is None:
         stored = _stored_fingerprint(backend) if backend is not None else None
         if stored is not None and stored.get("noise"):
             noise = ARNoise.from_dict(stored["noise"])  # resuming: the chain's own noise model
         elif profiled_ar and stored is not None and stored.get("profiled_ar_order"):
-            noise = ARNoise(np.zeros(int(stored["profiled_ar_order"])))  # resuming: its order
+            profiled = int(stored["profiled_ar_order"])  # resuming: the chain's own order
         else:
             if init is None:
                 from .fit.fast import fit_fast
@@ -834,11 +835,9 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
                                 discard=discard)
                 init_how = "fit_fast"
             noise = _noise_at(init, model, recording, discard, ar_order)
-    profiled = 0
-    if profiled_ar:
-        # the initial AR model gives the order (BIC unless given) and nothing else
-        profiled = max(1, noise.order)
-        noise = None
+            if profiled_ar:
+                # the initial AR model gives the order (BIC unless given) and nothing else
+                profiled, noise = max(1, noise.order), None
     lik = Likelihood(model, recording, discard=discard, noise=noise)
     if profiled and lik.n - lik.skip <= 4 * profiled:
         raise ValueError(f"an AR({profiled}) noise model needs more than {4 * profiled} samples "
@@ -858,7 +857,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         "recording": recording.source or "", "entropy": str(ss.entropy),
         "numba_threads": int(numba.get_num_threads())}
 
-    bk, resuming = None, False
+    bk, resuming, fp = None, False, None
     if backend is not None:
         fp = _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik, profiled)
         bk, resuming = _open_backend(backend, fp, n_walkers, ndim)
@@ -892,9 +891,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     rs = np.random.RandomState(np.random.MT19937(mcmc_ss)).get_state()
     if bk is not None and not resuming:
         bk.reset(n_walkers, ndim)  # a new (or emptied) chain, tagged with this run
-        _write_backend_attr(bk, _FINGERPRINT_ATTR, json.dumps(
-            _fingerprint(recording, model, names, likelihood, order, pri, n_walkers, lik,
-                         profiled)))
+        _write_backend_attr(bk, _FINGERPRINT_ATTR, json.dumps(fp))
     run = _run_emcee(logpost, p0, n_walkers=n_walkers, ndim=ndim, max_steps=max_steps,
                      min_steps=min_steps, check_every=check_every, tau_factor=tau_factor,
                      tau_rtol=tau_rtol, random_state=rs, progress=progress, backend=bk)

@@ -100,10 +100,10 @@ def profiled_ar_sse(e, lo, n, p, acc, A, b):
     squares of the least-squares (covariance-method) AR(p) fit to ``e[lo:n]``.
 
     ``acc`` (length p + 1), ``A`` (p x p) and ``b`` (p) are work buffers; on
-    return ``b[:p]`` holds the coefficients.  The
-    normal equations come from the p + 1 lagged sums over the whole segment,
-    less their few end terms, so the cost is (p + 1) passes' worth of
-    multiply-adds, done in one pass with independent accumulators.  A
+    return ``b[:p]`` holds the coefficients.  The normal equations come from
+    the p + 1 lagged sums over the whole segment, less their few end terms,
+    so the cost is (p + 1) passes' worth of multiply-adds, done in one pass
+    with independent accumulators.  A
     relative ridge of 1e-12 on the diagonal keeps a degenerate segment (a
     perfect fit) finite; the Cholesky solve is written out because p is at
     most a few tens and a LAPACK call per evaluation would cost more.
@@ -144,7 +144,7 @@ def profiled_ar_sse(e, lo, n, p, acc, A, b):
     if p == 0:
         return yy if yy > 0.0 else 0.0
     ridge = 1e-12 * acc[0] + 1e-300
-    # Cholesky A = L L^T in place (lower triangle), then yy - |L^{-1} b|^2
+    # Cholesky A = L L^T in place (lower triangle); yy is the fallback if A is not positive
     for j in range(p):
         d = A[j, j] + ridge
         for k in range(j):
