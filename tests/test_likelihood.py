@@ -181,6 +181,27 @@ def test_batch_equals_loop_bit_for_bit(fd_sim, model, initial):
     assert np.array_equal(lik.batch(pop[::2]), loop[::2])
 
 
+@pytest.mark.parametrize("initial", INITIALS)
+def test_batch_equals_loop_on_extended_models(fd_sim, model, initial):
+    """The batch fills the rows of theta-independent channels once per thread buffer
+    (``fill_plain_rows``); with two such channels (the n-channel recursion) or a
+    parametric stage on the visual one (no longer theta-independent), it must still
+    equal the single evaluation bit for bit."""
+    from bayespilot.model import Channel, Parameter, Washout
+
+    extra = model.add_channel(Channel("extra", "e", delay="tau_x", gain=("K_x",)),
+                              [Parameter("K_x", -5.0, 5.0, 0.3), Parameter("tau_x", 0.0, 1.0, 0.15)])
+    washout = model.add_stage("visual", Washout("omega_w"),
+                              [Parameter("omega_w", 0.01, 10.0, 0.3)])
+    for m, seed in ((extra, 41), (washout, 42)):
+        lik = Likelihood(m, fd_sim.recording, initial=initial)
+        lo, hi = m.bounds
+        pop = make_rng(seed).uniform(lo, hi, size=(23, m.n_free))
+        loop = np.array([lik.neg_log_lik(row) for row in pop])
+        assert np.all(np.isfinite(loop))
+        assert np.array_equal(lik.batch(pop), loop)
+
+
 def test_batch_threshold_free_model(fd_sim):
     m7 = paper_model(threshold=False)
     lik = Likelihood(m7, fd_sim.recording)

@@ -280,14 +280,16 @@ def neg_log_lik_from_sse(sse, n, s2_floor):
 
 @njit
 def _fill_pads(row, n, pad, periodic):
-    """Given row[pad:pad+n] = signal, fill the pads: wrapped (periodic) or rest."""
-    for j in range(pad):
-        if periodic:
-            row[j] = row[pad + (n - pad + j) % n]
-            row[pad + n + j] = row[pad + j % n]
-        else:
-            row[j] = 0.0
-            row[pad + n + j] = row[pad + n - 1]
+    """Given row[pad:pad+n] = signal, fill the pads: wrapped (periodic) or rest.
+
+    ``pad <= n`` (see :func:`padding`), so each pad is one slice of the signal.
+    """
+    if periodic:
+        row[:pad] = row[n:n + pad]  # the last pad samples of the signal
+        row[pad + n:pad + n + pad] = row[pad:pad + pad]  # its first pad samples
+    else:
+        row[:pad] = 0.0
+        row[pad + n:pad + n + pad] = row[pad + n - 1]
 
 
 @njit(fastmath={"contract"})
@@ -386,8 +388,33 @@ def _recursion_n(Qp, ms, taps, pad, u, A1, A2, periodic, warm, n, skip=0):
 
 
 @njit
+def _plain_channel(c, ch_int, st_int):
+    """True if channel ``c``'s signal does not depend on theta: no parametric stage, no
+    nonlinearity (the paper's visual channel).  Its padded row is then the same for
+    every parameter vector."""
+    if ch_int[c, CH_NL_KIND] != NL_NONE:
+        return False
+    for s in range(ch_int[c, CH_NSTAGES]):
+        kind = st_int[c, s, 0]
+        if kind != STAGE_FIXED and kind != STAGE_NONE:
+            return False
+    return True
+
+
+@njit
+def fill_plain_rows(X, ch_int, st_int, Qp, pad, periodic):
+    """Write the padded rows of the theta-independent channels into ``Qp`` once, so that
+    :func:`_fused_nll` called with ``prefilled=True`` skips copying them per evaluation."""
+    n = X.shape[1]
+    for c in range(X.shape[0]):
+        if _plain_channel(c, ch_int, st_int):
+            Qp[c, pad:pad + n] = X[c]
+            _fill_pads(Qp[c], n, pad, periodic)
+
+
+@njit
 def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
-               s2_floor, Qp, pad, q, skip=0):
+               s2_floor, Qp, pad, q, skip=0, prefilled=False):
     """-ln L in one fused pass: per-channel taps, H_nm recursion and residual sum together.
 
     Handles models without gain modulation or output nonlinearity whose delays
@@ -395,6 +422,8 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
     otherwise, so the caller falls back to the general ``response_into`` path.
     The arithmetic is that of ``response_into`` regrouped into one loop, so
     the FIR work of the channels overlaps the latency of the recursion.
+    ``prefilled``: the rows of the theta-independent channels of ``Qp`` already
+    hold their padded signal (:func:`fill_plain_rows`).
     """
     n_ch = X.shape[0]
     n = X.shape[1]
@@ -426,6 +455,8 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
         taps[c, 1] = B0 * f + B1 * (1.0 - f)
         taps[c, 2] = B1 * f + B2 * (1.0 - f)
         taps[c, 3] = B2 * f
+        if prefilled and _plain_channel(c, ch_int, st_int):
+            continue
         # channel signal (stages, nonlinearity) into the padded buffer
         src = X[c]
         for s in range(ch_int[c, CH_NSTAGES]):
@@ -479,15 +510,16 @@ def padding(n, dt, max_delay=1.5):
 
 @njit
 def neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
-                    s2_floor, y, q, v, Qp, pad, skip=0):
+                    s2_floor, y, q, v, Qp, pad, skip=0, prefilled=False):
     """-ln L (Eq. 4) for one full parameter vector; returns (value, floored).
 
-    ``Qp`` is a (n_channels, n + 2 pad) work buffer for the fused path.  The
-    model runs over the whole record; the first ``skip`` samples are left out
+    ``Qp`` is a (n_channels, n + 2 pad) work buffer for the fused path; with
+    ``prefilled`` its theta-independent rows already hold their padded signal
+    (:func:`fill_plain_rows`, done once per buffer by the batch).  The model runs over the whole record; the first ``skip`` samples are left out
     of Eq. 4 (N = n - skip).
     """
     val, fl, handled = _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt,
-                                  periodic, warm, s2_floor, Qp, pad, q, skip)
+                                  periodic, warm, s2_floor, Qp, pad, q, skip, prefilled)
     if handled:
         return val, fl
     ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
@@ -517,6 +549,7 @@ def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_c
         q = np.empty(n)
         v = np.empty(n)
         Qp = np.empty((X.shape[0], n + 2 * pad))
+        fill_plain_rows(X, ch_int, st_int, Qp, pad, periodic)
         theta = base.copy()
         # rows interleaved over threads: unstable rows return at once, so
         # contiguous blocks would leave one thread idle
@@ -524,7 +557,8 @@ def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_c
             for j in range(free_idx.shape[0]):
                 theta[free_idx[j]] = free[r, j]
             val, fl = neg_log_lik_one(theta, X, u, ch_int, ch_float, st_int, st_const, out_int,
-                                      dt, periodic, warm, s2_floor, y, q, v, Qp, pad, skip)
+                                      dt, periodic, warm, s2_floor, y, q, v, Qp, pad, skip,
+                                      True)
             out[r] = val
             floored[r] = fl
 
