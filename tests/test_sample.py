@@ -393,6 +393,19 @@ def test_profiled_ar_sse_matches_lstsq(p, lo):
     assert got == pytest.approx(naive_profiled_sse(x[lo:], p), rel=1e-9)
 
 
+@pytest.mark.parametrize("lo", [0, 7])
+def test_lagged_sums_match_numpy(lo):
+    """The register-blocked lag sums (four lags per pass, remainders of 1-3) against np.dot,
+    for every p up to 9, including segments shorter than p."""
+    x = make_rng(44).standard_normal(400)
+    for n in (400, lo + 5):
+        for p in range(10):
+            acc = np.full(p + 1, np.nan)
+            C._lagged_sums(x, lo, n, p, acc)
+            want = [x[lo:n - l] @ x[lo + l:n] if n - l > lo else 0.0 for l in range(p + 1)]
+            np.testing.assert_allclose(acc, want, rtol=1e-12, atol=1e-12)
+
+
 def test_profiled_ar_sse_degenerate_segment_is_finite():
     """A zero output error (a perfect fit) gives 0, not NaN."""
     p = 4
