@@ -59,7 +59,7 @@ TASKS = ("FD", "FT")
 LIKELIHOODS = ("eq4", "coloured", "profiled", "ar2")
 #: sample() options of each likelihood studied.
 OPTIONS = {"eq4": {"likelihood": "eq4"},
-           "coloured": {"likelihood": "coloured"},
+           "coloured": {"likelihood": "coloured", "ar": "fixed"},
            "profiled": {"likelihood": "coloured", "ar": "profiled"},
            "ar2": {"likelihood": "coloured", "ar": "sampled", "ar_order": 2, "discard": 0.0}}
 #: Panel titles of the figure.

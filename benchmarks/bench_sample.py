@@ -45,7 +45,7 @@ def _noise(fit) -> ARNoise | None:
 
 
 #: sample() options of each benchmarked likelihood.
-OPTIONS = {"eq4": {"likelihood": "eq4"}, "coloured": {"likelihood": "coloured"},
+OPTIONS = {"eq4": {"likelihood": "eq4"}, "coloured": {"likelihood": "coloured", "ar": "fixed"},
            "profiled": {"likelihood": "coloured", "ar": "profiled"}}
 
 

@@ -70,9 +70,11 @@ def test_sample_warns_when_not_converged(run_dir, capsys):
     assert "warning: the chain reached max_steps = 60" in err
     assert "Traceback" not in err
     post = Posterior.from_netcdf(run_dir / "p2.nc")
-    # the default coloured likelihood holds its AR model (order by BIC) fixed
+    # the default coloured likelihood re-fits its AR model (order by BIC at the initial fit)
+    # at every parameter vector: nothing but the pilot parameters is sampled
     assert post.parameter_names[-1] == "delta_abs" and not post.converged
-    assert post.settings["noise"]["order"] >= 1 and post.settings["ar"] == "fixed"
+    assert post.settings["ar"] == "profiled" and post.settings["noise"] is None
+    assert post.settings["ar_order"] >= 1
 
 
 def test_sample_coloured_with_sampled_ar(run_dir, capsys):

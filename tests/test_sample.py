@@ -321,11 +321,11 @@ def test_bayespilot_sample_is_callable(short_sim):
 
 # --- (h) the coloured likelihood with a fixed (plug-in) AR model ---------------------------------
 def test_fixed_ar_coloured_run(short_sim, model, tmp_path):
-    """Default coloured sampling: only the pilot parameters are sampled; the AR model (order by
-    BIC from the residual at init) and the 2-s lead-in are recorded; a resumed chain keeps the
-    noise model it was written with."""
+    """Coloured sampling with ar="fixed": only the pilot parameters are sampled; the AR model
+    (order by BIC from the residual at init) and the 2-s lead-in are recorded; a resumed chain
+    keeps the noise model it was written with."""
     rec = short_sim.recording
-    kw = dict(SHORT, n_walkers=16, max_steps=60, min_steps=0, check_every=30)
+    kw = dict(SHORT, n_walkers=16, max_steps=60, min_steps=0, check_every=30, ar="fixed")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
         post = sample(rec, likelihood="coloured", init=short_sim.params, seed=2, **kw)
@@ -444,7 +444,8 @@ def test_profiled_ar_run_widens_the_gains(short_sim, model):
     kw = dict(SHORT, n_walkers=32, max_steps=1500, min_steps=1500, check_every=500)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        fixed = sample(rec, likelihood="coloured", init=short_sim.params, seed=3, **kw)
+        fixed = sample(rec, likelihood="coloured", ar="fixed", init=short_sim.params, seed=3,
+                       **kw)
         prof = sample(rec, likelihood="coloured", ar="profiled", init=short_sim.params, seed=3,
                       **kw)
     assert prof.parameter_names == model.parameter_names

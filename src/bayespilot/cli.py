@@ -647,12 +647,17 @@ def _likelihood_arguments(p: argparse.ArgumentParser, profiled: bool = False) ->
     p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
                    help="'eq4': white output error (the paper's Eq. 4, default); 'coloured': "
                         "AR output error (a prediction-error likelihood)")
-    p.add_argument("--ar", choices=("fixed", "sampled", "profiled") if profiled
-                   else ("fixed", "sampled"), default="fixed",
-                   help="'coloured' only: the AR model estimated once from a prediction-error "
-                        "fit and held (default), or sampled with the pilot parameters"
-                        + (", or re-estimated at every parameter vector (profiled)"
-                           if profiled else ""))
+    if profiled:
+        p.add_argument("--ar", choices=("profiled", "fixed", "sampled"), default="profiled",
+                       help="'coloured' only: the AR model re-estimated at every parameter "
+                            "vector (profiled, default: the calibrated one), estimated once "
+                            "from a prediction-error fit and held (fixed), or sampled with "
+                            "the pilot parameters")
+    else:
+        p.add_argument("--ar", choices=("fixed", "sampled"), default="fixed",
+                       help="'coloured' only: the AR model estimated once from a "
+                            "prediction-error fit and held (default), or sampled with the "
+                            "pilot parameters")
     p.add_argument("--ar-order", type=_whole_number(0), default=None, metavar="P",
                    help="'coloured' only: order of the AR model (default: by BIC for --ar "
                         "fixed" + (" and profiled" if profiled else "") + ", 2 for --ar sampled)")

@@ -143,7 +143,9 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
         fit.to_json(dirs["fits"] / f"{name}_threshold.json")
         fit0.to_json(dirs["fits"] / f"{name}_none.json")
         say(f"[{i + 1}/{len(gains)}] {name}: sampling the posterior (emcee) ...")
-        post = sample(rec, likelihood=likelihood, init=fit, seed=s, max_steps=max_steps,
+        # ar="fixed": the posterior under the comparison's likelihood (fit's AR model)
+        post = sample(rec, likelihood=likelihood, ar="fixed", init=fit, seed=s,
+                      max_steps=max_steps,
                       min_steps=min(1000, max_steps), check_every=min(500, max_steps),
                       progress=progress)
         post.to_netcdf(dirs["posteriors"] / f"{name}.nc")

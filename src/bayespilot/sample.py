@@ -15,22 +15,25 @@ either
     the output error as an AR(p) process whose innovations are white,
     conditional on the first p samples, innovation variance profiled out
     (:mod:`bayespilot.noise`, ``kernels/_coloured.py``).  By default
-    (``ar="fixed"``) the AR model is estimated once, with its order by BIC,
-    from the residual of a prediction-error maximum-likelihood fit
-    (:func:`~bayespilot.fit.fast.fit_fast` with ``noise="ar"``) and held
-    fixed while the pilot parameters are sampled (a plug-in, empirical-Bayes
-    noise model: the remnant needs an order near 10 at 100 Hz, which would
-    more than double the sampled dimensions).  With ``ar="sampled"`` a
-    low-order AR model is sampled with the rest through its partial
-    autocorrelations ``pacf_1 ... pacf_p`` in (-1, 1), which keeps it
-    stationary; the calibration study in ``docs/posteriors.md`` shows why it
-    is not the default.  With ``ar="profiled"`` the AR model (order by BIC
-    at the initial fit, or ``ar_order``) is re-estimated by least squares
+    (``ar="profiled"``) the AR model (order by BIC at the initial fit, a
+    prediction-error maximum-likelihood fit, :func:`~bayespilot.fit.fast.fit_fast`
+    with ``noise="ar"``; or ``ar_order``) is re-estimated by least squares
     from the output error at every parameter vector, i.e. maximised out (a
     profile likelihood; the Laplace determinant of integrating it out is
-    neglected).  In closed loop the remnant also drives the model's inputs,
-    so a noise model held fixed makes the gains' intervals too narrow;
-    profiling widens them where that coupling is (``docs/posteriors.md``).
+    neglected).  With ``ar="fixed"`` the AR model is estimated once, from
+    the residual of that fit, and held fixed while the pilot parameters are
+    sampled (a plug-in, empirical-Bayes noise model: the remnant needs an
+    order near 10 at 100 Hz, which would more than double the sampled
+    dimensions); this is the likelihood of :mod:`bayespilot.compare`, which
+    needs a density to integrate.  In closed loop the remnant also drives
+    the model's inputs, so a noise model held fixed makes the gains'
+    intervals too narrow; profiling widens them where that coupling is, and
+    the calibration study in ``docs/posteriors.md`` finds it within binomial
+    error of nominal for every pilot parameter, which is why it is the
+    default.  With ``ar="sampled"`` a low-order AR model is sampled with the
+    rest through its partial autocorrelations ``pacf_1 ... pacf_p`` in
+    (-1, 1), which keeps it stationary; two lags cannot whiten this remnant,
+    and the same study shows its intervals overconfident.
     The first ``discard`` seconds (2 by default) are left out of the
     coloured likelihood: the model's start-up error there is not remnant.
 
@@ -680,7 +683,7 @@ def _initial_ensemble(center, prior: _Prior, logpost: _LogPosterior, n_walkers: 
 
 
 def sample(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
-           ar: str = "fixed", ar_order: int | None = None, noise: ARNoise | None = None,
+           ar: str = "profiled", ar_order: int | None = None, noise: ARNoise | None = None,
            discard: float | None = None,
            init: FitResult | Mapping[str, float] | None = None,
            n_walkers: int | None = None, max_steps: int = 20000, min_steps: int = 1000,
@@ -697,10 +700,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         Default :func:`~bayespilot.model.paper_model` (with threshold).
     likelihood : {"eq4", "coloured"}
         White output error (Eq. 4) or AR-coloured output error (module docs).
-    ar : {"fixed", "sampled", "profiled"}
-        ``"coloured"`` only: the AR model estimated once and held fixed
-        (default), sampled with the pilot parameters, or re-estimated at every
-        parameter vector (module docs).
+    ar : {"profiled", "fixed", "sampled"}
+        ``"coloured"`` only: the AR model re-estimated at every parameter
+        vector (default), estimated once and held fixed, or sampled with the
+        pilot parameters (module docs).
     ar_order : int, optional
         p of the AR model (``"coloured"`` only).  Default: chosen by BIC (up to
         :data:`~bayespilot.noise.MAX_AR_ORDER`) for ``ar="fixed"`` and
@@ -779,8 +782,9 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     profiled_ar = likelihood == "coloured" and ar == "profiled"
     fixed_ar = likelihood == "coloured" and ar == "fixed"
     if noise is not None and profiled_ar:
-        raise ValueError("noise is an ARNoise for ar='fixed' only; ar='profiled' estimates "
-                         "the AR model at every parameter vector")
+        raise ValueError("noise is an ARNoise for ar='fixed' only; ar='profiled' (the "
+                         "default) estimates the AR model at every parameter vector: pass "
+                         "ar='fixed' to sample with this one")
     if noise is not None and not (fixed_ar and isinstance(noise, ARNoise)):
         raise ValueError("noise is an ARNoise for likelihood='coloured' with ar='fixed' only, "
                          f"got {type(noise).__name__} with likelihood={likelihood!r}, ar={ar!r}")
