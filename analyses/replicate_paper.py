@@ -1,6 +1,7 @@
 """Replicate the simulation study of Pool et al. (2012), Section III.B.2 (Figs. 14 and 15).
 
 Run:  python analyses/replicate_paper.py [--realizations 100] [--chunk N] [--method paper]
+                                         [--report-only]
                                          [--remnant table4|fraction] [--fits both|threshold|none]
                                          [--remnant-fractions 0,0.1,0.2,0.25,0.3]
                                          [--iterate]
@@ -75,6 +76,8 @@ def main(argv=None) -> int:
     ap.add_argument("--iterate", action="store_true",
                     help="repeat Steps II and III until nothing changes (paper method only)")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--report-only", action="store_true",
+                    help="fit nothing: rebuild the summary from the result files")
     args = ap.parse_args(argv)
     if args.iterate and args.method != "paper":
         ap.error("--iterate is an option of the paper method")
@@ -89,7 +92,7 @@ def main(argv=None) -> int:
                        remnant_fractions=fractions, threshold=thresholds, method=args.method,
                        remnant=args.remnant, **({"iterate": True} if args.iterate else {}))
     todo = _unfinished(jobs, args.out)
-    run = todo if args.chunk is None else todo[:args.chunk]
+    run = [] if args.report_only else todo if args.chunk is None else todo[:args.chunk]
     print(f"{len(jobs)} fits in the study ({args.method} method), {len(jobs) - len(todo)} "
           f"already in {args.out}; running {len(run)} now")
     t0 = time.perf_counter()
