@@ -106,6 +106,7 @@ from .model import PilotModel, paper_model
 from .noise import ARNoise
 from .sample import likelihood_options
 from .recording import Recording
+from ._blas import one_blas_thread
 
 #: The AR treatments the evidence supports (a profiled AR model is :func:`sample`'s only:
 #: a profile likelihood is not a density to integrate for ln Z).
@@ -398,6 +399,7 @@ class _NegLogLik:
         return self.lik.n_terms - self.order
 
 
+@one_blas_thread
 def evidence(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
              ar: str = "fixed", ar_order: int | None = None, noise: ARNoise | None = None,
              discard: float = 0.0, nlive: int = 200, dlogz: float = 0.5,
@@ -925,6 +927,7 @@ def _fit_noise(recording: Recording, model: PilotModel, seed, order, discard) ->
     return ARNoise.from_dict(fit.settings["noise"])
 
 
+@one_blas_thread
 def compare(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
             ar: str = "fixed", ar_order: int | None = None, discard: float | None = None,
             nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",

@@ -32,12 +32,15 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import signal
 
+from ._blas import one_blas_thread
+
 __all__ = ["ARNoise", "fit_ar", "MAX_AR_ORDER"]
 
 #: Largest AR order :func:`fit_ar` and :meth:`ARNoise.from_residual` try by default.
 MAX_AR_ORDER = 30
 
 
+@one_blas_thread
 def fit_ar(x: np.ndarray, *, max_order: int = MAX_AR_ORDER, order: int | None = None
            ) -> np.ndarray:
     """AR(p) coefficients of a series by least squares, the order chosen by BIC.

@@ -68,6 +68,7 @@ from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import MAX_AR_ORDER, ARNoise
 from .recording import Recording
+from ._blas import one_blas_thread
 
 __all__ = ["sample", "Posterior", "ConvergenceWarning", "LIKELIHOODS", "AR_MODES", "PACF_BOUND",
            "COLOURED_DISCARD", "pacf_names", "pacf_from_residual"]
@@ -682,6 +683,7 @@ def _initial_ensemble(center, prior: _Prior, logpost: _LogPosterior, n_walkers: 
                        "positive around the initial point; give a better init")
 
 
+@one_blas_thread
 def sample(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
            ar: str = "profiled", ar_order: int | None = None, noise: ARNoise | None = None,
            discard: float | None = None,

@@ -38,6 +38,7 @@ import numpy as np
 
 from .._files import write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
+from .._blas import one_blas_thread
 
 __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension"]
 
@@ -189,6 +190,7 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates):
     return names
 
 
+@one_blas_thread
 def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstrap: int = 39,
              candidates: Sequence[str] | None = None, base_fit=None,
              skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,

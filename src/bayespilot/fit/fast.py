@@ -42,10 +42,12 @@ from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
 from .three_step import _model_for
+from .._blas import one_blas_thread
 
 __all__ = ["fit_fast"]
 
 
+@one_blas_thread
 def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold: bool = True,
              seed: int | None = None, n_starts: int = 8, profile_step: float = 0.0025,
              scan_step: float = 1e-4, initial: str = "periodic",

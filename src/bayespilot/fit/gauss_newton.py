@@ -20,6 +20,7 @@ import numpy as np
 from scipy import optimize
 
 from ..likelihood import Likelihood
+from .._blas import one_blas_thread
 
 __all__ = ["RefineResult", "refine"]
 
@@ -58,6 +59,7 @@ class RefineResult:
                 "message": self.message}
 
 
+@one_blas_thread
 def refine(likelihood: Likelihood, start: Mapping[str, float], *, hold: Sequence[str] = ("delta_abs",),
            max_nfev: int = 200, xtol: float = 1e-10, ftol: float = 1e-10,
            bounded: bool = False) -> RefineResult:

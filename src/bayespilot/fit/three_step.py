@@ -28,6 +28,7 @@ from ..recording import Recording
 from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
+from .._blas import one_blas_thread
 
 __all__ = ["fit_paper"]
 
@@ -42,6 +43,7 @@ def _model_for(model: PilotModel | None, threshold: bool) -> PilotModel:
     return model
 
 
+@one_blas_thread
 def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshold: bool = True,
               seed: int | None = None, repetitions: int = 20, n_best: int = 5,
               population: int = 160, generations: int = 100, p_crossover: float = 0.7,
