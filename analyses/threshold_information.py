@@ -30,17 +30,13 @@ import json
 from pathlib import Path
 
 import numpy as np
+from calibration import OUT as CAL  # the calibration study's result files and seeds
+from calibration import seed_of as calibration_seed
 
 ROOT = Path(__file__).resolve().parents[1]
-CAL = ROOT / "analyses" / "results" / "calibration"
 FIGURE = ROOT / "docs" / "figures" / "threshold_information.png"
 TRUE = 0.0075
 BANDS = ((0, 1), (1, 3), (3, 6), (6, 10), (10, 20), (20, 35), (35, 50))
-
-
-def calibration_seed(task: str, r: int) -> int:
-    """The seed ``analyses/calibration.py`` simulated recording ``r`` of ``task`` with."""
-    return 4_000_000 + 100_000 * ("FD", "FT").index(task) + r
 
 
 def posterior_shape() -> None:

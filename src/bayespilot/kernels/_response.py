@@ -422,8 +422,8 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
     otherwise, so the caller falls back to the general ``response_into`` path.
     The arithmetic is that of ``response_into`` regrouped into one loop, so
     the FIR work of the channels overlaps the latency of the recursion.
-    ``prefilled``: the rows of the theta-independent channels of ``Qp`` already
-    hold their padded signal (:func:`fill_plain_rows`).
+    The rows of the theta-independent channels come from
+    :func:`fill_plain_rows`, here unless ``prefilled`` says the caller did it.
     """
     n_ch = X.shape[0]
     n = X.shape[1]
@@ -437,6 +437,8 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
         return np.inf, False, True
     taps = np.empty((n_ch, 4))
     ms = np.empty(n_ch, dtype=np.int64)
+    if not prefilled:
+        fill_plain_rows(X, ch_int, st_int, Qp, pad, periodic)
     for c in range(n_ch):
         if ch_int[c, CH_MOD_KIND] != MOD_NONE:
             return np.inf, False, False
@@ -455,8 +457,8 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
         taps[c, 1] = B0 * f + B1 * (1.0 - f)
         taps[c, 2] = B1 * f + B2 * (1.0 - f)
         taps[c, 3] = B2 * f
-        if prefilled and _plain_channel(c, ch_int, st_int):
-            continue
+        if _plain_channel(c, ch_int, st_int):
+            continue  # its row is written once, by fill_plain_rows
         # channel signal (stages, nonlinearity) into the padded buffer
         src = X[c]
         for s in range(ch_int[c, CH_NSTAGES]):
