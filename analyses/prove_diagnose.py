@@ -18,6 +18,7 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --summarize              # table + figures
     python analyses/prove_diagnose.py --profile-noise --shard 0/2   # the same study with
     python analyses/prove_diagnose.py --profile-noise --shard 1/2   # profile_noise=True, 2 cores
+    python analyses/prove_diagnose.py --width-profile 177,181,215   # soft-threshold -ln L by width
 
 The case list is ordered round-robin over the entries and the controls (with
 the conditions shuffled by a fixed seed), so any prefix of it is a balanced
@@ -68,27 +69,59 @@ EFFECTS = {
     "control-saturation": [("clip=0.3%", {"clip": 0.003}), ("clip=1%", {"clip": 0.01}),
                            ("clip=3%", {"clip": 0.03})],
 }
+#: Sizes added in a second round (their cases come after the first round's, so the
+#: first round keeps its ids and seeds): the threshold shape was not yet found at
+#: the widths above, so the curve continues to wider corners; saturation and drift
+#: were found at their smallest size, so the curve continues below it.
+MORE_EFFECTS = {
+    "threshold-shape": [("w_soft=0.03", {"w_soft": 0.03}), ("w_soft=0.045", {"w_soft": 0.045})],
+    "time-varying-gains": [("drift=0.15", {"drift_v": 0.15, "drift_m": 0.15})],
+    "control-saturation": [("clip=0.1%", {"clip": 0.001})],
+}
 CONDITIONS = list(itertools.product(("FD", "FT"), (0.75, 1.0), (0.1, 0.25)))
 #: Bootstrap replicates per diagnosis here (the decision does not depend on them).
 N_BOOTSTRAP = 9
+#: Control replicates per condition in each round (8 conditions: 24 + 24 controls).
+CONTROL_ROUNDS = (3, 3)
 
 
-def cases() -> list[dict]:
-    """Every case, round-robin over entries and controls, conditions shuffled (seeded)."""
-    rng = np.random.default_rng(20240605)
+def _strength(entry: str, extra: dict) -> float:
+    """A number that grows with the effect (to order an entry's sizes)."""
+    if entry == "motion-system-dynamics":
+        return 1.0 / extra["omega_ms"]
+    if entry == "time-varying-gains":
+        return extra["drift_v"]
+    return float(next(iter(extra.values())))
+
+
+#: Every size of an entry, smallest effect first (the detection curves' x axis).
+ALL_EFFECTS = {e: sorted(EFFECTS[e] + MORE_EFFECTS.get(e, []),
+                         key=lambda s, e=e: _strength(e, s[1])) for e in EFFECTS}
+
+
+def _round(effects: dict, n_controls: int, seed: int) -> list[dict]:
+    """One round of cases, round-robin over entries and controls, conditions shuffled."""
+    rng = np.random.default_rng(seed)
     per: dict[str, list[dict]] = {}
-    for entry, sizes in EFFECTS.items():
+    for entry, sizes in effects.items():
         lst = [{"truth": entry, "effect": lab, "extra": ex, "task": t, "K_theta": k, "F_n": f}
                for (lab, ex) in sizes for (t, k, f) in CONDITIONS]
         per[entry] = [lst[i] for i in rng.permutation(len(lst))]
     ctl = [{"truth": "none", "effect": "control", "extra": {}, "task": t, "K_theta": k, "F_n": f}
-           for r in range(3) for (t, k, f) in CONDITIONS]
+           for r in range(n_controls) for (t, k, f) in CONDITIONS]
     per["none"] = [ctl[i] for i in rng.permutation(len(ctl))]
     order = []
     for i in range(max(len(v) for v in per.values())):
-        for key in ("none", *EFFECTS):
+        for key in ("none", *effects):
             if i < len(per[key]):
                 order.append(per[key][i])
+    return order
+
+
+def cases() -> list[dict]:
+    """Every case: the first round, then the second (ids and seeds run on), seeded."""
+    order = (_round(EFFECTS, CONTROL_ROUNDS[0], 20240605)
+             + _round(MORE_EFFECTS, CONTROL_ROUNDS[1], 20261125))
     for j, c in enumerate(order):
         c["id"] = j
         c["seed"] = 1000 + j
@@ -238,7 +271,7 @@ def summarize() -> dict:
     print(f"cases concealed (VAF and residual RMS within 3 sd of the controls): {n_conc}/{n_ent}")
     curves = {}
     print("\nDetection (correct naming) by effect size, all cases:")
-    for e, sizes in EFFECTS.items():
+    for e, sizes in ALL_EFFECTS.items():
         row = []
         for lab, _ in sizes:
             sel = [r for r in rs if r["case"]["truth"] == e and r["case"]["effect"] == lab]
@@ -261,7 +294,9 @@ def summarize() -> dict:
             ax.annotate(f"{k}/{n}", (xi, rate[xi] if n else 0), textcoords="offset points",
                         xytext=(0, 6), ha="center", fontsize=8)
         ax.set_xticks(x)
-        ax.set_xticklabels([lab for lab, *_ in row], fontsize=8)
+        # "name=value" labels: the values on the axis, the name below it
+        ax.set_xticklabels([lab.split("=")[-1] for lab, *_ in row], fontsize=8)
+        ax.set_xlabel(row[0][0].split("=")[0] if row else "", fontsize=8)
         ax.set_ylim(-0.05, 1.15)
         ax.set_title(e, fontsize=9)
         ax.grid(alpha=0.3)
@@ -357,6 +392,46 @@ def example() -> None:
     (ex / "summary.txt").write_text(res.summary() + "\n")
 
 
+def width_profile(ids: list[int]) -> None:
+    """-ln L of the soft dead zone over fixed corner widths, against the crisp dead zone.
+
+    For threshold-shape cases that ``diagnose`` missed: is the improvement
+    small at every width (the data), or only where the fit ended (the optimiser)?
+    Each width is a start and stays fixed; the other parameters are refitted
+    as ``diagnose`` refits them, on the base fit's noise model.
+    """
+    from bayespilot.diagnose import SKIP_SECONDS, get_extension
+    from bayespilot.diagnose import decide as D
+    from bayespilot.fit.fast import fit_fast
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
+
+    by_id = {c["id"]: c for c in cases()}
+    widths = (0.001, 0.004, 0.01, 0.02, 0.03, 0.045, 0.05)
+    print("-ln L(crisp) - -ln L(soft, w_soft fixed), the others refitted:")
+    print(f"{'case':<48}" + "".join(f"{w:>8g}" for w in widths))
+    for i in ids:
+        c = by_id[i]
+        if c["truth"] != "threshold-shape":
+            raise SystemExit(f"case {i} is not a threshold-shape case")
+        rec = simulate_case(c)[0].recording
+        base_model = paper_model()
+        fit = fit_fast(rec, base_model, seed=0, n_starts=4, profile_step=0.005)
+        start = {k: v for k, v in fit.params.items() if k in base_model.parameter_names}
+        skip = int(round(SKIP_SECONDS * rec.sample_rate_hz))  # as diagnose skips
+        noise = D.noise_model(Likelihood(base_model, rec).residual(start), rec.dt, skip=skip,
+                              omega_c=D.OMEGA_C)
+        _, base = D.fit_base_gls(base_model, rec, start, noise)
+        model = get_extension("threshold-shape").build(base_model)
+        wl = D.Whitened(model, rec, noise)
+        names = tuple(n for n in model.parameter_names if n != "w_soft")
+        row = []
+        for w in widths:
+            f = D._gls_refine(wl, {**base.params, "w_soft": w}, names)
+            row.append(base.neg_log_lik - f.neg_log_lik)
+        print(f"{case_key(c):<48}" + "".join(f"{d:+8.2f}" for d in row))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--chunk", type=int, default=None, help="run at most N unfinished cases")
@@ -369,6 +444,9 @@ def main(argv=None) -> int:
                          "figures with the suffix _profile_noise")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
+    ap.add_argument("--width-profile", metavar="IDS",
+                    help="-ln L over fixed soft-threshold widths for these threshold-shape "
+                         "case ids (comma-separated), against the crisp dead zone")
     args = ap.parse_args(argv)
     global OUT, FIG_SUFFIX, PROFILE_NOISE
     if args.profile_noise:
@@ -382,6 +460,9 @@ def main(argv=None) -> int:
         ap.error(f"--shard: K/N with 0 <= K < N, got {args.shard!r}")
     if args.example:
         example()
+        return 0
+    if args.width_profile:
+        width_profile([int(v) for v in args.width_profile.split(",")])
         return 0
     if not args.summarize:
         run(args.chunk, (k, n))
