@@ -1,6 +1,6 @@
 """Where the information on the threshold comes from, and why its intervals over-cover (issue 4).
 
-Run:  python analyses/threshold_information.py [--recordings 5] [--spectra 20]
+Run:  python analyses/threshold_information.py [--recordings 5] [--spectra 20] [--scatter 40]
 
 The calibration study (``analyses/calibration.py``) finds the 50 % and 90 %
 intervals of delta_abs too wide at K_theta = 1, F_n = 0.2.  This script
@@ -31,6 +31,15 @@ from the calibration's own recordings (same seeds) and result files:
    band (AR spectrum over the Welch spectrum averaged over the recordings).
    An AR spectrum too high where the information lies would make the
    posterior wider than the estimate varies; too low, narrower.
+5. Is -ln L quadratic in delta_abs?  On ``--scatter`` FD recordings, with
+   the other seven parameters held at the truth: the scatter of the 1-D
+   maximum-likelihood estimates across recordings, beside the Gauss-Newton
+   standard error (the width a quadratic -ln L with that slope information
+   has, and about the posterior's) and the standard error implied by the
+   finite-difference curvature of -ln L at steps from 2.5e-5 to 1.6e-3
+   (equal at every step if -ln L is quadratic).  Then the same scatter
+   against the Gauss-Newton standard error for the joint fit of all eight
+   parameters (the calibration's prediction-error fits).
 """
 
 from __future__ import annotations
@@ -198,17 +207,89 @@ def residual_checks(n_rec: int) -> None:
               + " ".join(f"{np.mean(rr[s]):12.2f}" for rr in ratios))
 
 
+STEPS = (2.5e-5, 5e-5, 1e-4, 2e-4, 4e-4, 8e-4, 1.6e-3)
+
+
+def conditional_scatter(n_rec: int) -> None:
+    from scipy import optimize
+
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
+    from bayespilot.noise import ARNoise
+    from bayespilot.simulate import simulate
+
+    model = paper_model()
+    names = model.parameter_names
+    k = names.index("delta_abs")
+    est, gn, curv = [], [], []
+    for r in range(n_rec):
+        sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2,
+                       seed=calibration_seed("FD", r))
+        p = dict(sim.params)
+        lik0 = Likelihood(model, sim.recording, discard=2.0)
+        noise = ARNoise.from_residual(lik0.residual(p)[lik0.used])
+        lik = Likelihood(model, sim.recording, discard=2.0, noise=noise)
+
+        def f(d):
+            return lik.neg_log_lik({**p, "delta_abs": float(d)})
+        grid = np.linspace(0.003, 0.012, 19)  # bracket first: -ln L has kinks in delta_abs
+        i = int(np.argmin([f(d) for d in grid]))
+        d = optimize.minimize_scalar(f, bounds=(grid[max(i - 1, 0)], grid[min(i + 1, 18)]),
+                                     method="bounded", options={"xatol": 1e-8}).x
+        at = {**p, "delta_abs": d}
+        J = lik.fit_jacobian(at)[:, k]
+        gn.append(np.sqrt(np.mean(lik.fit_residual(at) ** 2) / (J @ J)))
+        c = np.array([(f(d + h) - 2.0 * f(d) + f(d - h)) / h**2 for h in STEPS])
+        curv.append(np.where(c > 0, 1.0 / np.sqrt(np.abs(c)), np.nan))
+        est.append(d)
+    est, sd = np.array(est), np.std(est, ddof=1)
+    curv = np.nanmean(np.array(curv), axis=0)
+    print(f"\n5. Scatter of the estimate of delta_abs against its standard errors "
+          f"(FD recordings 0-{n_rec - 1})")
+    print(f"  alone (the others at the truth): mean {est.mean():.5f} (truth {TRUE}), sd across "
+          f"recordings {sd:.5f}; Gauss-Newton SE {np.mean(gn):.5f} (SE/sd {np.mean(gn) / sd:.2f})")
+    print("  SE from the curvature of -ln L by finite-difference step (mean over recordings):")
+    print("   " + "  ".join(f"{h:.1e}: {c:.5f}" for h, c in zip(STEPS, curv)))
+    slope = np.polyfit(np.log(STEPS), np.log(curv), 1)[0]
+    print(f"  -ln L rises like |step|^{2.0 - 2.0 * slope:.2f} near its minimum "
+          f"(2 would be quadratic)")
+    joint, jse = [], []
+    for r in range(n_rec):
+        path = CAL / f"FD_r{r:03d}_fitpem.json"
+        if not path.exists():
+            break
+        fit = json.loads(path.read_text())
+        sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2,
+                       seed=calibration_seed("FD", r))
+        lik = Likelihood(model, sim.recording, discard=2.0,
+                         noise=ARNoise(fit["settings"]["noise"]["a"]))
+        w = lik.fit_residual(fit["params"])
+        J = lik.fit_jacobian(fit["params"])
+        cov = np.mean(w**2) * np.linalg.inv(J.T @ J)
+        joint.append(fit["params"]["delta_abs"])
+        jse.append(np.sqrt(cov[k, k]))
+    if len(joint) > 2:
+        joint = np.array(joint)
+        print(f"  jointly (the calibration's prediction-error fits, {len(joint)} recordings): "
+              f"mean {joint.mean():.5f}, sd {joint.std(ddof=1):.5f}, mean Gauss-Newton SE "
+              f"{np.mean(jse):.5f}, SE/sd {np.mean(jse) / joint.std(ddof=1):.2f}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--recordings", type=int, default=5,
                     help="FD calibration recordings for the AR-order check (default 5)")
     ap.add_argument("--spectra", type=int, default=20,
                     help="FD calibration recordings for the residual checks (default 20)")
+    ap.add_argument("--scatter", type=int, default=40,
+                    help="FD calibration recordings for check 5 (default 40, 0 skips it)")
     args = ap.parse_args(argv)
     posterior_shape()
     curvature(args.recordings)
     information_spectrum()
     residual_checks(args.spectra)
+    if args.scatter:
+        conditional_scatter(args.scatter)
     return 0
 
 
