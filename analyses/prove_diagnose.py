@@ -363,11 +363,11 @@ def alpha_sweep(rs: list[dict], alphas=(0.01, 0.02, 0.05)) -> list[dict]:
     same = sum(decide(r, ALPHA / 6) == r["decision"] for r in rs)
     print(f"\nAt other family-wise levels (re-decided from the stored p-values; the rule "
           f"reproduces {same} of the {len(rs)} stored decisions at alpha = {ALPHA:g}):")
+    ent = [r for r in rs if r["case"]["truth"] != "none" and r["concealed"] is not False]
+    ctl = [r for r in rs if r["case"]["truth"] == "none"]
     out = []
     for a in alphas:
-        ent = [r for r in rs if r["case"]["truth"] != "none" and r["concealed"] is not False]
         ok = sum(decide(r, a / 6) == r["case"]["truth"] for r in ent)
-        ctl = [r for r in rs if r["case"]["truth"] == "none"]
         fa = sum(decide(r, a / 6) != "none" for r in ctl)
         print(f"  alpha = {a:<5g} concealed named correctly {ok}/{len(ent)}, "
               f"false alarms {fa}/{len(ctl)}")
@@ -441,10 +441,9 @@ def width_profile(ids: list[int]) -> None:
     Each width is a start and stays fixed; the other parameters are refitted
     as ``diagnose`` refits them, on the base fit's noise model.
     """
-    from bayespilot.diagnose import SKIP_SECONDS, get_extension
+    from bayespilot.diagnose import SKIP_SECONDS, _base_gls, get_extension
     from bayespilot.diagnose import decide as D
     from bayespilot.fit.fast import fit_fast
-    from bayespilot.likelihood import Likelihood
     from bayespilot.model import paper_model
 
     by_id = {c["id"]: c for c in cases()}
@@ -457,12 +456,11 @@ def width_profile(ids: list[int]) -> None:
             raise SystemExit(f"case {i} is not a threshold-shape case")
         rec = simulate_case(c)[0].recording
         base_model = paper_model()
+        # diagnose's base fit and its GLS refit under the base residual's noise model
         fit = fit_fast(rec, base_model, seed=0, n_starts=4, profile_step=0.005)
         start = {k: v for k, v in fit.params.items() if k in base_model.parameter_names}
-        skip = int(round(SKIP_SECONDS * rec.sample_rate_hz))  # as diagnose skips
-        noise = D.noise_model(Likelihood(base_model, rec).residual(start), rec.dt, skip=skip,
-                              omega_c=D.OMEGA_C)
-        _, base = D.fit_base_gls(base_model, rec, start, noise)
+        _, noise, base = _base_gls(rec, base_model, start,
+                                   skip=int(round(SKIP_SECONDS * rec.sample_rate_hz)))
         model = get_extension("threshold-shape").build(base_model)
         wl = D.Whitened(model, rec, noise)
         names = tuple(n for n in model.parameter_names if n != "w_soft")

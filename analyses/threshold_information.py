@@ -221,7 +221,7 @@ def conditional_scatter(n_rec: int) -> None:
     model = paper_model()
     names = model.parameter_names
     k = names.index("delta_abs")
-    est, gn, curv = [], [], []
+    est, gn, curv, joint, jse = [], [], [], [], []
     for r in range(n_rec):
         sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2,
                        seed=calibration_seed("FD", r))
@@ -242,6 +242,16 @@ def conditional_scatter(n_rec: int) -> None:
         c = np.array([(f(d + h) - 2.0 * f(d) + f(d - h)) / h**2 for h in STEPS])
         curv.append(np.where(c > 0, 1.0 / np.sqrt(np.abs(c)), np.nan))
         est.append(d)
+        # the joint fit of all eight: the calibration's prediction-error fit of this recording
+        path = CAL / f"FD_r{r:03d}_fitpem.json"
+        if path.exists():
+            fit = json.loads(path.read_text())
+            lik = Likelihood(model, sim.recording, discard=2.0,
+                             noise=ARNoise(fit["settings"]["noise"]["a"]))
+            w = lik.fit_residual(fit["params"])
+            Jf = lik.fit_jacobian(fit["params"])
+            joint.append(fit["params"]["delta_abs"])
+            jse.append(np.sqrt(np.mean(w**2) * np.linalg.inv(Jf.T @ Jf)[k, k]))
     est, sd = np.array(est), np.std(est, ddof=1)
     curv = np.nanmean(np.array(curv), axis=0)
     print(f"\n5. Scatter of the estimate of delta_abs against its standard errors "
@@ -253,21 +263,6 @@ def conditional_scatter(n_rec: int) -> None:
     slope = np.polyfit(np.log(STEPS), np.log(curv), 1)[0]
     print(f"  -ln L rises like |step|^{2.0 - 2.0 * slope:.2f} near its minimum "
           f"(2 would be quadratic)")
-    joint, jse = [], []
-    for r in range(n_rec):
-        path = CAL / f"FD_r{r:03d}_fitpem.json"
-        if not path.exists():
-            break
-        fit = json.loads(path.read_text())
-        sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2,
-                       seed=calibration_seed("FD", r))
-        lik = Likelihood(model, sim.recording, discard=2.0,
-                         noise=ARNoise(fit["settings"]["noise"]["a"]))
-        w = lik.fit_residual(fit["params"])
-        J = lik.fit_jacobian(fit["params"])
-        cov = np.mean(w**2) * np.linalg.inv(J.T @ J)
-        joint.append(fit["params"]["delta_abs"])
-        jse.append(np.sqrt(cov[k, k]))
     if len(joint) > 2:
         joint = np.array(joint)
         print(f"  jointly (the calibration's prediction-error fits, {len(joint)} recordings): "

@@ -32,7 +32,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -190,6 +190,24 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates):
     return names
 
 
+def _base_gls(recording, base_model, start: Mapping[str, float], *, skip: int,
+              omega_c: float | None = None):
+    """The noise model of the base fit's residual and the GLS fit of the base model under it.
+
+    The first stage of :func:`diagnose` after its base fit, for studies that
+    refit extensions as it does.  Returns the Eq. 4 likelihood of the base
+    model, the noise model and the GLS fit (a ``decide.FitSummary``).
+    """
+    from ..likelihood import Likelihood
+    from . import decide as D
+
+    omega_c = D.OMEGA_C if omega_c is None else float(omega_c)
+    lik0 = Likelihood(base_model, recording)
+    noise = D.noise_model(lik0.residual(start), recording.dt, skip=skip, omega_c=omega_c)
+    _, base = D.fit_base_gls(base_model, recording, start, noise)
+    return lik0, noise, base
+
+
 @one_blas_thread
 def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstrap: int = 39,
              candidates: Sequence[str] | None = None, base_fit=None,
@@ -246,7 +264,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     True
     """
     from ..fit.fast import fit_fast
-    from ..likelihood import Likelihood, vaf
+    from ..likelihood import vaf
     from ..model import paper_model
     from . import decide as D
     from . import locate as L
@@ -265,12 +283,8 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     start = {k: v for k, v in base_fit.params.items() if k in base_model.parameter_names}
     timings["base_fit"] = time.perf_counter() - t0
     skip = int(round(skip_seconds * recording.sample_rate_hz))
-    omega_c = D.OMEGA_C if omega_c is None else float(omega_c)
-    lik0 = Likelihood(base_model, recording)
-    eps0 = lik0.residual(start)
+    lik0, noise, base = _base_gls(recording, base_model, start, skip=skip, omega_c=omega_c)
     forcing = L.forcing_of(recording)
-    noise = D.noise_model(eps0, recording.dt, skip=skip, omega_c=omega_c)
-    wl, base = D.fit_base_gls(base_model, recording, start, noise)
     if profile_noise:
         base, noise = D.refit_with_noise(base_model, recording, base, noise,
                                          tuple(n for n in base_model.parameter_names
