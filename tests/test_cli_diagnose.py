@@ -70,3 +70,20 @@ def test_diagnose_unwritable_json_is_a_failure(rec_stem, tmp_path, capsys):
     code, out, err = _run(capsys, "diagnose", rec_stem, "--bootstrap", "0",
                           "--json", blocker / "sub" / "d.json")
     assert code == 1 and err.startswith("bayespilot: error:")
+
+
+def test_diagnose_several_runs_pools_them(rec_stem, tmp_path, capsys):
+    rec = simulate(task="FT", motion_gain=1.0, remnant_gain=0.06, seed=32, duration=30.0).recording
+    meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+    stem2 = tmp_path / "run2"
+    write_recording(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta),
+                    stem2)
+    out = tmp_path / "pooled.json"
+    code, stdout, err = _run(capsys, "diagnose", rec_stem, stem2, "--json", out,
+                             "--bootstrap", "0", "--report", tmp_path / "rep")
+    assert code == 0, err
+    assert "2 runs pooled" in stdout
+    d = json.loads(out.read_text())
+    assert d["pooled"] is True and d["n_runs"] == 2 and d["physics"] == "none"
+    assert len(d["runs"]) == 2 and len(d["ranking"]) == len(NAMES)
+    assert (tmp_path / "rep" / "runs.png").stat().st_size > 0

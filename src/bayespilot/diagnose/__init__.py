@@ -208,6 +208,95 @@ def _base_gls(recording, base_model, start: Mapping[str, float], *, skip: int,
     return lik0, noise, base
 
 
+@dataclass
+class _Run:
+    """One recording's first stages: base fit, GLS fit, noise model, located evidence."""
+
+    base_model: Any
+    base_fit: Any
+    base: Any
+    noise: Any
+    lik0: Any
+    forcing: Any
+    statistics: dict
+    where: dict
+    boot_info: dict
+    skip: int
+    timings: dict
+
+
+def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n_starts,
+             profile_noise, bar) -> _Run:
+    """Base fit (Eq. 4), the noise model and GLS base fit, and the calibrated evidence."""
+    from ..fit.fast import fit_fast
+    from ..model import paper_model
+    from . import decide as D
+    from . import locate as L
+
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    bar.set_postfix_str("base fit")
+    base_model = paper_model()
+    if base_fit is None:
+        base_fit = fit_fast(recording, base_model, seed=seed, n_starts=n_starts,
+                            profile_step=0.005)
+    start = {k: v for k, v in base_fit.params.items() if k in base_model.parameter_names}
+    timings["base_fit"] = time.perf_counter() - t0
+    skip = int(round(skip_seconds * recording.sample_rate_hz))
+    lik0, noise, base = _base_gls(recording, base_model, start, skip=skip, omega_c=omega_c)
+    forcing = L.forcing_of(recording)
+    if profile_noise:
+        base, noise = D.refit_with_noise(base_model, recording, base, noise,
+                                         tuple(n for n in base_model.parameter_names
+                                               if n != "delta_abs"))
+    timings["base_gls"] = time.perf_counter() - t0 - timings["base_fit"]
+    bar.update(1)
+    bar.set_postfix_str(f"located evidence ({n_bootstrap} bootstrap replicates)")
+    t1 = time.perf_counter()
+    st = L.statistics(recording, base_model, base.params, forcing, skip=skip, with_arrays=True)
+    null = None
+    boot_info: dict[str, Any] = {"replicates": 0}
+    if n_bootstrap > 0 and forcing is not None:
+        null, boot_info = L.bootstrap(recording, base_model, base.params, forcing,
+                                      st["arrays"]["residual"], n_replicates=n_bootstrap,
+                                      seed=seed, skip=skip)
+    where = L.calibrate(st["values"], null)
+    timings["locate"] = time.perf_counter() - t1
+    bar.update(1)
+    return _Run(base_model, base_fit, base, noise, lik0, forcing, st, where, boot_info, skip,
+                timings)
+
+
+def _decide(results, alpha):
+    """Bonferroni over the testable candidates; choose among the justified; rank all.
+
+    Returns ``(ranking, chosen, tested, level)``.
+    """
+    tested = [r for r in results if r.testable]
+    level = alpha / max(len(tested), 1)
+    for r in tested:
+        r.justified = bool(r.p_value < level)
+    justified = [r for r in tested if r.justified]
+    chosen = None
+    if justified:
+        # flat tops (probability zero under continuous noise) decide saturation;
+        # otherwise the largest BIC improvement, near-ties (< 2) broken by signature
+        chosen = max(justified, key=lambda r: (r.log_bayes_factor, r.signature_score))
+        close = [r for r in justified if math.isfinite(chosen.delta_bic)
+                 and chosen.delta_bic - r.delta_bic < 2.0]
+        if len(close) > 1:
+            chosen = max(close, key=lambda r: (r.signature_score, r.delta_bic))
+
+    def rank_key(r):
+        return (r.testable, r.justified, r.log_bayes_factor if r.testable else -math.inf)
+
+    ranking = sorted(results, key=rank_key, reverse=True)
+    if chosen is not None:
+        ranking.remove(chosen)
+        ranking.insert(0, chosen)
+    return ranking, chosen, tested, level
+
+
 @one_blas_thread
 def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstrap: int = 39,
              candidates: Sequence[str] | None = None, base_fit=None,
@@ -263,53 +352,26 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     >>> res.physics in ("none", "time-varying-gains")
     True
     """
-    from ..fit.fast import fit_fast
     from ..likelihood import vaf
-    from ..model import paper_model
     from . import decide as D
     from . import locate as L
 
     names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates)
     t0 = time.perf_counter()
-    timings: dict[str, float] = {}
     from tqdm.auto import tqdm
 
     bar = tqdm(total=2 + len(names), desc="diagnose", unit="stage", disable=not progress)
-    bar.set_postfix_str("base fit")
-    base_model = paper_model()
-    if base_fit is None:
-        base_fit = fit_fast(recording, base_model, seed=seed, n_starts=n_starts,
-                            profile_step=0.005)
-    start = {k: v for k, v in base_fit.params.items() if k in base_model.parameter_names}
-    timings["base_fit"] = time.perf_counter() - t0
-    skip = int(round(skip_seconds * recording.sample_rate_hz))
-    lik0, noise, base = _base_gls(recording, base_model, start, skip=skip, omega_c=omega_c)
-    forcing = L.forcing_of(recording)
-    if profile_noise:
-        base, noise = D.refit_with_noise(base_model, recording, base, noise,
-                                         tuple(n for n in base_model.parameter_names
-                                               if n != "delta_abs"))
-    timings["base_gls"] = time.perf_counter() - t0 - timings["base_fit"]
-    bar.update(1)
-    bar.set_postfix_str(f"located evidence ({n_bootstrap} bootstrap replicates)")
-
-    # -- locate
-    t1 = time.perf_counter()
-    st = L.statistics(recording, base_model, base.params, forcing, skip=skip, with_arrays=True)
-    null = None
-    boot_info: dict[str, Any] = {"replicates": 0}
-    if n_bootstrap > 0 and forcing is not None:
-        null, boot_info = L.bootstrap(recording, base_model, base.params, forcing,
-                                      st["arrays"]["residual"], n_replicates=n_bootstrap,
-                                      seed=seed, skip=skip)
-    where = L.calibrate(st["values"], null)
-    timings["locate"] = time.perf_counter() - t1
-    bar.update(1)
+    run = _prepare(recording, seed=seed, n_bootstrap=n_bootstrap, base_fit=base_fit,
+                   skip_seconds=skip_seconds, omega_c=omega_c, n_starts=n_starts,
+                   profile_noise=profile_noise, bar=bar)
+    base_model, base_fit, base, noise = run.base_model, run.base_fit, run.base, run.noise
+    lik0, forcing, st, where, boot_info, skip = (run.lik0, run.forcing, run.statistics,
+                                                  run.where, run.boot_info, run.skip)
+    timings = run.timings
 
     # -- name
     t2 = time.perf_counter()
     results = []
-    models = {}
     for name in names:
         ext = get_extension(name)
         bar.set_postfix_str(name)
@@ -322,31 +384,9 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
                if k in where and math.isfinite(where[k].p_value)]
         res.signature_score = float(max([-math.log10(p) for p in sig], default=0.0))
         results.append(res)
-        models[name] = res.model
         bar.update(1)
     bar.close()
-    tested = [r for r in results if r.testable]
-    level = alpha / max(len(tested), 1)
-    for r in tested:
-        r.justified = bool(r.p_value < level)
-    justified = [r for r in tested if r.justified]
-    chosen = None
-    if justified:
-        # flat tops (probability zero under continuous noise) decide saturation;
-        # otherwise the largest BIC improvement, near-ties (< 2) broken by signature
-        chosen = max(justified, key=lambda r: (r.log_bayes_factor, r.signature_score))
-        close = [r for r in justified if math.isfinite(chosen.delta_bic)
-                 and chosen.delta_bic - r.delta_bic < 2.0]
-        if len(close) > 1:
-            chosen = max(close, key=lambda r: (r.signature_score, r.delta_bic))
-
-    def rank_key(r):
-        return (r.testable, r.justified, r.log_bayes_factor if r.testable else -math.inf)
-
-    ranking = sorted(results, key=rank_key, reverse=True)
-    if chosen is not None:
-        ranking.remove(chosen)
-        ranking.insert(0, chosen)
+    ranking, chosen, tested, level = _decide(results, alpha)
     timings["name"] = time.perf_counter() - t2
 
     # -- model and show: residual after the chosen extension
@@ -423,3 +463,8 @@ def _saturation(recording, base_model, base, where, boot_info):
     res.fit = fit
     res.model = model
     return res
+
+
+from .pooled import PooledDiagnosisResult, diagnose_pooled  # noqa: E402  (uses the helpers above)
+
+__all__ += ["diagnose_pooled", "PooledDiagnosisResult"]

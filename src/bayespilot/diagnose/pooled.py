@@ -1,0 +1,464 @@
+"""Diagnose several runs of one condition together: shared physics, per-run pilot.
+
+One run of 81.92 s often cannot tell a small omission from remnant (the
+single-run proof study misses most of the smallest effects, see
+``docs/diagnose.md``).  A lab records several runs per subject and
+condition, and the physics the base model leaves out - the platform's
+bandwidth, the washout, an otolith response, the threshold's shape, a drift
+over the run, the stick's limit - is a property of the set-up and the
+subject, the same in every run, while the pilot's gains and delays may
+differ from run to run.  :func:`diagnose_pooled` tests exactly that model:
+
+1. each run gets the base stages of :func:`~bayespilot.diagnose.diagnose`
+   (Eq. 4 fit, its own noise model and GLS fit, located evidence);
+2. every GLS extension is fitted to all runs at once, with the pilot
+   parameters per run and the extension's new parameters shared; the pooled
+   -ln L is the sum of the runs' GLS -ln L (each with its own noise level),
+   so the likelihood-ratio statistic 2 (sum base - pooled) has the
+   extension's df, not R times it;
+3. ``control-saturation`` (flat tops) pools the runs' flat-top tests: any run
+   with exact repeats of its extreme value decides it;
+4. the same Bonferroni decision as for one run.
+
+The signature scores combine each located statistic's bootstrap p-values
+over the runs (Fisher's method).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from scipy import linalg, optimize, stats
+
+from .._blas import one_blas_thread
+from .._files import write_text_atomic
+from . import ALPHA, SKIP_SECONDS, _check, _decide, _prepare, _saturation
+from .catalogue import get_extension
+
+__all__ = ["diagnose_pooled", "PooledDiagnosisResult"]
+
+
+@dataclass
+class PooledDiagnosisResult:
+    """What :func:`diagnose_pooled` found.
+
+    Attributes
+    ----------
+    mismatch : bool
+        True if an extension is justified at level ``alpha``.
+    physics : str
+        The chosen catalogue name, or ``"none"``.
+    ranking : list of CandidateResult
+        Every candidate, best first; ``params`` and ``stderr`` are the shared
+        new parameters, ``delta_neg_log_lik`` is summed over the runs.
+    runs : list of dict
+        Per run: ``source``, ``base`` (Eq. 4 and GLS fits), ``where`` (located
+        evidence), ``delta_neg_log_lik`` (each candidate's improvement in
+        that run at the pooled fit) and ``params`` (the run's pilot parameters
+        under the chosen extension, if any).
+    where : dict
+        Located statistics with Fisher-combined p-values over the runs.
+    chosen : CandidateResult or None
+    settings : dict
+    elapsed : float
+        Wall time, s.
+    """
+
+    mismatch: bool
+    physics: str
+    ranking: list
+    runs: list
+    where: dict
+    chosen: Any
+    settings: dict
+    elapsed: float
+    arrays: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def base(self) -> dict:
+        """The runs' summed base-model figures (for the shared report helpers)."""
+        return {"neg_log_lik": float(sum(r["base"]["neg_log_lik"] for r in self.runs)),
+                "vaf": float(np.mean([r["base"]["vaf"] for r in self.runs]))}
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``runs``, ... ."""
+        def clean(x):
+            if isinstance(x, dict):
+                return {k: clean(v) for k, v in x.items()}
+            if isinstance(x, (list, tuple)):
+                return [clean(v) for v in x]
+            if isinstance(x, (float, np.floating)):
+                return float(x) if math.isfinite(x) else None
+            if isinstance(x, np.integer):
+                return int(x)
+            return x
+
+        runs = [dict(r, where={k: e.to_dict() for k, e in r["where"].items()})
+                for r in self.runs]
+        chosen = None if self.chosen is None else self.chosen.to_dict()
+        return clean({"mismatch": self.mismatch, "physics": self.physics, "pooled": True,
+                      "n_runs": len(self.runs),
+                      "ranking": [c.to_dict() for c in self.ranking],
+                      "where": self.where, "runs": runs, "chosen": chosen,
+                      "settings": self.settings, "elapsed_seconds": self.elapsed})
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        """The JSON summary as text; also written to ``path`` when given."""
+        text = json.dumps(self.to_dict(), indent=1)
+        if path is not None:
+            write_text_atomic(path, text)
+        return text
+
+    def summary(self) -> str:
+        """A readable account: the decision, the ranking, each run's share."""
+        R = len(self.runs)
+        lines = [f"bayespilot diagnose, {R} runs pooled (shared extension, pilot per run)",
+                 f"decision: {self.physics}" + (" (mismatch)" if self.mismatch else
+                                                " (no extension justified)"),
+                 f"level: alpha = {self.settings['alpha']:g} over "
+                 f"{self.settings['n_tested']} candidates", "",
+                 f"{'candidate':<24} {'d(-lnL)':>9} {'p':>9} {'dBIC':>9}  per run"
+                 f"{'':<{max(0, 7 * R - 7)}}  shared params"]
+        for c in self.ranking:
+            if not c.testable:
+                lines.append(f"{c.physics:<24} {'-':>9} {'-':>9} {'-':>9}  ({c.reason})")
+                continue
+            per = " ".join(f"{r['delta_neg_log_lik'].get(c.physics, math.nan):6.1f}"
+                           for r in self.runs)
+            ps = ", ".join(f"{k}={v:.4g}" for k, v in c.params.items())
+            lines.append(f"{c.physics:<24} {c.delta_neg_log_lik:9.2f} {c.p_value:9.2g} "
+                         f"{c.delta_bic:9.1f}  {per}  {ps}{'  *' if c.justified else ''}")
+        if self.chosen is not None and self.chosen.params:
+            lines += ["", f"fitted {self.chosen.physics} (shared by the {R} runs):"]
+            for k, v in self.chosen.params.items():
+                lines.append(f"  {k:<10} {v:12.5g} +- {self.chosen.stderr.get(k, math.nan):.2g}")
+        lines += ["", "runs:"]
+        for r in self.runs:
+            lines.append(f"  {str(r['source']):<40} base VAF {r['base']['vaf']:6.2f} %, "
+                         f"-ln L (Eq. 4) {r['base']['neg_log_lik']:.1f}")
+        lines.append(f"time: {self.elapsed:.1f} s")
+        return "\n".join(lines)
+
+    __str__ = summary
+
+    def report(self, directory: str | Path) -> dict[str, Path]:
+        """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``."""
+        import base64
+        import html
+
+        from .report import _png, plot_candidates
+
+        out = Path(directory)
+        out.mkdir(parents=True, exist_ok=True)
+        paths = {"candidates": _png(plot_candidates(self), out / "candidates.png"),
+                 "runs": _png(plot_runs(self), out / "runs.png"),
+                 "json": out / "diagnosis.json"}
+        self.to_json(paths["json"])
+
+        def img(p):
+            data = base64.b64encode(Path(p).read_bytes()).decode("ascii")
+            return f'<img alt="{p.stem}" src="data:image/png;base64,{data}" style="max-width:100%">'
+
+        title = f"bayespilot pooled diagnosis: {html.escape(self.physics)}"
+        page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+                f"<title>{title}</title></head><body style=\"font-family:sans-serif;"
+                f"max-width:1000px;margin:auto\"><h1>{title}</h1>"
+                f"<p>{len(self.runs)} runs; extension parameters shared, pilot parameters per "
+                f"run. Mismatch: <b>{self.mismatch}</b>.</p>"
+                f"<h2>Candidates (pooled)</h2>{img(paths['candidates'])}"
+                f"<h2>Each run's share</h2>{img(paths['runs'])}"
+                f"<pre>{html.escape(self.summary())}</pre></body></html>\n")
+        paths["html"] = out / "report.html"
+        write_text_atomic(paths["html"], page)
+        return paths
+
+
+def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
+    """Each run's improvement of -ln L per candidate at the pooled fit (grouped bars).
+
+    A real omission improves every run a little; one run's artefact improves one run.
+    """
+    from .report import _pyplot
+
+    plt = _pyplot()
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(8, 4))
+    else:
+        fig = ax.figure
+    rows = [c for c in result.ranking if c.testable]
+    R = len(result.runs)
+    width = 0.8 / max(R, 1)
+    for j, r in enumerate(result.runs):
+        d = [r["delta_neg_log_lik"].get(c.physics, math.nan) for c in rows]
+        ax.barh(np.arange(len(rows)) + (j - (R - 1) / 2) * width, d, height=width,
+                label=f"run {j + 1}")
+    ax.axvline(0.0, color="k", lw=0.8)
+    ax.set_yticks(range(len(rows)))
+    ax.set_yticklabels([c.physics for c in rows], fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xscale("symlog", linthresh=1.0)
+    ax.set_xlabel("-ln L(base) - -ln L(pooled extension), per run")
+    ax.set_title(f"Each run's share (decision: {result.physics})")
+    ax.legend(fontsize=7, ncol=min(R, 5))
+    fig.tight_layout()
+    return fig
+
+
+def _pooled_refine(wls, bases, names, shared, start_shared, *, max_nfev: int = 60):
+    """Least squares on the stacked whitened residuals: ``names`` per run, ``shared`` common.
+
+    Each run's residual is scaled by its GLS noise level at the start, which
+    makes the stacked sum of squares the pooled likelihood to first order; a
+    second pass re-scales at the first pass's solution.  (scipy's least
+    squares cannot minimise a sum of logs directly; two passes of this
+    iteratively re-weighted form reach it to well under 0.1 in -ln L.)
+    Returns ``(params per run, pooled -ln L, covariance of the shared parameters)``.
+    """
+    model = wls[0].model
+    R, p, k = len(wls), len(names), len(shared)
+    lo1 = np.array([model.parameter(n).lower for n in names])
+    hi1 = np.array([model.parameter(n).upper for n in names])
+    los = np.array([model.parameter(n).lower for n in shared])
+    his = np.array([model.parameter(n).upper for n in shared])
+    lo = np.concatenate([np.tile(lo1, R), los])
+    hi = np.concatenate([np.tile(hi1, R), his])
+    full = [dict(model.as_dict(model.free_vector(dict(b.params, **start_shared))))
+            for b in bases]
+
+    def params_of(x):
+        out = []
+        for r in range(R):
+            q = dict(full[r])
+            q.update(zip(names, (float(v) for v in x[r * p:(r + 1) * p])))
+            q.update(zip(shared, (float(v) for v in x[R * p:])))
+            out.append(q)
+        return out
+
+    def run_resid(r, q):
+        y = wls[r].lik.response(q)
+        if not np.all(np.isfinite(y)):
+            return None
+        return wls[r].whiten(wls[r].u - y)
+
+    def total(ps):
+        return float(sum(wl.neg_log_lik(q) for wl, q in zip(wls, ps)))
+
+    x = np.concatenate([np.concatenate([[full[r][n] for n in names] for r in range(R)]),
+                        [full[0][n] for n in shared]])
+    span = hi - lo
+    x = np.clip(x, lo + 1e-9 * span, hi - 1e-9 * span)
+    x_start = x.copy()
+    f_start = total(params_of(x_start))
+    J = None
+    for _pass in range(2):
+        ps = params_of(x)
+        scale = []
+        for r in range(R):
+            w = run_resid(r, ps[r])
+            scale.append(1.0 / math.sqrt(max(float(np.mean(w * w)), 1e-300)) if w is not None
+                         else 1.0)
+        big = [1e3 * float(np.std(wl.u)) * s + 1e-300 for wl, s in zip(wls, scale)]
+
+        def resid(x, scale=scale, big=big):
+            qs = params_of(x)
+            parts = []
+            for r in range(R):
+                w = run_resid(r, qs[r])
+                parts.append(np.full(wls[r].m, big[r]) if w is None else w * scale[r])
+            return np.concatenate(parts)
+
+        def jac(x, scale=scale):
+            qs = params_of(x)
+            blocks = np.zeros((sum(wl.m for wl in wls), R * p + k))
+            row = 0
+            for r in range(R):
+                _, Jr = wls[r].lik.jacobian(qs[r], tuple(names) + tuple(shared))
+                m = wls[r].m
+                if np.all(np.isfinite(Jr)):
+                    Jw = -wls[r].whiten(Jr) * scale[r]
+                    blocks[row:row + m, r * p:(r + 1) * p] = Jw[:, :p]
+                    blocks[row:row + m, R * p:] = Jw[:, p:]
+                row += m
+            return blocks
+
+        sol = optimize.least_squares(resid, x, jac=jac, bounds=(lo, hi), method="trf",
+                                     x_scale="jac", max_nfev=max_nfev, xtol=1e-8, ftol=1e-9)
+        x = sol.x
+        J = sol.jac
+    ps = params_of(x)
+    f = total(ps)
+    if not math.isfinite(f) or f > f_start:
+        ps, f = params_of(x_start), f_start
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        cov = linalg.pinvh(J.T @ J) if J is not None else np.full((R * p + k,) * 2, np.nan)
+    return ps, f, cov[R * p:, R * p:]
+
+
+def _pooled_candidate(ext, runs, recordings):
+    """Fit one GLS extension to all runs (shared new parameters) and test it."""
+    from . import decide as D
+
+    missing = sorted({c for rec in recordings for c in ext.needs if c not in rec})
+    if missing:
+        return D.CandidateResult(ext.name, False, f"needs the recording column(s) "
+                                 f"{', '.join(missing)} in every run", df=ext.df), None
+    model = ext.build(runs[0].base_model)
+    wls = [D.Whitened(model, rec, run.noise) for rec, run in zip(recordings, runs)]
+    names = tuple(n for n in model.parameter_names if n not in ext.new_parameters
+                  and (ext.refine_threshold or n != "delta_abs"))
+    best = None
+    for st in ext.starts or ({},):
+        try:
+            got = _pooled_refine(wls, [r.base for r in runs], names, ext.new_parameters, st)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if best is None or got[1] < best[1]:
+            best = got
+    if best is None:
+        return D.CandidateResult(ext.name, False, "the pooled fit failed from every start",
+                                 df=ext.df), None
+    ps, f, cov = best
+    base_total = float(sum(r.base.neg_log_lik for r in runs))
+    d = max(0.0, base_total - f)
+    stat = 2.0 * d
+    p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
+    if ext.boundary_null and ext.df == 1:
+        p *= 0.5  # chi-bar-squared, as for one run
+    m = sum(wl.m for wl in wls)
+    dbic = stat - ext.df * math.log(m)
+    se = np.sqrt(np.clip(np.diag(cov), 0, None))
+    new = {n: ps[0][n] for n in ext.new_parameters}
+    how = (f"pooled GLS likelihood-ratio test over {len(runs)} runs, "
+           + ("0.5 chi2(0) + 0.5 chi2(1) (boundary null)" if ext.boundary_null and ext.df == 1
+              else f"chi2({ext.df})"))
+    res = D.CandidateResult(ext.name, True, how, d, stat, ext.df, p, dbic, dbic / 2.0, new,
+                            {n: float(s) for n, s in zip(ext.new_parameters, se)}, {})
+    res.model = model
+    per_run = [float(r.base.neg_log_lik - wl.neg_log_lik(q)) for r, wl, q in zip(runs, wls, ps)]
+    return res, (ps, per_run)
+
+
+def _pooled_saturation(recordings, runs):
+    """Pool the runs' flat-top tests: exact repeats in any run decide; else Fisher's method."""
+    from . import decide as D
+
+    ext = get_extension("control-saturation")
+    each = [_saturation(rec, run.base_model, run.base, run.where, run.boot_info)
+            for rec, run in zip(recordings, runs)]
+    per_run = [float(c.delta_neg_log_lik) for c in each]
+    if not any(c.params for c in each):
+        return D.CandidateResult(ext.name, True, "no flat tops in u in any run", df=0,
+                                 p_value=1.0), per_run
+    ps = [c.p_value for c in each]
+    p = 0.0 if min(ps) == 0.0 else float(stats.combine_pvalues(ps, method="fisher")[1])
+    d = float(sum(per_run))
+    withtops = [c for c in each if c.params]
+    params = {"u_max": max(c.params["u_max"] for c in withtops),
+              "u_min": min(c.params["u_min"] for c in withtops),
+              "n_censored": float(sum(c.params["n_censored"] for c in withtops))}
+    how = (f"flat tops in {len(withtops)} of {len(each)} runs; "
+           + ("exact repeats have probability 0 under a continuous-noise model" if p == 0.0
+              else "Fisher's combination of the runs' flat-top p-values"))
+    res = D.CandidateResult(ext.name, True, how, d, params["n_censored"], 0, p,
+                            math.inf if p == 0.0 else 2.0 * d, math.inf if p == 0.0 else d,
+                            params, {}, {})
+    return res, per_run
+
+
+@one_blas_thread
+def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float = ALPHA,
+                    n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
+                    skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
+                    n_starts: int = 4, progress: bool = False) -> PooledDiagnosisResult:
+    """Diagnose several runs of one condition together (see the module docs).
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        Two or more runs of the same task and condition (one subject).  Each
+        keeps its own pilot parameters; the extension's parameters are shared.
+    seed : int or None
+        Seeds each run's base fit and bootstrap (run j uses ``seed + j``).
+    alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, progress
+        As for :func:`~bayespilot.diagnose.diagnose`.
+
+    Returns
+    -------
+    PooledDiagnosisResult
+
+    Raises
+    ------
+    ValueError
+        Fewer than two recordings, or a bad setting (named).
+    """
+    from tqdm.auto import tqdm
+
+    recs = list(recordings)
+    if len(recs) < 2:
+        raise ValueError(f"pooling needs at least two recordings, got {len(recs)}")
+    names = None
+    for rec in recs:
+        names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates)
+    t0 = time.perf_counter()
+    bar = tqdm(total=2 * len(recs) + len(names), desc="diagnose (pooled)", unit="stage",
+               disable=not progress)
+    runs = [_prepare(rec, seed=None if seed is None else seed + j, n_bootstrap=n_bootstrap,
+                     base_fit=None, skip_seconds=skip_seconds, omega_c=omega_c,
+                     n_starts=n_starts, profile_noise=False, bar=bar)
+            for j, rec in enumerate(recs)]
+    keys = sorted(set.intersection(*(set(r.where) for r in runs)))
+    where = {}
+    for k in keys:
+        ps = [r.where[k].p_value for r in runs]
+        ok = [min(max(q, 1e-300), 1.0) for q in ps if math.isfinite(q)]
+        where[k] = {"p_value": float(stats.combine_pvalues(ok, method="fisher")[1])
+                    if len(ok) == len(ps) and ok else math.nan,
+                    "values": [r.where[k].value for r in runs]}
+    results, shares, fits = [], {}, {}
+    for name in names:
+        ext = get_extension(name)
+        bar.set_postfix_str(name)
+        if ext.likelihood == "censored":
+            res, shares[name] = _pooled_saturation(recs, runs)
+        else:
+            res, extra = _pooled_candidate(ext, runs, recs)
+            if extra is not None:
+                fits[name], shares[name] = extra
+        sig = [where[k]["p_value"] for k in ext.signature_keys
+               if k in where and math.isfinite(where[k]["p_value"])]
+        res.signature_score = float(max([-math.log10(max(p, 1e-300)) for p in sig],
+                                        default=0.0))
+        results.append(res)
+        bar.update(1)
+    bar.close()
+    ranking, chosen, tested, level = _decide(results, alpha)
+    run_d = []
+    for j, (rec, run) in enumerate(zip(recs, runs)):
+        chosen_params = None
+        if chosen is not None and chosen.physics in fits:
+            chosen_params = fits[chosen.physics][j]
+        run_d.append({"source": rec.source,
+                      "base": {"params": dict(run.base_fit.params),
+                               "neg_log_lik": float(run.base_fit.neg_log_lik),
+                               "vaf": float(run.base_fit.vaf),
+                               "gls_params": dict(run.base.params),
+                               "gls_neg_log_lik": float(run.base.neg_log_lik)},
+                      "where": run.where,
+                      "delta_neg_log_lik": {n: s[j] for n, s in shares.items()},
+                      "params": chosen_params})
+    settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
+                "seed": seed, "n_bootstrap": n_bootstrap, "skip_seconds": skip_seconds,
+                "candidates": list(names), "n_runs": len(recs),
+                "decision_likelihood": "sum over runs of the GLS likelihood (each run's own AR "
+                                       "noise model and level); extension parameters shared"}
+    return PooledDiagnosisResult(chosen is not None, chosen.physics if chosen else "none",
+                                 ranking, run_d, where, chosen, settings,
+                                 time.perf_counter() - t0)
