@@ -12,6 +12,11 @@ A case is "concealed" when the base model's fit looks ordinary: its VAF and
 its residual RMS lie within 3 standard deviations of those of the controls of
 the same task and remnant level.
 
+``--pooled R`` runs the same cases as R runs each (new seeds, the same
+condition and effect) through ``diagnose_pooled``, which shares the
+extension's parameters over the runs; a pooled case is concealed when every
+one of its runs is, judged against the pooled controls' runs.
+
 Run (from the repository root):
 
     nice -n 10 python analyses/prove_diagnose.py --chunk 20     # next 20 cases
@@ -19,6 +24,9 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --profile-noise --shard 0/2   # the same study with
     python analyses/prove_diagnose.py --profile-noise --shard 1/2   # profile_noise=True, 2 cores
     python analyses/prove_diagnose.py --width-profile 177,181,215   # soft-threshold -ln L by width
+    python analyses/prove_diagnose.py --pooled 4 --shard 0/2   # four runs per case, pooled
+    python analyses/prove_diagnose.py --pooled 4 --shard 1/2   # (diagnose_pooled), 2 cores
+    python analyses/prove_diagnose.py --example-pooled         # the docs' pooled walk-through
 
 The case list is ordered round-robin over the entries and the controls (with
 the conditions shuffled by a fixed seed), so any prefix of it is a balanced
@@ -48,6 +56,8 @@ FIG = ROOT / "docs" / "figures"
 FIG_SUFFIX = ""
 #: diagnose(profile_noise=...) of the study (``--profile-noise`` sets it).
 PROFILE_NOISE = False
+#: Runs per case of the pooled study (``--pooled R`` sets it; 0: one run, ``diagnose``).
+POOLED = 0
 
 #: Effect sizes per entry, smallest effect first: (label, parameters).
 EFFECTS = {
@@ -154,10 +164,55 @@ def simulate_case(c: dict):
     return sim, extra
 
 
+def pooled_seed(c: dict, j: int) -> int:
+    """Seed of run ``j`` of a pooled case (apart from every single-run case's seed)."""
+    return 500000 + 10 * c["id"] + j
+
+
+def run_pooled_case(c: dict) -> dict:
+    """``diagnose_pooled`` on POOLED runs of the case's condition and effect (new seeds)."""
+    from bayespilot.diagnose import diagnose_pooled
+    from bayespilot.recording import Recording
+
+    recs, remnant, extra = [], [], {}
+    for j in range(POOLED):
+        sim, extra = simulate_case(dict(c, seed=pooled_seed(c, j)))
+        rec = sim.recording
+        meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+        recs.append(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta,
+                              f"run{j + 1}"))
+        remnant.append(float(np.var(sim.remnant) / np.var(rec.u)))
+    t0 = time.perf_counter()
+    res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP)
+    el = time.perf_counter() - t0
+    vafs = [r["base"]["vaf"] for r in res.runs]
+    rms = []
+    for rec, r in zip(recs, res.runs):
+        from bayespilot.likelihood import Likelihood
+        from bayespilot.model import paper_model
+
+        eps = Likelihood(paper_model(), rec).residual(r["base"]["gls_params"])
+        rms.append(float(np.sqrt(np.mean(eps ** 2))))
+    return {"case": dict(c), "runs": POOLED, "true_params": extra,
+            "remnant_fraction": float(np.mean(remnant)),
+            "decision": res.physics, "mismatch": res.mismatch,
+            "base_vaf": float(np.mean(vafs)), "residual_rms": float(np.mean(rms)),
+            "base_vafs": vafs, "residual_rmss": rms,
+            "ranking": [{"physics": r.physics, "delta_neg_log_lik": r.delta_neg_log_lik,
+                         "p_value": r.p_value, "params": r.params,
+                         "per_run": [x["delta_neg_log_lik"].get(r.physics) for x in res.runs]}
+                        for r in res.ranking],
+            "chosen_params": res.chosen.params if res.chosen else None,
+            "chosen_stderr": res.chosen.stderr if res.chosen else None,
+            "elapsed_seconds": el}
+
+
 def run_case(c: dict) -> dict:
     from bayespilot.diagnose import diagnose
     from bayespilot.recording import Recording
 
+    if POOLED:
+        return run_pooled_case(c)
     sim, extra = simulate_case(c)
     rec = sim.recording
     # blind: only what a lab recording would have (the simulator's notes go too)
@@ -227,8 +282,15 @@ def summarize() -> dict:
         if len(cs) >= 2:
             ok = True
             for key in ("base_vaf", "residual_rms"):
-                v = np.array([c[key] for c in cs])
-                ok &= abs(r[key] - v.mean()) <= 3 * max(v.std(ddof=1), 1e-12)
+                # pooled cases: every run against the controls' runs
+                many = key + "s"
+                if many in r:
+                    v = np.concatenate([c[many] for c in cs])
+                    mine = np.asarray(r[many])
+                else:
+                    v = np.array([c[key] for c in cs])
+                    mine = np.asarray([r[key]])
+                ok &= bool(np.all(np.abs(mine - v.mean()) <= 3 * max(v.std(ddof=1), 1e-12)))
             r["concealed"] = bool(ok)
         else:
             r["concealed"] = None
@@ -330,7 +392,7 @@ def summarize() -> dict:
                "detection_curves": {e: [{"effect": lab, "correct": k, "n": n, "concealed": c}
                                         for lab, k, n, c in row] for e, row in curves.items()},
                "median_seconds": float(np.median(times)), "alpha_sweep": sweep}
-    if PROFILE_NOISE:
+    if PROFILE_NOISE or POOLED:
         summary["paired_with_default"] = paired_with_default(rs)
     (OUT / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
@@ -433,6 +495,45 @@ def example() -> None:
     (ex / "summary.txt").write_text(res.summary() + "\n")
 
 
+def example_pooled() -> None:
+    """The pooled walk-through of docs/diagnose.md: a weak washout, one run against four.
+
+    Four runs (FD, K_theta = 1, F_n = 0.25, omega_w = 0.15 rad/s) diagnosed one
+    at a time and together; writes docs/figures/diagnose_pooled_runs.png and
+    diagnose_pooled_candidates.png and analyses/results/diagnose_pooled/example.txt.
+    """
+    import shutil
+
+    from bayespilot.diagnose import diagnose, diagnose_pooled
+    from bayespilot.recording import Recording
+
+    recs = []
+    for j in range(4):
+        c = {"truth": "motion-washout", "effect": "omega_w=0.15", "extra": {"omega_w": 0.15},
+             "task": "FD", "K_theta": 1.0, "F_n": 0.25, "seed": 50000 + j, "id": -1}
+        rec = simulate_case(c)[0].recording
+        meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+        recs.append(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta,
+                              f"run{j + 1}"))
+    lines = ["one run at a time:"]
+    for rec in recs:
+        r = diagnose(rec, seed=0, n_bootstrap=9)
+        w = next(x for x in r.ranking if x.physics == "motion-washout")
+        lines.append(f"  {rec.source}: decision {r.physics}; washout d(-ln L) = "
+                     f"{w.delta_neg_log_lik:.2f}, p = {w.p_value:.3g}")
+    res = diagnose_pooled(recs, seed=0, n_bootstrap=9)
+    lines += ["", res.summary()]
+    text = "\n".join(lines)
+    print(text)
+    out = ROOT / "analyses" / "results" / "diagnose_pooled"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "example.txt").write_text(text + "\n")
+    paths = res.report(out / "example_report")
+    FIG.mkdir(parents=True, exist_ok=True)
+    for key in ("runs", "candidates"):
+        shutil.copy(paths[key], FIG / f"diagnose_pooled_{key}.png")
+
+
 def width_profile(ids: list[int]) -> None:
     """-ln L of the soft dead zone over fixed corner widths, against the crisp dead zone.
 
@@ -477,17 +578,29 @@ def main(argv=None) -> int:
     ap.add_argument("--summarize", action="store_true", help="only print and plot the summary")
     ap.add_argument("--example", action="store_true",
                     help="diagnose the docs' example (a concealed washout) and write its figures")
+    ap.add_argument("--example-pooled", action="store_true",
+                    help="a weak washout in four runs, diagnosed one at a time and pooled; "
+                         "writes docs/figures/diagnose_pooled_*.png")
     ap.add_argument("--profile-noise", action="store_true",
                     help="diagnose with profile_noise=True (the AR noise model re-estimated "
                          "with each fit); results in analyses/results/diagnose_profile_noise/, "
                          "figures with the suffix _profile_noise")
+    ap.add_argument("--pooled", type=int, default=0, metavar="R",
+                    help="diagnose R runs of each case's condition together (diagnose_pooled, "
+                         "new seeds); results in analyses/results/diagnose_pooled/, figures "
+                         "with the suffix _pooled")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
     ap.add_argument("--width-profile", metavar="IDS",
                     help="-ln L over fixed soft-threshold widths for these threshold-shape "
                          "case ids (comma-separated), against the crisp dead zone")
     args = ap.parse_args(argv)
-    global OUT, FIG_SUFFIX, PROFILE_NOISE
+    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED
+    if args.pooled:
+        if args.pooled < 2 or args.profile_noise:
+            ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
+        OUT = ROOT / "analyses" / "results" / "diagnose_pooled"
+        FIG_SUFFIX, POOLED = "_pooled", args.pooled
     if args.profile_noise:
         OUT = ROOT / "analyses" / "results" / "diagnose_profile_noise"
         FIG_SUFFIX, PROFILE_NOISE = "_profile_noise", True
@@ -499,6 +612,9 @@ def main(argv=None) -> int:
         ap.error(f"--shard: K/N with 0 <= K < N, got {args.shard!r}")
     if args.example:
         example()
+        return 0
+    if args.example_pooled:
+        example_pooled()
         return 0
     if args.width_profile:
         width_profile([int(v) for v in args.width_profile.split(",")])

@@ -1,10 +1,11 @@
 """Time one ``diagnose`` at N = 8192 on one core (issue 5, target <= 2 min).
 
-Run:  python benchmarks/bench_diagnose.py [--repeats 1] [--bootstrap 39]
+Run:  python benchmarks/bench_diagnose.py [--repeats 1] [--bootstrap 39] [--runs R]
 
 Simulates task FD, K_theta = 1, K_n = 0.104 (F_n ~ 0.2, Table 4) with the
 paper's model, loads the kernels once (a short diagnose), then times the full
 diagnosis with numba limited to one thread; prints the wall time per stage.
+``--runs R`` (R >= 2) times ``diagnose_pooled`` on R such runs (seeds 3, 4, ...).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import time
 import numba
 import numpy as np
 
-from bayespilot.diagnose import diagnose
+from bayespilot.diagnose import diagnose, diagnose_pooled
 from bayespilot.simulate import simulate
 
 
@@ -25,19 +26,30 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--bootstrap", type=int, default=39)
+    ap.add_argument("--runs", type=int, default=1, help="R >= 2: time diagnose_pooled on R runs")
     args = ap.parse_args(argv)
     numba.set_num_threads(1)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; "
           f"numba threads {numba.get_num_threads()}; load {os.getloadavg()}")
-    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=3).recording
+    recs = [simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=3 + j).recording
+            for j in range(max(args.runs, 1))]
+    rec = recs[0]
     warm = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=4, duration=20.0).recording
     diagnose(warm, n_bootstrap=1)  # compile / load every kernel once
     ts = []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
-        res = diagnose(rec, seed=0, n_bootstrap=args.bootstrap)
+        if args.runs > 1:
+            res = diagnose_pooled(recs, seed=0, n_bootstrap=args.bootstrap)
+        else:
+            res = diagnose(rec, seed=0, n_bootstrap=args.bootstrap)
         ts.append(time.perf_counter() - t0)
-    print(f"N = {rec.n_samples}, bootstrap B = {args.bootstrap}: decision {res.physics}")
+    runs = f"{args.runs} runs pooled, " if args.runs > 1 else ""
+    print(f"N = {rec.n_samples}, {runs}bootstrap B = {args.bootstrap}: decision {res.physics}")
+    if args.runs > 1:
+        print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
+        print(f"load at the end: {os.getloadavg()}")
+        return
     print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
     print("stages (last run): " + ", ".join(f"{k} {v:.1f} s"
                                             for k, v in res.settings["timings"].items()))
