@@ -534,6 +534,29 @@ def example_pooled() -> None:
         shutil.copy(paths[key], FIG / f"diagnose_pooled_{key}.png")
 
 
+def threshold_null() -> None:
+    """threshold-shape's test on the controls alone: is its statistic chi-bar-squared?
+
+    Runs ``diagnose`` with only that candidate (no bootstrap) on every control
+    and prints the mean -ln L improvement (0.25 under 0.5 chi2(0) + 0.5 chi2(1))
+    and the share of p-values below 0.05 and 0.01.
+    """
+    from bayespilot.diagnose import diagnose
+
+    ds, ps = [], []
+    for c in cases():
+        if c["truth"] != "none":
+            continue
+        res = diagnose(simulate_case(c)[0].recording, seed=0, n_bootstrap=0,
+                       candidates=["threshold-shape"])
+        ds.append(res.ranking[0].delta_neg_log_lik)
+        ps.append(res.ranking[0].p_value)
+    ds, ps = np.array(ds), np.array(ps)
+    print(f"threshold-shape on {ds.size} controls: mean d(-ln L) {ds.mean():.3f} (chi-bar-squared "
+          f"null: 0.25), median {np.median(ds):.3f}; p < 0.05: {np.sum(ps < 0.05)}, "
+          f"p < 0.01: {np.sum(ps < 0.01)}, min p {ps.min():.3g}")
+
+
 def width_profile(ids: list[int]) -> None:
     """-ln L of the soft dead zone over fixed corner widths, against the crisp dead zone.
 
@@ -578,6 +601,8 @@ def main(argv=None) -> int:
     ap.add_argument("--summarize", action="store_true", help="only print and plot the summary")
     ap.add_argument("--example", action="store_true",
                     help="diagnose the docs' example (a concealed washout) and write its figures")
+    ap.add_argument("--threshold-null", action="store_true",
+                    help="threshold-shape's test alone on the controls: its null distribution")
     ap.add_argument("--example-pooled", action="store_true",
                     help="a weak washout in four runs, diagnosed one at a time and pooled; "
                          "writes docs/figures/diagnose_pooled_*.png")
@@ -612,6 +637,9 @@ def main(argv=None) -> int:
         ap.error(f"--shard: K/N with 0 <= K < N, got {args.shard!r}")
     if args.example:
         example()
+        return 0
+    if args.threshold_null:
+        threshold_null()
         return 0
     if args.example_pooled:
         example_pooled()

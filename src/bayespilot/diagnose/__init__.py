@@ -372,13 +372,21 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     # -- name
     t2 = time.perf_counter()
     results = []
+    refined = None
     for name in names:
         ext = get_extension(name)
         bar.set_postfix_str(name)
         if ext.likelihood == "censored":
             res = _saturation(recording, base_model, base, where, boot_info)
         else:
-            res, _ = D.fit_candidate(ext, base_model, recording, base, noise,
+            ref = base
+            if ext.refine_threshold:
+                # the entry refines delta_abs, which the base fit only scanned on a grid:
+                # its reference gets the same freedom (else that alone is its "improvement")
+                if refined is None:
+                    refined = D.refine_threshold(base_model, recording, base, noise)
+                ref = refined
+            res, _ = D.fit_candidate(ext, base_model, recording, ref, noise,
                                      profile_noise=profile_noise)
         sig = [where[k].p_value for k in ext.signature_keys
                if k in where and math.isfinite(where[k].p_value)]

@@ -63,7 +63,7 @@ from ..recording import Recording
 from .catalogue import Extension
 
 __all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "CandidateResult", "fit_base_gls",
-           "fit_candidate", "flat_tops", "fit_censored"]
+           "fit_candidate", "refine_threshold", "flat_tops", "fit_censored"]
 
 #: Cut-off of the decision likelihood's low-pass, rad/s.
 OMEGA_C = 25.0
@@ -413,6 +413,20 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
     res.fit = best
     res.model = model
     return res, wl
+
+
+def refine_threshold(model: PilotModel, recording: Recording, base: FitSummary,
+                     noise: NoiseModel) -> FitSummary:
+    """The GLS base fit with delta_abs refined too (from the scan's value), never worse.
+
+    The reference of an extension that refines delta_abs (``threshold-shape``):
+    against the scanned base, the continuous refinement of delta_abs alone
+    improved correct-model fits by about 0.2 in -ln L per run (twice the
+    chi-bar-squared null's mean in the single-run proof study's controls).
+    """
+    wl = Whitened(model, recording, noise)
+    fit = _gls_refine(wl, base.params, model.parameter_names)
+    return fit if fit.neg_log_lik < base.neg_log_lik else base
 
 
 # --- control saturation -------------------------------------------------------------------
