@@ -48,8 +48,32 @@ ALPHA = 0.01
 SKIP_SECONDS = 5.0
 
 
+def _json_ready(x):
+    """Nested dicts and lists with numpy scalars as Python numbers, non-finite floats as None."""
+    if isinstance(x, dict):
+        return {k: _json_ready(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_ready(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+class _JSONSummary:
+    """``to_json`` for a result that has ``to_dict``."""
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        """The JSON summary as text; also written to ``path`` when given."""
+        text = json.dumps(self.to_dict(), indent=1)
+        if path is not None:
+            write_text_atomic(path, text)
+        return text
+
+
 @dataclass
-class DiagnosisResult:
+class DiagnosisResult(_JSONSummary):
     """What :func:`diagnose` found.
 
     Attributes
@@ -97,30 +121,13 @@ class DiagnosisResult:
                       "vaf_before": self.arrays.get("before_vaf"),
                       "vaf_after": self.arrays.get("after_vaf")}
 
-        def clean(x):
-            if isinstance(x, dict):
-                return {k: clean(v) for k, v in x.items()}
-            if isinstance(x, (list, tuple)):
-                return [clean(v) for v in x]
-            if isinstance(x, (float, np.floating)):
-                return float(x) if math.isfinite(x) else None
-            if isinstance(x, np.integer):
-                return int(x)
-            return x
 
-        return clean({
+        return _json_ready({
             "mismatch": self.mismatch, "physics": self.physics,
             "ranking": [c.to_dict() for c in self.ranking],
             "where": {k: e.to_dict() for k, e in self.where.items()},
             "base": self.base, "chosen": chosen, "settings": self.settings,
             "elapsed_seconds": self.elapsed, "source": self.source})
-
-    def to_json(self, path: str | Path | None = None) -> str:
-        """The JSON summary as text; also written to ``path`` when given."""
-        text = json.dumps(self.to_dict(), indent=1)
-        if path is not None:
-            write_text_atomic(path, text)
-        return text
 
     def summary(self) -> str:
         """A readable account: the decision, the ranking, the located evidence."""

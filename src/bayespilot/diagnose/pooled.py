@@ -28,7 +28,6 @@ over the runs (Fisher's method).
 
 from __future__ import annotations
 
-import json
 import math
 import time
 import warnings
@@ -41,14 +40,15 @@ from scipy import linalg, optimize, stats
 
 from .._blas import one_blas_thread
 from .._files import write_text_atomic
-from . import ALPHA, SKIP_SECONDS, _check, _decide, _prepare, _saturation
+from . import (ALPHA, SKIP_SECONDS, _check, _decide, _json_ready, _JSONSummary, _prepare,
+               _saturation)
 from .catalogue import get_extension
 
 __all__ = ["diagnose_pooled", "PooledDiagnosisResult"]
 
 
 @dataclass
-class PooledDiagnosisResult:
+class PooledDiagnosisResult(_JSONSummary):
     """What :func:`diagnose_pooled` found.
 
     Attributes
@@ -91,32 +91,14 @@ class PooledDiagnosisResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``runs``, ... ."""
-        def clean(x):
-            if isinstance(x, dict):
-                return {k: clean(v) for k, v in x.items()}
-            if isinstance(x, (list, tuple)):
-                return [clean(v) for v in x]
-            if isinstance(x, (float, np.floating)):
-                return float(x) if math.isfinite(x) else None
-            if isinstance(x, np.integer):
-                return int(x)
-            return x
-
         runs = [dict(r, where={k: e.to_dict() for k, e in r["where"].items()})
                 for r in self.runs]
         chosen = None if self.chosen is None else self.chosen.to_dict()
-        return clean({"mismatch": self.mismatch, "physics": self.physics, "pooled": True,
+        return _json_ready({"mismatch": self.mismatch, "physics": self.physics, "pooled": True,
                       "n_runs": len(self.runs),
                       "ranking": [c.to_dict() for c in self.ranking],
                       "where": self.where, "runs": runs, "chosen": chosen,
                       "settings": self.settings, "elapsed_seconds": self.elapsed})
-
-    def to_json(self, path: str | Path | None = None) -> str:
-        """The JSON summary as text; also written to ``path`` when given."""
-        text = json.dumps(self.to_dict(), indent=1)
-        if path is not None:
-            write_text_atomic(path, text)
-        return text
 
     def summary(self) -> str:
         """A readable account: the decision, the ranking, each run's share."""
@@ -187,13 +169,9 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
 
     A real omission improves every run a little; one run's artefact improves one run.
     """
-    from .report import _pyplot
+    from .report import _figure_and_axes
 
-    plt = _pyplot()
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(8, 4))
-    else:
-        fig = ax.figure
+    fig, ax = _figure_and_axes(ax)
     rows = [c for c in result.ranking if c.testable]
     R = len(result.runs)
     width = 0.8 / max(R, 1)

@@ -169,15 +169,18 @@ def plot_evidence(result, ax: Any = None):
     return fig
 
 
+def _figure_and_axes(ax: Any = None, figsize=(8, 4)):
+    """``(figure, axes)``: the given axes and their figure, or a new figure of ``figsize``."""
+    if ax is None:
+        return _pyplot().subplots(figsize=figsize)
+    return ax.figure, ax
+
+
 def plot_candidates(result, ax: Any = None):
     """Fit improvement of each candidate on the decision likelihood, with the test's threshold."""
     from scipy import stats
 
-    plt = _pyplot()
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(8, 4))
-    else:
-        fig = ax.figure
+    fig, ax = _figure_and_axes(ax)
     rows = [c for c in result.ranking if c.testable]
     level = result.settings["level_per_candidate"]
     names = [c.physics for c in rows]
