@@ -172,6 +172,8 @@ def pooled_seed(c: dict, j: int) -> int:
 def run_pooled_case(c: dict) -> dict:
     """``diagnose_pooled`` on POOLED runs of the case's condition and effect (new seeds)."""
     from bayespilot.diagnose import diagnose_pooled
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
     from bayespilot.recording import Recording
 
     recs, remnant, extra = [], [], {}
@@ -188,9 +190,6 @@ def run_pooled_case(c: dict) -> dict:
     vafs = [r["base"]["vaf"] for r in res.runs]
     rms = []
     for rec, r in zip(recs, res.runs):
-        from bayespilot.likelihood import Likelihood
-        from bayespilot.model import paper_model
-
         eps = Likelihood(paper_model(), rec).residual(r["base"]["gls_params"])
         rms.append(float(np.sqrt(np.mean(eps ** 2))))
     return {"case": dict(c), "runs": POOLED, "true_params": extra,

@@ -83,12 +83,6 @@ class PooledDiagnosisResult(_JSONSummary):
     elapsed: float
     arrays: dict = field(default_factory=dict, repr=False)
 
-    @property
-    def base(self) -> dict:
-        """The runs' summed base-model figures (for the shared report helpers)."""
-        return {"neg_log_lik": float(sum(r["base"]["neg_log_lik"] for r in self.runs)),
-                "vaf": float(np.mean([r["base"]["vaf"] for r in self.runs]))}
-
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``runs``, ... ."""
         runs = [dict(r, where={k: e.to_dict() for k, e in r["where"].items()})
