@@ -27,6 +27,7 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --pooled 4 --shard 0/2   # four runs per case, pooled
     python analyses/prove_diagnose.py --pooled 4 --shard 1/2   # (diagnose_pooled), 2 cores
     python analyses/prove_diagnose.py --example-pooled         # the docs' pooled walk-through
+    python analyses/prove_diagnose.py --pooled-null 100        # pooled vs one-run null tests
 
 The case list is ordered round-robin over the entries and the controls (with
 the conditions shuffled by a fixed seed), so any prefix of it is a balanced
@@ -556,6 +557,79 @@ def threshold_null() -> None:
           f"p < 0.01: {np.sum(ps < 0.01)}, min p {ps.min():.3g}")
 
 
+#: The one-parameter boundary-null entries whose null distributions ``--pooled-null`` measures.
+NULL_ENTRIES = ("motion-washout", "motion-system-dynamics")
+
+
+def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
+    """The pooled tests' null distributions beside one run's, on the same runs.
+
+    ``n_cases`` new pooled controls (the paper's model, no extra physics;
+    conditions in turn over CONDITIONS, seeds apart from every other study's),
+    four runs each.  Per case: each run's base stages without bootstrap, then
+    for each entry of NULL_ENTRIES the pooled test (shared parameter) and the
+    one-run test of every run, from the same base fits.  One JSON line per case
+    in ``analyses/results/diagnose_pooled/null_study.jsonl`` (resumable; the
+    shards append to their own files); prints the mean -ln L improvement
+    (0.25 under 0.5 chi2(0) + 0.5 chi2(1)) and the shares of p below 0.05
+    and 0.01 with their binomial bands.
+    """
+    from tqdm import tqdm
+
+    from bayespilot.diagnose import SKIP_SECONDS, _prepare
+    from bayespilot.diagnose import decide as D
+    from bayespilot.diagnose.catalogue import get_extension
+    from bayespilot.diagnose.pooled import _pooled_candidate
+    from bayespilot.recording import Recording
+
+    out = ROOT / "analyses" / "results" / "diagnose_pooled"
+    out.mkdir(parents=True, exist_ok=True)
+    k, n = shard
+    path = out / (f"null_study_{k}of{n}.jsonl" if n > 1 else "null_study.jsonl")
+    done = {json.loads(line)["id"] for f in out.glob("null_study*.jsonl")
+            for line in f.read_text().splitlines() if line.strip()}
+    todo = [i for i in range(n_cases) if i % n == k and i not in done]
+    for i in tqdm(todo, desc="pooled null", unit="case"):
+        task, kt, fn = CONDITIONS[i % len(CONDITIONS)]
+        c = {"id": 100000 + i, "truth": "none", "effect": "control", "extra": {},
+             "task": task, "K_theta": kt, "F_n": fn}
+        recs = []
+        for j in range(4):
+            rec = simulate_case(dict(c, seed=900000 + 10 * i + j))[0].recording
+            recs.append(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, {},
+                                  f"run{j + 1}"))
+        runs = [_prepare(rec, seed=j, n_bootstrap=0, base_fit=None, skip_seconds=SKIP_SECONDS,
+                         omega_c=D.OMEGA_C, n_starts=4, profile_noise=False,
+                         bar=tqdm(disable=True)) for j, rec in enumerate(recs)]
+        row = {"id": i, "task": task, "K_theta": kt, "F_n": fn}
+        for name in NULL_ENTRIES:
+            ext = get_extension(name)
+            pooled, _ = _pooled_candidate(ext, runs, recs)
+            single = [D.fit_candidate(ext, r.base_model, rec, r.base, r.noise)[0]
+                      for rec, r in zip(recs, runs)]
+            row[name] = {"pooled": [pooled.delta_neg_log_lik, pooled.p_value,
+                                    pooled.params.get(ext.new_parameters[0])],
+                         "single": [[s.delta_neg_log_lik, s.p_value,
+                                     s.params.get(ext.new_parameters[0])] for s in single]}
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+    rows = [json.loads(line) for f in sorted(out.glob("null_study*.jsonl"))
+            for line in f.read_text().splitlines() if line.strip()]
+    print(f"{len(rows)} pooled controls of 4 runs (and their {4 * len(rows)} runs one at a time)")
+    for name in NULL_ENTRIES:
+        for label, vals in (("pooled", [r[name]["pooled"] for r in rows]),
+                            ("one run", [s for r in rows for s in r[name]["single"]])):
+            d = np.array([v[0] for v in vals])
+            p = np.array([v[1] for v in vals])
+            m = d.size
+            band = lambda q: 2.0 * np.sqrt(q * (1 - q) / m)  # noqa: E731
+            print(f"{name:<24} {label:<8} n={m:4d}  mean d(-ln L) {d.mean():.3f} +- "
+                  f"{2 * d.std(ddof=1) / np.sqrt(m):.3f} (null 0.25)  "
+                  f"p<0.05: {np.mean(p < 0.05):.3f} (0.05 +- {band(0.05):.3f})  "
+                  f"p<0.01: {np.mean(p < 0.01):.3f} (0.01 +- {band(0.01):.3f})  "
+                  f"at the bound: {np.mean(d <= 0.0):.2f}")
+
+
 def width_profile(ids: list[int]) -> None:
     """-ln L of the soft dead zone over fixed corner widths, against the crisp dead zone.
 
@@ -615,6 +689,9 @@ def main(argv=None) -> int:
                          "with the suffix _pooled")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
+    ap.add_argument("--pooled-null", type=int, default=0, metavar="N",
+                    help="N new pooled controls (four runs each): the pooled washout and "
+                         "platform tests' null distributions beside one run's on the same runs")
     ap.add_argument("--width-profile", metavar="IDS",
                     help="-ln L over fixed soft-threshold widths for these threshold-shape "
                          "case ids (comma-separated), against the crisp dead zone")
@@ -642,6 +719,9 @@ def main(argv=None) -> int:
         return 0
     if args.example_pooled:
         example_pooled()
+        return 0
+    if args.pooled_null:
+        pooled_null(args.pooled_null, (k, n))
         return 0
     if args.width_profile:
         width_profile([int(v) for v in args.width_profile.split(",")])
