@@ -42,6 +42,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -59,6 +60,9 @@ FIG_SUFFIX = ""
 PROFILE_NOISE = False
 #: Runs per case of the pooled study (``--pooled R`` sets it; 0: one run, ``diagnose``).
 POOLED = 0
+#: Cut-off of the decision likelihood's low-pass, rad/s (``--omega-c`` sets it; None:
+#: the package default; inf: the whole band).
+OMEGA_C = None
 
 #: Effect sizes per entry, smallest effect first: (label, parameters).
 EFFECTS = {
@@ -186,7 +190,7 @@ def run_pooled_case(c: dict) -> dict:
                               f"run{j + 1}"))
         remnant.append(float(np.var(sim.remnant) / np.var(rec.u)))
     t0 = time.perf_counter()
-    res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP)
+    res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP, omega_c=OMEGA_C)
     el = time.perf_counter() - t0
     vafs = [r["base"]["vaf"] for r in res.runs]
     rms = []
@@ -219,7 +223,8 @@ def run_case(c: dict) -> dict:
     meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
     rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
     t0 = time.perf_counter()
-    res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP, profile_noise=PROFILE_NOISE)
+    res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP, profile_noise=PROFILE_NOISE,
+                   omega_c=OMEGA_C)
     el = time.perf_counter() - t0
     resid = res.arrays["residual"]
     return {"case": {k: v for k, v in c.items()}, "true_params": extra,
@@ -262,17 +267,9 @@ def load() -> list[dict]:
     return [json.loads(p.read_text()) for p in sorted(OUT.glob("[0-9]*.json"))]
 
 
-def summarize() -> dict:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rs = load()
-    if not rs:
-        print("no results yet")
-        return {}
-    # concealment against controls of the same task and remnant level
+def mark_concealed(rs: list[dict]) -> None:
+    """Set ``r["concealed"]``: VAF and residual RMS within 3 sd of the controls of the same
+    task and remnant level (every run of a pooled case); None with fewer than 2 controls."""
     ctl: dict[tuple, list] = {}
     for r in rs:
         if r["case"]["truth"] == "none":
@@ -294,6 +291,19 @@ def summarize() -> dict:
             r["concealed"] = bool(ok)
         else:
             r["concealed"] = None
+
+
+def summarize() -> dict:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rs = load()
+    if not rs:
+        print("no results yet")
+        return {}
+    mark_concealed(rs)
     labels = ["none", *EFFECTS]
     cols = labels
     conf = {t: {d: 0 for d in cols} for t in labels}
@@ -392,7 +402,7 @@ def summarize() -> dict:
                "detection_curves": {e: [{"effect": lab, "correct": k, "n": n, "concealed": c}
                                         for lab, k, n, c in row] for e, row in curves.items()},
                "median_seconds": float(np.median(times)), "alpha_sweep": sweep}
-    if PROFILE_NOISE or POOLED:
+    if PROFILE_NOISE or POOLED or OMEGA_C is not None:
         summary["paired_with_default"] = paired_with_default(rs)
     (OUT / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
@@ -439,7 +449,7 @@ def alpha_sweep(rs: list[dict], alphas=(0.01, 0.02, 0.05)) -> list[dict]:
 
 
 def paired_with_default(rs: list[dict]) -> dict:
-    """Decisions of this (profile-noise) study beside the default study's on the same cases."""
+    """Decisions of this (profile-noise, pooled or other-band) study beside the default study's on the same cases."""
     out = {"cases": 0, "same": 0, "gained": [], "lost": [], "changed_wrong": []}
     for r in rs:
         key = case_key(r["case"])
@@ -630,6 +640,210 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
                   f"at the bound: {np.mean(d <= 0.0):.2f}")
 
 
+def oracle(shard: tuple[int, int] = (0, 1)) -> None:
+    """How many concealed cases could any likelihood-ratio test name at the decision's level?
+
+    Per effect case: the base stages of ``diagnose`` (fast fit, noise model, GLS
+    fit) on the case's recording give the innovation variance s2 of the
+    decision likelihood; then the true extended model's noise-free response
+    at the true parameters, y_ext (on the recording's own e and motion), is
+    fitted by the base model under the same noise model.  Its whitened misfit
+    over s2 is the noncentrality lambda of the likelihood-ratio statistic
+    (2 d(-ln L) ~ noncentral chi2(df, lambda) for a small effect), so the
+    power of the optimal test of that extension at the decision's
+    per-candidate level (alpha over six candidates, the chi-bar-squared
+    critical value for the boundary nulls) is 1 - ncx2.cdf(crit, df, lambda).
+    Summed over the concealed cases it is the number that a test of the
+    right extension, knowing which one to test, would name on average: an
+    upper bound of the study's rate at that level.  Both the default
+    decision likelihood (low-passed at 25 rad/s) and the whole band are
+    measured.  Saturation is left out (flat tops decide it; it is found at
+    every size).  One JSON line per case in ``OUT/oracle.jsonl`` (resumable).
+    """
+    from scipy import stats
+    from tqdm import tqdm
+
+    from bayespilot.diagnose import ALPHA, SKIP_SECONDS, _base_gls, get_extension
+    from bayespilot.diagnose import decide as D
+    from bayespilot.fit.fast import fit_fast
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
+    from bayespilot import presets
+    from bayespilot.recording import Recording
+
+    import numba
+
+    numba.set_num_threads(1)
+    k, n = shard
+    out = DEFAULT_OUT / (f"oracle_{k}of{n}.jsonl" if n > 1 else "oracle.jsonl")
+    done = {json.loads(line)["id"] for f in DEFAULT_OUT.glob("oracle*.jsonl")
+            for line in f.read_text().splitlines() if line.strip()}
+    todo = [c for c in cases() if c["truth"] not in ("none", "control-saturation")
+            and c["id"] % n == k and c["id"] not in done]
+    level = ALPHA / 6
+    for c in tqdm(todo, desc="oracle", unit="case"):
+        sim, extra = simulate_case(c)
+        rec = sim.recording
+        base_model = paper_model()
+        ext = get_extension(c["truth"])
+        ext_model = ext.build(base_model)
+        truth = dict(presets.paper_parameters(c["task"]), **extra)
+        y_ext = Likelihood(ext_model, rec).response(truth)
+        signals = dict(rec.signals, u=y_ext)
+        clean = Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, {}, "clean")
+        fit = fit_fast(rec, base_model, seed=0, n_starts=4, profile_step=0.005)
+        start = {q: v for q, v in fit.params.items() if q in base_model.parameter_names}
+        skip = int(round(SKIP_SECONDS * rec.sample_rate_hz))
+        row = {"id": c["id"], "truth": c["truth"], "effect": c["effect"], "task": c["task"],
+               "K_theta": c["K_theta"], "F_n": c["F_n"], "df": ext.df}
+        for tag, om in (("lowpass", D.OMEGA_C), ("fullband", math.inf)):
+            _, noise, base = _base_gls(rec, base_model, start, skip=skip, omega_c=om)
+            s2 = math.exp(2.0 * base.neg_log_lik / D.Whitened(base_model, rec, noise).m - 1.0)
+            base_truth = {q: truth[q] for q in base_model.parameter_names}
+            wl, misfit = D.fit_base_gls(base_model, clean, base_truth, noise)
+            ms = math.exp(2.0 * misfit.neg_log_lik / wl.m - 1.0)
+            lam = wl.m * ms / s2
+            if ext.boundary_null and ext.df == 1:
+                crit = float(stats.chi2.isf(2.0 * level, 1))
+            else:
+                crit = float(stats.chi2.isf(level, ext.df))
+            row[tag] = {"lambda": lam, "power": float(stats.ncx2.sf(crit, ext.df, max(lam, 1e-12)))}
+        with open(out, "a") as f:
+            f.write(json.dumps(row) + "\n")
+    rows = [json.loads(line) for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl"))
+            for line in f.read_text().splitlines() if line.strip()]
+    _oracle_table(rows)
+
+
+def _oracle_table(rows: list[dict]) -> None:
+    """The oracle's expected naming against the default study's, per entry and size; also
+    the expected naming with R runs pooled (lambda times R), and the figure
+    ``docs/figures/diagnose_oracle.png``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from scipy import stats
+
+    from bayespilot.diagnose import ALPHA, get_extension
+
+    global OUT
+    keep, OUT = OUT, DEFAULT_OUT
+    try:
+        study = {r["case"]["id"]: r for r in load()}
+        mark_concealed(list(study.values()))
+    finally:
+        OUT = keep
+    level = ALPHA / 6
+
+    def power(r, tag, runs=1):
+        ext = get_extension(r["truth"])
+        crit = (stats.chi2.isf(2.0 * level, 1) if ext.boundary_null and ext.df == 1
+                else stats.chi2.isf(level, ext.df))
+        return float(stats.ncx2.sf(crit, ext.df, max(runs * r[tag]["lambda"], 1e-12)))
+
+    print("Concealed cases: named by the default study, and the expected number an optimal test "
+          "of the true extension\nwould name (sum of its powers at the level alpha/6, one run)")
+    print(f"{'entry / size':<38}{'n':>4}{'named':>7}{'oracle 25 rad/s':>17}"
+          f"{'oracle full band':>18}{'median lambda 25/full':>24}")
+    tot = {"n": 0, "named": 0, "low": 0.0, "full": 0.0}
+    panels = {}
+    for e, sizes in ALL_EFFECTS.items():
+        for lab, _ in sizes:
+            sel = [r for r in rows if r["truth"] == e and r["effect"] == lab
+                   and study.get(r["id"], {}).get("concealed")]
+            if not sel:
+                continue
+            named = sum(study[r["id"]]["decision"] == e for r in sel)
+            low = sum(power(r, "lowpass") for r in sel)
+            full = sum(power(r, "fullband") for r in sel)
+            lam = (np.median([r["lowpass"]["lambda"] for r in sel]),
+                   np.median([r["fullband"]["lambda"] for r in sel]))
+            print(f"{e + ' ' + lab:<38}{len(sel):>4}{named:>7}{low:>17.1f}"
+                  f"{full:>18.1f}{lam[0]:>12.1f} / {lam[1]:<8.1f}")
+            panels.setdefault(e, []).append((lab, len(sel), named, low,
+                                             [sum(power(r, "lowpass", R) for r in sel)
+                                              for R in (4, 8)]))
+            tot["n"] += len(sel)
+            tot["named"] += named
+            tot["low"] += low
+            tot["full"] += full
+    print(f"{'all concealed (saturation left out)':<38}{tot['n']:>4}{tot['named']:>7}"
+          f"{tot['low']:>17.1f}{tot['full']:>18.1f}")
+    conc = [r for r in rows if study.get(r["id"], {}).get("concealed")]
+    for R in (2, 4, 8, 16):
+        print(f"  R = {R:>2} runs pooled (lambda x R, 25 rad/s): expected "
+              f"{sum(power(r, 'lowpass', R) for r in conc):.1f} of {len(conc)}")
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.0 * len(panels), 3.4), sharey=True)
+    for ax, (e, row) in zip(np.atleast_1d(axes), panels.items()):
+        x = np.arange(len(row))
+        n = np.array([v[1] for v in row], float)
+        ax.plot(x, [v[3] for v in row] / n, "k--", label="optimal test, 1 run")
+        ax.plot(x, [v[4][0] for v in row] / n, ":", color="0.5", label="optimal, 4 runs")
+        ax.plot(x, [v[4][1] for v in row] / n, "-.", color="0.7", label="optimal, 8 runs")
+        ax.plot(x, [v[2] for v in row] / n, "o", color="C0", label="diagnose, 1 run")
+        for xi, v in zip(x, row):
+            ax.annotate(f"{v[2]}/{v[1]}", (xi, v[2] / v[1]), textcoords="offset points",
+                        xytext=(0, 6), ha="center", fontsize=7)
+        ax.set_xticks(x)
+        ax.set_xticklabels([v[0].split("=")[-1] for v in row], fontsize=7)
+        ax.set_xlabel(row[0][0].split("=")[0], fontsize=8)
+        ax.set_title(e, fontsize=8)
+        ax.set_ylim(-0.05, 1.1)
+        ax.grid(alpha=0.3)
+    np.atleast_1d(axes)[0].set_ylabel("rate named (concealed cases)")
+    np.atleast_1d(axes)[0].legend(fontsize=6, loc="upper left")
+    fig.suptitle("diagnose against the best any test could do at its false-alarm level",
+                 fontsize=9)
+    fig.tight_layout()
+    FIG.mkdir(parents=True, exist_ok=True)
+    fig.savefig(FIG / "diagnose_oracle.png", dpi=110)
+    plt.close(fig)
+
+
+def model_error(n_controls: int = 16) -> None:
+    """How visible the likelihood's own discretisation error is to the decision likelihood.
+
+    On the first ``n_controls`` controls: the model's error at the true
+    parameters, err = (u - remnant) - u_hat(truth) (the simulator integrates
+    at 1 kHz, the likelihood runs at 100 Hz), is whitened by the noise model
+    of the residual u - u_hat(truth) for several low-pass cut-offs; its
+    whitened sum of squares over the innovation variance is the noncentrality
+    lambda_err that this deterministic error adds to a likelihood-ratio
+    statistic (an extension that can mimic it gains up to lambda_err / 2 in
+    -ln L on correct-model data).
+    """
+    from bayespilot import presets
+    from bayespilot.diagnose import SKIP_SECONDS
+    from bayespilot.diagnose import decide as D
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
+
+    model = paper_model()
+    cuts = (math.inf, 100.0, 50.0, D.OMEGA_C)
+    print("lambda_err of the model's discretisation error at the truth, per low-pass cut-off "
+          "(rad/s; inf: the whole band)")
+    print(f"{'control':<22}" + "".join(f"{c:>10g}" for c in cuts))
+    lams = []
+    for c in [c for c in cases() if c["truth"] == "none"][:n_controls]:
+        sim, _ = simulate_case(c)
+        rec = sim.recording
+        y = Likelihood(model, rec).response(presets.paper_parameters(c["task"]))
+        err = (rec.u - sim.remnant) - y
+        eps = rec.u - y
+        skip = int(round(SKIP_SECONDS * rec.sample_rate_hz))
+        row = []
+        for om in cuts:
+            nm = D.noise_model(eps, rec.dt, skip=skip, omega_c=om)
+            row.append(float(np.sum(nm.whiten(err) ** 2) / np.mean(nm.whiten(eps) ** 2)))
+        lams.append(row)
+        label = f"{c['task']} K_theta {c['K_theta']:g} F_n {c['F_n']:g}"
+        print(f"{label:<22}" + "".join(f"{v:>10.2f}" for v in row))
+    lams = np.array(lams)
+    print(f"{'median':<22}" + "".join(f"{v:>10.2f}" for v in np.median(lams, axis=0)))
+    print(f"{'max':<22}" + "".join(f"{v:>10.2f}" for v in lams.max(axis=0)))
+
+
 def width_profile(ids: list[int]) -> None:
     """-ln L of the soft dead zone over fixed corner widths, against the crisp dead zone.
 
@@ -692,11 +906,22 @@ def main(argv=None) -> int:
     ap.add_argument("--pooled-null", type=int, default=0, metavar="N",
                     help="N new pooled controls (four runs each): the pooled washout and "
                          "platform tests' null distributions beside one run's on the same runs")
+    ap.add_argument("--omega-c", type=float, default=None, metavar="RAD_S",
+                    help="cut-off of the decision likelihood's low-pass (inf: the whole band, "
+                         "no decimation); results and figures get the suffix _fullband (inf) "
+                         "or _omega<RAD_S>")
+    ap.add_argument("--oracle", action="store_true",
+                    help="per effect case, the power of the optimal likelihood-ratio test of the "
+                         "true extension (noncentrality from the noise-free extended model), "
+                         "beside the study's naming; analyses/results/diagnose/oracle.jsonl")
+    ap.add_argument("--model-error", action="store_true",
+                    help="the noncentrality that the likelihood's discretisation error adds to "
+                         "the decision likelihood on 16 controls, per low-pass cut-off")
     ap.add_argument("--width-profile", metavar="IDS",
                     help="-ln L over fixed soft-threshold widths for these threshold-shape "
                          "case ids (comma-separated), against the crisp dead zone")
     args = ap.parse_args(argv)
-    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED
+    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
@@ -705,6 +930,13 @@ def main(argv=None) -> int:
     if args.profile_noise:
         OUT = ROOT / "analyses" / "results" / "diagnose_profile_noise"
         FIG_SUFFIX, PROFILE_NOISE = "_profile_noise", True
+    if args.omega_c is not None:
+        if not args.omega_c > 0:
+            ap.error(f"--omega-c must be > 0 rad/s (inf: the whole band), got {args.omega_c!r}")
+        OMEGA_C = args.omega_c
+        tag = "_fullband" if math.isinf(OMEGA_C) else f"_omega{OMEGA_C:g}"
+        OUT = OUT.with_name(OUT.name + tag)
+        FIG_SUFFIX += tag
     try:
         k, n = (int(v) for v in args.shard.split("/"))
         if not 0 <= k < n:
@@ -722,6 +954,12 @@ def main(argv=None) -> int:
         return 0
     if args.pooled_null:
         pooled_null(args.pooled_null, (k, n))
+        return 0
+    if args.oracle:
+        oracle((k, n))
+        return 0
+    if args.model_error:
+        model_error()
         return 0
     if args.width_profile:
         width_profile([int(v) for v in args.width_profile.split(",")])

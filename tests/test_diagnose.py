@@ -139,6 +139,33 @@ def test_fit_ar_recovers_an_ar2():
     np.testing.assert_allclose(a, [1.2, -0.5], atol=0.02)
 
 
+def test_full_band_gls_is_the_prediction_error_likelihood():
+    """omega_c = inf: no low-pass, no decimation, so the decision likelihood is the package's
+    prediction-error likelihood (Likelihood with an ARNoise, the first seconds discarded)."""
+    import math
+
+    from bayespilot.diagnose import decide as D
+    from bayespilot.noise import ARNoise
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=24,
+                   duration=20.48).recording
+    model = paper_model()
+    truth = presets.paper_parameters("FD")
+    eps = Likelihood(model, rec).residual(truth)
+    noise = D.noise_model(eps, rec.dt, skip=300, omega_c=math.inf)
+    assert noise.decimation == 1 and noise.to_dict()["omega_c"] is None
+    np.testing.assert_array_equal(noise.reduce(eps), eps[300:])
+    ref = Likelihood(model, rec, discard=3.0, noise=ARNoise(noise.ar))
+    p = dict(truth, K_m=0.5, tau_m=0.21)
+    assert D.Whitened(model, rec, noise).neg_log_lik(p) == pytest.approx(
+        ref.neg_log_lik(model.free_vector(p)), rel=1e-10)
+    # the low-passed, decimated one is a different (shorter) series
+    assert D.noise_model(eps, rec.dt, skip=300).decimation > 1
+    for bad in (0.0, -1.0, math.nan, "inf"):
+        with pytest.raises(ValueError, match="omega_c"):
+            D.noise_model(eps, rec.dt, omega_c=bad)
+
+
 def test_diagnose_rejects_bad_input():
     rec = simulate(task="FD", seed=0, duration=20.0).recording
     with pytest.raises(TypeError, match="Recording"):

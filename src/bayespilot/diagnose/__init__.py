@@ -334,6 +334,9 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         (the likelihood's start-up transient).
     omega_c : float, optional
         Cut-off of the decision likelihood's low-pass, rad/s (default 25).
+        ``math.inf`` keeps the whole band; it is not a safe choice: the
+        model's 100-Hz discretisation error becomes visible there and raises
+        false alarms (``docs/diagnose.md``).
     n_starts : int
         Starting points of the base fit.
     profile_noise : bool
