@@ -900,7 +900,7 @@ def main(argv=None) -> int:
     ap.add_argument("--pooled", type=int, default=0, metavar="R",
                     help="diagnose R runs of each case's condition together (diagnose_pooled, "
                          "new seeds); results in analyses/results/diagnose_pooled/, figures "
-                         "with the suffix _pooled")
+                         "with the suffix _pooled (R = 4) or diagnose_pooledR/, _pooledR")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
     ap.add_argument("--pooled-null", type=int, default=0, metavar="N",
@@ -925,8 +925,10 @@ def main(argv=None) -> int:
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
-        OUT = ROOT / "analyses" / "results" / "diagnose_pooled"
-        FIG_SUFFIX, POOLED = "_pooled", args.pooled
+        # four runs (the study of docs/diagnose.md) keep the plain names; other R their own
+        tag = "_pooled" if args.pooled == 4 else f"_pooled{args.pooled}"
+        OUT = ROOT / "analyses" / "results" / f"diagnose{tag}"
+        FIG_SUFFIX, POOLED = tag, args.pooled
     if args.profile_noise:
         OUT = ROOT / "analyses" / "results" / "diagnose_profile_noise"
         FIG_SUFFIX, PROFILE_NOISE = "_profile_noise", True
