@@ -2,6 +2,7 @@
 
 Run:  python analyses/threshold_information.py [--recordings 5] [--spectra 20] [--scatter 40]
       python analyses/threshold_information.py --exact 200 [--open-loop 1000] --exact-only
+      python analyses/threshold_information.py --kinks 6
 
 The calibration study (``analyses/calibration.py``) finds the 50 % and 90 %
 intervals of delta_abs too wide at K_theta = 1, F_n = 0.2.  This script
@@ -63,6 +64,10 @@ from the calibration's own recordings (same seeds) and result files:
    mechanism, on the first 40 recordings: the model error's cross term in
    -ln L, -eps_m' (u_hat(delta) - u_hat(truth)) / s2 (whitened), beside the
    rise that (c) has, at delta = truth +- 0.001.
+7. With ``--kinks N``: where in the model that error is made.  The model
+   error and its bowl kappa for the package's motion path, for one that
+   interpolates the delay before the dead zone, and for one run at 10 times
+   the rate (see :func:`kink_variants`).
 """
 
 from __future__ import annotations
@@ -420,6 +425,103 @@ def exact_posteriors(n_closed: int, n_open: int) -> None:
               f"coverage {2 * norm.cdf(z50) - 1:.3f} / {2 * norm.cdf(z90) - 1:.3f} at 50 / 90 %")
 
 
+def kink_variants(n_rec: int, oversample: int = 10) -> None:
+    """Which part of the 100-Hz model makes the error at the dead zone's kinks (check 7).
+
+    On the first ``n_rec`` recordings of check 6 (FD, K_theta = 1, F_n = 0.2),
+    the model error at the truth, eps_m = (u - remnant) - u_hat(truth), and the
+    bowl it adds to -ln L around delta_abs (kappa: the second difference of
+    the whitened -ln L at truth +- 0.001 with eps_m in the data, over the same
+    without it, minus 1), for three versions of the motion path, written from
+    the equations with the plain NumPy twins of ``tests/naive.py``:
+
+    A. the package's model: dead zone on the 100-Hz canal output, then the
+       delay by linear interpolation, Tustin at 100 Hz;
+    B. the delay interpolated first, then the dead zone (in continuous time
+       the two commute; sampled, B keeps the interpolation off the kink);
+    C. the motion path at ``oversample`` times the rate: the canal output
+       interpolated linearly, the dead zone and the delay there, Tustin of
+       -K_m H_nm at the fine rate, every ``oversample``-th sample kept.
+
+    Energies are in innovation variances s2 of the AR model of the residual.
+    """
+    import sys
+
+    from scipy import signal
+
+    from bayespilot import presets
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
+    from bayespilot.noise import ARNoise
+    from bayespilot.simulate import simulate
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    import naive  # the plain NumPy/SciPy twin of the likelihood's model
+
+    model = paper_model()
+    p0 = presets.paper_parameters("FD")
+    M = int(oversample)
+
+    def motion(p, i, dt, variant):
+        if variant == "A":
+            d = naive.delay(naive.dead_zone(i, p["delta_abs"]), p["tau_m"], dt, "periodic")
+        elif variant == "B":
+            d = naive.dead_zone(naive.delay(i, p["tau_m"], dt, "periodic"), p["delta_abs"])
+        else:
+            n = i.size
+            tf = np.arange(n * M) * dt / M
+            i_f = np.interp(tf, np.arange(n) * dt, i, period=n * dt)
+            d_f = np.interp(tf - p["tau_m"], tf, naive.dead_zone(i_f, p["delta_abs"]),
+                            period=n * dt)
+            w, z = p["omega_nm"], p["zeta_nm"]
+            b, a = signal.bilinear([-p["K_m"] * w * w], [1.0, 2 * z * w, w * w], fs=M / dt)
+            return naive.steady_filter(b, a, d_f)[::M]
+        w, z = p["omega_nm"], p["zeta_nm"]
+        b, a = signal.bilinear([-p["K_m"] * w * w], [1.0, 2 * z * w, w * w], fs=1.0 / dt)
+        idx = np.arange(-500 - 2, i.size)  # the likelihood's 5-s warm-up, periodic
+        fir = signal.lfilter(b, [1.0], np.take(d, idx, mode="wrap"))[2:]
+        return signal.lfilter([1.0], a, fir)[500:]
+
+    print(f"\n7. The model error at the kinks, three versions of the motion path "
+          f"({n_rec} recordings of check 6)")
+    rows = {v: [] for v in "ABC"}
+    for r in range(n_rec):
+        sim = simulate(model, task="FD", motion_gain=1.0, remnant_fraction=0.2,
+                       seed=EXACT_SEED + r)
+        rec = sim.recording
+        lik = Likelihood(model, rec)
+        i = lik.X[1]
+        visual = lik.response(dict(p0, K_m=0.0))  # the visual channel alone
+        clean = rec.u - sim.remnant
+        ar = ARNoise.from_residual((rec.u - lik.response(p0))[200:])
+
+        def w(x):
+            return ar.whiten(x[200:])
+
+        s2 = float(np.mean(w(rec.u - lik.response(p0)) ** 2))
+        for v in "ABC":
+            def resp(d, v=v):
+                return visual + motion(dict(p0, delta_abs=d), i, rec.dt, v)
+
+            y0 = resp(TRUE)
+            if v == "A":  # the twin is the package's model
+                assert np.allclose(y0, lik.response(p0), rtol=0, atol=1e-9 * np.abs(y0).max())
+
+            def f(d, data):
+                return float(np.sum(w(data - resp(d)) ** 2) / s2)
+
+            h = 0.001
+            bowl = f(TRUE + h, clean) + f(TRUE - h, clean) - 2 * f(TRUE, clean)
+            ref = f(TRUE + h, y0) + f(TRUE - h, y0) - 2 * f(TRUE, y0)
+            rows[v].append((f(TRUE, clean), bowl / ref - 1.0))
+    names = {"A": "A, the package (dead zone, then delay)", "B": "B, delay, then dead zone",
+             "C": f"C, motion path at {M}x the rate"}
+    for v in "ABC":
+        a = np.array(rows[v])
+        print(f"   {names[v]:<40} model-error energy {a[:, 0].mean():6.2f} s2 "
+              f"(range {a[:, 0].min():.2f}-{a[:, 0].max():.2f}), kappa {a[:, 1].mean():+.3f}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--recordings", type=int, default=5,
@@ -433,7 +535,13 @@ def main(argv=None) -> int:
     ap.add_argument("--open-loop", type=int, default=1000,
                     help="open-loop noise realizations for check 6 (default 1000)")
     ap.add_argument("--exact-only", action="store_true", help="run check 6 only")
+    ap.add_argument("--kinks", type=int, default=0, metavar="N",
+                    help="run only check 7 on the first N recordings of check 6: the model "
+                         "error at the kinks for three versions of the motion path")
     args = ap.parse_args(argv)
+    if args.kinks:
+        kink_variants(args.kinks)
+        return 0
     if args.exact_only:
         exact_posteriors(args.exact, args.open_loop)
         return 0
