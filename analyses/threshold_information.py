@@ -66,8 +66,8 @@ from the calibration's own recordings (same seeds) and result files:
    rise that (c) has, at delta = truth +- 0.001.
 7. With ``--kinks N``: where in the model that error is made.  The model
    error and its bowl kappa for the package's motion path, for one that
-   interpolates the delay before the dead zone, and for one run at 10 times
-   the rate (see :func:`kink_variants`).
+   interpolates the delay before the dead zone, for one run at 10 times
+   the rate, and for two with a first-order hold (see :func:`kink_variants`).
 """
 
 from __future__ import annotations
@@ -425,6 +425,26 @@ def exact_posteriors(n_closed: int, n_open: int) -> None:
               f"coverage {2 * norm.cdf(z50) - 1:.3f} / {2 * norm.cdf(z90) - 1:.3f} at 50 / 90 %")
 
 
+def _area_corrected_dz(i: np.ndarray, d: float) -> np.ndarray:
+    """Dead-zone samples of a periodic canal output, each corrected by half the area error of
+    its two intervals (check 7, variant G): the exact mean of dz(i(t)) over an interval with
+    i linear between samples, less the trapezoid of its end samples."""
+    def antiderivative(x):  # integral_0^x dz(s) ds
+        a = np.maximum(np.abs(x) - d, 0.0)
+        return 0.5 * a * a
+
+    dz = np.sign(i) * np.maximum(np.abs(i) - d, 0.0)
+    i1 = np.roll(i, -1)
+    di = i1 - i
+    mean = dz.copy()
+    moving = np.abs(di) > 1e-12
+    mean[moving] = (antiderivative(i1[moving]) - antiderivative(i[moving])) / di[moving]
+    flat = ~moving
+    mean[flat] = np.sign(i[flat]) * np.maximum(np.abs(i[flat]) - d, 0.0)
+    eps = mean - 0.5 * (dz + np.roll(dz, -1))
+    return dz + 0.5 * (eps + np.roll(eps, 1))
+
+
 def kink_variants(n_rec: int, oversample: int = 10) -> None:
     """Which part of the 100-Hz model makes the error at the dead zone's kinks (check 7).
 
@@ -442,6 +462,11 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
     C. the motion path at ``oversample`` times the rate: the canal output
        interpolated linearly, the dead zone and the delay there, Tustin of
        -K_m H_nm at the fine rate, every ``oversample``-th sample kept.
+    F. A with a first-order hold instead of Tustin for -K_m H_nm (exact for
+       inputs linear between samples: no frequency warping);
+    G. F with each sample corrected by half of its two intervals' area error
+       (the exact mean of the dead zone of the linearly interpolated canal
+       output over an interval, less the trapezoid of its end samples).
 
     Energies are in innovation variances s2 of the AR model of the residual.
     """
@@ -463,7 +488,7 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
     M = int(oversample)
 
     def motion(p, i, dt, variant):
-        if variant == "A":
+        if variant in "AFG":
             d = naive.delay(naive.dead_zone(i, p["delta_abs"]), p["tau_m"], dt, "periodic")
         elif variant == "B":
             d = naive.dead_zone(naive.delay(i, p["tau_m"], dt, "periodic"), p["delta_abs"])
@@ -477,14 +502,22 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
             b, a = signal.bilinear([-p["K_m"] * w * w], [1.0, 2 * z * w, w * w], fs=M / dt)
             return naive.steady_filter(b, a, d_f)[::M]
         w, z = p["omega_nm"], p["zeta_nm"]
-        b, a = signal.bilinear([-p["K_m"] * w * w], [1.0, 2 * z * w, w * w], fs=1.0 / dt)
+        num, den = [-p["K_m"] * w * w], [1.0, 2 * z * w, w * w]
+        if variant in "FG":
+            if variant == "G":
+                d = naive.delay(_area_corrected_dz(i, p["delta_abs"]), p["tau_m"], dt,
+                                "periodic")
+            bd, a, _ = signal.cont2discrete((num, den), dt, method="foh")
+            b, a = np.ravel(bd), np.ravel(a)
+        else:
+            b, a = signal.bilinear(num, den, fs=1.0 / dt)
         idx = np.arange(-500 - 2, i.size)  # the likelihood's 5-s warm-up, periodic
         fir = signal.lfilter(b, [1.0], np.take(d, idx, mode="wrap"))[2:]
         return signal.lfilter([1.0], a, fir)[500:]
 
-    print(f"\n7. The model error at the kinks, three versions of the motion path "
+    print(f"\n7. The model error at the kinks, five versions of the motion path "
           f"({n_rec} recordings of check 6)")
-    rows = {v: [] for v in "ABC"}
+    rows = {v: [] for v in "ABCFG"}
     for r in range(n_rec):
         sim = simulate(model, task="FD", motion_gain=1.0, remnant_fraction=0.2,
                        seed=EXACT_SEED + r)
@@ -499,7 +532,7 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
             return ar.whiten(x[200:])
 
         s2 = float(np.mean(w(rec.u - lik.response(p0)) ** 2))
-        for v in "ABC":
+        for v in "ABCFG":
             def resp(d, v=v):
                 return visual + motion(dict(p0, delta_abs=d), i, rec.dt, v)
 
@@ -515,8 +548,9 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
             ref = f(TRUE + h, y0) + f(TRUE - h, y0) - 2 * f(TRUE, y0)
             rows[v].append((f(TRUE, clean), bowl / ref - 1.0))
     names = {"A": "A, the package (dead zone, then delay)", "B": "B, delay, then dead zone",
-             "C": f"C, motion path at {M}x the rate"}
-    for v in "ABC":
+             "C": f"C, motion path at {M}x the rate", "F": "F, A with a first-order hold",
+             "G": "G, F with area-corrected samples"}
+    for v in "ABCFG":
         a = np.array(rows[v])
         print(f"   {names[v]:<40} model-error energy {a[:, 0].mean():6.2f} s2 "
               f"(range {a[:, 0].min():.2f}-{a[:, 0].max():.2f}), kappa {a[:, 1].mean():+.3f}")
