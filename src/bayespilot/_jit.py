@@ -5,7 +5,19 @@
 ``error_model="numpy"`` makes 0/0 give NaN instead of raising, which the
 kernels turn into +inf costs rather than exceptions.  ``fastmath`` stays off:
 the likelihood must be reproducible to the last bit between the scalar and
-batch forms.
+batch forms.  (Two kernels make documented exceptions: ``_recursion_2`` allows
+``contract``, and the segmented SIMD kernel, ``kernels/_segmented.py``, writes
+its fused multiply-adds and one AVX-512 instruction explicitly through the
+intrinsics of ``kernels/_simd.py``; ``Likelihood`` sends single evaluations
+through the same routine as the batch, so single and batch still agree to
+the bit.)
+
+The cache is keyed on the CPU features numba compiles for, so a kernel cached
+on one machine is never loaded on a CPU it was not built for.  numba checks
+only the source file of the function it caches: after editing
+``kernels/_simd.py`` (whose intrinsics are compiled into ``_segmented``'s
+kernels), delete ``src/bayespilot/kernels/__pycache__`` or touch
+``_segmented.py``.
 """
 
 from __future__ import annotations

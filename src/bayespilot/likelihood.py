@@ -25,6 +25,7 @@ from scipy import signal
 
 from .kernels import _coloured as C
 from .kernels import _response as R
+from .kernels import _segmented as SEG
 from .model import FixedFilter, PilotModel
 from .noise import ARNoise
 from .recording import Recording
@@ -36,6 +37,12 @@ INITIAL_CONDITIONS = ("periodic", "rest")
 
 class PerfectFitWarning(RuntimeWarning):
     """The model reproduces u to round-off, so s2 was floored and -ln L is a bound."""
+
+
+def _warn_perfect_fit() -> None:
+    warnings.warn("the model reproduces u to round-off; the output-error variance was "
+                  "floored, so -ln L is a finite bound, not an optimum", PerfectFitWarning,
+                  stacklevel=3)
 
 
 def _source_signal(recording: Recording, source: str) -> np.ndarray:
@@ -201,6 +208,41 @@ class Likelihood:
         self._plan = model.plan
         self._base = model.full_vector()
         self._free_idx = model.free_index
+        #: The layout and arguments of the segmented SIMD kernel, or None (see :attr:`segmented`).
+        self._seg_args = self._segmented_args() if SEG.ENABLED else None
+
+    @property
+    def segmented(self) -> bool:
+        """True if :meth:`neg_log_lik` and :meth:`batch` use the segmented SIMD kernel
+        (``kernels/_segmented.py``).
+
+        Decided when the likelihood is made: the CPU has AVX-512, or AVX2 and
+        FMA (``kernels._segmented.ENABLED``; ``BAYESPILOT_KERNEL=scalar`` or
+        ``=segmented`` in the environment overrides it), and the model and
+        settings are the paper's kind: two channels without parametric stages or gain
+        modulation, one plain and one plain or with a dead zone and no lead, no
+        output nonlinearity, ``initial="periodic"``, no discarded lead-in, no
+        noise model, and a record of 8 equal segments.  Otherwise the fused
+        scalar kernel computes the same values to round-off.
+        """
+        return self._seg_args is not None
+
+    def _segmented_args(self) -> tuple | None:
+        """The segmented kernel's constant arguments (layout built once), or None if the
+        model or settings are outside what it computes."""
+        if not self.periodic or self.skip != 0 or self._a.size:
+            return None
+        channels = SEG.plan_channels(self._plan)
+        if channels is None:
+            return None
+        lay = SEG.build_layout(self.X, self.u, *channels, self.pad)
+        if lay is None:
+            return None
+        p = self._plan
+        return (lay.P, lay.Q, lay.I, lay.U, lay.uu, lay.S, lay.H, lay.cv, lay.cm, self.X,
+                self.u,
+                p.ch_int, p.ch_float, p.st_int, p.st_const, p.out_int, self.dt, self.warm,
+                self.s2_floor, self.pad)
 
     # -- helpers ---------------------------------------------------------------
     def _theta(self, params) -> np.ndarray:
@@ -245,8 +287,16 @@ class Likelihood:
 
         Warns with :class:`PerfectFitWarning` when the residual is at round-off
         level: the variance is then floored and the value is a finite bound.
+        Computed by the same routine as :meth:`batch` (one row), so the two
+        agree to the bit.
         """
         theta = self._theta(params)
+        if self._seg_args is not None:
+            # the batch's routine on one row: the same value to the bit
+            val, floored = SEG.neg_log_lik_segmented_one(theta, *self._seg_args)
+            if floored:
+                _warn_perfect_fit()
+            return float(val)
         y = np.empty(self.n)
         q = np.empty(self.n)
         v = np.empty(self.n)
@@ -261,9 +311,7 @@ class Likelihood:
                                              self.periodic, self.warm, self.s2_floor, y, q, v,
                                              Qp, self.pad, self.skip)
         if floored:
-            warnings.warn("the model reproduces u to round-off; the output-error variance was "
-                          "floored, so -ln L is a finite bound, not an optimum", PerfectFitWarning,
-                          stacklevel=2)
+            _warn_perfect_fit()
         return float(val)
 
     def vaf(self, params) -> float:
@@ -308,7 +356,11 @@ class Likelihood:
         """-ln L for every row of ``free`` (free-parameter vectors, shape (M, n_free)).
 
         Runs in parallel over rows on numba's threads.  Non-finite or unstable
-        rows give +inf.
+        rows give +inf.  Each row's value is that of :meth:`neg_log_lik` to the
+        bit, whatever the batch size, row order or thread count.  With
+        :attr:`segmented` the segmented SIMD kernel computes it (about ten
+        times faster per row than the fused scalar kernel with AVX-512, twice
+        with AVX2; equal to it to round-off).
         """
         free = np.ascontiguousarray(free, dtype=float)
         if free.ndim != 2 or free.shape[1] != self.model.n_free:
@@ -319,7 +371,10 @@ class Likelihood:
             out = np.empty(m)
         floored = np.zeros(m, dtype=np.bool_)
         n_chunks = max(1, min(m, numba.get_num_threads()))
-        if self._a.size:
+        if self._seg_args is not None:
+            SEG.neg_log_lik_segmented_batch(free, self._free_idx, self._base, *self._seg_args,
+                                            n_chunks, out, floored)
+        elif self._a.size:
             C.neg_log_lik_whitened_batch(free, self._free_idx, self._base, self._a, self.X,
                                          self.u, *self._args(), self.dt, self.periodic,
                                          self.warm, self.s2_floor, n_chunks, out, floored,
