@@ -640,6 +640,20 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
                   f"at the bound: {np.mean(d <= 0.0):.2f}")
 
 
+def optimal_power(ext, lam: float) -> float:
+    """Power of the likelihood-ratio test of extension ``ext`` when 2 d(-ln L) is noncentral
+    chi2(df, ``lam``), at diagnose's per-candidate level (alpha over six candidates; the
+    chi-bar-squared critical value for a one-parameter boundary null)."""
+    from scipy import stats
+
+    from bayespilot.diagnose import ALPHA
+
+    level = ALPHA / 6
+    crit = (stats.chi2.isf(2.0 * level, 1) if ext.boundary_null and ext.df == 1
+            else stats.chi2.isf(level, ext.df))
+    return float(stats.ncx2.sf(crit, ext.df, max(lam, 1e-12)))
+
+
 def oracle(shard: tuple[int, int] = (0, 1)) -> None:
     """How many concealed cases could any likelihood-ratio test name at the decision's level?
 
@@ -654,16 +668,15 @@ def oracle(shard: tuple[int, int] = (0, 1)) -> None:
     per-candidate level (alpha over six candidates, the chi-bar-squared
     critical value for the boundary nulls) is 1 - ncx2.cdf(crit, df, lambda).
     Summed over the concealed cases it is the number that a test of the
-    right extension, knowing which one to test, would name on average: an
-    upper bound of the study's rate at that level.  Both the default
+    right extension, knowing which one to test, would name on average: about
+    the most any test at that level can do (noncentral chi2 approximation).  Both the default
     decision likelihood (low-passed at 25 rad/s) and the whole band are
     measured.  Saturation is left out (flat tops decide it; it is found at
     every size).  One JSON line per case in ``OUT/oracle.jsonl`` (resumable).
     """
-    from scipy import stats
     from tqdm import tqdm
 
-    from bayespilot.diagnose import ALPHA, SKIP_SECONDS, _base_gls, get_extension
+    from bayespilot.diagnose import SKIP_SECONDS, _base_gls, get_extension
     from bayespilot.diagnose import decide as D
     from bayespilot.fit.fast import fit_fast
     from bayespilot.likelihood import Likelihood
@@ -680,7 +693,6 @@ def oracle(shard: tuple[int, int] = (0, 1)) -> None:
             for line in f.read_text().splitlines() if line.strip()}
     todo = [c for c in cases() if c["truth"] not in ("none", "control-saturation")
             and c["id"] % n == k and c["id"] not in done]
-    level = ALPHA / 6
     for c in tqdm(todo, desc="oracle", unit="case"):
         sim, extra = simulate_case(c)
         rec = sim.recording
@@ -703,11 +715,7 @@ def oracle(shard: tuple[int, int] = (0, 1)) -> None:
             wl, misfit = D.fit_base_gls(base_model, clean, base_truth, noise)
             ms = math.exp(2.0 * misfit.neg_log_lik / wl.m - 1.0)
             lam = wl.m * ms / s2
-            if ext.boundary_null and ext.df == 1:
-                crit = float(stats.chi2.isf(2.0 * level, 1))
-            else:
-                crit = float(stats.chi2.isf(level, ext.df))
-            row[tag] = {"lambda": lam, "power": float(stats.ncx2.sf(crit, ext.df, max(lam, 1e-12)))}
+            row[tag] = {"lambda": lam, "power": optimal_power(ext, lam)}
         with open(out, "a") as f:
             f.write(json.dumps(row) + "\n")
     rows = [json.loads(line) for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl"))
@@ -723,9 +731,8 @@ def _oracle_table(rows: list[dict]) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from scipy import stats
 
-    from bayespilot.diagnose import ALPHA, get_extension
+    from bayespilot.diagnose import get_extension
 
     global OUT
     keep, OUT = OUT, DEFAULT_OUT
@@ -734,13 +741,9 @@ def _oracle_table(rows: list[dict]) -> None:
         mark_concealed(list(study.values()))
     finally:
         OUT = keep
-    level = ALPHA / 6
 
     def power(r, tag, runs=1):
-        ext = get_extension(r["truth"])
-        crit = (stats.chi2.isf(2.0 * level, 1) if ext.boundary_null and ext.df == 1
-                else stats.chi2.isf(level, ext.df))
-        return float(stats.ncx2.sf(crit, ext.df, max(runs * r[tag]["lambda"], 1e-12)))
+        return optimal_power(get_extension(r["truth"]), runs * r[tag]["lambda"])
 
     print("Concealed cases: named by the default study, and the expected number an optimal test "
           "of the true extension\nwould name (sum of its powers at the level alpha/6, one run)")
