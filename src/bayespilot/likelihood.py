@@ -299,7 +299,7 @@ class Likelihood:
             return float(val)
         y = np.empty(self.n)
         q = np.empty(self.n)
-        v = np.empty(self.n)
+        v = np.empty(R.work_length(self._plan.ch_int, self.n))
         if self._a.size:
             val, floored = C.neg_log_lik_whitened_one(theta, self._a, self.X, self.u,
                                                       *self._args(), self.dt, self.periodic,

@@ -136,6 +136,37 @@ def nonlinearity(kind, x, p0, p1):
 
 
 @njit
+def nonlinearity_tangent(kind, x, p0, p1, dx, dp0, dp1):
+    """Derivative of ``nonlinearity`` along (dx, dp0, dp1)."""
+    if kind == NL_DEADZONE:
+        if abs(x) - p0 <= 0.0:
+            return 0.0
+        return dx - dp0 if x > 0.0 else dx + dp0
+    if kind == NL_SOFT_DEADZONE:
+        w = p1 if p1 > 1e-12 else 1e-12
+        dw = dp1 if p1 > 1e-12 else 0.0
+        ax = abs(x)
+        dax = dx if x >= 0.0 else -dx
+        a = (ax - p0) / w
+        a0 = -p0 / w
+        da = (dax - dp0) / w - a * dw / w
+        da0 = -dp0 / w - a0 * dw / w
+        sp = a + math.log1p(math.exp(-a)) if a > 0.0 else math.log1p(math.exp(a))
+        sp0 = a0 + math.log1p(math.exp(-a0)) if a0 > 0.0 else math.log1p(math.exp(a0))
+        sig = 1.0 / (1.0 + math.exp(-a))
+        sig0 = 1.0 / (1.0 + math.exp(-a0))
+        dy = dw * (sp - sp0) + w * (sig * da - sig0 * da0)
+        return dy if x >= 0.0 else -dy
+    if kind == NL_SATURATION:
+        if x > p0:
+            return dp0
+        if x < -p0:
+            return -dp0
+        return dx
+    return dx
+
+
+@njit
 def modulation(kind, t_frac, p0):
     """Gain modulation factor at run fraction ``t_frac`` in [0, 1)."""
     if kind == MOD_LINEAR:

@@ -37,7 +37,7 @@ import numba
 import numpy as np
 
 from .._jit import njit, pjit
-from ._response import neg_log_lik_from_sse, response_into
+from ._response import neg_log_lik_from_sse, response_into, work_length
 
 
 @njit
@@ -252,7 +252,7 @@ def neg_log_lik_profiled_batch(free, free_idx, base, p, X, u, ch_int, ch_float, 
     for ch in numba.prange(n_chunks):
         y = np.empty(n)
         q = np.empty(n)
-        v = np.empty(n)
+        v = np.empty(work_length(ch_int, n))
         acc = np.empty(p + 1)
         A = np.empty((max(p, 1), max(p, 1)))
         b = np.empty(max(p, 1))
@@ -305,7 +305,7 @@ def neg_log_lik_whitened_batch(free, free_idx, base, a, X, u, ch_int, ch_float, 
     for ch in numba.prange(n_chunks):
         y = np.empty(n)
         q = np.empty(n)
-        v = np.empty(n)
+        v = np.empty(work_length(ch_int, n))
         theta = base.copy()
         for r in range(ch, m, n_chunks):
             if not load_row(theta, free, r, free_idx):
@@ -358,7 +358,7 @@ def neg_log_lik_coloured_batch(rows, n_model, free_idx, base, X, u, ch_int, ch_f
         hi = ((ch + 1) * m) // n_chunks
         y = np.empty(n)
         q = np.empty(n)
-        v = np.empty(n)
+        v = np.empty(work_length(ch_int, n))
         a = np.empty(p)
         work = np.empty(p)
         r = np.empty(p)

@@ -7,6 +7,10 @@ channels' fixed linear stages, e.g. the canal model) at the recording's rate:
                     d_c(t) = g_c(t) q_c(t - tau_c)           (linear interpolation)
     u_hat = out_nl( sum_c  K_c (1 + T_c s) H_nm(s) d_c )    (Tustin, one recursion)
 
+A channel with ``oversample`` M > 1 runs its path after the parametric
+stages at M times the rate and is folded back to the recording's rate
+(``kernels/_oversample.py``).
+
 Initial conditions (``periodic``): the forcing functions are periodic in the
 record length, so the record is treated as one period: delays read across the
 start from the end of the record, and the model starts in periodic steady
@@ -24,12 +28,13 @@ import numba
 import numpy as np
 
 from .._jit import njit, pjit
+from . import _oversample as OV
 from ._blocks import (MOD_NONE, NL_DEADZONE, NL_NONE, STAGE_FIXED, STAGE_NONE, modulation,
                       nonlinearity, param_or, stable, stage_tf, tustin)
 
 # Layout of the plan's integer channel table (one row per channel).
 CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, \
-    CH_MOD_P0, CH_NSTAGES, CH_SOURCE = range(11)
+    CH_MOD_P0, CH_NSTAGES, CH_SOURCE, CH_OVERSAMPLE = range(12)
 CH_NFIELDS = 12
 # Float channel table.
 CHF_GAIN_CONST, CHF_SIGN = range(2)
@@ -172,13 +177,55 @@ def _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind, mod_p, periodic):
 
 
 @njit
+def oversampling(ch_int, c):
+    """The channel's oversampling factor M (1: the recording's rate)."""
+    M = ch_int[c, CH_OVERSAMPLE]
+    return M if M > 1 else 1
+
+
+@njit
+def any_oversampled(ch_int):
+    """True if some channel runs at a multiple of the recording's rate."""
+    for c in range(ch_int.shape[0]):
+        if oversampling(ch_int, c) > 1:
+            return True
+    return False
+
+
+@njit
+def work_length(ch_int, n):
+    """Length of the ``v`` work buffer :func:`response_into` needs: n, and for oversampled
+    channels three more records (4 n)."""
+    return 4 * n if any_oversampled(ch_int) else n
+
+
+@njit
 def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
                   y, q, v):
     """Pilot-model response for full parameter vector ``theta`` into ``y``.
 
-    ``q`` and ``v`` are work buffers of the record's length.  Returns False if
-    the response is not finite (an unstable or degenerate parameter vector).
+    ``q`` is a work buffer of the record's length, ``v`` one of
+    :func:`work_length` (the record's length unless a channel is
+    oversampled; a shorter ``v`` makes this allocate one per call).  Returns
+    False if the response is not finite (an unstable or degenerate parameter
+    vector).
     """
+    n = X.shape[1]
+    if not any_oversampled(ch_int):
+        return _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt,
+                              periodic, warm, y, q, v, v[:0], v[:0], v[:0])
+    need = work_length(ch_int, n)
+    if v.shape[0] < need:
+        v = np.empty(need)
+    return _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
+                          warm, y, q, v[:n], v[n:2 * n], v[2 * n:3 * n], v[3 * n:4 * n])
+
+
+@njit
+def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
+                   y, q, v, w, b, fb):
+    """:func:`response_into` with its buffers: ``v`` (n), and for oversampled channels ``w``
+    (n, their share of u_hat), ``b`` (n) and ``fb`` (2 M n, their fine signals)."""
     n_ch = X.shape[0]
     n = X.shape[1]
     wn = theta[out_int[OUT_OMEGA]]
@@ -190,6 +237,9 @@ def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, per
         return False  # an unstable (or marginal) H_nm is no pilot: -ln L = +inf
     for k in range(n):
         v[k] = 0.0
+    fine = w.shape[0] > 0
+    for k in range(w.shape[0]):
+        w[k] = 0.0
     for c in range(n_ch):
         src = X[c]
         nst = ch_int[c, CH_NSTAGES]
@@ -205,7 +255,32 @@ def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, per
                 return False
             _filter_biquad(src, sB0, sB1, sB2, sA1, sA2, periodic, warm, q)
             src = q
+        gain = ch_float[c, CHF_GAIN_CONST] * ch_float[c, CHF_SIGN] \
+            * param_or(theta, ch_int[c, CH_GAIN0], 1.0) * param_or(theta, ch_int[c, CH_GAIN1], 1.0)
+        lead = param_or(theta, ch_int[c, CH_LEAD], 0.0)
+        kg = gain * w2
         nl = ch_int[c, CH_NL_KIND]
+        mod_kind = ch_int[c, CH_MOD_KIND]
+        M = oversampling(ch_int, c)
+        if M > 1:
+            # this channel at M times the rate, folded back (kernels/_oversample.py)
+            dtf = dt / M
+            B0, B1, B2, fA1, fA2 = tustin(kg, kg * lead, 0.0, w2, 2.0 * zn * wn, 1.0, dtf)
+            dd = theta[ch_int[c, CH_DELAY]] / dtf
+            if not (abs(dd) < n * M - 4):
+                return False
+            m = int(math.floor(dd))
+            K, _, A1p, A2p, _, _ = OV.coefficients(fA1, fA2, B0, B1, B2, dd - m, M,
+                                                   0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            OV.fold_channel(src, M, m, K, periodic, nl, param_or(theta, ch_int[c, CH_NL_P0], 0.0),
+                            param_or(theta, ch_int[c, CH_NL_P1], 0.0), fb, b)
+            if mod_kind != MOD_NONE:
+                OV.modulate(b, mod_kind, param_or(theta, ch_int[c, CH_MOD_P0], 0.0), 0.0, b,
+                            False)
+            f1, f2 = OV.recursion_add(b, A1p, A2p, periodic, warm, w)
+            if not (math.isfinite(f1) and math.isfinite(f2)):
+                return False
+            continue
         if nl == NL_DEADZONE:
             dz = param_or(theta, ch_int[c, CH_NL_P0], 0.0)
             for k in range(n):
@@ -220,17 +295,12 @@ def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, per
             for k in range(n):
                 q[k] = nonlinearity(nl, src[k], p0, p1)
             src = q
-        gain = ch_float[c, CHF_GAIN_CONST] * ch_float[c, CHF_SIGN] \
-            * param_or(theta, ch_int[c, CH_GAIN0], 1.0) * param_or(theta, ch_int[c, CH_GAIN1], 1.0)
-        lead = param_or(theta, ch_int[c, CH_LEAD], 0.0)
-        kg = gain * w2
         B0, B1, B2, _, _ = tustin(kg, kg * lead, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
         dd = theta[ch_int[c, CH_DELAY]] / dt
         if not (abs(dd) < n - 4):
             return False
         m = int(math.floor(dd))
         f = dd - m
-        mod_kind = ch_int[c, CH_MOD_KIND]
         if mod_kind == MOD_NONE:
             _accumulate_delayed(v, src, m, B0 * (1.0 - f), B0 * f + B1 * (1.0 - f),
                                 B1 * f + B2 * (1.0 - f), B2 * f, periodic)
@@ -252,6 +322,9 @@ def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, per
         y2 = y1
         y1 = yk
         y[k] = yk
+    if fine:
+        for k in range(n):
+            y[k] += w[k]
     out_nl = out_int[OUT_NL_KIND]
     if out_nl != NL_NONE:
         o0 = param_or(theta, out_int[OUT_NL_P0], 0.0)
@@ -417,8 +490,8 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
                s2_floor, Qp, pad, q, skip=0, prefilled=False):
     """-ln L in one fused pass: per-channel taps, H_nm recursion and residual sum together.
 
-    Handles models without gain modulation or output nonlinearity whose delays
-    fit the padding; returns (value, floored, handled) and handled=False
+    Handles models without gain modulation, oversampled channels or output
+    nonlinearity whose delays fit the padding; returns (value, floored, handled) and handled=False
     otherwise, so the caller falls back to the general ``response_into`` path.
     The arithmetic is that of ``response_into`` regrouped into one loop, so
     the FIR work of the channels overlaps the latency of the recursion.
@@ -427,7 +500,7 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
     """
     n_ch = X.shape[0]
     n = X.shape[1]
-    if out_int[OUT_NL_KIND] != NL_NONE:
+    if out_int[OUT_NL_KIND] != NL_NONE or any_oversampled(ch_int):
         return np.inf, False, False
     wn = theta[out_int[OUT_OMEGA]]
     zn = theta[out_int[OUT_ZETA]]
@@ -549,7 +622,7 @@ def neg_log_lik_batch(free, free_idx, base, X, u, ch_int, ch_float, st_int, st_c
     for ch in numba.prange(n_chunks):
         y = np.empty(n)
         q = np.empty(n)
-        v = np.empty(n)
+        v = np.empty(work_length(ch_int, n))
         Qp = np.empty((X.shape[0], n + 2 * pad))
         fill_plain_rows(X, ch_int, st_int, Qp, pad, periodic)
         theta = base.copy()
@@ -571,7 +644,7 @@ def response(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic
     n = X.shape[1]
     y = np.empty(n)
     q = np.empty(n)
-    v = np.empty(n)
+    v = np.empty(work_length(ch_int, n))
     ok = response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
                        warm, y, q, v)
     return y, ok

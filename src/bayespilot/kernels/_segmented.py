@@ -191,10 +191,11 @@ def plan_channels(plan) -> tuple[int, int] | None:
 
     Two channels without parametric stages or gain modulation, one of them
     plain (no nonlinearity; it may have a lead), the other plain or with a
-    dead zone and without a lead; no output nonlinearity.
+    dead zone and without a lead; no output nonlinearity; no channel
+    oversampled.
     """
     ch = plan.ch_int
-    if ch.shape[0] != 2 or plan.out_int[R.OUT_NL_KIND] != NL_NONE:
+    if ch.shape[0] != 2 or plan.out_int[R.OUT_NL_KIND] != NL_NONE or R.any_oversampled(ch):
         return None
     if not (_theta_free_channel(plan, 0) and _theta_free_channel(plan, 1)):
         return None

@@ -19,11 +19,11 @@ import math
 import numpy as np
 
 from .._jit import njit
-from ._blocks import (MOD_LINEAR, MOD_NONE, NL_DEADZONE, NL_NONE, NL_SATURATION,
-                      NL_SOFT_DEADZONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
+from . import _oversample as OV
+from ._blocks import (MOD_LINEAR, MOD_NONE, NL_NONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
                       STAGE_LOWPASS1, STAGE_LOWPASS2, STAGE_NONE, modulation, nonlinearity,
-                      param_or, stable, stage_tf, tustin)
-from ._response import (_tap, periodic_state, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
+                      nonlinearity_tangent, param_or, stable, stage_tf, tustin)
+from ._response import (_tap, any_oversampled, oversampling, periodic_state, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
                         CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_NSTAGES, CHF_GAIN_CONST, CHF_SIGN,
                         OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1, OUT_OMEGA, OUT_ZETA)
 
@@ -82,37 +82,6 @@ def tustin_tangent(b0, b1, b2, a0, a1, a2, db0, db1, db2, da0, da1, da2, dt):
 
 
 @njit
-def nonlinearity_tangent(kind, x, p0, p1, dx, dp0, dp1):
-    """Derivative of ``nonlinearity`` along (dx, dp0, dp1)."""
-    if kind == NL_DEADZONE:
-        if abs(x) - p0 <= 0.0:
-            return 0.0
-        return dx - dp0 if x > 0.0 else dx + dp0
-    if kind == NL_SOFT_DEADZONE:
-        w = p1 if p1 > 1e-12 else 1e-12
-        dw = dp1 if p1 > 1e-12 else 0.0
-        ax = abs(x)
-        dax = dx if x >= 0.0 else -dx
-        a = (ax - p0) / w
-        a0 = -p0 / w
-        da = (dax - dp0) / w - a * dw / w
-        da0 = -dp0 / w - a0 * dw / w
-        sp = a + math.log1p(math.exp(-a)) if a > 0.0 else math.log1p(math.exp(a))
-        sp0 = a0 + math.log1p(math.exp(-a0)) if a0 > 0.0 else math.log1p(math.exp(a0))
-        sig = 1.0 / (1.0 + math.exp(-a))
-        sig0 = 1.0 / (1.0 + math.exp(-a0))
-        dy = dw * (sp - sp0) + w * (sig * da - sig0 * da0)
-        return dy if x >= 0.0 else -dy
-    if kind == NL_SATURATION:
-        if x > p0:
-            return dp0
-        if x < -p0:
-            return -dp0
-        return dx
-    return dx
-
-
-@njit
 def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic, warm, y, dy):
     """A biquad and its tangent: y = F(x), dy = F(dx) + (dF) x.
 
@@ -156,6 +125,40 @@ def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic
 
 
 @njit
+def _accumulate_tangent(v, dv, src, dsrc, m, f, df, B0, B1, B2, dB0, dB1, dB2, mod_kind, mp,
+                        dmp, periodic):
+    """The channel's delayed, gain-modulated Tustin numerator into ``v`` and its tangent into
+    ``dv`` (``_response._accumulate_delayed`` / ``_accumulate_modulated`` with derivatives)."""
+    n = src.shape[0]
+    d1 = 0.0
+    d2 = 0.0
+    t1 = 0.0
+    t2 = 0.0
+    start = -2 if periodic else 0
+    for k in range(start, n):
+        j = k - m
+        sa = _tap(src, j, n, periodic)
+        sb = _tap(src, j - 1, n, periodic)
+        dsa = _tap(dsrc, j, n, periodic)
+        dsb = _tap(dsrc, j - 1, n, periodic)
+        dk = (1.0 - f) * sa + f * sb
+        tk = (1.0 - f) * dsa + f * dsb + df * (sb - sa)
+        if mod_kind != MOD_NONE:
+            frac = ((k + n) % n) / n
+            g = modulation(mod_kind, frac, mp)
+            dg = dmp * (frac - 0.5) if mod_kind == MOD_LINEAR else 0.0
+            tk = g * tk + dg * dk
+            dk = g * dk
+        if k >= 0:
+            v[k] += B0 * dk + B1 * d1 + B2 * d2
+            dv[k] += dB0 * dk + dB1 * d1 + dB2 * d2 + B0 * tk + B1 * t1 + B2 * t2
+        d2 = d1
+        d1 = dk
+        t2 = t1
+        t1 = tk
+
+
+@njit
 def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic,
                      warm, y, dy):
     """u_hat into ``y`` and its derivative along ``dtheta`` into ``dy``; False if unstable."""
@@ -180,6 +183,11 @@ def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_i
     q2 = np.empty(n)
     dq2 = np.empty(n)
     zero = np.zeros(n)
+    fine = any_oversampled(ch_int)
+    wf = np.zeros(n if fine else 1)  # the oversampled channels' share of u_hat ...
+    dwf = np.zeros(n if fine else 1)  # ... and of its tangent
+    D = np.empty(n if fine else 1)  # their dead-zone output at the recording's rate ...
+    dD = np.empty(n if fine else 1)  # ... and its tangent
     for c in range(n_ch):
         src = X[c]
         dsrc = zero
@@ -207,23 +215,6 @@ def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_i
                 dq[k] = dq2[k]
             src = q
             dsrc = dq
-        nl = ch_int[c, CH_NL_KIND]
-        if nl != NL_NONE:
-            i0 = ch_int[c, CH_NL_P0]
-            i1 = ch_int[c, CH_NL_P1]
-            p0 = param_or(theta, i0, 0.0)
-            p1 = param_or(theta, i1, 0.0)
-            dp0 = _dparam(dtheta, i0)
-            dp1 = _dparam(dtheta, i1)
-            for k in range(n):
-                xk = src[k]
-                q2[k] = nonlinearity(nl, xk, p0, p1)
-                dq2[k] = nonlinearity_tangent(nl, xk, p0, p1, dsrc[k], dp0, dp1)
-            for k in range(n):
-                q[k] = q2[k]
-                dq[k] = dq2[k]
-            src = q
-            dsrc = dq
         ig0 = ch_int[c, CH_GAIN0]
         ig1 = ch_int[c, CH_GAIN1]
         g0 = param_or(theta, ig0, 1.0)
@@ -236,65 +227,69 @@ def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_i
         dlead = _dparam(dtheta, il)
         kg = gain * w2
         dkg = dgain * w2 + gain * dw2
-        B0, B1, B2, _, _ = tustin(kg, kg * lead, 0.0, w2, a1c, 1.0, dt)
-        dB0, dB1, dB2, _, _ = tustin_tangent(kg, kg * lead, 0.0, w2, a1c, 1.0,
-                                             dkg, dkg * lead + kg * dlead, 0.0, dw2, da1c, 0.0, dt)
-        idl = ch_int[c, CH_DELAY]
-        dd = theta[idl] / dt
-        ddd = _dparam(dtheta, idl) / dt
-        if not (abs(dd) < n - 4):
-            return False
-        m = int(math.floor(dd))
-        f = dd - m
-        df = ddd
+        nl = ch_int[c, CH_NL_KIND]
+        i0 = ch_int[c, CH_NL_P0]
+        i1 = ch_int[c, CH_NL_P1]
+        p0 = param_or(theta, i0, 0.0)
+        p1 = param_or(theta, i1, 0.0)
+        dp0 = _dparam(dtheta, i0)
+        dp1 = _dparam(dtheta, i1)
         mod_kind = ch_int[c, CH_MOD_KIND]
         imod = ch_int[c, CH_MOD_P0]
         mp = param_or(theta, imod, 0.0)
         dmp = _dparam(dtheta, imod)
-        d1 = 0.0
-        d2 = 0.0
-        t1 = 0.0
-        t2 = 0.0
-        start = -2 if periodic else 0
-        for k in range(start, n):
-            j = k - m
-            sa = _tap(src, j, n, periodic)
-            sb = _tap(src, j - 1, n, periodic)
-            dsa = _tap(dsrc, j, n, periodic)
-            dsb = _tap(dsrc, j - 1, n, periodic)
-            dk = (1.0 - f) * sa + f * sb
-            tk = (1.0 - f) * dsa + f * dsb + df * (sb - sa)
+        idl = ch_int[c, CH_DELAY]
+        M = oversampling(ch_int, c)
+        if M > 1:
+            # as _response.response_into runs it (kernels/_oversample.py), with tangents
+            dtf = dt / M
+            B0, B1, B2, fA1, fA2 = tustin(kg, kg * lead, 0.0, w2, a1c, 1.0, dtf)
+            dB0, dB1, dB2, fdA1, fdA2 = tustin_tangent(kg, kg * lead, 0.0, w2, a1c, 1.0, dkg,
+                                                       dkg * lead + kg * dlead, 0.0, dw2, da1c,
+                                                       0.0, dtf)
+            dd = theta[idl] / dtf
+            if not (abs(dd) < n * M - 4):
+                return False
+            m = int(math.floor(dd))
+            K, dK, A1p, A2p, dA1p, dA2p = OV.coefficients(fA1, fA2, B0, B1, B2, dd - m, M,
+                                                          fdA1, fdA2, dB0, dB1, dB2,
+                                                          _dparam(dtheta, idl) / dtf)
+            OV.fold_channel_tangent(src, dsrc, M, m, K, dK, periodic, nl, p0, p1, dp0, dp1,
+                                    D, dD, q2, dq2)
             if mod_kind != MOD_NONE:
-                frac = ((k + n) % n) / n
-                g = modulation(mod_kind, frac, mp)
-                dg = dmp * (frac - 0.5) if mod_kind == MOD_LINEAR else 0.0
-                tk = g * tk + dg * dk
-                dk = g * dk
-            if k >= 0:
-                v[k] += B0 * dk + B1 * d1 + B2 * d2
-                dv[k] += dB0 * dk + dB1 * d1 + dB2 * d2 + B0 * tk + B1 * t1 + B2 * t2
-            d2 = d1
-            d1 = dk
-            t2 = t1
-            t1 = tk
-    y1 = 0.0
-    y2 = 0.0
-    dy1 = 0.0
-    dy2 = 0.0
-    if periodic:
-        start = n - warm if warm < n else 0
-        for k in range(start, n):
-            yk = (v[k] - A2 * y2) - A1 * y1
-            dyk = dv[k] - dA1 * y1 - dA2 * y2 - A1 * dy1 - A2 * dy2
-            y2, y1 = y1, yk
-            dy2, dy1 = dy1, dyk
+                OV.modulate(q2, mod_kind, mp, dmp, dq2, True)
+            f1, df1 = OV.recursion_add_tangent(q2, dq2, A1p, A2p, dA1p, dA2p, periodic, warm,
+                                               wf, dwf)
+            if not (math.isfinite(f1) and math.isfinite(df1)):
+                return False
+            continue
+        if nl != NL_NONE:
+            for k in range(n):
+                xk = src[k]
+                q2[k] = nonlinearity(nl, xk, p0, p1)
+                dq2[k] = nonlinearity_tangent(nl, xk, p0, p1, dsrc[k], dp0, dp1)
+            for k in range(n):
+                q[k] = q2[k]
+                dq[k] = dq2[k]
+            src = q
+            dsrc = dq
+        B0, B1, B2, _, _ = tustin(kg, kg * lead, 0.0, w2, a1c, 1.0, dt)
+        dB0, dB1, dB2, _, _ = tustin_tangent(kg, kg * lead, 0.0, w2, a1c, 1.0,
+                                             dkg, dkg * lead + kg * dlead, 0.0, dw2, da1c, 0.0, dt)
+        dd = theta[idl] / dt
+        if not (abs(dd) < n - 4):
+            return False
+        m = int(math.floor(dd))
+        _accumulate_tangent(v, dv, src, dsrc, m, dd - m, _dparam(dtheta, idl) / dt, B0, B1, B2,
+                            dB0, dB1, dB2, mod_kind, mp, dmp, periodic)
     for k in range(n):
-        yk = (v[k] - A2 * y2) - A1 * y1
-        dyk = dv[k] - dA1 * y1 - dA2 * y2 - A1 * dy1 - A2 * dy2
-        y2, y1 = y1, yk
-        dy2, dy1 = dy1, dyk
-        y[k] = yk
-        dy[k] = dyk
+        y[k] = 0.0
+        dy[k] = 0.0
+    y1, dy1 = OV.recursion_add_tangent(v, dv, A1, A2, dA1, dA2, periodic, warm, y, dy)
+    if fine:
+        for k in range(n):
+            y[k] += wf[k]
+            dy[k] += dwf[k]
     out_nl = out_int[OUT_NL_KIND]
     if out_nl != NL_NONE:
         i0 = out_int[OUT_NL_P0]
