@@ -20,7 +20,14 @@ two likelihoods of :func:`bayespilot.sample.sample`:
     same prediction-error fit: it tests whether the too-narrow gains of the
     fixed AR model come from holding the noise model fixed in closed loop.
 
-A fourth set, ``ar2`` (the first version of the coloured likelihood: an AR(2)
+``profiled8``
+    the profiled coloured likelihood with the vestibular channel at 8 times
+    the recording's rate (``paper_model(oversample=8)``), from the same
+    prediction-error fit: it tests whether delta_abs's over-wide intervals
+    come from the 100-Hz model's error at the dead zone's corners
+    (``analyses/threshold_information.py --kinks``).
+
+A fifth set, ``ar2`` (the first version of the coloured likelihood: an AR(2)
 model sampled with the pilot parameters, the whole record), was run on the
 first 14 recordings only; it is reported beside the others because it shows
 why the AR order matters, and is not run further (``--likelihoods`` can).
@@ -56,15 +63,18 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "analyses" / "results" / "calibration"
 FIGURE = ROOT / "docs" / "figures" / "calibration_coverage.png"
 TASKS = ("FD", "FT")
-LIKELIHOODS = ("eq4", "coloured", "profiled", "ar2")
+LIKELIHOODS = ("eq4", "coloured", "profiled", "profiled8", "ar2")
 #: sample() options of each likelihood studied.
 OPTIONS = {"eq4": {"likelihood": "eq4"},
            "coloured": {"likelihood": "coloured", "ar": "fixed"},
            "profiled": {"likelihood": "coloured", "ar": "profiled"},
+           "profiled8": {"likelihood": "coloured", "ar": "profiled"},
            "ar2": {"likelihood": "coloured", "ar": "sampled", "ar_order": 2, "discard": 0.0}}
+#: The vestibular channel's oversampling factor of each likelihood studied (default 1).
+OVERSAMPLE = {"profiled8": 8}
 #: Panel titles of the figure.
 LABELS = {"eq4": "Eq. 4", "coloured": "coloured, AR fixed", "profiled": "coloured, AR profiled",
-          "ar2": "coloured, AR(2) sampled"}
+          "profiled8": "AR profiled, motion channel 8x", "ar2": "coloured, AR(2) sampled"}
 F_N, K_THETA = 0.2, 1.0
 LEVELS = (0.5, 0.9)
 NAMES = ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm", "delta_abs")
@@ -109,6 +119,7 @@ def _finished(task: str, r: int, lik: str, max_steps: int) -> bool:
 def run_one(task: str, r: int, likelihoods, max_steps: int) -> None:
     from bayespilot.fit.fast import fit_fast
     from bayespilot.fit.result import FitResult
+    from bayespilot.model import paper_model
     from bayespilot.presets import paper_parameters
     from bayespilot.sample import ConvergenceWarning, sample
     from bayespilot.simulate import simulate
@@ -129,13 +140,13 @@ def run_one(task: str, r: int, likelihoods, max_steps: int) -> None:
         if _finished(task, r, lik, max_steps):
             continue
         # the output-error fit for Eq. 4 (and AR(2)); a prediction-error fit for the AR model
-        fit = (fit_of("fitpem", noise="ar", discard=2.0) if lik in ("coloured", "profiled")
-               else fit_of("fit"))
+        fit = (fit_of("fitpem", noise="ar", discard=2.0)
+               if lik in ("coloured", "profiled", "profiled8") else fit_of("fit"))
         t0 = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            post = sample(rec, **OPTIONS[lik], init=fit, seed=r, max_steps=max_steps,
-                          progress=False)
+            post = sample(rec, paper_model(oversample=OVERSAMPLE.get(lik, 1)), **OPTIONS[lik],
+                          init=fit, seed=r, max_steps=max_steps, progress=False)
         q = {}
         for n in NAMES:
             x = post.draws(n)
@@ -151,7 +162,8 @@ def run_one(task: str, r: int, likelihoods, max_steps: int) -> None:
                       "seconds": time.perf_counter() - t0, "fit_seconds": fit.elapsed,
                       "remnant_fraction": sim.remnant_fraction,
                       "settings": {k: post.settings.get(k) for k in
-                                   ("likelihood", "ar", "ar_order", "discard_seconds")}})
+                                   ("likelihood", "ar", "ar_order", "discard_seconds",
+                                    "model")}})
         print(f"  {task} r{r:03d} {lik:>8}: {post.settings['n_steps']} steps, "
               f"{'converged' if post.converged else 'NOT converged'}, "
               f"{time.perf_counter() - t0:.0f} s", flush=True)
@@ -273,7 +285,7 @@ def main(argv=None) -> int:
     ap.add_argument("--chunk", type=int, default=None,
                     help="do at most this many unfinished recordings, then report")
     ap.add_argument("--likelihoods", default="eq4,coloured",
-                    help="comma-separated, of eq4, coloured, profiled, ar2 "
+                    help="comma-separated, of eq4, coloured, profiled, profiled8, ar2 "
                          "(default eq4,coloured)")
     ap.add_argument("--max-steps", type=int, default=6000,
                     help="cap on the steps of each chain (default 6000); raising it redoes "
@@ -281,6 +293,9 @@ def main(argv=None) -> int:
     ap.add_argument("--tasks", default=",".join(TASKS),
                     help="comma-separated tasks to run (default FD,FT; two processes can "
                          "take one task each)")
+    ap.add_argument("--from", dest="first", type=int, default=0, metavar="R",
+                    help="start at realization R (a second process can take the end of a "
+                         "task's list; the first skips what it finds done)")
     ap.add_argument("--report-only", action="store_true")
     args = ap.parse_args(argv)
     tasks = tuple(args.tasks.split(","))
@@ -290,7 +305,7 @@ def main(argv=None) -> int:
     done = 0
     if not args.report_only:
         for task, r in jobs(args.per_task):
-            if task not in tasks:
+            if task not in tasks or r < args.first:
                 continue
             if all(_finished(task, r, lk, args.max_steps) for lk in liks):
                 continue

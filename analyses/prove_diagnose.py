@@ -63,6 +63,8 @@ POOLED = 0
 #: Cut-off of the decision likelihood's low-pass, rad/s (``--omega-c`` sets it; None:
 #: the package default; inf: the whole band).
 OMEGA_C = None
+#: The likelihood's vestibular channel oversampling (``--oversample`` sets it; 1: the paper's).
+OVERSAMPLE = 1
 
 #: Effect sizes per entry, smallest effect first: (label, parameters).
 EFFECTS = {
@@ -190,12 +192,13 @@ def run_pooled_case(c: dict) -> dict:
                               f"run{j + 1}"))
         remnant.append(float(np.var(sim.remnant) / np.var(rec.u)))
     t0 = time.perf_counter()
-    res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP, omega_c=OMEGA_C)
+    res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP, omega_c=OMEGA_C,
+                          oversample=OVERSAMPLE)
     el = time.perf_counter() - t0
     vafs = [r["base"]["vaf"] for r in res.runs]
     rms = []
     for rec, r in zip(recs, res.runs):
-        eps = Likelihood(paper_model(), rec).residual(r["base"]["gls_params"])
+        eps = Likelihood(paper_model(oversample=OVERSAMPLE), rec).residual(r["base"]["gls_params"])
         rms.append(float(np.sqrt(np.mean(eps ** 2))))
     return {"case": dict(c), "runs": POOLED, "true_params": extra,
             "remnant_fraction": float(np.mean(remnant)),
@@ -224,7 +227,7 @@ def run_case(c: dict) -> dict:
     rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
     t0 = time.perf_counter()
     res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP, profile_noise=PROFILE_NOISE,
-                   omega_c=OMEGA_C)
+                   omega_c=OMEGA_C, oversample=OVERSAMPLE)
     el = time.perf_counter() - t0
     resid = res.arrays["residual"]
     return {"case": {k: v for k, v in c.items()}, "true_params": extra,
@@ -804,7 +807,7 @@ def _oracle_table(rows: list[dict]) -> None:
     plt.close(fig)
 
 
-def model_error(n_controls: int = 16) -> None:
+def model_error(n_controls: int = 16, oversample: int = 1) -> None:
     """How visible the likelihood's own discretisation error is to the decision likelihood.
 
     On the first ``n_controls`` controls: the model's error at the true
@@ -822,10 +825,10 @@ def model_error(n_controls: int = 16) -> None:
     from bayespilot.likelihood import Likelihood
     from bayespilot.model import paper_model
 
-    model = paper_model()
+    model = paper_model(oversample=oversample)
     cuts = (math.inf, 100.0, 50.0, D.OMEGA_C)
     print("lambda_err of the model's discretisation error at the truth, per low-pass cut-off "
-          "(rad/s; inf: the whole band)")
+          f"(rad/s; inf: the whole band); likelihood: {model.name}")
     print(f"{'control':<22}" + "".join(f"{c:>10g}" for c in cuts))
     lams = []
     for c in [c for c in cases() if c["truth"] == "none"][:n_controls]:
@@ -920,11 +923,15 @@ def main(argv=None) -> int:
     ap.add_argument("--model-error", action="store_true",
                     help="the noncentrality that the likelihood's discretisation error adds to "
                          "the decision likelihood on 16 controls, per low-pass cut-off")
+    ap.add_argument("--oversample", type=int, default=1, metavar="M",
+                    help="the likelihood's vestibular channel at M times the recording's rate "
+                         "(default 1): diagnose(oversample=M), and --model-error's likelihood; "
+                         "results and figures get the suffix _os<M>")
     ap.add_argument("--width-profile", metavar="IDS",
                     help="-ln L over fixed soft-threshold widths for these threshold-shape "
                          "case ids (comma-separated), against the crisp dead zone")
     args = ap.parse_args(argv)
-    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C
+    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
@@ -942,6 +949,10 @@ def main(argv=None) -> int:
         tag = "_fullband" if math.isinf(OMEGA_C) else f"_omega{OMEGA_C:g}"
         OUT = OUT.with_name(OUT.name + tag)
         FIG_SUFFIX += tag
+    if args.oversample != 1:
+        OVERSAMPLE = args.oversample
+        OUT = OUT.with_name(OUT.name + f"_os{OVERSAMPLE}")
+        FIG_SUFFIX += f"_os{OVERSAMPLE}"
     try:
         k, n = (int(v) for v in args.shard.split("/"))
         if not 0 <= k < n:
@@ -964,7 +975,7 @@ def main(argv=None) -> int:
         oracle((k, n))
         return 0
     if args.model_error:
-        model_error()
+        model_error(oversample=args.oversample)
         return 0
     if args.width_profile:
         width_profile([int(v) for v in args.width_profile.split(",")])

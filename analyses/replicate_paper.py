@@ -4,6 +4,7 @@ Run:  python analyses/replicate_paper.py [--realizations 100] [--chunk N] [--met
                                          [--report-only]
                                          [--remnant table4|fraction] [--fits both|threshold|none]
                                          [--remnant-fractions 0,0.1,0.2,0.25,0.3]
+                                         [--motion-gains 0.25,0.5,0.75,1]
                                          [--iterate]
                                          [--workers N | --scheduler tcp://host:8786]
                                          [--out analyses/results/replication]
@@ -71,6 +72,8 @@ def main(argv=None) -> int:
     ap.add_argument("--remnant-fractions", default="0,0.1,0.2,0.25,0.3",
                     help="comma-separated F_n of the grid (default all five; Figs. 14/15 "
                          "need 0,0.2,0.3)")
+    ap.add_argument("--motion-gains", default=",".join(f"{k:g}" for k in presets.MOTION_GAINS),
+                    help="comma-separated K_theta of the grid (default all four)")
     ap.add_argument("--fits", choices=("both", "threshold", "none"), default="both",
                     help="fit with and without threshold (default), or one of the two")
     ap.add_argument("--iterate", action="store_true",
@@ -88,7 +91,8 @@ def main(argv=None) -> int:
 
     fractions = tuple(float(x) for x in args.remnant_fractions.split(","))
     thresholds = {"both": (True, False), "threshold": (True,), "none": (False,)}[args.fits]
-    jobs = paper_study(args.realizations, tasks=("FD", "FT"), motion_gains=presets.MOTION_GAINS,
+    gains = tuple(float(x) for x in args.motion_gains.split(","))
+    jobs = paper_study(args.realizations, tasks=("FD", "FT"), motion_gains=gains,
                        remnant_fractions=fractions, threshold=thresholds, method=args.method,
                        remnant=args.remnant, **({"iterate": True} if args.iterate else {}))
     todo = _unfinished(jobs, args.out)

@@ -2,7 +2,8 @@
 
 Run:  python analyses/threshold_information.py [--recordings 5] [--spectra 20] [--scatter 40]
       python analyses/threshold_information.py --exact 200 [--open-loop 1000] --exact-only
-      python analyses/threshold_information.py --kinks 6
+                                               [--oversample 8]
+      python analyses/threshold_information.py --kinks 6 [--oversample 10]
 
 The calibration study (``analyses/calibration.py``) finds the 50 % and 90 %
 intervals of delta_abs too wide at K_theta = 1, F_n = 0.2.  This script
@@ -343,7 +344,7 @@ def _coverage_row(name: str, rows: list[dict]) -> None:
           f"+-{1.96 * np.sqrt(0.25 / n):.3f}/{1.96 * np.sqrt(0.09 / n):.3f} {expo:6.2f}")
 
 
-def exact_posteriors(n_closed: int, n_open: int) -> None:
+def exact_posteriors(n_closed: int, n_open: int, oversample: int = 1) -> None:
     from scipy import signal
 
     from bayespilot.likelihood import Likelihood
@@ -351,10 +352,10 @@ def exact_posteriors(n_closed: int, n_open: int) -> None:
     from bayespilot.noise import ARNoise
     from bayespilot.simulate import remnant, simulate
 
-    model = paper_model()
+    model = paper_model(oversample=oversample)  # the simulator ignores oversample
     k = model.parameter_names.index("delta_abs")
     print(f"\n6. Exact 1-D posteriors of delta_abs on a grid (FD, the others at the truth, "
-          f"flat prior; truth {TRUE})")
+          f"flat prior; truth {TRUE}; likelihood {model.name})")
     print(f"  {'setting':<28} {'n':>5} {'mean MLE':>8} {'sd(MLE)':>8} {'mean SE':>8} "
           f"{'post. sd':>9} {'cr.50':>6} {'cr.90':>6} {'LR50':>6} {'LR90':>6} {'band':>12} "
           f"{'expo.':>6}")
@@ -372,7 +373,8 @@ def exact_posteriors(n_closed: int, n_open: int) -> None:
         x = signal.lfilter([1.0], np.r_[1.0, -noise.a], s_w * w)[burn:]
         lik = Likelihood(model, sim.recording.with_signals(u=u0 + x), discard=2.0, noise=noise)
         rows["(a) open loop, exact model"].append(_grid_posterior(lik, free0, k))
-    _coverage_row("(a) open loop, exact model", rows["(a) open loop, exact model"])
+    if n_open:
+        _coverage_row("(a) open loop, exact model", rows["(a) open loop, exact model"])
 
     names = ("(b) closed loop, as simulated", "(c) closed loop, no model err",
              "(d) independent remnant")
@@ -467,6 +469,9 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
     G. F with each sample corrected by half of its two intervals' area error
        (the exact mean of the dead zone of the linearly interpolated canal
        output over an interval, less the trapezoid of its end samples).
+    P. the package's likelihood with the vestibular channel oversampled
+       (``paper_model(oversample=M)``, ``kernels/_oversample.py``): C as the
+       package computes it, at the recording's rate.
 
     Energies are in innovation variances s2 of the AR model of the residual.
     """
@@ -515,9 +520,10 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
         fir = signal.lfilter(b, [1.0], np.take(d, idx, mode="wrap"))[2:]
         return signal.lfilter([1.0], a, fir)[500:]
 
-    print(f"\n7. The model error at the kinks, five versions of the motion path "
+    print(f"\n7. The model error at the kinks, six versions of the motion path "
           f"({n_rec} recordings of check 6)")
-    rows = {v: [] for v in "ABCFG"}
+    rows = {v: [] for v in "ABCFGP"}
+    fine_model = paper_model(oversample=M)
     for r in range(n_rec):
         sim = simulate(model, task="FD", motion_gain=1.0, remnant_fraction=0.2,
                        seed=EXACT_SEED + r)
@@ -532,8 +538,11 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
             return ar.whiten(x[200:])
 
         s2 = float(np.mean(w(rec.u - lik.response(p0)) ** 2))
-        for v in "ABCFG":
+        fine = Likelihood(fine_model, rec)
+        for v in "ABCFGP":
             def resp(d, v=v):
+                if v == "P":
+                    return fine.response(dict(p0, delta_abs=d))
                 return visual + motion(dict(p0, delta_abs=d), i, rec.dt, v)
 
             y0 = resp(TRUE)
@@ -549,8 +558,9 @@ def kink_variants(n_rec: int, oversample: int = 10) -> None:
             rows[v].append((f(TRUE, clean), bowl / ref - 1.0))
     names = {"A": "A, the package (dead zone, then delay)", "B": "B, delay, then dead zone",
              "C": f"C, motion path at {M}x the rate", "F": "F, A with a first-order hold",
-             "G": "G, F with area-corrected samples"}
-    for v in "ABCFG":
+             "G": "G, F with area-corrected samples",
+             "P": f"P, the package, oversample={M}"}
+    for v in "ABCFGP":
         a = np.array(rows[v])
         print(f"   {names[v]:<40} model-error energy {a[:, 0].mean():6.2f} s2 "
               f"(range {a[:, 0].min():.2f}-{a[:, 0].max():.2f}), kappa {a[:, 1].mean():+.3f}")
@@ -569,15 +579,19 @@ def main(argv=None) -> int:
     ap.add_argument("--open-loop", type=int, default=1000,
                     help="open-loop noise realizations for check 6 (default 1000)")
     ap.add_argument("--exact-only", action="store_true", help="run check 6 only")
+    ap.add_argument("--oversample", type=int, default=None, metavar="M",
+                    help="--kinks: the fine rate of variants C and P, samples per interval "
+                         "(default 10); --exact: the likelihood's vestibular channel at M "
+                         "times the rate (default 1, the paper's computation)")
     ap.add_argument("--kinks", type=int, default=0, metavar="N",
                     help="run only check 7 on the first N recordings of check 6: the model "
                          "error at the kinks for three versions of the motion path")
     args = ap.parse_args(argv)
     if args.kinks:
-        kink_variants(args.kinks)
+        kink_variants(args.kinks, args.oversample or 10)
         return 0
     if args.exact_only:
-        exact_posteriors(args.exact, args.open_loop)
+        exact_posteriors(args.exact, args.open_loop, args.oversample or 1)
         return 0
     posterior_shape()
     curvature(args.recordings)
@@ -586,7 +600,7 @@ def main(argv=None) -> int:
     if args.scatter:
         conditional_scatter(args.scatter)
     if args.exact:
-        exact_posteriors(args.exact, args.open_loop)
+        exact_posteriors(args.exact, args.open_loop, args.oversample or 1)
     return 0
 
 

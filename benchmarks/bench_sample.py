@@ -1,12 +1,14 @@
 """Time to 1000 effective samples of delta_abs, and one evidence, per likelihood (issue 4).
 
 Run:  python benchmarks/bench_sample.py [--likelihoods eq4,coloured,profiled] [--nlive 200]
+                                        [--oversample M]
 
 ``profiled`` is the coloured likelihood with the AR model re-fitted at every
 parameter vector (``sample(..., ar="profiled")``); it has no evidence.
 
 Simulates task FD, K_theta = 1, K_n = 0.104 (F_n ~ 0.2, Table 4), 81.92 s,
-with the paper's model.  For each likelihood it times, with numba limited to
+with the paper's model (``--oversample M``: its vestibular channel at M
+times the rate in the likelihood).  For each likelihood it times, with numba limited to
 one thread:
 
 - the initial maximum-likelihood fit that ``sample`` starts from (for
@@ -49,15 +51,16 @@ OPTIONS = {"eq4": {"likelihood": "eq4"}, "coloured": {"likelihood": "coloured", 
            "profiled": {"likelihood": "coloured", "ar": "profiled"}}
 
 
-def _warm_up(lik: str) -> None:
+def _warm_up(lik: str, model) -> None:
     rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=4, duration=10.0).recording
-    fit = fit_fast(rec, seed=0, noise="ar" if lik != "eq4" else None)
+    fit = fit_fast(rec, model, seed=0, noise="ar" if lik != "eq4" else None)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sample(rec, **OPTIONS[lik], init=fit, max_steps=40, min_steps=20, check_every=20,
-               progress=False, seed=0)
+        sample(rec, model, **OPTIONS[lik], init=fit, max_steps=40, min_steps=20,
+               check_every=20, progress=False, seed=0)
         if lik != "profiled":
-            evidence(rec, likelihood=lik, noise=_noise(fit), nlive=20, dlogz=50.0, seed=0)
+            evidence(rec, model, likelihood=lik, noise=_noise(fit), nlive=20, dlogz=50.0,
+                     seed=0)
 
 
 def main(argv=None):
@@ -65,15 +68,18 @@ def main(argv=None):
     ap.add_argument("--likelihoods", default="eq4,coloured,profiled")
     ap.add_argument("--nlive", type=int, default=200)
     ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--oversample", type=int, default=1,
+                    help="the likelihood's vestibular channel at M times the rate (default 1)")
     args = ap.parse_args(argv)
     numba.set_num_threads(1)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; "
           f"numba threads {numba.get_num_threads()}; load {os.getloadavg()}")
     rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=args.seed).recording
-    model = paper_model()
+    model = paper_model(oversample=args.oversample)
+    print(f"model: {model.name}")
     rows = []
     for lik in args.likelihoods.split(","):
-        _warm_up(lik)
+        _warm_up(lik, model)
         t0 = time.perf_counter()
         discard = COLOURED_DISCARD if lik != "eq4" else 0.0
         fit = fit_fast(rec, model, seed=0, noise="ar" if lik != "eq4" else None,

@@ -170,3 +170,33 @@ def test_summary_and_default_channels():
     assert [c.oversample for c in m.channels] == [1, 8]  # only the dead-zone channel
     assert "[8x the rate]" in m.summary()
     assert paper_model(threshold=False, oversample=8).channels[1].oversample == 8
+
+
+def test_cli_oversample(tmp_path, capsys):
+    """``--oversample M`` prints the oversampled model's -ln L; a bad M is a usage error."""
+    import json
+
+    from bayespilot.cli import main
+    from bayespilot.io import read_recording
+
+    assert main(["simulate", "--task", "FD", "--motion-gain", "1", "--remnant-fraction", "0.2",
+                 "--seed", "4", "--duration", "10", "-o", str(tmp_path / "run"), "-q"]) == 0
+    pfile = tmp_path / "p.json"
+    pfile.write_text(json.dumps(FD))
+    capsys.readouterr()
+    assert main(["loglik", str(tmp_path / "run"), "--params", str(pfile), "--oversample", "8",
+                 "-q"]) == 0
+    out = capsys.readouterr().out
+    rec = read_recording(tmp_path / "run")
+    assert float(out.split("=")[1]) == Likelihood(paper_model(oversample=8), rec).neg_log_lik(FD)
+    for bad, msg in (("0", "must be >= 1"), ("65", "must be <= 64"), ("2.5", "whole number")):
+        assert main(["loglik", str(tmp_path / "run"), "--params", str(pfile),
+                     "--oversample", bad]) == 2
+        assert msg in capsys.readouterr().err
+
+
+def test_diagnose_refuses_bad_oversample(fd_rec):
+    from bayespilot.diagnose import diagnose
+
+    with pytest.raises(ValueError, match="oversample must be an integer"):
+        diagnose(fd_rec, oversample=0)

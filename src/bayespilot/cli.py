@@ -93,6 +93,25 @@ def _whole_number(minimum: int):
 _seed = _whole_number(0)
 
 
+def _oversample(text: str) -> int:
+    """An argparse type: an oversampling factor, 1 to model.MAX_OVERSAMPLE."""
+    from .model import MAX_OVERSAMPLE
+
+    x = _whole_number(1)(text)
+    if x > MAX_OVERSAMPLE:
+        raise argparse.ArgumentTypeError(f"must be <= {MAX_OVERSAMPLE}, got {text}")
+    return x
+
+
+def _oversample_argument(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--oversample", type=_oversample, default=1, metavar="M",
+                   help="run the motion channel (dead zone, delay, H_nm) at M times the "
+                        "recording's rate in the likelihood: 1 is the paper's computation "
+                        "(default); 8 removes the 100-Hz model's error at the dead zone's "
+                        "corners, which makes delta_abs's intervals calibrated "
+                        "(docs/posteriors.md)")
+
+
 # --- helpers --------------------------------------------------------------------------
 def _save_figure(fig, png: Path) -> None:
     """Write a figure to PNG and close it; a failed write is a runtime failure (exit 1)."""
@@ -283,7 +302,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 def _cmd_loglik(args: argparse.Namespace) -> int:
     from .model import paper_model
 
-    model = paper_model(threshold=not args.no_threshold)
+    model = paper_model(threshold=not args.no_threshold, oversample=args.oversample)
     params = _read_params(args.params, model, require=model.parameter_names)
     if args.no_threshold and "delta_abs" in params:
         _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
@@ -303,17 +322,20 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         raise UsageError("argument --noise: 'ar' (a prediction-error fit) goes with --method fast")
     if args.iterate and args.method != "paper":
         raise UsageError("argument --iterate: it repeats Steps II and III of --method paper")
+    from .model import paper_model
+
     rec = _read(args.recording)
     threshold = not args.no_threshold
+    model = paper_model(oversample=args.oversample)
     if args.method == "paper":
         _say(args, f"fitting {rec.source} with the paper's three-step procedure "
                    f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
-        fit = fit_paper(rec, threshold=threshold, seed=args.seed, iterate=args.iterate,
+        fit = fit_paper(rec, model, threshold=threshold, seed=args.seed, iterate=args.iterate,
                         progress=_progress(args))
     else:
         _say(args, f"fitting {rec.source} with the fast estimator"
                    + (" (prediction error: AR noise model)" if args.noise == "ar" else "") + " ...")
-        fit = fit_fast(rec, threshold=threshold, seed=args.seed,
+        fit = fit_fast(rec, model, threshold=threshold, seed=args.seed,
                        **({"noise": "ar", "discard": 2.0} if args.noise == "ar" else {}))
     if not math.isfinite(fit.neg_log_lik):
         raise CommandFailed("the fit did not reach a finite -ln L")
@@ -514,6 +536,7 @@ def _write_json(path: str, obj) -> None:
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:
+    from .model import paper_model
     from .sample import sample
 
     out = Path(args.output)
@@ -525,7 +548,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            post = sample(rec, likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
+            post = sample(rec, paper_model(oversample=args.oversample),
+                          likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
                           seed=args.seed,
                           max_steps=args.max_steps, min_steps=min(1000, args.max_steps),
                           progress=_progress(args), backend=args.backend)
@@ -551,6 +575,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from .compare import compare
+    from .model import paper_model
 
     posterior = _read_posterior(args.posterior) if args.posterior else None
     rec = _read(args.recording)
@@ -559,7 +584,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            result = compare(rec, likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
+            result = compare(rec, paper_model(oversample=args.oversample),
+                             likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
                              seed=args.seed, nlive=args.nlive,
                              posterior=posterior,
                              savage_dickey_samples=not args.no_savage_dickey)
@@ -651,7 +677,7 @@ def _seed_argument(p: argparse.ArgumentParser, help: str) -> None:
 
 
 def _likelihood_arguments(p: argparse.ArgumentParser, profiled: bool = False) -> None:
-    """--likelihood, --ar and --ar-order, as sample() and compare() take them (``profiled``:
+    """--likelihood, --ar, --ar-order and --oversample, as sample() and compare() take them (``profiled``:
     the command offers --ar profiled, which sample() has and the evidence has not)."""
     p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
                    help="'eq4': white output error (the paper's Eq. 4, default); 'coloured': "
@@ -670,6 +696,7 @@ def _likelihood_arguments(p: argparse.ArgumentParser, profiled: bool = False) ->
     p.add_argument("--ar-order", type=_whole_number(0), default=None, metavar="P",
                    help="'coloured' only: order of the AR model (default: by BIC for --ar "
                         "fixed" + (" and profiled" if profiled else "") + ", 2 for --ar sampled)")
+    _oversample_argument(p)
 
 
 TOP_EPILOG = """\
@@ -952,6 +979,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--initial", choices=("periodic", "rest"), default="periodic",
                    help="model start-up: 'periodic' treats the record as periodic (filters in "
                         "steady state), 'rest' starts from zero state (default periodic)")
+    _oversample_argument(p)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_loglik)
 
@@ -977,6 +1005,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="OUT",
                    help="write the result (params, neg_log_lik, vaf, method, seed and every "
                         "step) to this JSON file")
+    _oversample_argument(p)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_fit)
 

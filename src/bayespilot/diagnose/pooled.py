@@ -387,7 +387,8 @@ def _pooled_saturation(recordings, runs):
 def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float = ALPHA,
                     n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
                     skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
-                    n_starts: int = 4, progress: bool = False) -> PooledDiagnosisResult:
+                    n_starts: int = 4, oversample: int = 1,
+                    progress: bool = False) -> PooledDiagnosisResult:
     """Diagnose several runs of one condition together (see the module docs).
 
     Parameters
@@ -397,7 +398,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         keeps its own pilot parameters; the extension's parameters are shared.
     seed : int or None
         Seeds each run's base fit and bootstrap (run j uses ``seed + j``).
-    alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, progress
+    alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample, progress
         As for :func:`~bayespilot.diagnose.diagnose`.
 
     Returns
@@ -416,13 +417,13 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         raise ValueError(f"pooling needs at least two recordings, got {len(recs)}")
     names = None
     for rec in recs:
-        names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates)
+        names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample)
     t0 = time.perf_counter()
     bar = tqdm(total=2 * len(recs) + len(names), desc="diagnose (pooled)", unit="stage",
                disable=not progress)
     runs = [_prepare(rec, seed=None if seed is None else seed + j, n_bootstrap=n_bootstrap,
                      base_fit=None, skip_seconds=skip_seconds, omega_c=omega_c,
-                     n_starts=n_starts, profile_noise=False, bar=bar)
+                     n_starts=n_starts, profile_noise=False, bar=bar, oversample=oversample)
             for j, rec in enumerate(recs)]
     keys = sorted(set.intersection(*(set(r.where) for r in runs)))
     where = {}
