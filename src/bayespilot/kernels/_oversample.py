@@ -333,7 +333,10 @@ def modulate(v, mod_kind, mp, dmp, dv, tangent):
 @njit
 def recursion_add(v, A1, A2, periodic, warm, w):
     """y_k = v_k - A1 y_{k-1} - A2 y_{k-2}, warmed up over the last ``warm`` samples when
-    periodic, added to ``w``.  Returns the last two states (for a finiteness check)."""
+    periodic, added to ``w``.  Returns the last two states (for a finiteness check).
+
+    ``(v - A2 y2) - A1 y1`` keeps one multiply-add on the loop-carried path.  The
+    recording-rate H_nm recursion of ``_response.response_into`` is this one too."""
     n = v.shape[0]
     y1 = 0.0
     y2 = 0.0

@@ -307,24 +307,10 @@ def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, pe
         else:
             _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind,
                                   param_or(theta, ch_int[c, CH_MOD_P0], 0.0), periodic)
-    # The common recursion through H_nm; (v - A2 y2) - A1 y1 keeps one
-    # multiply-add on the loop-carried path.
-    y1 = 0.0
-    y2 = 0.0
-    if periodic:
-        start = n - warm if warm < n else 0
-        for k in range(start, n):
-            yk = (v[k] - A2 * y2) - A1 * y1
-            y2 = y1
-            y1 = yk
+    # The common recursion through H_nm, added to the oversampled channels' share
     for k in range(n):
-        yk = (v[k] - A2 * y2) - A1 * y1
-        y2 = y1
-        y1 = yk
-        y[k] = yk
-    if fine:
-        for k in range(n):
-            y[k] += w[k]
+        y[k] = w[k] if fine else 0.0
+    y1, y2 = OV.recursion_add(v, A1, A2, periodic, warm, y)
     out_nl = out_int[OUT_NL_KIND]
     if out_nl != NL_NONE:
         o0 = param_or(theta, out_int[OUT_NL_P0], 0.0)
