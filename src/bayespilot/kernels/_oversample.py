@@ -5,11 +5,13 @@ A channel with ``oversample`` M > 1 (``ch_int[c, CH_OVERSAMPLE]``, see
 parametric stages on a fine grid of M points per sample interval:
 
     x_f = the stage output x interpolated linearly to t = (k + j / M) dt
-    d_f = g(t) NL(x_f)                    the nonlinearity (dead zone) there
+    d_f = NL(x_f)                         the nonlinearity (dead zone) there
     v_f = sum_t c_t d_f[i - m - t]        delay m + f (fine samples), Tustin numerator at dt / M
     y_f = v_f - A1 y_f[i-1] - A2 y_f[i-2] its own H_nm, Tustin at dt / M
 
-and adds y_f at every M-th point (i = k M) to u_hat.  A sampled dead zone is
+and adds y_f at every M-th point (i = k M) to u_hat.  A gain modulation (a
+drift over the run) multiplies the channel's folded input below at each
+output sample's time (:func:`modulate`).  A sampled dead zone is
 the largest discretisation error of the paper's model (``docs/posteriors.md``):
 between samples the dead zone's output is not the straight line the 100-Hz
 model assumes, and that error sits exactly where the threshold's information
@@ -26,11 +28,16 @@ recursion at the recording's rate,
 
     y_k = tr(P) y_{k-1} - det(P) y_{k-2} + v'_k,   P = T^M,
 
-whose input v'_k is one FIR of 2M + 3 taps ``K`` on d_f, evaluated at every
-M-th point (:func:`coefficients` derives K from T, the numerator and the
-delay's fraction).  Exact in real arithmetic; the cost is the fine dead zone
-(M per sample, vectorised), 2M + 3 multiply-adds per sample and one
-recursion at the recording's rate.
+whose input v'_k is one FIR of 2M + 3 taps ``K`` on d_f, read at every M-th
+point (:func:`coefficients` derives K from T, the numerator and the delay's
+fraction).  And d_f itself need not be built: where the interpolated input
+stays on one linear piece of the nonlinearity over a sample interval, d_f
+there is the linear interpolation of D = NL(x) at the recording's rate, so
+the FIR becomes 4-5 taps on D (:func:`coarse_taps`), plus corrections
+d_f - interp(D) in the few intervals where the input crosses a corner of the
+dead zone (:func:`fold_channel`; every interval for a smooth nonlinearity).
+Exact in real arithmetic; the cost is that of one more channel at the
+recording's rate, the corners, and one more recursion.
 
 Each routine has a tangent twin for the Jacobians (``kernels/_sensitivity.py``)
 that runs the same arithmetic with derivatives alongside, so the response and

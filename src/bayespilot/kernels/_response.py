@@ -225,7 +225,8 @@ def response_into(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, per
 def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, periodic, warm,
                    y, q, v, w, b, fb):
     """:func:`response_into` with its buffers: ``v`` (n), and for oversampled channels ``w``
-    (n, their share of u_hat), ``b`` (n) and ``fb`` (2 M n, their fine signals)."""
+    (n, their share of u_hat), ``b`` (n, a channel's folded input) and ``fb`` (n, its
+    nonlinearity's output at the recording's rate)."""
     n_ch = X.shape[0]
     n = X.shape[1]
     wn = theta[out_int[OUT_OMEGA]]
