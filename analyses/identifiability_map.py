@@ -65,6 +65,7 @@ def _write(path: Path, obj) -> None:
 
 def run_one(task, k, fn, r, lik, max_steps) -> dict:
     from bayespilot.fit.fast import fit_fast
+    from bayespilot.model import paper_model
     from bayespilot.sample import ConvergenceWarning, sample
     from bayespilot.simulate import simulate
 
@@ -72,12 +73,13 @@ def run_one(task, k, fn, r, lik, max_steps) -> dict:
     sim = simulate(task=task, motion_gain=k, remnant_fraction=fn, seed=seed_of(task, k, fn, r))
     rec = sim.recording
     # the prediction-error fit for the coloured likelihood (its AR model comes with it)
-    coloured = lik in ("coloured", "profiled")
+    coloured = lik in ("coloured", "profiled", "profiled8")
     fit = fit_fast(rec, seed=r, n_starts=4, **({"noise": "ar", "discard": 2.0} if coloured else {}))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ConvergenceWarning)
-        post = sample(rec, likelihood="coloured" if coloured else lik,
-                      ar="profiled" if lik == "profiled" else "fixed",
+        post = sample(rec, paper_model(oversample=8 if lik == "profiled8" else 1),
+                      likelihood="coloured" if coloured else lik,
+                      ar="profiled" if lik.startswith("profiled") else "fixed",
                       init=fit, seed=r, max_steps=max_steps, progress=False)
     d = post.draws("delta_abs")
     i = sim.channels["vestibular"]["pre"]
@@ -190,9 +192,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--realizations", type=int, default=3)
     ap.add_argument("--chunk", type=int, default=None)
-    ap.add_argument("--likelihood", default="coloured", choices=("eq4", "coloured", "profiled"),
+    ap.add_argument("--likelihood", default="coloured",
+                    choices=("eq4", "coloured", "profiled", "profiled8"),
                     help="coloured: AR noise model fixed at the fit; profiled: re-fitted at "
-                         "every parameter vector (sample(..., ar='profiled'))")
+                         "every parameter vector (sample(..., ar='profiled')); profiled8: that "
+                         "with the motion channel at 8 times the rate (paper_model(oversample=8))")
     ap.add_argument("--tasks", default=",".join(TASKS),
                     help="comma-separated tasks to run (default both; one process per task "
                          "uses both cores)")
