@@ -17,7 +17,9 @@ on one machine is never loaded on a CPU it was not built for.  numba checks
 only the source file of the function it caches: after editing
 ``kernels/_simd.py`` (whose intrinsics are compiled into ``_segmented``'s
 kernels), delete ``src/bayespilot/kernels/__pycache__`` or touch
-``_segmented.py``.
+``_segmented.py``; the same after editing ``kernels/_oversample.py`` or
+``kernels/_blocks.py`` alone (compiled into ``_response``'s and
+``_sensitivity``'s kernels: seen to keep a stale callee).
 """
 
 from __future__ import annotations
