@@ -192,6 +192,42 @@ def test_diagnose_correct_model_says_none(control_result):
     assert {r["physics"] for r in d["ranking"]} == set(NAMES)
     for r in d["ranking"]:
         assert set(r) >= {"physics", "delta_neg_log_lik", "p_value", "params"}
+    # the tests are against the final GLS base fit (threshold-shape: or its refinement)
+    ref = res.base["gls_neg_log_lik"]
+    for c in res.ranking:
+        if c.fit is None or c.physics == "control-saturation":
+            continue
+        want = max(0.0, ref - c.fit.neg_log_lik)
+        if c.physics == "threshold-shape":
+            assert c.delta_neg_log_lik <= want + 1e-9
+        else:
+            assert c.delta_neg_log_lik == pytest.approx(want, abs=1e-9)
+
+
+def test_null_refit_takes_the_basin_an_extension_reached_from_its_test():
+    """An extension that refines delta_abs reaches a better basin of the *base* model from a
+    base fit stuck in a poor one; that basin alone is not the extension's improvement."""
+    from bayespilot.diagnose import decide as D
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=24,
+                   duration=40.96).recording
+    model = paper_model()
+    start = presets.paper_parameters("FD")
+    noise = D.noise_model(Likelihood(model, rec).residual(start), rec.dt, skip=500)
+    wl, good = D.fit_base_gls(model, rec, start, noise)
+    names = tuple(n for n in model.parameter_names if n != "delta_abs")
+    poor = D._gls_refine(wl, dict(good.params, delta_abs=0.002), names)
+    assert poor.neg_log_lik > good.neg_log_lik + 5.0
+    ext = get_extension("threshold-shape")
+    res, _ = D.fit_candidate(ext, model, rec, poor, noise)
+    assert res.delta_neg_log_lik > 5.0 and res.p_value < 1e-3  # the basin, tested as physics
+    null = D.null_refit(ext, model, rec, res, noise)
+    assert null.neg_log_lik <= good.neg_log_lik + 0.1
+    assert null.params["delta_abs"] == pytest.approx(good.params["delta_abs"], abs=1e-3)
+    D.retest(res, ext, null.neg_log_lik)
+    assert res.delta_neg_log_lik == pytest.approx(max(0.0, null.neg_log_lik - res.fit.neg_log_lik))
+    assert res.delta_neg_log_lik < 1.5 and res.p_value > 0.01
+    assert res.delta_bic == pytest.approx(2 * res.delta_neg_log_lik - np.log(wl.m))
 
 
 def test_diagnose_names_a_strong_washout():

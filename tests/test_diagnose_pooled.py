@@ -76,7 +76,10 @@ def test_pooled_fit_matches_a_profile_over_the_shared_parameter(washout_runs, wa
                  if k in paper_model().parameter_names}
         _, noise, base = _base_gls(rec, paper_model(), start,
                                    skip=int(round(SKIP_SECONDS * rec.sample_rate_hz)))
-        assert base.neg_log_lik == pytest.approx(run["base"]["gls_neg_log_lik"], abs=1e-6)
+        # the reported base is the best fit found (a refit from a candidate's fit can only
+        # improve it; here by a hair)
+        assert run["base"]["gls_neg_log_lik"] <= base.neg_log_lik + 1e-9
+        assert base.neg_log_lik == pytest.approx(run["base"]["gls_neg_log_lik"], abs=0.01)
         whitened.append((D.Whitened(model, rec, noise), base))
     names = tuple(n for n in model.parameter_names if n not in ("omega_w", "delta_abs"))
     grid = np.array([0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.6])
@@ -100,6 +103,12 @@ def test_pooled_controls_say_none_and_report(tmp_path):
                           candidates=["motion-washout", "otolith-channel", "control-saturation"])
     assert res.physics == "none" and not res.mismatch
     assert "2 runs pooled" in res.summary()
+    # every GLS test is against the runs' final base fits (after any refit from a candidate)
+    ref = sum(r["base"]["gls_neg_log_lik"] for r in res.runs)
+    for c in res.ranking:
+        if c.physics in ("motion-washout", "otolith-channel"):
+            assert c.delta_neg_log_lik == pytest.approx(max(0.0, ref - c.fit.neg_log_lik),
+                                                        abs=1e-9)
     paths = res.report(tmp_path / "rep")
     for key in ("candidates", "runs", "json", "html"):
         assert paths[key].stat().st_size > 0

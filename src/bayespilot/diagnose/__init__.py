@@ -46,6 +46,12 @@ __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "ge
 ALPHA = 0.01
 #: Seconds at the start of the record left out of the decision likelihood and the evidence.
 SKIP_SECONDS = 5.0
+#: A better base fit found from an extension's fit (``decide.null_refit``) by more than this
+#: (in -ln L) makes every extension be fitted again from it; a smaller gain only moves the
+#: reference of the tests.
+REBASE_TOL = 0.5
+#: At most this many such refits.
+MAX_REBASE = 2
 
 
 def _json_ready(x):
@@ -279,6 +285,51 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
                 timings)
 
 
+def _fit_candidates(names, recording, base_model, base, noise, where, boot_info, profile_noise,
+                    bar):
+    """Fit and test every candidate from the GLS base fit ``base``.
+
+    Returns the candidate results and the delta_abs-refined reference (or None).
+    """
+    from . import decide as D
+
+    results = []
+    refined = None
+    for name in names:
+        ext = get_extension(name)
+        bar.set_postfix_str(name)
+        if ext.likelihood == "censored":
+            res = _saturation(recording, base_model, base, where, boot_info)
+        else:
+            ref = base
+            if ext.refine_threshold:
+                # the entry refines delta_abs, which the base fit only scanned on a grid:
+                # its reference gets the same freedom (else that alone is its "improvement")
+                if refined is None:
+                    refined = D.refine_threshold(base_model, recording, base, noise)
+                ref = refined
+            res, _ = D.fit_candidate(ext, base_model, recording, ref, noise,
+                                     profile_noise=profile_noise)
+        sig = [where[k].p_value for k in ext.signature_keys
+               if k in where and math.isfinite(where[k].p_value)]
+        res.signature_score = float(max([-math.log10(p) for p in sig], default=0.0))
+        results.append(res)
+        bar.update(1)
+    return results, refined
+
+
+def _best_null(names, results, base_model, recording, noise):
+    """The best base-model fit reached from any candidate's fit (:func:`decide.null_refit`)."""
+    from . import decide as D
+
+    best = None
+    for name, res in zip(names, results):
+        got = D.null_refit(get_extension(name), base_model, recording, res, noise)
+        if got is not None and (best is None or got.neg_log_lik < best.neg_log_lik):
+            best = got
+    return best
+
+
 def _decide(results, alpha):
     """Bonferroni over the testable candidates; choose among the justified; rank all.
 
@@ -392,28 +443,32 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
 
     # -- name
     t2 = time.perf_counter()
-    results = []
-    refined = None
-    for name in names:
-        ext = get_extension(name)
-        bar.set_postfix_str(name)
-        if ext.likelihood == "censored":
-            res = _saturation(recording, base_model, base, where, boot_info)
-        else:
-            ref = base
-            if ext.refine_threshold:
-                # the entry refines delta_abs, which the base fit only scanned on a grid:
-                # its reference gets the same freedom (else that alone is its "improvement")
-                if refined is None:
-                    refined = D.refine_threshold(base_model, recording, base, noise)
-                ref = refined
-            res, _ = D.fit_candidate(ext, base_model, recording, ref, noise,
-                                     profile_noise=profile_noise)
-        sig = [where[k].p_value for k in ext.signature_keys
-               if k in where and math.isfinite(where[k].p_value)]
-        res.signature_score = float(max([-math.log10(p) for p in sig], default=0.0))
-        results.append(res)
-        bar.update(1)
+    rebased = []
+    for _ in range(MAX_REBASE + 1):
+        results, refined = _fit_candidates(names, recording, base_model, base, noise, where,
+                                           boot_info, profile_noise, bar)
+        if profile_noise:
+            break  # each fit has its own noise model: the -ln L are not comparable
+        better = _best_null(names, results, base_model, recording, noise)
+        if better is None or not better.neg_log_lik < base.neg_log_lik:
+            break
+        gain = base.neg_log_lik - better.neg_log_lik
+        if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
+            # test against the better reference without refitting the extensions from it
+            for r in results:
+                ext = get_extension(r.physics)
+                ref = better.neg_log_lik
+                if ext.refine_threshold and refined is not None:
+                    ref = min(ref, refined.neg_log_lik)
+                D.retest(r, ext, ref)
+            rebased.append({"gain": gain, "refitted": False})
+            base = better
+            break
+        # a better basin of the base model: every extension again from there
+        rebased.append({"gain": gain, "refitted": True})
+        base = better
+        bar.reset(total=2 + len(names) * (len(rebased) + 1))
+        bar.update(2 + len(names) * len(rebased))
     bar.close()
     ranking, chosen, tested, level = _decide(results, alpha)
     timings["name"] = time.perf_counter() - t2
@@ -451,7 +506,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "bootstrap": boot_info,
                 "skip_seconds": skip_seconds, "dt": recording.dt, "noise_model": noise.to_dict(),
-                "candidates": list(names), "timings": timings,
+                "candidates": list(names), "timings": timings, "rebased": rebased,
                 "decision_likelihood": "GLS: residual low-passed, decimated and whitened by an "
                                        "AR model of the base residual"}
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,

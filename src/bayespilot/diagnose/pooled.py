@@ -40,8 +40,8 @@ from scipy import linalg, optimize, stats
 
 from .._blas import one_blas_thread
 from .._files import write_text_atomic
-from . import (ALPHA, SKIP_SECONDS, _check, _decide, _json_ready, _JSONSummary, _prepare,
-               _saturation)
+from . import (ALPHA, MAX_REBASE, REBASE_TOL, SKIP_SECONDS, _check, _decide, _json_ready,
+               _JSONSummary, _prepare, _saturation)
 from .catalogue import get_extension
 
 __all__ = ["diagnose_pooled", "PooledDiagnosisResult"]
@@ -347,13 +347,15 @@ def _pooled_candidate(ext, runs, recordings, refined_base=None):
     res = D.CandidateResult(ext.name, True, how, d, stat, ext.df, p, dbic, dbic / 2.0, new,
                             {n: float(s) for n, s in zip(ext.new_parameters, se)}, {})
     res.model = model
+    res.fit = D.FitSummary({}, f, (), np.zeros((0, 0)))  # the pooled -ln L, for a later retest
     if starts[0] is runs[0].base:
         ref = [r.base.neg_log_lik for r in runs]
     else:
         ref = [D.Whitened(runs[0].base_model, rec, r.noise).neg_log_lik(b.params)
                for rec, r, b in zip(recordings, runs, starts)]
-    per_run = [float(f0 - wl.neg_log_lik(q)) for f0, wl, q in zip(ref, wls, ps)]
-    return res, (ps, per_run)
+    own = [float(wl.neg_log_lik(q)) for wl, q in zip(wls, ps)]
+    per_run = [float(f0 - g) for f0, g in zip(ref, own)]
+    return res, (ps, per_run, own)
 
 
 def _pooled_saturation(recordings, runs):
@@ -381,6 +383,64 @@ def _pooled_saturation(recordings, runs):
                             math.inf if p == 0.0 else 2.0 * d, math.inf if p == 0.0 else d,
                             params, {}, {})
     return res, per_run
+
+
+def _pooled_candidates(names, runs, recs, where, bar):
+    """Fit and test every candidate on all runs from the runs' GLS base fits.
+
+    Returns ``(results, shares, fits, own, refined)``: the candidate results,
+    each candidate's per-run improvement, its per-run parameters and -ln L,
+    and the delta_abs-refined reference (or None).
+    """
+    results, shares, fits, own = [], {}, {}, {}
+    refined = None
+    for name in names:
+        ext = get_extension(name)
+        bar.set_postfix_str(name)
+        if ext.likelihood == "censored":
+            res, shares[name] = _pooled_saturation(recs, runs)
+        else:
+            if ext.refine_threshold and refined is None:
+                refined = _refined_base(runs, recs)
+            res, extra = _pooled_candidate(ext, runs, recs, refined)
+            if extra is not None:
+                fits[name], shares[name], own[name] = extra
+        sig = [where[k]["p_value"] for k in ext.signature_keys
+               if k in where and math.isfinite(where[k]["p_value"])]
+        res.signature_score = float(max([-math.log10(max(p, 1e-300)) for p in sig],
+                                        default=0.0))
+        results.append(res)
+        bar.update(1)
+    return results, shares, fits, own, refined
+
+
+def _pooled_null(names, fits, runs, recs):
+    """Per run, the best base-model fit: its GLS base fit or one reached from a candidate's fit.
+
+    The pooled counterpart of :func:`bayespilot.diagnose.decide.null_refit`:
+    each run's base model is refitted from each candidate's parameters for
+    that run (the candidate's new parameters dropped); under the base model
+    the runs are independent, so each run keeps its own best.
+    """
+    from . import decide as D
+
+    model = runs[0].base_model
+    best = [r.base for r in runs]
+    for name in names:
+        ext = get_extension(name)
+        if name not in fits or ext.likelihood != "gls":
+            continue
+        free = tuple(n for n in model.parameter_names
+                     if ext.refine_threshold or n != "delta_abs")
+        for j, (rec, run, q) in enumerate(zip(recs, runs, fits[name])):
+            start = {n: q[n] for n in model.parameter_names if n in q}
+            try:
+                got = D._gls_refine(D.Whitened(model, rec, run.noise), start, free)
+            except (ValueError, np.linalg.LinAlgError):
+                continue
+            if got.neg_log_lik < best[j].neg_log_lik:
+                best[j] = got
+    return best
 
 
 @one_blas_thread
@@ -412,6 +472,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     """
     from tqdm.auto import tqdm
 
+    from . import decide as D
+
     recs = list(recordings)
     if len(recs) < 2:
         raise ValueError(f"pooling needs at least two recordings, got {len(recs)}")
@@ -433,25 +495,32 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         where[k] = {"p_value": float(stats.combine_pvalues(ok, method="fisher")[1])
                     if len(ok) == len(ps) and ok else math.nan,
                     "values": [r.where[k].value for r in runs]}
-    results, shares, fits = [], {}, {}
-    refined = None
-    for name in names:
-        ext = get_extension(name)
-        bar.set_postfix_str(name)
-        if ext.likelihood == "censored":
-            res, shares[name] = _pooled_saturation(recs, runs)
-        else:
-            if ext.refine_threshold and refined is None:
-                refined = _refined_base(runs, recs)
-            res, extra = _pooled_candidate(ext, runs, recs, refined)
-            if extra is not None:
-                fits[name], shares[name] = extra
-        sig = [where[k]["p_value"] for k in ext.signature_keys
-               if k in where and math.isfinite(where[k]["p_value"])]
-        res.signature_score = float(max([-math.log10(max(p, 1e-300)) for p in sig],
-                                        default=0.0))
-        results.append(res)
-        bar.update(1)
+    rebased = []
+    for _ in range(MAX_REBASE + 1):
+        results, shares, fits, own, refined = _pooled_candidates(names, runs, recs, where, bar)
+        better = _pooled_null(names, fits, runs, recs)
+        gain = float(sum(r.base.neg_log_lik - b.neg_log_lik for r, b in zip(runs, better)))
+        if not gain > 0:
+            break
+        for run, b in zip(runs, better):
+            run.base = b
+        if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
+            # test against the better references without refitting the extensions from them
+            for r in results:
+                ext = get_extension(r.physics)
+                ref = float(sum(b.neg_log_lik for b in better))
+                if ext.refine_threshold and refined is not None and refined[0] <= ref:
+                    continue  # its reference, the refined base, stays the better one
+                D.retest(r, ext, ref)
+                if r.physics in own:
+                    shares[r.physics] = [float(b.neg_log_lik - g)
+                                         for b, g in zip(better, own[r.physics])]
+            rebased.append({"gain": gain, "refitted": False})
+            break
+        # a better basin of the base model in some run: every extension again from there
+        rebased.append({"gain": gain, "refitted": True})
+        bar.reset(total=2 * len(recs) + len(names) * (len(rebased) + 1))
+        bar.update(2 * len(recs) + len(names) * len(rebased))
     bar.close()
     ranking, chosen, tested, level = _decide(results, alpha)
     run_d = []
@@ -470,7 +539,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                       "params": chosen_params})
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "skip_seconds": skip_seconds,
-                "candidates": list(names), "n_runs": len(recs),
+                "candidates": list(names), "n_runs": len(recs), "rebased": rebased,
                 "decision_likelihood": "sum over runs of the GLS likelihood (each run's own AR "
                                        "noise model and level); extension parameters shared"}
     return PooledDiagnosisResult(chosen is not None, chosen.physics if chosen else "none",
