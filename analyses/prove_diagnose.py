@@ -28,6 +28,8 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --pooled 4 --shard 1/2   # (diagnose_pooled), 2 cores
     python analyses/prove_diagnose.py --example-pooled         # the docs' pooled walk-through
     python analyses/prove_diagnose.py --pooled-null 100        # pooled vs one-run null tests
+    python analyses/prove_diagnose.py --pooled-null 100 --rebase   # the same, tests against the
+                                                                   # base's best fit (as diagnose)
 
 The case list is ordered round-robin over the entries and the controls (with
 the conditions shuffled by a fixed seed), so any prefix of it is a balanced
@@ -43,6 +45,7 @@ import argparse
 import itertools
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -60,6 +63,8 @@ FIG_SUFFIX = ""
 PROFILE_NOISE = False
 #: Runs per case of the pooled study (``--pooled R`` sets it; 0: one run, ``diagnose``).
 POOLED = 0
+#: --pooled-null: test against the base model's best fit found (decide.null_refit), as diagnose.
+REBASE = False
 #: Cut-off of the decision likelihood's low-pass, rad/s (``--omega-c`` sets it; None:
 #: the package default; inf: the whole band).
 OMEGA_C = None
@@ -598,8 +603,11 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
     out = ROOT / "analyses" / "results" / "diagnose_pooled"
     out.mkdir(parents=True, exist_ok=True)
     k, n = shard
-    path = out / (f"null_study_{k}of{n}.jsonl" if n > 1 else "null_study.jsonl")
-    done = {json.loads(line)["id"] for f in out.glob("null_study*.jsonl")
+    stem = "null_study_rebase" if REBASE else "null_study"
+    path = out / (f"{stem}_{k}of{n}.jsonl" if n > 1 else f"{stem}.jsonl")
+    mine = re.compile(rf"{stem}(_\d+of\d+)?\.jsonl")
+    files = lambda: sorted(f for f in out.glob("*.jsonl") if mine.fullmatch(f.name))  # noqa: E731
+    done = {json.loads(line)["id"] for f in files()
             for line in f.read_text().splitlines() if line.strip()}
     todo = [i for i in range(n_cases) if i % n == k and i not in done]
     for i in tqdm(todo, desc="pooled null", unit="case"):
@@ -617,16 +625,35 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
         row = {"id": i, "task": task, "K_theta": kt, "F_n": fn}
         for name in NULL_ENTRIES:
             ext = get_extension(name)
-            pooled, _ = _pooled_candidate(ext, runs, recs)
+            pooled, extra = _pooled_candidate(ext, runs, recs)
             single = [D.fit_candidate(ext, r.base_model, rec, r.base, r.noise)[0]
                       for rec, r in zip(recs, runs)]
+            if REBASE:
+                # the tests against the base model's best fit found, as diagnose does it:
+                # each run's base refitted from the candidate's fit (decide.null_refit)
+                model = runs[0].base_model
+                best = []
+                for rec, r, s_, q in zip(recs, runs, single, extra[0] if extra else [None] * 4):
+                    refs = [r.base.neg_log_lik]
+                    for start in ([q] if q is not None else []) + [s_.fit.params if s_.fit
+                                                                   else None]:
+                        if start is None:
+                            continue
+                        fake = D.CandidateResult(name, True, fit=D.FitSummary(
+                            dict(start), math.nan, (), np.zeros((0, 0))))
+                        got = D.null_refit(ext, model, rec, fake, r.noise)
+                        if got is not None:
+                            refs.append(got.neg_log_lik)
+                    best.append(min(refs))
+                    D.retest(s_, ext, min(refs))
+                D.retest(pooled, ext, float(sum(best)))
             row[name] = {"pooled": [pooled.delta_neg_log_lik, pooled.p_value,
                                     pooled.params.get(ext.new_parameters[0])],
                          "single": [[s.delta_neg_log_lik, s.p_value,
                                      s.params.get(ext.new_parameters[0])] for s in single]}
         with open(path, "a") as f:
             f.write(json.dumps(row) + "\n")
-    rows = [json.loads(line) for f in sorted(out.glob("null_study*.jsonl"))
+    rows = [json.loads(line) for f in files()
             for line in f.read_text().splitlines() if line.strip()]
     print(f"{len(rows)} pooled controls of 4 runs (and their {4 * len(rows)} runs one at a time)")
     for name in NULL_ENTRIES:
@@ -912,6 +939,9 @@ def main(argv=None) -> int:
     ap.add_argument("--pooled-null", type=int, default=0, metavar="N",
                     help="N new pooled controls (four runs each): the pooled washout and "
                          "platform tests' null distributions beside one run's on the same runs")
+    ap.add_argument("--rebase", action="store_true",
+                    help="with --pooled-null: test against the base model's best fit found, "
+                         "refitted from each candidate's fit as diagnose does (null_study_rebase)")
     ap.add_argument("--omega-c", type=float, default=None, metavar="RAD_S",
                     help="cut-off of the decision likelihood's low-pass (inf: the whole band, "
                          "no decimation); results and figures get the suffix _fullband (inf) "
@@ -931,7 +961,7 @@ def main(argv=None) -> int:
                     help="-ln L over fixed soft-threshold widths for these threshold-shape "
                          "case ids (comma-separated), against the crisp dead zone")
     args = ap.parse_args(argv)
-    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE
+    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
@@ -969,6 +999,7 @@ def main(argv=None) -> int:
         example_pooled()
         return 0
     if args.pooled_null:
+        REBASE = args.rebase
         pooled_null(args.pooled_null, (k, n))
         return 0
     if args.oracle:

@@ -265,3 +265,25 @@ def test_profiled_noise_model_is_the_least_squares_ar_of_the_fits_residual():
     res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, profile_noise=True,
                    candidates=["time-varying-gains"])
     assert res.physics == "none"
+
+
+def test_whole_band_fit_starts_from_the_low_band_fit():
+    """On the whole band an extension is also started from its fit on the low-passed band
+    (decide.guide_fits), which reaches a 6-rad/s platform; the whole-band test then names it."""
+    import math
+
+    from bayespilot.diagnose import decide as D
+
+    model = get_extension("motion-system-dynamics").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_ms=6.0)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=25,
+                   duration=40.96).recording
+    g = D.guide_fits(["motion-system-dynamics", "control-saturation"], paper_model(), rec,
+                     presets.paper_parameters("FD"), 500, get_extension)
+    assert set(g) == {"motion-system-dynamics"}  # saturation is not a GLS fit
+    assert g["motion-system-dynamics"]["omega_ms"] == pytest.approx(6.0, rel=0.3)
+    res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, omega_c=math.inf, oversample=8,
+                   candidates=["motion-system-dynamics"])
+    assert res.physics == "motion-system-dynamics"
+    assert res.chosen.params["omega_ms"] == pytest.approx(6.0, rel=0.25)
+    assert res.chosen.p_value < 1e-6

@@ -286,9 +286,11 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
 
 
 def _fit_candidates(names, recording, base_model, base, noise, where, boot_info, profile_noise,
-                    bar):
+                    bar, guide=None):
     """Fit and test every candidate from the GLS base fit ``base``.
 
+    ``guide``: name -> parameters of the candidate's fit on the low-passed band
+    (``decide.guide_fits``), one more start for its fit.
     Returns the candidate results and the delta_abs-refined reference (or None).
     """
     from . import decide as D
@@ -308,8 +310,9 @@ def _fit_candidates(names, recording, base_model, base, noise, where, boot_info,
                 if refined is None:
                     refined = D.refine_threshold(base_model, recording, base, noise)
                 ref = refined
+            extra = [guide[name]] if guide and name in guide else []
             res, _ = D.fit_candidate(ext, base_model, recording, ref, noise,
-                                     profile_noise=profile_noise)
+                                     profile_noise=profile_noise, extra_starts=extra)
         sig = [where[k].p_value for k in ext.signature_keys
                if k in where and math.isfinite(where[k].p_value)]
         res.signature_score = float(max([-math.log10(p) for p in sig], default=0.0))
@@ -444,9 +447,16 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     # -- name
     t2 = time.perf_counter()
     rebased = []
+    guide = None
+    if noise.omega_c > D.OMEGA_C:
+        # a wider band than the default: start each extension from its low-band fit too
+        bar.set_postfix_str(f"low-band fits (omega_c = {D.OMEGA_C:g} rad/s)")
+        guide = D.guide_fits(names, base_model, recording,
+                             {k: v for k, v in base_fit.params.items()
+                              if k in base_model.parameter_names}, skip, get_extension)
     for _ in range(MAX_REBASE + 1):
         results, refined = _fit_candidates(names, recording, base_model, base, noise, where,
-                                           boot_info, profile_noise, bar)
+                                           boot_info, profile_noise, bar, guide)
         if profile_noise:
             break  # each fit has its own noise model: the -ln L are not comparable
         better = _best_null(names, results, base_model, recording, noise)
