@@ -454,31 +454,38 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         guide = D.guide_fits(names, base_model, recording,
                              {k: v for k, v in base_fit.params.items()
                               if k in base_model.parameter_names}, skip, get_extension)
+    kept: dict[str, Any] = {}  # each candidate's best fit over the rounds
     for _ in range(MAX_REBASE + 1):
         results, refined = _fit_candidates(names, recording, base_model, base, noise, where,
                                            boot_info, profile_noise, bar, guide)
+        for r in results:
+            old = kept.get(r.physics)
+            if (old is None or r.fit is None or old.fit is None
+                    or r.fit.neg_log_lik <= old.fit.neg_log_lik):
+                kept[r.physics] = r
         if profile_noise:
             break  # each fit has its own noise model: the -ln L are not comparable
-        better = _best_null(names, results, base_model, recording, noise)
+        better = _best_null(names, [kept[n] for n in names], base_model, recording, noise)
         if better is None or not better.neg_log_lik < base.neg_log_lik:
             break
         gain = base.neg_log_lik - better.neg_log_lik
+        base = better
         if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
-            # test against the better reference without refitting the extensions from it
-            for r in results:
-                ext = get_extension(r.physics)
-                ref = better.neg_log_lik
-                if ext.refine_threshold and refined is not None:
-                    ref = min(ref, refined.neg_log_lik)
-                D.retest(r, ext, ref)
             rebased.append({"gain": gain, "refitted": False})
-            base = better
             break
         # a better basin of the base model: every extension again from there
         rebased.append({"gain": gain, "refitted": True})
-        base = better
         bar.reset(total=2 + len(names) * (len(rebased) + 1))
         bar.update(2 + len(names) * len(rebased))
+    results = [kept[n] for n in names]
+    if rebased:
+        # every test against the best base fit found (threshold-shape: or its refinement)
+        for r in results:
+            ext = get_extension(r.physics)
+            ref = base.neg_log_lik
+            if ext.refine_threshold and refined is not None:
+                ref = min(ref, refined.neg_log_lik)
+            D.retest(r, ext, ref)
     bar.close()
     ranking, chosen, tested, level = _decide(results, alpha)
     timings["name"] = time.perf_counter() - t2

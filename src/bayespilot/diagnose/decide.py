@@ -22,7 +22,11 @@ an AR noise model (a prediction-error likelihood, :class:`Whitened`):
    the exact Jacobians of the model passed through the same filters;
 4. 2 (-ln L_base - -ln L_ext) is compared with chi2(df), df = the number of
    parameters the extension adds, at the family-wise level ``alpha`` split
-   over the candidates tested (Bonferroni).
+   over the candidates tested (Bonferroni).  -ln L_base is the base model's
+   best fit found: the base model is also refitted from every extension's
+   fit with the extension taken out (:func:`null_refit`), because an
+   extension can carry the fit into a better basin of the *base* model
+   (another delta_abs), which is not physics.
 
 Why the low-pass: the likelihood runs the pilot model at the recording's
 100 Hz (Tustin, interpolated delays) while the pilot (or the simulator, at

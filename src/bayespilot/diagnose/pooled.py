@@ -496,8 +496,18 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                     if len(ok) == len(ps) and ok else math.nan,
                     "values": [r.where[k].value for r in runs]}
     rebased = []
+    kept: dict[str, Any] = {}  # each candidate's best pooled fit over the rounds
+    fits, shares, own = {}, {}, {}
     for _ in range(MAX_REBASE + 1):
-        results, shares, fits, own, refined = _pooled_candidates(names, runs, recs, where, bar)
+        results, sh, fi, ow, refined = _pooled_candidates(names, runs, recs, where, bar)
+        for r in results:
+            old = kept.get(r.physics)
+            if (old is None or r.fit is None or old.fit is None
+                    or r.fit.neg_log_lik <= old.fit.neg_log_lik):
+                kept[r.physics] = r
+                for store, new in ((fits, fi), (shares, sh), (own, ow)):
+                    if r.physics in new:
+                        store[r.physics] = new[r.physics]
         better = _pooled_null(names, fits, runs, recs)
         gain = float(sum(r.base.neg_log_lik - b.neg_log_lik for r, b in zip(runs, better)))
         if not gain > 0:
@@ -505,22 +515,25 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         for run, b in zip(runs, better):
             run.base = b
         if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
-            # test against the better references without refitting the extensions from them
-            for r in results:
-                ext = get_extension(r.physics)
-                ref = float(sum(b.neg_log_lik for b in better))
-                if ext.refine_threshold and refined is not None and refined[0] <= ref:
-                    continue  # its reference, the refined base, stays the better one
-                D.retest(r, ext, ref)
-                if r.physics in own:
-                    shares[r.physics] = [float(b.neg_log_lik - g)
-                                         for b, g in zip(better, own[r.physics])]
             rebased.append({"gain": gain, "refitted": False})
             break
         # a better basin of the base model in some run: every extension again from there
         rebased.append({"gain": gain, "refitted": True})
         bar.reset(total=2 * len(recs) + len(names) * (len(rebased) + 1))
         bar.update(2 * len(recs) + len(names) * len(rebased))
+    results = [kept[n] for n in names]
+    if rebased:
+        # every test against the runs' best base fits found (threshold-shape: or the refined)
+        ref = float(sum(r.base.neg_log_lik for r in runs))
+        for r in results:
+            ext = get_extension(r.physics)
+            if ext.refine_threshold and refined is not None and refined[0] < ref:
+                D.retest(r, ext, refined[0])  # per-run shares stay against the refined base
+                continue
+            D.retest(r, ext, ref)
+            if r.physics in own:
+                shares[r.physics] = [float(run.base.neg_log_lik - g)
+                                     for run, g in zip(runs, own[r.physics])]
     bar.close()
     ranking, chosen, tested, level = _decide(results, alpha)
     run_d = []
