@@ -1,11 +1,14 @@
 """Time one ``diagnose`` at N = 8192 on one core (issue 5, target <= 2 min).
 
 Run:  python benchmarks/bench_diagnose.py [--repeats 1] [--bootstrap 39] [--runs R]
+                                          [--omega-c RAD_S] [--oversample M]
 
 Simulates task FD, K_theta = 1, K_n = 0.104 (F_n ~ 0.2, Table 4) with the
 paper's model, loads the kernels once (a short diagnose), then times the full
 diagnosis with numba limited to one thread; prints the wall time per stage.
-``--runs R`` (R >= 2) times ``diagnose_pooled`` on R such runs (seeds 3, 4, ...).
+``--runs R`` (R >= 2) times ``diagnose_pooled`` on R such runs (seeds 3, 4, ...);
+``--omega-c inf --oversample 8`` the whole-band decision likelihood with the
+motion channel at 8x.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--bootstrap", type=int, default=39)
     ap.add_argument("--runs", type=int, default=1, help="R >= 2: time diagnose_pooled on R runs")
+    ap.add_argument("--omega-c", type=float, default=None, help="decision band, rad/s (inf: whole)")
+    ap.add_argument("--oversample", type=int, default=1, help="motion channel at M x the rate")
     args = ap.parse_args(argv)
     numba.set_num_threads(1)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; "
@@ -35,16 +40,19 @@ def main(argv=None):
             for j in range(max(args.runs, 1))]
     rec = recs[0]
     warm = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=4, duration=20.0).recording
-    diagnose(warm, n_bootstrap=1)  # compile / load every kernel once
+    kw = {"omega_c": args.omega_c, "oversample": args.oversample}
+    diagnose(warm, n_bootstrap=1, **kw)  # compile / load every kernel once
     ts = []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
         if args.runs > 1:
-            res = diagnose_pooled(recs, seed=0, n_bootstrap=args.bootstrap)
+            res = diagnose_pooled(recs, seed=0, n_bootstrap=args.bootstrap, **kw)
         else:
-            res = diagnose(rec, seed=0, n_bootstrap=args.bootstrap)
+            res = diagnose(rec, seed=0, n_bootstrap=args.bootstrap, **kw)
         ts.append(time.perf_counter() - t0)
     runs = f"{args.runs} runs pooled, " if args.runs > 1 else ""
+    if args.omega_c is not None or args.oversample != 1:
+        runs += f"omega_c {args.omega_c}, oversample {args.oversample}, "
     print(f"N = {rec.n_samples}, {runs}bootstrap B = {args.bootstrap}: decision {res.physics}")
     if args.runs > 1:
         print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
