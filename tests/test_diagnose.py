@@ -287,3 +287,20 @@ def test_whole_band_fit_starts_from_the_low_band_fit():
     assert res.physics == "motion-system-dynamics"
     assert res.chosen.params["omega_ms"] == pytest.approx(6.0, rel=0.25)
     assert res.chosen.p_value < 1e-6
+
+
+def test_summary_says_when_the_base_was_refitted(control_result):
+    """The summary states a refit of the base model from an extension's fit, with its gain."""
+    res = control_result
+    rebased = res.settings["rebased"]
+    text = res.summary()
+    if rebased:
+        gain = sum(r["gain"] for r in rebased)
+        assert f"better by {gain:.2f}" in text
+    else:
+        assert "refitted from an extension's fit" not in text
+    res.settings["rebased"] = [{"gain": 1.234, "refitted": True}]
+    try:
+        assert "-ln L (GLS) better by 1.23" in res.summary()
+    finally:
+        res.settings["rebased"] = rebased

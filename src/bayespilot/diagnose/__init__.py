@@ -144,6 +144,9 @@ class DiagnosisResult(_JSONSummary):
                  f"VAF = {self.base['vaf']:.2f} %",
                  f"level: alpha = {self.settings['alpha']:g} over "
                  f"{self.settings['n_tested']} candidates",
+                 *([f"base model refitted from an extension's fit: -ln L (GLS) better by "
+                    f"{sum(r['gain'] for r in self.settings['rebased']):.2f}; every test is "
+                    f"against that fit"] if self.settings.get("rebased") else []),
                  "", f"{'candidate':<24} {'d(-lnL)':>9} {'p':>9} {'dBIC':>9} {'sig':>5}  params"]
         for c in self.ranking:
             if not c.testable:

@@ -503,8 +503,8 @@ def null_refit(ext: Extension, base_model: PilotModel, recording: Recording,
     can reach the other basin through its new parameter and end at the
     base model (a corner width at its lower bound, 1e-5 IPUT), so that the
     basin, not the physics, makes its "improvement": on the whole band at 8x
-    that raised 17 false alarms on 48 controls, the soft corner's fit at
-    w_soft = 1e-5 better by 5-40 in -ln L.  Starting the base model from the
+    that raised 17 false alarms on 48 controls, the soft corner's fit
+    mostly near w_soft = 1e-5 and better by 4.5-41 in -ln L.  Starting the base model from the
     extension's parameters (its new ones dropped: the extended model at
     their null values is the base model) finds that basin for the base
     model too.  Returns ``None`` when the candidate has no fit.

@@ -101,7 +101,11 @@ class PooledDiagnosisResult(_JSONSummary):
                  f"decision: {self.physics}" + (" (mismatch)" if self.mismatch else
                                                 " (no extension justified)"),
                  f"level: alpha = {self.settings['alpha']:g} over "
-                 f"{self.settings['n_tested']} candidates", "",
+                 f"{self.settings['n_tested']} candidates",
+                 *([f"runs' base models refitted from the extensions' fits: pooled -ln L "
+                    f"better by {sum(r['gain'] for r in self.settings['rebased']):.2f}; every "
+                    f"test is against those fits"] if self.settings.get("rebased") else []),
+                 "",
                  f"{'candidate':<24} {'d(-lnL)':>9} {'p':>9} {'dBIC':>9}  per run"
                  f"{'':<{max(0, 7 * R - 7)}}  shared params"]
         for c in self.ranking:
