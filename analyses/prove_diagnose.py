@@ -918,6 +918,8 @@ def width_profile(ids: list[int]) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--chunk", type=int, default=None, help="run at most N unfinished cases")
+    ap.add_argument("--tag", default="", metavar="SUFFIX",
+                    help="append SUFFIX to the results folder (a rerun beside the stored one)")
     ap.add_argument("--summarize", action="store_true", help="only print and plot the summary")
     ap.add_argument("--example", action="store_true",
                     help="diagnose the docs' example (a concealed washout) and write its figures")
@@ -983,6 +985,11 @@ def main(argv=None) -> int:
         OVERSAMPLE = args.oversample
         OUT = OUT.with_name(OUT.name + f"_os{OVERSAMPLE}")
         FIG_SUFFIX += f"_os{OVERSAMPLE}"
+    if args.tag:
+        if not re.fullmatch(r"[A-Za-z0-9_.-]+", args.tag):
+            ap.error(f"--tag: letters, digits, _ . - only, got {args.tag!r}")
+        OUT = OUT.with_name(OUT.name + args.tag)
+        FIG_SUFFIX += args.tag
     try:
         k, n = (int(v) for v in args.shard.split("/"))
         if not 0 <= k < n:
