@@ -639,9 +639,7 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
                                                                    else None]:
                         if start is None:
                             continue
-                        fake = D.CandidateResult(name, True, fit=D.FitSummary(
-                            dict(start), math.nan, (), np.zeros((0, 0))))
-                        got = D.null_refit(ext, model, rec, fake, r.noise)
+                        got = D.null_refit_from(ext, model, rec, start, r.noise)
                         if got is not None:
                             refs.append(got.neg_log_lik)
                     best.append(min(refs))

@@ -77,7 +77,8 @@ from ..recording import Recording
 from .catalogue import Extension
 
 __all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "CandidateResult", "fit_base_gls",
-           "fit_candidate", "guide_fits", "refine_threshold", "null_refit", "retest", "flat_tops",
+           "fit_candidate", "guide_fits", "refine_threshold", "null_refit", "null_refit_from",
+           "lr_p_value", "retest", "flat_tops",
            "fit_censored"]
 
 #: Cut-off of the decision likelihood's low-pass, rad/s.
@@ -387,6 +388,16 @@ class CandidateResult:
                 "signature_score": num(self.signature_score), "justified": self.justified}
 
 
+def lr_p_value(stat: float, ext: Extension) -> float:
+    """p-value of the likelihood-ratio statistic ``stat`` = 2 d(-ln L) for extension ``ext``.
+
+    chi2(df); for a one-parameter boundary null the chi-bar-squared mixture
+    0.5 chi2(0) + 0.5 chi2(1) (Self & Liang 1987).
+    """
+    p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
+    return 0.5 * p if ext.boundary_null and ext.df == 1 else p
+
+
 def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
                   base: FitSummary, noise: NoiseModel, *, profile_noise: bool = False,
                   extra_starts: Sequence[Mapping[str, float]] = ()
@@ -428,9 +439,7 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
         wl = Whitened(model, recording, noise)
     d = max(0.0, base.neg_log_lik - best.neg_log_lik)
     stat = 2.0 * d
-    p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
-    if ext.boundary_null and ext.df == 1:
-        p *= 0.5  # chi-bar-squared: 0.5 chi2(0) + 0.5 chi2(1) (Self & Liang 1987)
+    p = lr_p_value(stat, ext)
     dbic = stat - ext.df * math.log(wl.m)
     se = best.stderr
     new = {n: best.params[n] for n in ext.new_parameters}
@@ -512,7 +521,13 @@ def null_refit(ext: Extension, base_model: PilotModel, recording: Recording,
     fit = candidate.fit
     if fit is None or not candidate.testable or ext.likelihood != "gls":
         return None
-    start = {n: fit.params[n] for n in base_model.parameter_names if n in fit.params}
+    return null_refit_from(ext, base_model, recording, fit.params, noise)
+
+
+def null_refit_from(ext: Extension, base_model: PilotModel, recording: Recording,
+                    params: Mapping[str, float], noise: NoiseModel) -> FitSummary | None:
+    """:func:`null_refit` from the extended model's parameters ``params`` (its new ones ignored)."""
+    start = {n: params[n] for n in base_model.parameter_names if n in params}
     names = tuple(n for n in base_model.parameter_names
                   if ext.refine_threshold or n != "delta_abs")
     try:
@@ -529,9 +544,7 @@ def retest(res: CandidateResult, ext: Extension, reference: float) -> CandidateR
     if d >= res.delta_neg_log_lik:
         return res
     stat = 2.0 * d
-    p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
-    if ext.boundary_null and ext.df == 1:
-        p *= 0.5
+    p = lr_p_value(stat, ext)
     dbic = stat - (res.statistic - res.delta_bic)  # the same df ln m penalty
     res.delta_neg_log_lik, res.statistic, res.p_value = d, stat, p
     res.delta_bic, res.log_bayes_factor = dbic, dbic / 2.0

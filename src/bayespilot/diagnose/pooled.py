@@ -338,9 +338,7 @@ def _pooled_candidate(ext, runs, recordings, refined_base=None):
     ps, f, cov = best
     d = max(0.0, base_total - f)
     stat = 2.0 * d
-    p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
-    if ext.boundary_null and ext.df == 1:
-        p *= 0.5  # chi-bar-squared, as for one run
+    p = D.lr_p_value(stat, ext)
     m = sum(wl.m for wl in wls)
     dbic = stat - ext.df * math.log(m)
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -434,15 +432,9 @@ def _pooled_null(names, fits, runs, recs):
         ext = get_extension(name)
         if name not in fits or ext.likelihood != "gls":
             continue
-        free = tuple(n for n in model.parameter_names
-                     if ext.refine_threshold or n != "delta_abs")
         for j, (rec, run, q) in enumerate(zip(recs, runs, fits[name])):
-            start = {n: q[n] for n in model.parameter_names if n in q}
-            try:
-                got = D._gls_refine(D.Whitened(model, rec, run.noise), start, free)
-            except (ValueError, np.linalg.LinAlgError):
-                continue
-            if got.neg_log_lik < best[j].neg_log_lik:
+            got = D.null_refit_from(ext, model, rec, q, run.noise)
+            if got is not None and got.neg_log_lik < best[j].neg_log_lik:
                 best[j] = got
     return best
 
