@@ -302,12 +302,14 @@ def _refined_base(runs, recordings):
     return f, ps
 
 
-def _pooled_candidate(ext, runs, recordings, refined_base=None):
+def _pooled_candidate(ext, runs, recordings, refined_base=None, guide=None):
     """Fit one GLS extension to all runs (shared new parameters) and test it.
 
     ``refined_base``: ``(pooled -ln L, parameters per run)`` of the base model
     with delta_abs refined (:func:`_refined_base`), the reference for an
-    entry that refines delta_abs.
+    entry that refines delta_abs.  ``guide``: the extended model's parameters
+    per run from its pooled fit on the low-passed band (:func:`_pooled_guide`),
+    one more start.
     """
     from . import decide as D
 
@@ -331,6 +333,15 @@ def _pooled_candidate(ext, runs, recordings, refined_base=None):
         except (ValueError, np.linalg.LinAlgError):
             continue
         if best is None or got[1] < best[1]:
+            best = got
+    if guide is not None:
+        try:
+            got = _pooled_refine(wls, [D.FitSummary(dict(q), math.nan, (), np.zeros((0, 0)))
+                                       for q in guide], names, ext.new_parameters,
+                                 {n: guide[0][n] for n in ext.new_parameters})
+        except (ValueError, np.linalg.LinAlgError):
+            got = None
+        if got is not None and (best is None or got[1] < best[1]):
             best = got
     if best is None:
         return D.CandidateResult(ext.name, False, "the pooled fit failed from every start",
@@ -387,7 +398,42 @@ def _pooled_saturation(recordings, runs):
     return res, per_run
 
 
-def _pooled_candidates(names, runs, recs, where, bar):
+def _pooled_guide(names, runs, recs):
+    """Each extension's pooled fit on the band low-passed at ``decide.OMEGA_C``: starts for a
+    wider band (the pooled counterpart of :func:`bayespilot.diagnose.decide.guide_fits`).
+
+    Every run gets its own noise model and GLS base fit on the low band, then
+    each GLS extension is fitted to all runs there.  Returns name -> the
+    extended model's parameters per run.
+    """
+    import dataclasses
+
+    from ..likelihood import Likelihood
+    from . import decide as D
+
+    low = []
+    for rec, run in zip(recs, runs):
+        start = {k: v for k, v in run.base_fit.params.items()
+                 if k in run.base_model.parameter_names}
+        noise = D.noise_model(Likelihood(run.base_model, rec).residual(start), rec.dt,
+                              skip=run.skip, omega_c=D.OMEGA_C)
+        _, base = D.fit_base_gls(run.base_model, rec, start, noise)
+        low.append(dataclasses.replace(run, noise=noise, base=base))
+    out: dict[str, list[dict[str, float]]] = {}
+    refined = None
+    for name in names:
+        ext = get_extension(name)
+        if ext.likelihood != "gls":
+            continue
+        if ext.refine_threshold and refined is None:
+            refined = _refined_base(low, recs)
+        _, extra = _pooled_candidate(ext, low, recs, refined)
+        if extra is not None:
+            out[name] = [dict(q) for q in extra[0]]
+    return out
+
+
+def _pooled_candidates(names, runs, recs, where, bar, guide=None):
     """Fit and test every candidate on all runs from the runs' GLS base fits.
 
     Returns ``(results, shares, fits, own, refined)``: the candidate results,
@@ -404,7 +450,8 @@ def _pooled_candidates(names, runs, recs, where, bar):
         else:
             if ext.refine_threshold and refined is None:
                 refined = _refined_base(runs, recs)
-            res, extra = _pooled_candidate(ext, runs, recs, refined)
+            res, extra = _pooled_candidate(ext, runs, recs, refined,
+                                           guide.get(name) if guide else None)
             if extra is not None:
                 fits[name], shares[name], own[name] = extra
         sig = [where[k]["p_value"] for k in ext.signature_keys
@@ -491,11 +538,16 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         where[k] = {"p_value": float(stats.combine_pvalues(ok, method="fisher")[1])
                     if len(ok) == len(ps) and ok else math.nan,
                     "values": [r.where[k].value for r in runs]}
+    guide = None
+    if runs[0].noise.omega_c > D.OMEGA_C:
+        # a wider band than the default: start each extension from its low-band fit too
+        bar.set_postfix_str(f"low-band fits (omega_c = {D.OMEGA_C:g} rad/s)")
+        guide = _pooled_guide(names, runs, recs)
     rebased = []
     kept: dict[str, Any] = {}  # each candidate's best pooled fit over the rounds
     fits, shares, own = {}, {}, {}
     for _ in range(MAX_REBASE + 1):
-        results, sh, fi, ow, refined = _pooled_candidates(names, runs, recs, where, bar)
+        results, sh, fi, ow, refined = _pooled_candidates(names, runs, recs, where, bar, guide)
         for r in results:
             old = kept.get(r.physics)
             if (old is None or r.fit is None or old.fit is None
