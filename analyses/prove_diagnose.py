@@ -412,6 +412,8 @@ def summarize() -> dict:
                "median_seconds": float(np.median(times)), "alpha_sweep": sweep}
     if PROFILE_NOISE or POOLED or OMEGA_C is not None:
         summary["paired_with_default"] = paired_with_default(rs)
+    if POOLED and OMEGA_C is None and OVERSAMPLE == 1:
+        summary["against_optimal_test"] = pooled_against_oracle(rs)
     (OUT / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
 
@@ -482,6 +484,49 @@ def paired_with_default(rs: list[dict]) -> dict:
         for key in out[k]:
             print(f"  {k}: {key}")
     return out
+
+
+def pooled_against_oracle(rs: list[dict]) -> dict:
+    """A pooled study's naming beside the optimal test's expectation with as many runs.
+
+    For every pooled case concealed in all its runs (saturation left out) the
+    single-run oracle's noncentrality of the same case (``--oracle``, the
+    single-run study's recording of it: same condition and effect, another
+    seed) times the number of runs gives the power of an optimal test of
+    the true extension pooled over that many runs (information adds over
+    runs).  Per entry: cases, named by ``diagnose_pooled``, expected for the
+    optimal test.
+    """
+    from bayespilot.diagnose import get_extension
+
+    lam = {}
+    for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl")):
+        for line in f.read_text().splitlines():
+            if line.strip():
+                row = json.loads(line)
+                lam[row["id"]] = row["lowpass"]["lambda"]
+    per: dict[str, list] = {}
+    for r in rs:
+        c = r["case"]
+        if c["truth"] in ("none", "control-saturation") or not r["concealed"] \
+                or c["id"] not in lam:
+            continue
+        ext = get_extension(c["truth"])
+        v = per.setdefault(c["truth"], [0, 0, 0.0])
+        v[0] += 1
+        v[1] += r["decision"] == c["truth"]
+        v[2] += optimal_power(ext, POOLED * lam[c["id"]])
+    print(f"\nAgainst the optimal test with {POOLED} runs (concealed cases, saturation left "
+          f"out; lambda from --oracle x {POOLED}):")
+    print(f"  {'entry':<24}{'n':>5}{'named':>7}{'optimal':>9}")
+    tot = [0, 0, 0.0]
+    for e, (n, k, x) in per.items():
+        print(f"  {e:<24}{n:>5}{k:>7}{x:>9.1f}")
+        tot = [tot[0] + n, tot[1] + k, tot[2] + x]
+    print(f"  {'all':<24}{tot[0]:>5}{tot[1]:>7}{tot[2]:>9.1f}")
+    return {"runs": POOLED, "per_entry": {e: {"n": v[0], "named": v[1], "optimal": v[2]}
+                                          for e, v in per.items()},
+            "all": {"n": tot[0], "named": tot[1], "optimal": tot[2]}}
 
 
 def example() -> None:
