@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from bayespilot.cli import main
@@ -33,10 +34,13 @@ def rec_stem(tmp_path_factory):
 def test_diagnose_json_and_report(rec_stem, tmp_path, capsys):
     out = tmp_path / "d.json"
     rep = tmp_path / "report"
+    post = tmp_path / "post.nc"
     code, stdout, err = _run(capsys, "diagnose", rec_stem, "--json", out, "--report", rep,
-                             "--bootstrap", "0", "--seed", "1")
+                             "--bootstrap", "0", "--seed", "1", "--posterior", post)
     assert code == 0, err
     assert "decision:" in stdout
+    # nothing chosen, nothing to sample: said, and no file
+    assert "no extended model to sample" in err and not post.exists()
     d = json.loads(out.read_text())
     assert isinstance(d["mismatch"], bool)
     assert d["physics"] in (*NAMES, "none")
@@ -87,3 +91,46 @@ def test_diagnose_several_runs_pools_them(rec_stem, tmp_path, capsys):
     assert d["pooled"] is True and d["n_runs"] == 2 and d["physics"] == "none"
     assert len(d["runs"]) == 2 and len(d["ranking"]) == len(NAMES)
     assert (tmp_path / "rep" / "runs.png").stat().st_size > 0
+
+
+def test_diagnose_posterior_needs_one_recording_and_a_netcdf_name(rec_stem, tmp_path, capsys):
+    code, out, err = _run(capsys, "diagnose", rec_stem, rec_stem, "--posterior",
+                          tmp_path / "p.nc")
+    assert code == 2 and "takes one recording" in err and err.count("\n") == 1
+    code, out, err = _run(capsys, "diagnose", rec_stem, "--posterior", tmp_path / "p.txt")
+    assert code == 2 and "must end in .nc" in err
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.filterwarnings("ignore::bayespilot.sample.ConvergenceWarning")
+def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, monkeypatch):
+    """--posterior on a run with a strong washout: the chosen model's posterior as netCDF
+    (readable by Posterior.from_netcdf), its summary in the JSON and the stdout summary.
+    (The chain is shortened here; the command's own is sample()'s default.)"""
+    import bayespilot.diagnose as dg
+    from bayespilot import presets
+    from bayespilot.diagnose import get_extension
+    from bayespilot.model import paper_model
+    from bayespilot.sample import Posterior
+
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=22,
+                   duration=40.96).recording
+    meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+    stem = tmp_path / "wash"
+    write_recording(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta),
+                    stem)
+    real = dg.sample_chosen
+    monkeypatch.setattr(dg, "sample_chosen", lambda res, r, **kw: real(
+        res, r, n_walkers=20, max_steps=600, min_steps=200, check_every=200, **kw))
+    post, out = tmp_path / "post.nc", tmp_path / "d.json"
+    code, stdout, err = _run(capsys, "diagnose", stem, "--bootstrap", "0", "--posterior", post,
+                             "--json", out)
+    assert code == 0, err
+    assert "decision: motion-washout" in stdout and "posterior (coloured likelihood" in stdout
+    back = Posterior.from_netcdf(post)
+    assert "omega_w" in back.parameter_names
+    d = json.loads(out.read_text())["chosen"]["posterior"]
+    assert d["params"]["omega_w"]["median"] == pytest.approx(
+        float(np.median(back.draws("omega_w"))))

@@ -230,17 +230,59 @@ def test_null_refit_takes_the_basin_an_extension_reached_from_its_test():
     assert res.delta_bic == pytest.approx(2 * res.delta_neg_log_lik - np.log(wl.m))
 
 
-def test_diagnose_names_a_strong_washout():
+@pytest.fixture(scope="module")
+def washout_case():
     model = get_extension("motion-washout").build(paper_model())
     p = dict(presets.paper_parameters("FD"), omega_w=0.8)
     rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=22,
                    duration=40.96).recording
     res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2,
                    candidates=["motion-washout", "time-varying-gains", "threshold-shape"])
+    return rec, res
+
+
+def test_diagnose_names_a_strong_washout(washout_case):
+    rec, res = washout_case
     assert res.physics == "motion-washout"
     assert res.chosen.params["omega_w"] == pytest.approx(0.8, rel=0.3)
     assert res.chosen.stderr["omega_w"] > 0
     assert res.chosen.p_value < 1e-4
+
+
+@pytest.mark.filterwarnings("ignore::bayespilot.sample.ConvergenceWarning")  # short chain
+def test_posterior_of_the_chosen_extension(washout_case, control_result, tmp_path):
+    """sample_chosen samples the extended model (pilot parameters and omega_w) from the chosen
+    fit; its 90 % interval holds the true washout, and JSON, summary and report carry it."""
+    import json
+
+    from bayespilot.diagnose import sample_chosen
+    from bayespilot.sample import Posterior
+
+    rec, res = washout_case
+    post = sample_chosen(res, rec, seed=0, n_walkers=20, max_steps=1500, min_steps=500,
+                         check_every=500)
+    assert isinstance(post, Posterior) and res.posterior is post
+    assert set(post.parameter_names) == set(res.chosen.model.parameter_names)
+    lo, hi = post.credible_interval("omega_w", 0.9)
+    assert lo < 0.8 < hi  # the truth
+    assert hi - lo < 0.5  # and the record does pin it down
+    assert post.settings["likelihood"] == "coloured"
+    d = json.loads(res.to_json())["chosen"]["posterior"]
+    assert d["new_parameters"] == ["omega_w"] and d["likelihood"] == "coloured"
+    assert d["params"]["omega_w"]["hdi_90"] == pytest.approx([lo, hi])
+    assert d["params"]["omega_w"]["median"] == pytest.approx(np.median(post.draws("omega_w")))
+    assert "posterior (coloured likelihood" in res.summary()
+    paths = res.report(tmp_path / "rep")
+    assert paths["posterior"].stat().st_size > 0
+    assert "Posterior of the extended model" in paths["html"].read_text()
+    with pytest.raises(ValueError, match="chose no extension"):
+        sample_chosen(control_result, rec)
+    short = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=3,
+                     duration=20.48).recording
+    with pytest.raises(ValueError, match="not the recording that was diagnosed"):
+        sample_chosen(res, short)
+    with pytest.raises(TypeError, match="Recording"):
+        sample_chosen(res, rec.u)
 
 
 def test_profiled_noise_model_is_the_least_squares_ar_of_the_fits_residual():

@@ -630,8 +630,15 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from .diagnose import NAMES, diagnose, diagnose_pooled
+    from .diagnose import NAMES, diagnose, diagnose_pooled, get_extension, sample_chosen
 
+    if args.posterior is not None:
+        if len(args.recording) > 1:
+            raise UsageError("argument --posterior: takes one recording (the posterior of a "
+                             "pooled diagnosis is not built)")
+        if Path(args.posterior).suffix != ".nc":
+            raise UsageError(f"argument --posterior: {args.posterior} must end in .nc "
+                             "(a netCDF file)")
     recs = [_read(r) for r in args.recording]
     try:
         if len(recs) == 1:
@@ -649,6 +656,27 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                                   alpha=args.alpha, progress=_progress(args))
     except ValueError as exc:  # e.g. a recording too short for the analysis
         raise UsageError(str(exc)) from None
+    if args.posterior is not None:
+        if res.chosen is None or get_extension(res.physics).likelihood != "gls":
+            # asked for a file and none is written: a warning, even with --quiet
+            print(f"{PROG}: warning: decision {res.physics}: no extended model to sample; "
+                  f"{args.posterior} not written", file=sys.stderr)
+        else:
+            _say(args, f"sampling the posterior of the model with {res.physics} (coloured "
+                       "likelihood, started at its fit) ...")
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                try:
+                    post = sample_chosen(res, recs[0], seed=args.seed, progress=_progress(args))
+                except RuntimeError as exc:
+                    raise CommandFailed(str(exc)) from None
+            _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
+            try:
+                post.to_netcdf(args.posterior)
+            except OSError as exc:
+                raise CommandFailed(f"{args.posterior}: cannot write the posterior "
+                                    f"({exc.strerror or exc})") from None
+            _say(args, f"wrote {args.posterior}")
     print(res.summary())
     if args.json:
         try:
@@ -907,7 +935,11 @@ The JSON (--json) has mismatch, physics (a catalogue name or 'none'), ranking
 candidate), where (each located statistic with its bootstrap p-value), base,
 chosen and the settings. --report DIR writes frequency_response.png,
 residuals.png, evidence.png, candidates.png, diagnosis.json and report.html
-(self-contained, figures embedded).
+(self-contained, figures embedded). --posterior POST.nc also samples the
+posterior of the chosen extended model (emcee, started at its fit; tens of
+seconds), writes it as netCDF (readable by 'bayespilot plot') and adds its
+medians and 90 % intervals to the summary and JSON and posterior.png to the
+report.
 
 Several recordings (runs of one condition) are diagnosed together: each run
 keeps its own pilot parameters, the extension's parameters are shared, and
@@ -919,6 +951,7 @@ report writes candidates.png, runs.png, diagnosis.json and report.html.
 Examples:
   bayespilot diagnose out/run --json out/run-diagnosis.json
   bayespilot diagnose out/run --report out/run-diagnosis --seed 1
+  bayespilot diagnose out/run --report out/run-diagnosis --posterior out/run-ext.nc
   bayespilot diagnose out/run1 out/run2 out/run3 out/run4 --report out/pooled
 """
 
@@ -1138,6 +1171,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="bootstrap replicates for the located evidence (default 39; 0: none)")
     p.add_argument("--alpha", type=_fraction, default=0.01, metavar="A",
                    help="family-wise false-alarm level of the decision (default 0.01)")
+    p.add_argument("--posterior", metavar="POST.nc",
+                   help="one recording: also sample the posterior of the chosen extended model "
+                        "(emcee, coloured likelihood) and write it to this netCDF file; the "
+                        "summary, JSON and report then include it")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_diagnose)
     return parser

@@ -17,7 +17,9 @@
    censored likelihood for control saturation).  Candidates are ranked by
    BIC and by how well the located evidence shows their signature; the
    answer is ``"none"`` when no test passes the family-wise level ``alpha``.
-4. **Model**: the chosen extension's parameters with standard errors.
+4. **Model**: the chosen extension's parameters with standard errors;
+   :func:`~bayespilot.diagnose.posterior.sample_chosen` then samples the
+   extended model's posterior (optional, tens of seconds).
 5. **Show**: :meth:`DiagnosisResult.report` writes PNG figures, a
    self-contained HTML report and a JSON summary.
 
@@ -102,6 +104,9 @@ class DiagnosisResult(_JSONSummary):
     elapsed : float
         Wall time, s.
     source : str or None
+    posterior : Posterior or None
+        The chosen extended model's posterior, once
+        :func:`~bayespilot.diagnose.posterior.sample_chosen` has sampled it.
     """
 
     mismatch: bool
@@ -114,6 +119,14 @@ class DiagnosisResult(_JSONSummary):
     elapsed: float
     source: str | None = None
     arrays: dict = field(default_factory=dict, repr=False)
+    posterior: Any = field(default=None, repr=False)
+
+    def _posterior_dict(self) -> dict[str, Any] | None:
+        if self.posterior is None or self.chosen is None:
+            return None
+        from .posterior import posterior_dict
+
+        return posterior_dict(self.posterior, tuple(self.chosen.params))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``base``, ... ."""
@@ -125,9 +138,8 @@ class DiagnosisResult(_JSONSummary):
                       "neg_log_lik_before": self.arrays.get("before_eq4_neg_log_lik"),
                       "neg_log_lik_after": self.arrays.get("after_eq4_neg_log_lik"),
                       "vaf_before": self.arrays.get("before_vaf"),
-                      "vaf_after": self.arrays.get("after_vaf")}
-
-
+                      "vaf_after": self.arrays.get("after_vaf"),
+                      "posterior": self._posterior_dict()}
         return _json_ready({
             "mismatch": self.mismatch, "physics": self.physics,
             "ranking": [c.to_dict() for c in self.ranking],
@@ -167,6 +179,15 @@ class DiagnosisResult(_JSONSummary):
                              f"-ln L (Eq. 4) {self.arrays['before_eq4_neg_log_lik']:.1f} -> "
                              f"{self.arrays['after_eq4_neg_log_lik']:.1f} (after the first "
                              f"{self.settings['skip_seconds']:g} s)")
+            post = self._posterior_dict()
+            if post is not None:
+                lines.append(f"  posterior ({post['likelihood']} likelihood, "
+                             f"{'converged' if post['converged'] else 'NOT converged'}): "
+                             "median, 90 % HDI")
+                for k in post["new_parameters"]:
+                    d = post["params"][k]
+                    lines.append(f"  {k:<10} {d['median']:12.5g}  [{d['hdi_90'][0]:.4g}, "
+                                 f"{d['hdi_90'][1]:.4g}]")
         lines += ["", "located evidence (bootstrap p-values):"]
         for k, e in self.where.items():
             if not math.isfinite(e.value):
@@ -574,5 +595,6 @@ def _saturation(recording, base_model, base, where, boot_info):
 
 
 from .pooled import PooledDiagnosisResult, diagnose_pooled  # noqa: E402  (uses the helpers above)
+from .posterior import sample_chosen  # noqa: E402
 
-__all__ += ["diagnose_pooled", "PooledDiagnosisResult"]
+__all__ += ["diagnose_pooled", "PooledDiagnosisResult", "sample_chosen"]

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
-           "write_report"]
+           "plot_posterior", "write_report"]
 
 
 def _pyplot():
@@ -202,6 +202,32 @@ def plot_candidates(result, ax: Any = None):
     return fig
 
 
+def plot_posterior(result, axes: Any = None):
+    """Marginal posteriors of the chosen extension's new parameters, with the maximum-likelihood
+    fit and its +-1 standard error (from the decision likelihood) marked."""
+    from ..plots import plot_marginal
+
+    post, chosen = result.posterior, result.chosen
+    names = [n for n in chosen.params if n in post.parameter_names]
+    if axes is None:
+        plt = _pyplot()
+        fig, axes = plt.subplots(1, len(names), figsize=(4.5 * len(names), 3.4), squeeze=False)
+        axes = axes[0]
+    else:
+        axes = np.atleast_1d(axes)
+        fig = axes[0].figure
+    for ax, n in zip(axes, names):
+        plot_marginal(post, n, ax=ax)
+        v, se = chosen.params[n], chosen.stderr.get(n, math.nan)
+        ax.axvline(v, color="C3", ls="--", lw=1, label="ML fit (decision likelihood)")
+        if math.isfinite(se):
+            ax.axvspan(v - se, v + se, color="C3", alpha=0.12, label="+-1 s.e.")
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{chosen.physics}: posterior of its new parameters", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
 def _png(fig, path: Path) -> Path:
     plt = _pyplot()
     try:
@@ -221,6 +247,9 @@ def write_report(result, directory) -> dict[str, Path]:
         "evidence": _png(plot_evidence(result), out / "evidence.png"),
         "candidates": _png(plot_candidates(result), out / "candidates.png"),
     }
+    post = getattr(result, "posterior", None)
+    if post is not None:
+        paths["posterior"] = _png(plot_posterior(result), out / "posterior.png")
     paths["json"] = out / "diagnosis.json"
     result.to_json(paths["json"])
 
@@ -262,6 +291,7 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 {img(paths['evidence'])}
 <h2>Frequency responses</h2>{img(paths['frequency_response'])}
 <h2>Residuals before and after</h2>{img(paths['residuals'])}
+{f"<h2>Posterior of the extended model</h2>{img(paths['posterior'])}" if post is not None else ""}
 <pre>{html.escape(result.summary())}</pre>
 </body></html>
 """
