@@ -111,5 +111,6 @@ def posterior_dict(post: Any, names: tuple[str, ...]) -> dict[str, Any]:
         d["sd"] = float(np.std(post.draws(n)))
         params[n] = d
     return {"likelihood": post.settings.get("likelihood"), "converged": bool(post.converged),
-            "seed": post.seed, "new_parameters": [n for n in names if n in summ],
+            "seed": post.seed, "elapsed_seconds": post.settings.get("elapsed_seconds"),
+            "new_parameters": [n for n in names if n in summ],
             "params": params}
