@@ -27,6 +27,8 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --pooled 4 --shard 0/2   # four runs per case, pooled
     python analyses/prove_diagnose.py --pooled 4 --shard 1/2   # (diagnose_pooled), 2 cores
     python analyses/prove_diagnose.py --example-pooled         # the docs' pooled walk-through
+    python analyses/prove_diagnose.py --posterior-check 8      # s.e. and posterior vs spread
+    python analyses/prove_diagnose.py --locate-null           # located p-values on controls
     python analyses/prove_diagnose.py --pooled-null 100        # pooled vs one-run null tests
     python analyses/prove_diagnose.py --pooled-null 100 --rebase   # the same, tests against the
                                                                    # base's best fit (as diagnose)
@@ -537,7 +539,7 @@ def example() -> None:
     """
     import shutil
 
-    from bayespilot.diagnose import diagnose
+    from bayespilot.diagnose import diagnose, sample_chosen
     from bayespilot.io import read_recording, write_recording
     from bayespilot.recording import Recording
 
@@ -549,13 +551,132 @@ def example() -> None:
     ex = OUT / "example"
     write_recording(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta),
                     ex / "washout_run")
-    res = diagnose(read_recording(ex / "washout_run"), seed=0)
+    rec = read_recording(ex / "washout_run")
+    res = diagnose(rec, seed=0)
+    if res.chosen is not None and res.physics != "control-saturation":
+        # step 4's optional posterior of the chosen extended model (sample()'s default chain)
+        sample_chosen(res, rec, seed=0)
     print(res.summary())
     paths = res.report(ex / "report")
     FIG.mkdir(parents=True, exist_ok=True)
-    for key in ("frequency_response", "residuals", "evidence", "candidates"):
+    for key in ("frequency_response", "residuals", "evidence", "candidates", "posterior"):
+        if key not in paths:
+            continue
         shutil.copy(paths[key], FIG / f"diagnose_example_{key}.png")
     (ex / "summary.txt").write_text(res.summary() + "\n")
+
+
+def locate_null(n_bootstrap: int = 39, shard: tuple[int, int] = (0, 1)) -> None:
+    """Are the located evidence's bootstrap p-values calibrated on correct-model data?
+
+    On the study's 48 controls (the paper's model, no extra physics): the base
+    stages of ``diagnose`` with ``n_bootstrap`` replicates (what ``diagnose``
+    runs by default, 39), and every statistic's p-value.  Under a calibrated
+    (or conservative) bootstrap P(p <= a) <= a for every a on the replicates'
+    grid.  One JSON line per control in
+    ``analyses/results/diagnose/locate_null.jsonl`` (resumable); the summary
+    prints per statistic the fraction at p <= 0.05 and 0.10 and the mean p.
+    """
+    from tqdm import tqdm
+
+    from bayespilot.diagnose import SKIP_SECONDS, _prepare
+    from bayespilot.recording import Recording
+
+    import numba
+
+    numba.set_num_threads(1)
+    k, n = shard
+    out = DEFAULT_OUT / (f"locate_null_{k}of{n}.jsonl" if n > 1 else "locate_null.jsonl")
+    files = sorted(DEFAULT_OUT.glob("locate_null*.jsonl"))
+    done = {json.loads(line)["id"] for f in files for line in f.read_text().splitlines()
+            if line.strip()}
+    todo = [c for c in cases() if c["truth"] == "none" and c["id"] % n == k
+            and c["id"] not in done]
+    for c in tqdm(todo, desc="locate null", unit="control"):
+        sim, _ = simulate_case(c)
+        rec = sim.recording
+        meta = {q: v for q, v in rec.metadata.items() if q != "notes"}
+        rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "ctl")
+        run = _prepare(rec, seed=0, n_bootstrap=n_bootstrap, base_fit=None,
+                       skip_seconds=SKIP_SECONDS, omega_c=None, n_starts=4,
+                       profile_noise=False, bar=tqdm(disable=True), oversample=1)
+        row = {"id": c["id"], "task": c["task"], "F_n": c["F_n"], "K_theta": c["K_theta"],
+               "replicates": run.boot_info.get("replicates"),
+               "p": {q: e.p_value for q, e in run.where.items()}}
+        with open(out, "a") as f:
+            f.write(json.dumps(row) + "\n")
+    rows = [json.loads(line) for f in sorted(DEFAULT_OUT.glob("locate_null*.jsonl"))
+            for line in f.read_text().splitlines() if line.strip()]
+    if not rows:
+        print("no results yet")
+        return
+    print(f"located evidence on {len(rows)} correct-model runs, B = {n_bootstrap} "
+          f"(p = (1 + #replicates >= observed) / (B + 1)):")
+    print(f"  {'statistic':<30}{'n':>4}{'p<=0.05':>9}{'p<=0.10':>9}{'mean p':>8}")
+    anyp = np.zeros(len(rows), bool)
+    for key in rows[0]["p"]:
+        ps = np.array([r["p"].get(key) for r in rows], dtype=float)
+        ps = ps[np.isfinite(ps)]
+        if not ps.size:
+            continue
+        print(f"  {key:<30}{ps.size:>4}{np.mean(ps <= 0.05):>9.3f}{np.mean(ps <= 0.10):>9.3f}"
+              f"{ps.mean():>8.3f}")
+    for i, r in enumerate(rows):
+        anyp[i] = any(v is not None and v <= 0.05 for v in r["p"].values())
+    print(f"  runs with any statistic at p <= 0.05: {anyp.sum()}/{len(rows)}")
+
+
+def posterior_check(n: int = 8) -> None:
+    """Are the chosen extension's uncertainties honest?  ``n`` runs (FD, 40.96 s, K_theta = 1,
+    K_n = 0.063) with a washout at omega_w = 0.8 rad/s, seeds 100, 101, ...: per run the
+    GLS fit of the washout with its standard error and the posterior (``sample_chosen``,
+    coloured likelihood, at most 3000 steps) median and sd.  Over the runs, each spread
+    should match its reported width.  ``analyses/results/diagnose/posterior_check.jsonl``.
+    """
+    import warnings
+
+    from bayespilot import presets
+    from bayespilot.diagnose import diagnose, get_extension, sample_chosen
+    from bayespilot.model import paper_model
+    from bayespilot.simulate import simulate
+
+    import numba
+
+    numba.set_num_threads(1)
+    model = get_extension("motion-washout").build(paper_model())
+    truth = 0.8
+    p = dict(presets.paper_parameters("FD"), omega_w=truth)
+    out = DEFAULT_OUT / "posterior_check.jsonl"
+    rows = []
+    if out.exists():
+        rows = [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
+    for seed in range(100 + len(rows), 100 + n):
+        rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=seed,
+                       duration=40.96).recording
+        res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, candidates=["motion-washout"])
+        c = res.ranking[0]
+        res.chosen = c  # sampled whether or not the test chose it (it does, at this size)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            post = sample_chosen(res, rec, seed=0, max_steps=3000, min_steps=1000,
+                                 check_every=500)
+        d = post.draws("omega_w")
+        row = {"seed": seed, "decision": res.physics, "gls": c.params["omega_w"],
+               "se": c.stderr["omega_w"], "median": float(np.median(d)), "sd": float(d.std()),
+               "hdi_90": list(post.credible_interval("omega_w", 0.9)),
+               "converged": bool(post.converged)}
+        rows.append(row)
+        with open(out, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        print(json.dumps(row), flush=True)
+    g = np.array([r["gls"] for r in rows])
+    m = np.array([r["median"] for r in rows])
+    print(f"{len(rows)} runs, omega_w = {truth} rad/s; named {sum(r['decision'] == 'motion-washout' for r in rows)}")
+    print(f"GLS fit:   mean {g.mean():.3f}, sd over runs {g.std(ddof=1):.3f}, mean s.e. "
+          f"{np.mean([r['se'] for r in rows]):.3f}")
+    print(f"posterior: mean median {m.mean():.3f}, sd over runs {m.std(ddof=1):.3f}, mean "
+          f"posterior sd {np.mean([r['sd'] for r in rows]):.3f}; truth in the 90 % HDI "
+          f"{sum(r['hdi_90'][0] < truth < r['hdi_90'][1] for r in rows)}/{len(rows)}")
 
 
 def example_pooled() -> None:
@@ -1002,6 +1123,13 @@ def main(argv=None) -> int:
                     help="the likelihood's vestibular channel at M times the recording's rate "
                          "(default 1): diagnose(oversample=M), and --model-error's likelihood; "
                          "results and figures get the suffix _os<M>")
+    ap.add_argument("--locate-null", action="store_true",
+                    help="the located evidence's bootstrap p-values (B = 39) on the 48 "
+                         "controls: calibrated? (analyses/results/diagnose/locate_null*.jsonl)")
+    ap.add_argument("--posterior-check", type=int, default=0, metavar="N",
+                    help="GLS standard errors and posteriors of the chosen washout against "
+                         "their spread over N runs (analyses/results/diagnose/"
+                         "posterior_check.jsonl)")
     ap.add_argument("--width-profile", metavar="IDS",
                     help="-ln L over fixed soft-threshold widths for these threshold-shape "
                          "case ids (comma-separated), against the crisp dead zone")
@@ -1057,6 +1185,12 @@ def main(argv=None) -> int:
         return 0
     if args.model_error:
         model_error(oversample=args.oversample)
+        return 0
+    if args.locate_null:
+        locate_null(shard=(k, n))
+        return 0
+    if args.posterior_check:
+        posterior_check(args.posterior_check)
         return 0
     if args.width_profile:
         width_profile([int(v) for v in args.width_profile.split(",")])
