@@ -30,6 +30,33 @@ from .catalogue import get_extension
 __all__ = ["sample_chosen"]
 
 
+def _checked_chosen(result: Any, recording: Recording, what: str):
+    """The chosen GLS candidate of a single-run ``result`` of ``recording``, or a clear error."""
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    if getattr(result, "runs", None) is not None:
+        raise ValueError(f"{what} takes a single-run diagnosis; for a pooled diagnosis "
+                         "(parameters shared over runs) it is not built")
+    chosen = getattr(result, "chosen", None)
+    if chosen is None:
+        raise ValueError(f"the diagnosis chose no extension (physics = "
+                         f"{getattr(result, 'physics', 'none')!r}): there is no extended model "
+                         "for " + what)
+    ext = get_extension(chosen.physics)
+    if ext.likelihood != "gls" or getattr(chosen, "model", None) is None:
+        raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
+                         f"likelihood; its limits are read from the data ({what} does not "
+                         "apply)")
+    dt = result.settings.get("dt")
+    n = np.size(result.arrays.get("residual", ()))
+    if (dt is not None and not math.isclose(dt, recording.dt, rel_tol=1e-9)) or \
+            (n and n != recording.n_samples):
+        raise ValueError(f"this is not the recording that was diagnosed ({result.source}: "
+                         f"dt {dt}, {n} samples; given: dt {recording.dt}, "
+                         f"{recording.n_samples} samples)")
+    return chosen
+
+
 def sample_chosen(result: Any, recording: Recording, *, likelihood: str = "coloured",
                   seed: int | None = 0, progress: bool = False, **options: Any):
     """Sample the posterior of the extended model that :func:`diagnose` chose.
@@ -71,27 +98,7 @@ def sample_chosen(result: Any, recording: Recording, *, likelihood: str = "colou
     """
     from ..sample import sample
 
-    if not isinstance(recording, Recording):
-        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    if getattr(result, "runs", None) is not None:
-        raise ValueError("sample_chosen takes a single-run diagnosis; the posterior of a pooled "
-                         "diagnosis (shared parameters over runs) is not built")
-    chosen = getattr(result, "chosen", None)
-    if chosen is None:
-        raise ValueError(f"the diagnosis chose no extension (physics = "
-                         f"{getattr(result, 'physics', 'none')!r}): there is no extended model "
-                         "to sample")
-    ext = get_extension(chosen.physics)
-    if ext.likelihood != "gls" or getattr(chosen, "model", None) is None:
-        raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
-                         "likelihood; its limits are read from the data, not sampled")
-    dt = result.settings.get("dt")
-    n = np.size(result.arrays.get("residual", ()))
-    if (dt is not None and not math.isclose(dt, recording.dt, rel_tol=1e-9)) or \
-            (n and n != recording.n_samples):
-        raise ValueError(f"this is not the recording that was diagnosed ({result.source}: "
-                         f"dt {dt}, {n} samples; given: dt {recording.dt}, "
-                         f"{recording.n_samples} samples)")
+    chosen = _checked_chosen(result, recording, "a posterior")
     model = chosen.model
     init = {k: float(v) for k, v in chosen.all_params.items() if k in model.parameter_names}
     post = sample(recording, model, likelihood=likelihood, init=init, seed=seed,
