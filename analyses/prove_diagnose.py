@@ -29,6 +29,8 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --example-pooled         # the docs' pooled walk-through
     python analyses/prove_diagnose.py --posterior-check 8      # s.e. and posterior vs spread
     python analyses/prove_diagnose.py --locate-null           # located p-values on controls
+    python analyses/prove_diagnose.py --pooled 8 --shard 0/2   # eight runs per case, pooled
+    python analyses/prove_diagnose.py --compare-runs           # 1, 4 and 8 runs, same cases
     python analyses/prove_diagnose.py --pooled-null 100        # pooled vs one-run null tests
     python analyses/prove_diagnose.py --pooled-null 100 --rebase   # the same, tests against the
                                                                    # base's best fit (as diagnose)
@@ -564,6 +566,65 @@ def example() -> None:
             continue
         shutil.copy(paths[key], FIG / f"diagnose_example_{key}.png")
     (ex / "summary.txt").write_text(res.summary() + "\n")
+
+
+def compare_runs(runs: tuple[int, ...] = (1, 4, 8)) -> dict:
+    """One run, four and eight pooled, on the same cases: those the largest study has done.
+
+    Each study judges concealment its own way (a pooled case: every one of
+    its runs within the spread of that study's control runs); per entry the
+    table gives the concealed cases and how many of them each study named.
+    """
+    global OUT
+    keep = OUT
+    studies = {}
+    try:
+        for R in runs:
+            OUT = DEFAULT_OUT if R == 1 else DEFAULT_OUT.with_name(
+                "diagnose_pooled" if R == 4 else f"diagnose_pooled{R}")
+            rs = load()
+            mark_concealed(rs)
+            studies[R] = {r["case"]["id"]: r for r in rs}
+    finally:
+        OUT = keep
+    ids = set.intersection(*(set(v) for v in studies.values()))
+    print(f"{len(ids)} cases done by every study ({', '.join(str(R) for R in runs)} runs); "
+          "per entry: named / concealed (all cases: named / n)")
+    print(f"  {'truth':<24}" + "".join(f"{f'{R} run' + ('s' if R > 1 else ''):>22}"
+                                       for R in runs))
+    out = {}
+    tot = {R: [0, 0, 0, 0] for R in runs}
+    for e in ["none", *EFFECTS]:
+        row = []
+        for R in runs:
+            sel = [studies[R][i] for i in ids if studies[R][i]["case"]["truth"] == e]
+            conc = [r for r in sel if r["concealed"]]
+            k_c = sum(r["decision"] == e for r in conc)
+            k = sum(r["decision"] == e for r in sel)
+            row.append((k_c, len(conc), k, len(sel)))
+            if e != "none":
+                tot[R] = [a + b for a, b in zip(tot[R], row[-1])]
+        if not row[0][3]:
+            continue
+        out[e] = {R: dict(zip(("named_concealed", "concealed", "named", "n"), v))
+                  for R, v in zip(runs, row)}
+        print(f"  {e:<24}" + "".join(f"{f'{a}/{b} ({c}/{d})':>22}" for a, b, c, d in row))
+    print(f"  {'all effects':<24}" + "".join(
+        f"{f'{a}/{b} ({c}/{d})':>22}" for a, b, c, d in (tot[R] for R in runs)))
+    out["all effects"] = {R: dict(zip(("named_concealed", "concealed", "named", "n"), tot[R]))
+                          for R in runs}
+    # the same effects judged by one run: which of the cases that one run conceals are named
+    one = studies[runs[0]]
+    sel = sorted(i for i in ids if one[i]["case"]["truth"] != "none" and one[i]["concealed"])
+    print(f"\nThe {len(sel)} of these cases whose single run is concealed (the same condition and "
+          "effect), named by:")
+    out["single_run_concealed"] = {}
+    for R in runs:
+        k = sum(studies[R][i]["decision"] == studies[R][i]["case"]["truth"] for i in sel)
+        out["single_run_concealed"][R] = [k, len(sel)]
+        print(f"  {R} run{'s' if R > 1 else ' '}: {k}/{len(sel)}"
+              + (f" = {k / len(sel):.0%}" if sel else ""))
+    return out
 
 
 def locate_null(n_bootstrap: int = 39, shard: tuple[int, int] = (0, 1)) -> None:
@@ -1123,6 +1184,9 @@ def main(argv=None) -> int:
                     help="the likelihood's vestibular channel at M times the recording's rate "
                          "(default 1): diagnose(oversample=M), and --model-error's likelihood; "
                          "results and figures get the suffix _os<M>")
+    ap.add_argument("--compare-runs", action="store_true",
+                    help="one run, four and eight pooled on the cases all three studies have "
+                         "done (after --pooled 8)")
     ap.add_argument("--locate-null", action="store_true",
                     help="the located evidence's bootstrap p-values (B = 39) on the 48 "
                          "controls: calibrated? (analyses/results/diagnose/locate_null*.jsonl)")
@@ -1185,6 +1249,11 @@ def main(argv=None) -> int:
         return 0
     if args.model_error:
         model_error(oversample=args.oversample)
+        return 0
+    if args.compare_runs:
+        res = compare_runs()
+        (DEFAULT_OUT.with_name("diagnose_pooled8") / "compare_runs.json").write_text(
+            json.dumps(res, indent=1))
         return 0
     if args.locate_null:
         locate_null(shard=(k, n))
