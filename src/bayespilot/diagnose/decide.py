@@ -453,6 +453,16 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
     return res, wl
 
 
+def low_band_base(base_model: PilotModel, recording: Recording, start: Mapping[str, float],
+                  skip: int) -> tuple[NoiseModel, FitSummary]:
+    """The noise model and GLS base fit on the band low-passed at :data:`OMEGA_C`, from ``start``
+    (the low-band reference of :func:`guide_fits` and of the pooled guide)."""
+    lik0 = Likelihood(base_model, recording)
+    noise = noise_model(lik0.residual(start), recording.dt, skip=skip, omega_c=OMEGA_C)
+    _, base = fit_base_gls(base_model, recording, start, noise)
+    return noise, base
+
+
 def guide_fits(names: Sequence[str], base_model: PilotModel, recording: Recording,
                start: Mapping[str, float], skip: int, get: Any) -> dict[str, dict[str, float]]:
     """Each extension fitted on the band low-passed at :data:`OMEGA_C`: starts for a wider band.
@@ -467,9 +477,7 @@ def guide_fits(names: Sequence[str], base_model: PilotModel, recording: Recordin
     :class:`~bayespilot.diagnose.catalogue.Extension`; entries not fitted by
     GLS are left out.  Returns name -> the extended model's parameters.
     """
-    lik0 = Likelihood(base_model, recording)
-    noise = noise_model(lik0.residual(start), recording.dt, skip=skip, omega_c=OMEGA_C)
-    _, base = fit_base_gls(base_model, recording, start, noise)
+    noise, base = low_band_base(base_model, recording, start, skip)
     refined = None
     out: dict[str, dict[str, float]] = {}
     for name in names:

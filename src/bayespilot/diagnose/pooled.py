@@ -408,16 +408,13 @@ def _pooled_guide(names, runs, recs):
     """
     import dataclasses
 
-    from ..likelihood import Likelihood
     from . import decide as D
 
     low = []
     for rec, run in zip(recs, runs):
         start = {k: v for k, v in run.base_fit.params.items()
                  if k in run.base_model.parameter_names}
-        noise = D.noise_model(Likelihood(run.base_model, rec).residual(start), rec.dt,
-                              skip=run.skip, omega_c=D.OMEGA_C)
-        _, base = D.fit_base_gls(run.base_model, rec, start, noise)
+        noise, base = D.low_band_base(run.base_model, rec, start, run.skip)
         low.append(dataclasses.replace(run, noise=noise, base=base))
     out: dict[str, list[dict[str, float]]] = {}
     refined = None

@@ -30,23 +30,22 @@ from .catalogue import get_extension
 __all__ = ["sample_chosen"]
 
 
-def _checked_chosen(result: Any, recording: Recording, what: str):
+def _checked_chosen(result: Any, recording: Recording):
     """The chosen GLS candidate of a single-run ``result`` of ``recording``, or a clear error."""
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     if getattr(result, "runs", None) is not None:
-        raise ValueError(f"{what} takes a single-run diagnosis; for a pooled diagnosis "
-                         "(parameters shared over runs) it is not built")
+        raise ValueError("sample_chosen takes a single-run diagnosis; the posterior of a "
+                         "pooled diagnosis (parameters shared over runs) is not built")
     chosen = getattr(result, "chosen", None)
     if chosen is None:
         raise ValueError(f"the diagnosis chose no extension (physics = "
                          f"{getattr(result, 'physics', 'none')!r}): there is no extended model "
-                         "for " + what)
+                         "to sample")
     ext = get_extension(chosen.physics)
     if ext.likelihood != "gls" or getattr(chosen, "model", None) is None:
         raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
-                         f"likelihood; its limits are read from the data ({what} does not "
-                         "apply)")
+                         "likelihood; its limits are read from the data, not sampled")
     dt = result.settings.get("dt")
     n = np.size(result.arrays.get("residual", ()))
     if (dt is not None and not math.isclose(dt, recording.dt, rel_tol=1e-9)) or \
@@ -98,7 +97,7 @@ def sample_chosen(result: Any, recording: Recording, *, likelihood: str = "colou
     """
     from ..sample import sample
 
-    chosen = _checked_chosen(result, recording, "a posterior")
+    chosen = _checked_chosen(result, recording)
     model = chosen.model
     init = {k: float(v) for k, v in chosen.all_params.items() if k in model.parameter_names}
     post = sample(recording, model, likelihood=likelihood, init=init, seed=seed,
