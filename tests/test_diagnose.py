@@ -249,6 +249,36 @@ def test_diagnose_names_a_strong_washout(washout_case):
     assert res.chosen.p_value < 1e-4
 
 
+def test_diagnose_on_another_plant_rate_and_forcing():
+    """Not the paper's task: K/(s (s + 1)) at 50 Hz with twelve forcing sines of its own. The
+    located evidence sits at that task's forcing frequencies, its bootstrap simulates that plant,
+    and the decision is right with and without a washout of 0.8 rad/s."""
+    from bayespilot.simulate import Multisine, TrackingTask
+
+    w0 = 2 * np.pi / 40.96
+    ft = Multisine(w0, [3, 7, 13, 23, 37, 61], [0.04, 0.03, 0.015, 0.008, 0.005, 0.004],
+                   np.linspace(0.3, 5.0, 6))
+    fd = Multisine(w0, [5, 11, 17, 29, 47, 73], [0.02, 0.02, 0.015, 0.012, 0.01, 0.01],
+                   np.linspace(1.0, 6.0, 6))
+    task = TrackingTask(ft, fd, motion_gain=0.8, controlled_element=([3.0], [1.0, 1.0, 0.0]),
+                        sample_rate_hz=50.0, duration=40.96, run_in=20.48)
+    washout = get_extension("motion-washout").build(paper_model())
+    for model, extra, want in ((paper_model(), {}, "none"),
+                               (washout, {"omega_w": 0.8}, "motion-washout")):
+        p = dict(presets.paper_parameters("FT"), **extra)
+        rec = simulate(model, p, task=task, remnant_fraction=0.15, seed=5).recording
+        assert rec.sample_rate_hz == 50.0 and rec.n_samples == 2048
+        res = diagnose(rec, seed=0, n_bootstrap=5, n_starts=2)
+        assert res.physics == want
+        np.testing.assert_allclose(res.arrays["df_data"]["omega"],
+                                   w0 * np.array([3, 5, 7, 11, 13, 17, 23, 29, 37, 47, 61, 73]))
+        # every bootstrap replicate of that closed loop ran (none diverged)
+        assert res.to_dict()["where"]["frequency.motion_low"]["replicates"] == 5
+        if extra:
+            assert res.chosen.params["omega_w"] == pytest.approx(0.8, rel=0.5)
+            assert res.chosen.p_value < 1e-3
+
+
 @pytest.mark.filterwarnings("ignore::bayespilot.sample.ConvergenceWarning")  # short chain
 def test_posterior_of_the_chosen_extension(washout_case, control_result, tmp_path):
     """sample_chosen samples the extended model (pilot parameters and omega_w) from the chosen
