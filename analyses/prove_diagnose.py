@@ -804,6 +804,8 @@ def threshold_null() -> None:
 
 #: The one-parameter boundary-null entries whose null distributions ``--pooled-null`` measures.
 NULL_ENTRIES = ("motion-washout", "motion-system-dynamics")
+#: The entries whose closed- and open-loop null distributions ``--open-loop-null`` measures.
+OPEN_LOOP_ENTRIES = NULL_ENTRIES + ("time-varying-gains",)
 
 
 def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
@@ -893,6 +895,85 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
                   f"p<0.05: {np.mean(p < 0.05):.3f} (0.05 +- {band(0.05):.3f})  "
                   f"p<0.01: {np.mean(p < 0.01):.3f} (0.01 +- {band(0.01):.3f})  "
                   f"at the bound: {np.mean(d <= 0.0):.2f}")
+
+
+def open_loop_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
+    """Why the washout's null tail is heavy: the same runs with and without feedback of the remnant.
+
+    Eq. 4 treats e and theta_ddot_m as inputs, but in the closed loop they
+    carry the remnant's past (remnant -> u -> plant -> e, motion), most at
+    the low frequencies where the loop gain is high: the washout's only
+    freedom.  Per case a control run A (the paper's model, a condition of
+    CONDITIONS in turn) and the *open-loop* run u_A - n_A + n_B, its
+    deterministic pilot output with the remnant n_B of another run of the
+    condition, independent of A's e and motion.  Both get diagnose's base
+    stages (no bootstrap) and the one-run tests of OPEN_LOOP_ENTRIES from their
+    own base fits.  One JSON line per case in
+    ``analyses/results/diagnose/open_loop_null.jsonl`` (resumable; a case
+    whose line lacks an entry is done again, and its newer line counts);
+    prints per entry and loop the mean -ln L improvement (its null mean: 0.25
+    under the chi-bar-squared null, df / 2 under chi2(df)) and the shares of p
+    below 0.05 and 0.01 with their binomial bands.
+    """
+    from tqdm import tqdm
+
+    from bayespilot.diagnose import SKIP_SECONDS, _prepare
+    from bayespilot.diagnose import decide as D
+    from bayespilot.diagnose.catalogue import get_extension
+    from bayespilot.recording import Recording
+
+    DEFAULT_OUT.mkdir(parents=True, exist_ok=True)
+    k, n = shard
+    path = DEFAULT_OUT / (f"open_loop_null_{k}of{n}.jsonl" if n > 1 else "open_loop_null.jsonl")
+    mine = re.compile(r"open_loop_null(_\d+of\d+)?\.jsonl")
+    files = lambda: sorted(f for f in DEFAULT_OUT.glob("*.jsonl") if mine.fullmatch(f.name))  # noqa: E731
+    def load():
+        rows = {}
+        for f in files():
+            for line in f.read_text().splitlines():
+                if line.strip():
+                    r = json.loads(line)
+                    if all(e in r for e in OPEN_LOOP_ENTRIES) or r["id"] not in rows:
+                        rows[r["id"]] = r
+        return rows
+
+    done = {i for i, r in load().items() if all(e in r for e in OPEN_LOOP_ENTRIES)}
+    todo = [i for i in range(n_cases) if i % n == k and i not in done]
+    for i in tqdm(todo, desc="open-loop null", unit="case"):
+        task, kt, fn = CONDITIONS[i % len(CONDITIONS)]
+        c = {"id": 200000 + i, "truth": "none", "effect": "control", "extra": {},
+             "task": task, "K_theta": kt, "F_n": fn}
+        a = simulate_case(dict(c, seed=700000 + 2 * i))[0]
+        b = simulate_case(dict(c, seed=700001 + 2 * i))[0]
+        ra = a.recording
+        closed = Recording(ra.signals, ra.sample_rate_hz, ra.motion_gain, ra.task, {}, "closed")
+        opened = closed.with_signals(u=ra.u - a.remnant + b.remnant)
+        row = {"id": i, "task": task, "K_theta": kt, "F_n": fn}
+        for label, rec in (("closed", closed), ("open", opened)):
+            run = _prepare(rec, seed=0, n_bootstrap=0, base_fit=None, skip_seconds=SKIP_SECONDS,
+                           omega_c=D.OMEGA_C, n_starts=4, profile_noise=False,
+                           bar=tqdm(disable=True))
+            for name in OPEN_LOOP_ENTRIES:
+                ext = get_extension(name)
+                res = D.fit_candidate(ext, run.base_model, rec, run.base, run.noise)[0]
+                row.setdefault(name, {})[label] = [res.delta_neg_log_lik, res.p_value,
+                                                   res.params.get(ext.new_parameters[0])]
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+    rows = list(load().values())
+    print(f"{len(rows)} controls, each closed-loop and with its remnant replaced (open loop)")
+    for name in OPEN_LOOP_ENTRIES:
+        have = [r for r in rows if name in r]
+        null = 0.25 if get_extension(name).boundary_null else get_extension(name).df / 2
+        for label in ("closed", "open"):
+            d = np.array([r[name][label][0] for r in have])
+            p = np.array([r[name][label][1] for r in have])
+            m = d.size
+            band = lambda q: 2.0 * np.sqrt(q * (1 - q) / m)  # noqa: E731
+            print(f"{name:<24} {label:<7} n={m:4d}  mean d(-ln L) {d.mean():.3f} +- "
+                  f"{2 * d.std(ddof=1) / np.sqrt(m):.3f} (null {null:g})  "
+                  f"p<0.05: {np.mean(p < 0.05):.3f} (0.05 +- {band(0.05):.3f})  "
+                  f"p<0.01: {np.mean(p < 0.01):.3f} (0.01 +- {band(0.01):.3f})")
 
 
 def optimal_power(ext, lam: float) -> float:
@@ -1197,6 +1278,10 @@ def main(argv=None) -> int:
     ap.add_argument("--width-profile", metavar="IDS",
                     help="-ln L over fixed soft-threshold widths for these threshold-shape "
                          "case ids (comma-separated), against the crisp dead zone")
+    ap.add_argument("--open-loop-null", type=int, default=0, metavar="N",
+                    help="N controls, closed loop and with the remnant replaced (open loop): "
+                         "the washout's and platform's null distributions in each "
+                         "(analyses/results/diagnose/open_loop_null*.jsonl)")
     args = ap.parse_args(argv)
     global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE
     if args.pooled:
@@ -1243,6 +1328,9 @@ def main(argv=None) -> int:
     if args.pooled_null:
         REBASE = args.rebase
         pooled_null(args.pooled_null, (k, n))
+        return 0
+    if args.open_loop_null:
+        open_loop_null(args.open_loop_null, (k, n))
         return 0
     if args.oracle:
         oracle((k, n))
