@@ -624,6 +624,50 @@ def compare_runs(runs: tuple[int, ...] = (1, 4, 8)) -> dict:
         out["single_run_concealed"][R] = [k, len(sel)]
         print(f"  {R} run{'s' if R > 1 else ' '}: {k}/{len(sel)}"
               + (f" = {k / len(sel):.0%}" if sel else ""))
+    out["identifiable"] = identifiable(studies, sel)
+    return out
+
+
+def identifiable(studies: dict[int, dict[int, dict]], concealed: list[int],
+                 powers=(0.5, 0.9, 0.99)) -> dict:
+    """Naming among the cases the data can reveal: the optimal test's power at least ``powers``.
+
+    For each study (R runs) and each non-saturation case of ``--oracle``, the
+    power an optimal test of the true extension has with R runs (lambda x R,
+    the decision's level); among the cases with at least that power, how
+    many the study named, of those one run conceals (``concealed``, case ids)
+    and of all.  The selection uses the truth (the oracle's lambda), so it is
+    an evaluation of ``diagnose`` where the target can be met, not a decision rule.
+    """
+    from bayespilot.diagnose import get_extension
+
+    path = DEFAULT_OUT / "oracle.jsonl"
+    if not path.exists():
+        print("\n(no oracle results: run --oracle for the naming among identifiable cases)")
+        return {}
+    orc = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    conc = set(concealed)
+    print("\nAmong the cases an optimal test with as many runs names with at least this "
+          "probability (non-saturation; named / those one run conceals, named / all):")
+    out = {}
+    for R, st in studies.items():
+        row = {}
+        for q in powers:
+            k = n = k_all = n_all = 0
+            for o in orc:
+                r = st.get(o["id"])
+                if r is None or optimal_power(get_extension(o["truth"]),
+                                              o["lowpass"]["lambda"] * R) < q:
+                    continue
+                hit = r["decision"] == o["truth"]
+                n_all, k_all = n_all + 1, k_all + hit
+                if o["id"] in conc:
+                    n, k = n + 1, k + hit
+            row[q] = {"named_concealed": k, "concealed": n, "named": k_all, "n": n_all}
+        out[R] = row
+        print(f"  {R} run{'s' if R > 1 else ' '}: " + "   ".join(
+            f"power >= {q:g}: {v['named_concealed']}/{v['concealed']} ({v['named']}/{v['n']})"
+            for q, v in row.items()))
     return out
 
 
