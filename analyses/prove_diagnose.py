@@ -651,13 +651,14 @@ def identifiable(studies: dict[int, dict[int, dict]], concealed: list[int],
           "probability (non-saturation; named / those one run conceals, named / all):")
     out = {}
     for R, st in studies.items():
+        cases = [(o, st[o["id"]], optimal_power(get_extension(o["truth"]),
+                                                o["lowpass"]["lambda"] * R))
+                 for o in orc if o["id"] in st]
         row = {}
         for q in powers:
             k = n = k_all = n_all = 0
-            for o in orc:
-                r = st.get(o["id"])
-                if r is None or optimal_power(get_extension(o["truth"]),
-                                              o["lowpass"]["lambda"] * R) < q:
+            for o, r, power in cases:
+                if power < q:
                     continue
                 hit = r["decision"] == o["truth"]
                 n_all, k_all = n_all + 1, k_all + hit
@@ -852,6 +853,26 @@ NULL_ENTRIES = ("motion-washout", "motion-system-dynamics")
 OPEN_LOOP_ENTRIES = NULL_ENTRIES + ("time-varying-gains",)
 
 
+def _shard_files(out: Path, stem: str, shard: tuple[int, int]):
+    """A resumable study's output: this shard's file ``stem[_KofN].jsonl`` in ``out`` and a
+    function listing every shard's file of that stem."""
+    k, n = shard
+    path = out / (f"{stem}_{k}of{n}.jsonl" if n > 1 else f"{stem}.jsonl")
+    mine = re.compile(rf"{stem}(_\d+of\d+)?\.jsonl")
+    return path, lambda: sorted(f for f in out.glob("*.jsonl") if mine.fullmatch(f.name))
+
+
+def _null_line(name: str, label: str, d: np.ndarray, p: np.ndarray, null: float) -> str:
+    """One row of a null study: mean -ln L improvement (2 s.e.) against its null mean, and the
+    shares of p below 0.05 and 0.01 with their two-binomial-sd bands."""
+    m = d.size
+    band = lambda q: 2.0 * np.sqrt(q * (1 - q) / m)  # noqa: E731
+    return (f"{name:<24} {label:<8} n={m:4d}  mean d(-ln L) {d.mean():.3f} +- "
+            f"{2 * d.std(ddof=1) / np.sqrt(m):.3f} (null {null:g})  "
+            f"p<0.05: {np.mean(p < 0.05):.3f} (0.05 +- {band(0.05):.3f})  "
+            f"p<0.01: {np.mean(p < 0.01):.3f} (0.01 +- {band(0.01):.3f})")
+
+
 def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
     """The pooled tests' null distributions beside one run's, on the same runs.
 
@@ -876,10 +897,7 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
     out = ROOT / "analyses" / "results" / "diagnose_pooled"
     out.mkdir(parents=True, exist_ok=True)
     k, n = shard
-    stem = "null_study_rebase" if REBASE else "null_study"
-    path = out / (f"{stem}_{k}of{n}.jsonl" if n > 1 else f"{stem}.jsonl")
-    mine = re.compile(rf"{stem}(_\d+of\d+)?\.jsonl")
-    files = lambda: sorted(f for f in out.glob("*.jsonl") if mine.fullmatch(f.name))  # noqa: E731
+    path, files = _shard_files(out, "null_study_rebase" if REBASE else "null_study", shard)
     done = {json.loads(line)["id"] for f in files()
             for line in f.read_text().splitlines() if line.strip()}
     todo = [i for i in range(n_cases) if i % n == k and i not in done]
@@ -932,17 +950,12 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
                             ("one run", [s for r in rows for s in r[name]["single"]])):
             d = np.array([v[0] for v in vals])
             p = np.array([v[1] for v in vals])
-            m = d.size
-            band = lambda q: 2.0 * np.sqrt(q * (1 - q) / m)  # noqa: E731
-            print(f"{name:<24} {label:<8} n={m:4d}  mean d(-ln L) {d.mean():.3f} +- "
-                  f"{2 * d.std(ddof=1) / np.sqrt(m):.3f} (null 0.25)  "
-                  f"p<0.05: {np.mean(p < 0.05):.3f} (0.05 +- {band(0.05):.3f})  "
-                  f"p<0.01: {np.mean(p < 0.01):.3f} (0.01 +- {band(0.01):.3f})  "
-                  f"at the bound: {np.mean(d <= 0.0):.2f}")
+            print(_null_line(name, label, d, p, 0.25) + f"  at the bound: {np.mean(d <= 0.0):.2f}")
 
 
 def open_loop_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
-    """Why the washout's null tail is heavy: the same runs with and without feedback of the remnant.
+    """Is the closed loop what makes the washout's null tail heavy? The same runs with and without
+    feedback of the remnant.
 
     Eq. 4 treats e and theta_ddot_m as inputs, but in the closed loop they
     carry the remnant's past (remnant -> u -> plant -> e, motion), most at
@@ -968,9 +981,8 @@ def open_loop_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
 
     DEFAULT_OUT.mkdir(parents=True, exist_ok=True)
     k, n = shard
-    path = DEFAULT_OUT / (f"open_loop_null_{k}of{n}.jsonl" if n > 1 else "open_loop_null.jsonl")
-    mine = re.compile(r"open_loop_null(_\d+of\d+)?\.jsonl")
-    files = lambda: sorted(f for f in DEFAULT_OUT.glob("*.jsonl") if mine.fullmatch(f.name))  # noqa: E731
+    path, files = _shard_files(DEFAULT_OUT, "open_loop_null", shard)
+
     def load():
         rows = {}
         for f in files():
@@ -1012,12 +1024,7 @@ def open_loop_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
         for label in ("closed", "open"):
             d = np.array([r[name][label][0] for r in have])
             p = np.array([r[name][label][1] for r in have])
-            m = d.size
-            band = lambda q: 2.0 * np.sqrt(q * (1 - q) / m)  # noqa: E731
-            print(f"{name:<24} {label:<7} n={m:4d}  mean d(-ln L) {d.mean():.3f} +- "
-                  f"{2 * d.std(ddof=1) / np.sqrt(m):.3f} (null {null:g})  "
-                  f"p<0.05: {np.mean(p < 0.05):.3f} (0.05 +- {band(0.05):.3f})  "
-                  f"p<0.01: {np.mean(p < 0.01):.3f} (0.01 +- {band(0.01):.3f})")
+            print(_null_line(name, label, d, p, null))
 
 
 def optimal_power(ext, lam: float) -> float:
@@ -1324,7 +1331,7 @@ def main(argv=None) -> int:
                          "case ids (comma-separated), against the crisp dead zone")
     ap.add_argument("--open-loop-null", type=int, default=0, metavar="N",
                     help="N controls, closed loop and with the remnant replaced (open loop): "
-                         "the washout's and platform's null distributions in each "
+                         "the washout's, platform's and drifts' null distributions in each "
                          "(analyses/results/diagnose/open_loop_null*.jsonl)")
     args = ap.parse_args(argv)
     global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE
