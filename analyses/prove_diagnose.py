@@ -74,6 +74,9 @@ REBASE = False
 OMEGA_C = None
 #: The likelihood's vestibular channel oversampling (``--oversample`` sets it; 1: the paper's).
 OVERSAMPLE = 1
+#: Replicates of the bootstrap calibration of the chosen candidate's test (``--calibrate B``;
+#: 0: the asymptotic test alone, as the stored studies without the suffix _cal<B> were run).
+N_CALIBRATE = 0
 
 #: Effect sizes per entry, smallest effect first: (label, parameters).
 EFFECTS = {
@@ -202,7 +205,7 @@ def run_pooled_case(c: dict) -> dict:
         remnant.append(float(np.var(sim.remnant) / np.var(rec.u)))
     t0 = time.perf_counter()
     res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP, omega_c=OMEGA_C,
-                          oversample=OVERSAMPLE)
+                          oversample=OVERSAMPLE, n_calibrate=N_CALIBRATE)
     el = time.perf_counter() - t0
     vafs = [r["base"]["vaf"] for r in res.runs]
     rms = []
@@ -216,11 +219,21 @@ def run_pooled_case(c: dict) -> dict:
             "base_vafs": vafs, "residual_rmss": rms,
             "ranking": [{"physics": r.physics, "delta_neg_log_lik": r.delta_neg_log_lik,
                          "p_value": r.p_value, "params": r.params,
-                         "per_run": [x["delta_neg_log_lik"].get(r.physics) for x in res.runs]}
+                         "per_run": [x["delta_neg_log_lik"].get(r.physics) for x in res.runs],
+                         **_calibration_of(r)}
                         for r in res.ranking],
             "chosen_params": res.chosen.params if res.chosen else None,
             "chosen_stderr": res.chosen.stderr if res.chosen else None,
             "elapsed_seconds": el}
+
+
+def _calibration_of(r) -> dict:
+    """A ranking entry's bootstrap calibration (``--calibrate``), if its test was calibrated."""
+    c = r.calibration
+    if c is None:
+        return {}
+    return {"calibration": {"replicates": c.replicates, "scale": c.scale,
+                            "p_nominal": c.p_nominal, "p_empirical": c.p_empirical}}
 
 
 def run_case(c: dict) -> dict:
@@ -236,7 +249,7 @@ def run_case(c: dict) -> dict:
     rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
     t0 = time.perf_counter()
     res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP, profile_noise=PROFILE_NOISE,
-                   omega_c=OMEGA_C, oversample=OVERSAMPLE)
+                   omega_c=OMEGA_C, oversample=OVERSAMPLE, n_calibrate=N_CALIBRATE)
     el = time.perf_counter() - t0
     resid = res.arrays["residual"]
     return {"case": {k: v for k, v in c.items()}, "true_params": extra,
@@ -244,7 +257,8 @@ def run_case(c: dict) -> dict:
             "decision": res.physics, "mismatch": res.mismatch,
             "base_vaf": res.base["vaf"], "residual_rms": float(np.sqrt(np.mean(resid ** 2))),
             "ranking": [{"physics": r.physics, "delta_neg_log_lik": r.delta_neg_log_lik,
-                         "p_value": r.p_value, "params": r.params} for r in res.ranking],
+                         "p_value": r.p_value, "params": r.params, **_calibration_of(r)}
+                        for r in res.ranking],
             "chosen_params": res.chosen.params if res.chosen else None,
             "chosen_stderr": res.chosen.stderr if res.chosen else None,
             "elapsed_seconds": el}
@@ -261,8 +275,17 @@ def run(chunk: int | None, shard: tuple[int, int] = (0, 1)) -> None:
     if chunk is not None:
         todo = todo[:chunk]
     print(f"{len(todo)} case(s) to run", flush=True)
+    uncalibrated = OUT.with_name(OUT.name.removesuffix(f"_cal{N_CALIBRATE}"))
     for c in todo:
         path = OUT / f"{case_key(c)}.json"
+        before = uncalibrated / f"{case_key(c)}.json"
+        if N_CALIBRATE and before.exists() and json.loads(before.read_text())["decision"] == "none":
+            # the calibration only ever raises a p-value: a case the asymptotic test leaves at
+            # none (same seeds, same pipeline up to the decision) stays none; not rerun
+            r = json.loads(before.read_text())
+            r["calibration"] = "none before calibration: not rerun"
+            path.write_text(json.dumps(r, indent=1, default=float))
+            continue
         try:
             r = run_case(c)
         except Exception as exc:  # keep going; the error is recorded and retried next time
@@ -1316,6 +1339,10 @@ def main(argv=None) -> int:
                     help="the likelihood's vestibular channel at M times the recording's rate "
                          "(default 1): diagnose(oversample=M), and --model-error's likelihood; "
                          "results and figures get the suffix _os<M>")
+    ap.add_argument("--calibrate", type=int, default=0, metavar="B",
+                    help="diagnose(n_calibrate=B): the chosen candidate's test calibrated by B "
+                         "bootstrap replicates; results and figures get the suffix _cal<B>; a "
+                         "case the stored uncalibrated study decided none is copied, not rerun")
     ap.add_argument("--compare-runs", action="store_true",
                     help="one run, four and eight pooled on the cases all three studies have "
                          "done (after --pooled 8)")
@@ -1334,7 +1361,7 @@ def main(argv=None) -> int:
                          "the washout's, platform's and drifts' null distributions in each "
                          "(analyses/results/diagnose/open_loop_null*.jsonl)")
     args = ap.parse_args(argv)
-    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE
+    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE, N_CALIBRATE
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
@@ -1356,6 +1383,10 @@ def main(argv=None) -> int:
         OVERSAMPLE = args.oversample
         OUT = OUT.with_name(OUT.name + f"_os{OVERSAMPLE}")
         FIG_SUFFIX += f"_os{OVERSAMPLE}"
+    if args.calibrate:
+        N_CALIBRATE = args.calibrate
+        OUT = OUT.with_name(OUT.name + f"_cal{N_CALIBRATE}")
+        FIG_SUFFIX += f"_cal{N_CALIBRATE}"
     if args.tag:
         if not re.fullmatch(r"[A-Za-z0-9_.-]+", args.tag):
             ap.error(f"--tag: letters, digits, _ . - only, got {args.tag!r}")

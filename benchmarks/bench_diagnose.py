@@ -2,13 +2,16 @@
 
 Run:  python benchmarks/bench_diagnose.py [--repeats 1] [--bootstrap 39] [--runs R]
                                           [--omega-c RAD_S] [--oversample M]
+                                          [--washout OMEGA_W] [--calibrate B]
 
 Simulates task FD, K_theta = 1, K_n = 0.104 (F_n ~ 0.2, Table 4) with the
 paper's model, loads the kernels once (a short diagnose), then times the full
 diagnosis with numba limited to one thread; prints the wall time per stage.
 ``--runs R`` (R >= 2) times ``diagnose_pooled`` on R such runs (seeds 3, 4, ...);
 ``--omega-c inf --oversample 8`` the whole-band decision likelihood with the
-motion channel at 8x.
+motion channel at 8x.  ``--washout 0.5`` simulates a washout of 0.5 rad/s, so
+that a candidate is chosen and its test calibrated (``--calibrate`` replicates,
+default 39): the slowest path.
 """
 
 from __future__ import annotations
@@ -21,7 +24,9 @@ import time
 import numba
 import numpy as np
 
-from bayespilot.diagnose import diagnose, diagnose_pooled
+from bayespilot import presets
+from bayespilot.diagnose import diagnose, diagnose_pooled, get_extension
+from bayespilot.model import paper_model
 from bayespilot.simulate import simulate
 
 
@@ -32,16 +37,25 @@ def main(argv=None):
     ap.add_argument("--runs", type=int, default=1, help="R >= 2: time diagnose_pooled on R runs")
     ap.add_argument("--omega-c", type=float, default=None, help="decision band, rad/s (inf: whole)")
     ap.add_argument("--oversample", type=int, default=1, help="motion channel at M x the rate")
+    ap.add_argument("--washout", type=float, default=None, metavar="OMEGA_W",
+                    help="simulate a washout of this break frequency (rad/s)")
+    ap.add_argument("--calibrate", type=int, default=39, metavar="B",
+                    help="replicates of the chosen candidate's calibration (default 39)")
     args = ap.parse_args(argv)
     numba.set_num_threads(1)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; "
           f"numba threads {numba.get_num_threads()}; load {os.getloadavg()}")
-    recs = [simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=3 + j).recording
-            for j in range(max(args.runs, 1))]
+    model, params = None, None
+    if args.washout is not None:
+        model = get_extension("motion-washout").build(paper_model())
+        params = dict(presets.paper_parameters("FD"), omega_w=args.washout)
+    recs = [simulate(model, params, task="FD", motion_gain=1.0, remnant_gain=0.104,
+                     seed=3 + j).recording for j in range(max(args.runs, 1))]
     rec = recs[0]
     warm = simulate(task="FD", motion_gain=1.0, remnant_gain=0.104, seed=4, duration=20.0).recording
-    kw = {"omega_c": args.omega_c, "oversample": args.oversample}
-    diagnose(warm, n_bootstrap=1, **kw)  # compile / load every kernel once
+    kw = {"omega_c": args.omega_c, "oversample": args.oversample,
+          "n_calibrate": args.calibrate}
+    diagnose(warm, n_bootstrap=1, **dict(kw, n_calibrate=0))  # compile / load every kernel once
     ts = []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
@@ -53,6 +67,8 @@ def main(argv=None):
     runs = f"{args.runs} runs pooled, " if args.runs > 1 else ""
     if args.omega_c is not None or args.oversample != 1:
         runs += f"omega_c {args.omega_c}, oversample {args.oversample}, "
+    if args.washout is not None:
+        runs += f"washout {args.washout:g} rad/s, calibration B = {args.calibrate}, "
     print(f"N = {rec.n_samples}, {runs}bootstrap B = {args.bootstrap}: decision {res.physics}")
     if args.runs > 1:
         print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")

@@ -66,6 +66,8 @@ def test_diagnose_missing_recording_is_a_usage_error(tmp_path, capsys):
 def test_diagnose_bad_option_is_a_usage_error(rec_stem, capsys):
     code, out, err = _run(capsys, "diagnose", rec_stem, "--bootstrap", "-3")
     assert code == 2 and "bootstrap" in err
+    code, out, err = _run(capsys, "diagnose", rec_stem, "--calibrate", "-1")
+    assert code == 2 and "--calibrate" in err and out == ""
 
 
 def test_diagnose_unwritable_json_is_a_failure(rec_stem, tmp_path, capsys):
@@ -126,9 +128,10 @@ def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, 
         res, r, n_walkers=20, max_steps=600, min_steps=200, check_every=200, **kw))
     post, out = tmp_path / "post.nc", tmp_path / "d.json"
     code, stdout, err = _run(capsys, "diagnose", stem, "--bootstrap", "0", "--posterior", post,
-                             "--json", out)
+                             "--json", out, "--calibrate", "3")
     assert code == 0, err
     assert "decision: motion-washout" in stdout and "posterior (coloured likelihood" in stdout
+    assert "calibrated by 3 replicates" in stdout
     back = Posterior.from_netcdf(post)
     assert "omega_w" in back.parameter_names
     d = json.loads(out.read_text())["chosen"]["posterior"]

@@ -32,7 +32,7 @@ def washout_runs():
 
 @pytest.fixture(scope="module")
 def washout_result(washout_runs):
-    return diagnose_pooled(washout_runs, seed=0, n_bootstrap=0, n_starts=2,
+    return diagnose_pooled(washout_runs, seed=0, n_bootstrap=0, n_starts=2, n_calibrate=3,
                            candidates=["motion-washout", "time-varying-gains"])
 
 
@@ -55,6 +55,11 @@ def test_pooled_names_a_shared_washout(washout_result):
     shares = [r["delta_neg_log_lik"]["motion-washout"] for r in res.runs]
     assert len(shares) == 2 and min(shares) > 0
     assert sum(shares) == pytest.approx(res.chosen.delta_neg_log_lik, abs=1e-6)
+    # its test calibrated by replicates of both runs' base models, refitted together
+    cal = res.chosen.calibration
+    assert cal.replicates == 3 and res.chosen.p_value == cal.p_value >= cal.p_nominal
+    assert cal.statistics.max() < 0.5 * res.chosen.delta_neg_log_lik
+    assert "calibrated by 3 replicates" in res.summary()
     d = json.loads(res.to_json())
     assert d["pooled"] is True and d["n_runs"] == 2 and d["physics"] == "motion-washout"
     assert {"physics", "delta_neg_log_lik", "p_value", "params"} <= set(d["ranking"][0])
@@ -128,7 +133,7 @@ def test_pooled_whole_band_starts_from_the_low_band_fit(monkeypatch):
     recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=s,
                      duration=40.96).recording for s in (25, 26)]
     kw = dict(seed=0, n_bootstrap=0, n_starts=2, omega_c=math.inf, oversample=8,
-              candidates=["motion-system-dynamics"])
+              candidates=["motion-system-dynamics"], n_calibrate=0)
     res = diagnose_pooled(recs, **kw)
     assert res.physics == "motion-system-dynamics"
     assert res.chosen.params["omega_ms"] == pytest.approx(6.0, rel=0.25)

@@ -17,6 +17,9 @@
    censored likelihood for control saturation).  Candidates are ranked by
    BIC and by how well the located evidence shows their signature; the
    answer is ``"none"`` when no test passes the family-wise level ``alpha``.
+   The chosen candidate's test is first calibrated by a parametric bootstrap
+   of the base model (:mod:`bayespilot.diagnose.calibrate`); a candidate
+   that fails its calibrated test gives way to the next.
 4. **Model**: the chosen extension's parameters with standard errors;
    :func:`~bayespilot.diagnose.posterior.sample_chosen` then samples the
    extended model's posterior (optional, tens of seconds).
@@ -29,6 +32,7 @@ forcing functions); never the ``simulation`` key of a simulated run's sidecar.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import time
@@ -46,6 +50,8 @@ __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "ge
 
 #: Default family-wise false-alarm level of the decision.
 ALPHA = 0.01
+#: Default replicates of the parametric bootstrap that calibrates the chosen candidate's test.
+N_CALIBRATE = 39
 #: Seconds at the start of the record left out of the decision likelihood and the evidence.
 SKIP_SECONDS = 5.0
 #: A better base fit found from an extension's fit (``decide.null_refit``) by more than this
@@ -78,6 +84,20 @@ class _JSONSummary:
         if path is not None:
             write_text_atomic(path, text)
         return text
+
+
+def _calibration_lines(ranking) -> list[str]:
+    """The summary's account of the tests calibrated by the parametric bootstrap."""
+    lines = []
+    for c in ranking:
+        cal = c.calibration
+        if cal is None:
+            continue
+        lines.append(f"{c.physics}: test calibrated by {cal.replicates} replicates of the base "
+                     f"model: null mean d(-lnL) {cal.null_mean:.2f} (reference "
+                     f"{cal.reference_mean:.2f}, scale {cal.scale:.2f}), p {cal.p_nominal:.2g} "
+                     f"-> {cal.p_value:.2g}" + ("" if c.justified else " (not justified)"))
+    return [""] + lines if lines else []
 
 
 @dataclass
@@ -168,6 +188,7 @@ class DiagnosisResult(_JSONSummary):
             p = f"{c.p_value:.2g}"
             lines.append(f"{c.physics:<24} {c.delta_neg_log_lik:9.2f} {p:>9} {c.delta_bic:9.1f} "
                          f"{c.signature_score:5.2f}  {ps}{'  *' if c.justified else ''}")
+        lines += _calibration_lines(self.ranking)
         if self.chosen is not None:
             lines += ["", f"fitted {self.chosen.physics}:"]
             for k, v in self.chosen.params.items():
@@ -209,7 +230,8 @@ class DiagnosisResult(_JSONSummary):
         return write_report(self, directory)
 
 
-def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1):
+def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1,
+           n_calibrate=0):
     from ..model import MAX_OVERSAMPLE
     from ..recording import Recording
 
@@ -219,6 +241,9 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1
         raise ValueError(f"alpha must be in (0, 1), got {alpha!r}")
     if not isinstance(n_bootstrap, (int, np.integer)) or n_bootstrap < 0:
         raise ValueError(f"n_bootstrap must be an integer >= 0, got {n_bootstrap!r}")
+    if isinstance(n_calibrate, bool) or not isinstance(n_calibrate, (int, np.integer)) \
+            or n_calibrate < 0:
+        raise ValueError(f"n_calibrate must be an integer >= 0, got {n_calibrate!r}")
     if not (isinstance(skip_seconds, (int, float)) and 0 <= skip_seconds < recording.duration / 2):
         raise ValueError(f"skip_seconds must be in [0, {recording.duration / 2:g}) s, "
                          f"got {skip_seconds!r}")
@@ -357,6 +382,23 @@ def _best_null(names, results, base_model, recording, noise):
     return best
 
 
+def _calibrator(runs, recordings, n_calibrate, seed, bar):
+    """The calibration function of :func:`_calibrated_decision` for these runs."""
+    from .calibrate import calibrate_candidate
+
+    # the replicates' own seeds: a child of the seed, apart from the located evidence's
+    child = None if seed is None else np.random.SeedSequence(seed).spawn(1)[0]
+
+    def calibrate(res):
+        bar.total = (bar.total or 0) + n_calibrate
+        bar.set_postfix_str(f"calibrating {res.physics} ({n_calibrate} replicates)")
+        bar.refresh()
+        return calibrate_candidate(get_extension(res.physics), runs, recordings,
+                                   res.delta_neg_log_lik, n_replicates=n_calibrate,
+                                   seed=child, progress=bar.update)
+    return calibrate
+
+
 def _decide(results, alpha):
     """Bonferroni over the testable candidates; choose among the justified; rank all.
 
@@ -387,12 +429,32 @@ def _decide(results, alpha):
     return ranking, chosen, tested, level
 
 
+def _calibrated_decision(results, alpha, calibrate):
+    """:func:`_decide`, then the chosen candidate's test calibrated by ``calibrate`` (a
+    function of a CandidateResult returning a ``calibrate.Calibration`` or None); a choice
+    that fails its calibrated test gives way to the next justified candidate, calibrated in
+    turn.  Flat tops (``control-saturation``) are not recalibrated: they decide.
+    """
+    ranking, chosen, tested, level = _decide(results, alpha)
+    done = set()
+    while (calibrate is not None and chosen is not None and chosen.physics not in done
+           and get_extension(chosen.physics).likelihood == "gls"):
+        done.add(chosen.physics)
+        cal = calibrate(chosen)
+        chosen.calibration = cal
+        if cal is None:
+            break
+        chosen.p_value = cal.p_value
+        ranking, chosen, tested, level = _decide(results, alpha)
+    return ranking, chosen, tested, level
+
+
 @one_blas_thread
 def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstrap: int = 39,
              candidates: Sequence[str] | None = None, base_fit=None,
              skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
              n_starts: int = 4, profile_noise: bool = False, oversample: int = 1,
-             progress: bool = False) -> DiagnosisResult:
+             n_calibrate: int = N_CALIBRATE, progress: bool = False) -> DiagnosisResult:
     """Locate a model mismatch, name the missing physics, fit it (see module docs).
 
     Parameters
@@ -438,9 +500,18 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         (``paper_model(oversample=...)``); 1, the default, is the paper's
         computation.  With 8 the model's discretisation error no longer
         shows in the whole band (``docs/diagnose.md``).
+    n_calibrate : int
+        Replicates B of the parametric bootstrap that calibrates the chosen
+        candidate's test before it is accepted (:mod:`.calibrate`: the base
+        model simulated with its own remnant, the candidate refitted on each
+        replicate; its p-value is then the reference's at the statistic
+        divided by the replicates' scale when that is above 1).  A choice
+        that fails gives way to the next justified candidate.  0 keeps the
+        asymptotic test alone.  Costs about 0.5-1 s per replicate, only when
+        a candidate is justified.
     progress : bool
         Show a tqdm bar over the stages (base fit, located evidence, each
-        candidate).
+        candidate, the calibration's replicates).
 
     Returns
     -------
@@ -459,7 +530,8 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     from . import decide as D
     from . import locate as L
 
-    names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample)
+    names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample,
+                   n_calibrate)
     t0 = time.perf_counter()
     from tqdm.auto import tqdm
 
@@ -514,9 +586,15 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
             if ext.refine_threshold and refined is not None:
                 ref = min(ref, refined.neg_log_lik)
             D.retest(r, ext, ref)
-    bar.close()
-    ranking, chosen, tested, level = _decide(results, alpha)
     timings["name"] = time.perf_counter() - t2
+    t3 = time.perf_counter()
+    calibrate = None
+    if n_calibrate > 0:
+        calibrate = _calibrator([dataclasses.replace(run, base=base)], [recording],
+                                n_calibrate, seed, bar)
+    ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
+    bar.close()
+    timings["calibrate"] = time.perf_counter() - t3
 
     # -- model and show: residual after the chosen extension
     arrays = dict(st.get("arrays", {}))
@@ -550,6 +628,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
               "gls_stderr": base.stderr}
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "bootstrap": boot_info,
+                "n_calibrate": n_calibrate,
                 "skip_seconds": skip_seconds, "dt": recording.dt, "noise_model": noise.to_dict(),
                 "candidates": list(names), "timings": timings, "rebased": rebased,
                 "decision_likelihood": "GLS: residual low-passed, decimated and whitened by an "

@@ -26,7 +26,11 @@ an AR noise model (a prediction-error likelihood, :class:`Whitened`):
    best fit found: the base model is also refitted from every extension's
    fit with the extension taken out (:func:`null_refit`), because an
    extension can carry the fit into a better basin of the *base* model
-   (another delta_abs), which is not physics.
+   (another delta_abs), which is not physics;
+5. the chosen candidate's test is then calibrated by a parametric bootstrap
+   of the base model (:mod:`bayespilot.diagnose.calibrate`), which replaces
+   its p-value when the asymptotic reference proves anti-conservative on the
+   recording at hand.
 
 Why the low-pass: the likelihood runs the pilot model at the recording's
 100 Hz (Tustin, interpolated delays) while the pilot (or the simulator, at
@@ -355,6 +359,10 @@ class CandidateResult:
         (max of -log10 p over its signature keys; 0 when nothing is located).
     justified : bool
         p_value < the per-candidate level.
+    calibration : Calibration or None
+        The parametric bootstrap's calibration of this test
+        (:mod:`bayespilot.diagnose.calibrate`), when it was made; ``p_value``
+        is then its calibrated p-value.
     """
 
     physics: str
@@ -373,6 +381,7 @@ class CandidateResult:
     justified: bool = False
     fit: Any = None
     model: Any = None
+    calibration: Any = None
 
     def to_dict(self) -> dict[str, Any]:
         def num(x):
@@ -385,7 +394,8 @@ class CandidateResult:
                 "params": {k: num(v) for k, v in self.params.items()},
                 "stderr": {k: num(v) for k, v in self.stderr.items()},
                 "all_params": {k: num(v) for k, v in self.all_params.items()},
-                "signature_score": num(self.signature_score), "justified": self.justified}
+                "signature_score": num(self.signature_score), "justified": self.justified,
+                "calibration": None if self.calibration is None else self.calibration.to_dict()}
 
 
 def lr_p_value(stat: float, ext: Extension) -> float:

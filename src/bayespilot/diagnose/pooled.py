@@ -40,8 +40,9 @@ from scipy import linalg, optimize, stats
 
 from .._blas import one_blas_thread
 from .._files import write_text_atomic
-from . import (ALPHA, MAX_REBASE, REBASE_TOL, SKIP_SECONDS, _check, _decide, _json_ready,
-               _JSONSummary, _prepare, _saturation)
+from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
+               _calibration_lines, _calibrator, _check, _json_ready, _JSONSummary, _prepare,
+               _saturation)
 from .catalogue import get_extension
 
 __all__ = ["diagnose_pooled", "PooledDiagnosisResult"]
@@ -117,6 +118,7 @@ class PooledDiagnosisResult(_JSONSummary):
             ps = ", ".join(f"{k}={v:.4g}" for k, v in c.params.items())
             lines.append(f"{c.physics:<24} {c.delta_neg_log_lik:9.2f} {c.p_value:9.2g} "
                          f"{c.delta_bic:9.1f}  {per}  {ps}{'  *' if c.justified else ''}")
+        lines += _calibration_lines(self.ranking)
         if self.chosen is not None and self.chosen.params:
             lines += ["", f"fitted {self.chosen.physics} (shared by the {R} runs):"]
             for k, v in self.chosen.params.items():
@@ -487,7 +489,7 @@ def _pooled_null(names, fits, runs, recs):
 def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float = ALPHA,
                     n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
                     skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
-                    n_starts: int = 4, oversample: int = 1,
+                    n_starts: int = 4, oversample: int = 1, n_calibrate: int = N_CALIBRATE,
                     progress: bool = False) -> PooledDiagnosisResult:
     """Diagnose several runs of one condition together (see the module docs).
 
@@ -499,7 +501,11 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     seed : int or None
         Seeds each run's base fit and bootstrap (run j uses ``seed + j``).
     alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample, progress
-        As for :func:`~bayespilot.diagnose.diagnose`.  With ``omega_c`` above
+        As for :func:`~bayespilot.diagnose.diagnose`.
+    n_calibrate : int
+        As for :func:`~bayespilot.diagnose.diagnose`: each replicate simulates
+        every run's base model and refits the candidate to all of them, so it
+        costs about R times a single run's.  With ``omega_c`` above
         25 rad/s every extension is also started from its pooled fit on the
         25-rad/s band (:func:`_pooled_guide`).
 
@@ -521,7 +527,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         raise ValueError(f"pooling needs at least two recordings, got {len(recs)}")
     names = None
     for rec in recs:
-        names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample)
+        names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample,
+                       n_calibrate)
     t0 = time.perf_counter()
     bar = tqdm(total=2 * len(recs) + len(names), desc="diagnose (pooled)", unit="stage",
                disable=not progress)
@@ -581,8 +588,9 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
             if r.physics in own:
                 shares[r.physics] = [float(run.base.neg_log_lik - g)
                                      for run, g in zip(runs, own[r.physics])]
+    calibrate = (_calibrator(runs, recs, n_calibrate, seed, bar) if n_calibrate > 0 else None)
+    ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
     bar.close()
-    ranking, chosen, tested, level = _decide(results, alpha)
     run_d = []
     for j, (rec, run) in enumerate(zip(recs, runs)):
         chosen_params = None
@@ -598,7 +606,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                       "delta_neg_log_lik": {n: s[j] for n, s in shares.items()},
                       "params": chosen_params})
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
-                "seed": seed, "n_bootstrap": n_bootstrap, "skip_seconds": skip_seconds,
+                "seed": seed, "n_bootstrap": n_bootstrap, "n_calibrate": n_calibrate,
+                "skip_seconds": skip_seconds,
                 "candidates": list(names), "n_runs": len(recs), "rebased": rebased,
                 "decision_likelihood": "sum over runs of the GLS likelihood (each run's own AR "
                                        "noise model and level); extension parameters shared"}

@@ -272,6 +272,10 @@ def write_report(result, directory) -> dict[str, Path]:
     ev = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(e.description)}</td>"
                  f"<td>{e.value:.4g}</td><td>{'' if not math.isfinite(e.p_value) else f'{e.p_value:.3f}'}</td></tr>"
                  for k, e in result.where.items() if math.isfinite(e.value))
+    from . import _calibration_lines
+
+    cal = "".join(f"<p>{html.escape(line)}</p>" for line in _calibration_lines(result.ranking)
+                  if line)
     title = f"bayespilot diagnosis: {html.escape(result.physics)}"
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
@@ -285,6 +289,7 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 <h2>Candidates</h2>
 <table><tr><th>physics</th><th>&Delta;(-ln L)</th><th>p</th><th>&Delta;BIC</th><th>signature</th><th>parameters</th></tr>
 {''.join(rows)}</table>
+{cal}
 {img(paths['candidates'])}
 <h2>Where</h2>
 <table><tr><th>evidence</th><th>what</th><th>value</th><th>bootstrap p</th></tr>{ev}</table>

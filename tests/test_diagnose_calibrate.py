@@ -1,0 +1,159 @@
+"""Tests of bayespilot.diagnose.calibrate: the bootstrap calibration of a candidate's test, its
+p-value against scipy.stats, a replicate's statistic retraced by hand, and the decision that
+gives way when the chosen candidate fails its calibrated test."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from bayespilot import presets
+from bayespilot.diagnose import SKIP_SECONDS, _calibrated_decision, _prepare, diagnose
+from bayespilot.diagnose import decide as D
+from bayespilot.diagnose import get_extension
+from bayespilot.diagnose import locate as L
+from bayespilot.diagnose.calibrate import Calibration, calibrate_candidate, reference_mean
+from bayespilot.model import paper_model
+from bayespilot.simulate import simulate
+
+
+class _Silent:
+    def set_postfix_str(self, *a, **k):
+        pass
+
+    def update(self, *a, **k):
+        pass
+
+
+def test_reference_means_are_the_asymptotic_nulls():
+    # 0.5 chi2(0) + 0.5 chi2(1) halved: 0.25; chi2(2) halved: 1
+    for name in ("motion-washout", "motion-system-dynamics", "threshold-shape"):
+        assert reference_mean(get_extension(name)) == 0.25
+    for name in ("time-varying-gains", "otolith-channel"):
+        assert reference_mean(get_extension(name)) == 1.0
+    with pytest.raises(ValueError, match="GLS"):
+        calibrate_candidate(get_extension("control-saturation"), [], [], 1.0)
+
+
+@pytest.fixture(scope="module")
+def control_run():
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=31,
+                   duration=30.0).recording
+    run = _prepare(rec, seed=0, n_bootstrap=0, base_fit=None, skip_seconds=SKIP_SECONDS,
+                   omega_c=None, n_starts=2, profile_noise=False, bar=_Silent())
+    return rec, run
+
+
+def test_calibration_of_a_washout_on_a_control(control_run):
+    rec, run = control_run
+    ext = get_extension("motion-washout")
+    d = 1.3  # an observed improvement to calibrate (the test's input, not this run's)
+    cal = calibrate_candidate(ext, [run], [rec], d, n_replicates=4, seed=5)
+    assert isinstance(cal, Calibration) and cal.replicates == 4
+    assert np.all(cal.statistics >= 0) and np.all(np.isfinite(cal.statistics))
+    assert cal.null_mean == pytest.approx(cal.statistics.mean())
+    assert cal.scale == pytest.approx(cal.statistics.mean() / 0.25)
+    # the chi-bar-squared p-value at 2 d / max(1, c), from scipy.stats directly
+    c = max(1.0, cal.scale)
+    assert cal.p_nominal == pytest.approx(0.5 * stats.chi2.sf(2 * d, 1))
+    assert cal.p_value == pytest.approx(0.5 * stats.chi2.sf(2 * d / c, 1))
+    assert cal.p_value >= cal.p_nominal
+    assert cal.p_empirical == pytest.approx((1 + np.sum(cal.statistics >= d)) / 5)
+    assert json.loads(json.dumps(cal.to_dict()))["replicates"] == 4
+
+
+def test_a_replicates_statistic_retraced_by_hand(control_run):
+    """Replicate 0: the base model at the run's GLS fit simulated with the run's remnant level
+    and colour, then the noise model, the GLS base fit, the extension's fit and the base
+    model refitted from it, step by step."""
+    rec, run = control_run
+    ext = get_extension("time-varying-gains")
+    cal = calibrate_candidate(ext, [run], [rec], 0.0, n_replicates=1, seed=9)
+    K_n, T_n = L.remnant_like(run.lik0.residual(run.base.params)[run.skip:], rec.dt)
+    seed0 = int(np.random.SeedSequence(9).generate_state(1)[0])
+    rep = simulate(run.base_model, run.base.params, task=L.task_of(rec, run.forcing),
+                   remnant_gain=K_n, T_n=T_n, seed=seed0, oversample=10).recording
+    # the replicate has the recording's forcing and a remnant of the residual's level
+    np.testing.assert_allclose(rep.signals["f_t"], rec.signals["f_t"], atol=1e-9)
+    from bayespilot.likelihood import Likelihood
+
+    eps = Likelihood(run.base_model, rep).residual(run.base.params)
+    assert np.std(eps[run.skip:]) == pytest.approx(
+        np.std(run.lik0.residual(run.base.params)[run.skip:]), rel=0.3)
+    noise = D.noise_model(eps, rep.dt, skip=run.skip)
+    _, base = D.fit_base_gls(run.base_model, rep, run.base.params, noise)
+    res, _ = D.fit_candidate(ext, run.base_model, rep, base, noise)
+    null = D.null_refit(ext, run.base_model, rep, res, noise)
+    ref = min(base.neg_log_lik, null.neg_log_lik)
+    assert cal.statistics[0] == pytest.approx(max(0.0, ref - res.fit.neg_log_lik), abs=1e-8)
+    # seeded: the same seed, the same replicates; another seed, others
+    again = calibrate_candidate(ext, [run], [rec], 0.0, n_replicates=2, seed=9)
+    assert again.statistics[0] == cal.statistics[0]
+    other = calibrate_candidate(ext, [run], [rec], 0.0, n_replicates=2, seed=10)
+    assert not np.any(np.isin(other.statistics, again.statistics))
+
+
+def _result(name, p, bf):
+    ext = get_extension(name)
+    r = D.CandidateResult(name, True, "", 5.0, 10.0, ext.df, p, 2 * bf, bf)
+    return r
+
+
+def test_a_choice_that_fails_calibration_gives_way():
+    wash = _result("motion-washout", 1e-5, 10.0)
+    drift = _result("time-varying-gains", 1e-4, 5.0)
+    plat = _result("motion-system-dynamics", 0.5, -3.0)
+    asked = []
+
+    def cal(res, p):
+        return Calibration(res.physics, 39, 1.0, 0.25, 4.0, res.p_value, p, 0.025,
+                           np.zeros(39))
+
+    def calibrate(res):
+        asked.append(res.physics)
+        return cal(res, {"motion-washout": 0.01, "time-varying-gains": 2e-4}[res.physics])
+
+    ranking, chosen, tested, level = _calibrated_decision([wash, drift, plat], 0.01, calibrate)
+    assert level == pytest.approx(0.01 / 3)
+    assert asked == ["motion-washout", "time-varying-gains"]
+    assert chosen is drift and ranking[0] is drift
+    assert not wash.justified and wash.p_value == 0.01 and wash.calibration.scale == 4.0
+    assert drift.justified and drift.p_value == 2e-4
+    assert plat.calibration is None
+    # every choice failing: none; no calibration possible: the asymptotic test stands
+    for r in (wash, drift):
+        r.p_value, r.calibration = 1e-5, None
+    _, chosen, _, _ = _calibrated_decision([wash, drift, plat], 0.01, lambda r: cal(r, 0.5))
+    assert chosen is None and not wash.justified and not drift.justified
+    wash.p_value = drift.p_value = 1e-5
+    _, chosen, _, _ = _calibrated_decision([wash, drift, plat], 0.01, lambda r: None)
+    assert chosen is wash and wash.p_value == 1e-5
+
+
+def test_diagnose_calibrates_a_strong_washout(tmp_path):
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=22,
+                   duration=40.96).recording
+    res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, n_calibrate=3,
+                   candidates=["motion-washout", "time-varying-gains"])
+    assert res.physics == "motion-washout"
+    cal = res.chosen.calibration
+    assert cal.replicates == 3
+    assert cal.p_nominal < res.chosen.p_value == cal.p_value < res.settings["level_per_candidate"]
+    # the replicates are of the base model: well below the washout's improvement (10.9)
+    assert cal.statistics.max() < 0.5 * res.chosen.delta_neg_log_lik
+    d = json.loads(res.to_json())
+    assert d["ranking"][0]["calibration"]["replicates"] == 3
+    assert d["settings"]["n_calibrate"] == 3
+    assert "calibrated by 3 replicates" in res.summary()
+    page = res.report(tmp_path)["html"].read_text()
+    assert "<p>motion-washout: test calibrated by 3 replicates" in page
+    for bad in (-1, True, 2.5):
+        with pytest.raises(ValueError, match="n_calibrate"):
+            diagnose(rec, n_calibrate=bad)
+    assert math.isfinite(res.settings["timings"]["calibrate"])
