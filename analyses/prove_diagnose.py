@@ -876,6 +876,75 @@ NULL_ENTRIES = ("motion-washout", "motion-system-dynamics")
 OPEN_LOOP_ENTRIES = NULL_ENTRIES + ("time-varying-gains",)
 
 
+def calibration_check(which: list[str], n_calibrate: int = 39) -> None:
+    """The bootstrap calibration (``n_calibrate``) on the false alarms and on controls.
+
+    ``which``: ``null<i>`` (pooled null control i of ``--pooled-null``, four runs,
+    ``diagnose_pooled``), ``case<i>`` (study case i with eight runs, as ``--pooled 8``), or
+    ``controls<N>`` (the chosen-candidate scale of the washout and the platform on N new
+    single-run controls, whatever their decision).  One JSON line per item in
+    ``analyses/results/diagnose/calibration_check.jsonl``.
+    """
+    from bayespilot.diagnose import SKIP_SECONDS, _prepare, diagnose_pooled, get_extension
+    from bayespilot.diagnose import decide as D
+    from bayespilot.diagnose.calibrate import calibrate_candidate
+    from bayespilot.recording import Recording
+    from tqdm import tqdm
+
+    out = DEFAULT_OUT / "calibration_check.jsonl"
+    for item in which:
+        t0 = time.perf_counter()
+        if item.startswith("controls"):
+            rows = []
+            for i in range(int(item[len("controls"):])):
+                task, kt, fn = CONDITIONS[i % len(CONDITIONS)]
+                c = {"id": 0, "truth": "none", "effect": "control", "extra": {}, "task": task,
+                     "K_theta": kt, "F_n": fn, "seed": 7770000 + i}
+                rec = simulate_case(c)[0].recording
+                run = _prepare(rec, seed=0, n_bootstrap=0, base_fit=None,
+                               skip_seconds=SKIP_SECONDS, omega_c=D.OMEGA_C, n_starts=4,
+                               profile_noise=False, bar=tqdm(disable=True))
+                for name in ("motion-washout", "motion-system-dynamics"):
+                    ext = get_extension(name)
+                    res, _ = D.fit_candidate(ext, run.base_model, rec, run.base, run.noise)
+                    cal = calibrate_candidate(ext, [run], [rec], res.delta_neg_log_lik,
+                                              n_replicates=n_calibrate, seed=i)
+                    rows.append({"control": i, "physics": name, "scale": cal.scale,
+                                 "null_mean": cal.null_mean})
+                    print(f"control {i} {name}: scale {cal.scale:.2f}", flush=True)
+            line = {"item": item, "controls": rows}
+        else:
+            if item.startswith("null"):
+                i = int(item[4:])
+                task, kt, fn = CONDITIONS[i % len(CONDITIONS)]
+                c = {"id": 100000 + i, "truth": "none", "effect": "control", "extra": {},
+                     "task": task, "K_theta": kt, "F_n": fn}
+                recs = []
+                for j in range(4):  # as pooled_null() made them
+                    r = simulate_case(dict(c, seed=900000 + 10 * i + j))[0].recording
+                    recs.append(Recording(r.signals, r.sample_rate_hz, r.motion_gain, r.task, {},
+                                          f"run{j + 1}"))
+                nb = 0
+            else:
+                c = next(c for c in cases() if c["id"] == int(item[4:]))
+                recs = []
+                for j in range(8):
+                    r = simulate_case(dict(c, seed=pooled_seed(c, j)))[0].recording
+                    meta = {k: v for k, v in r.metadata.items() if k != "notes"}
+                    recs.append(Recording(r.signals, r.sample_rate_hz, r.motion_gain, r.task,
+                                          meta, f"run{j + 1}"))
+                nb = N_BOOTSTRAP
+            res = diagnose_pooled(recs, seed=0, n_bootstrap=nb, n_calibrate=n_calibrate)
+            print(res.summary(), flush=True)
+            line = {"item": item, "decision": res.physics,
+                    "ranking": [{"physics": r.physics, "delta_neg_log_lik": r.delta_neg_log_lik,
+                                 "p_value": r.p_value, **_calibration_of(r)}
+                                for r in res.ranking]}
+        line["elapsed_seconds"] = time.perf_counter() - t0
+        with out.open("a") as f:
+            f.write(json.dumps(line) + "\n")
+
+
 def _shard_files(out: Path, stem: str, shard: tuple[int, int]):
     """A resumable study's output: this shard's file ``stem[_KofN].jsonl`` in ``out`` and a
     function listing every shard's file of that stem."""
@@ -1343,6 +1412,11 @@ def main(argv=None) -> int:
                     help="diagnose(n_calibrate=B): the chosen candidate's test calibrated by B "
                          "bootstrap replicates; results and figures get the suffix _cal<B>; a "
                          "case the stored uncalibrated study decided none is copied, not rerun")
+    ap.add_argument("--calibration-check", metavar="ITEMS",
+                    help="diagnose with the bootstrap calibration (B from --calibrate, default "
+                         "39) on these comma-separated items: null<i> (a pooled null control), "
+                         "case<i> (a study case, eight runs), controls<N> (the washout's and "
+                         "platform's scale on N single-run controls)")
     ap.add_argument("--compare-runs", action="store_true",
                     help="one run, four and eight pooled on the cases all three studies have "
                          "done (after --pooled 8)")
@@ -1419,6 +1493,9 @@ def main(argv=None) -> int:
         return 0
     if args.model_error:
         model_error(oversample=args.oversample)
+        return 0
+    if args.calibration_check:
+        calibration_check(args.calibration_check.split(","), args.calibrate or 39)
         return 0
     if args.compare_runs:
         res = compare_runs()

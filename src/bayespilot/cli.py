@@ -928,12 +928,13 @@ motion-washout, otolith-channel, threshold-shape, time-varying-gains,
 control-saturation) fitted and tested by a likelihood-ratio test on a
 pre-whitened (GLS) likelihood, or by its flat tops and the censored likelihood
 for control-saturation. The answer is 'none' when no extension passes the
-family-wise level --alpha. When one does, its test is first calibrated by a
-parametric bootstrap of the base model (--calibrate replicates, each the
-closed loop simulated with the run's own remnant and the candidate refitted):
-a candidate whose calibrated p-value fails gives way to the next. Reads only
-the recording. Under a minute at N = 8192, about a minute more when a
-candidate is calibrated (see docs/diagnose.md and docs/performance.md).
+family-wise level --alpha. With --calibrate B the chosen candidate's test is
+first calibrated by a parametric bootstrap of the base model (B replicates,
+each the closed loop simulated with the run's own remnant and the diagnosis
+retraced for that candidate); a candidate whose calibrated p-value fails gives
+way to the next. Reads only the recording. Under a minute at N = 8192; a
+calibration adds about 2.5 s per replicate and run (see docs/diagnose.md and
+docs/performance.md).
 
 The JSON (--json) has mismatch, physics (a catalogue name or 'none'), ranking
 (physics, delta_neg_log_lik, p_value, delta_bic, params, stderr per
@@ -1176,10 +1177,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="bootstrap replicates for the located evidence (default 39; 0: none)")
     p.add_argument("--alpha", type=_fraction, default=0.01, metavar="A",
                    help="family-wise false-alarm level of the decision (default 0.01)")
-    p.add_argument("--calibrate", type=_whole_number(0), default=39, metavar="B",
-                   help="replicates of the parametric bootstrap that calibrates the chosen "
-                        "candidate's test before it is accepted (default 39; 0: the "
-                        "asymptotic test alone)")
+    p.add_argument("--calibrate", type=_whole_number(0), default=0, metavar="B",
+                   help="calibrate the chosen candidate's test by B replicates of a parametric "
+                        "bootstrap of the base model before accepting it (default 0: the "
+                        "asymptotic test alone; 39 is a sensible B, about 2.5 s each per run)")
     p.add_argument("--posterior", metavar="POST.nc",
                    help="one recording: also sample the posterior of the chosen extended model "
                         "(emcee, coloured likelihood) and write it to this netCDF file; the "

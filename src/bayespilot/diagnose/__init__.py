@@ -17,9 +17,10 @@
    censored likelihood for control saturation).  Candidates are ranked by
    BIC and by how well the located evidence shows their signature; the
    answer is ``"none"`` when no test passes the family-wise level ``alpha``.
-   The chosen candidate's test is first calibrated by a parametric bootstrap
-   of the base model (:mod:`bayespilot.diagnose.calibrate`); a candidate
-   that fails its calibrated test gives way to the next.
+   Optionally (``n_calibrate``) the chosen candidate's test is first
+   calibrated by a parametric bootstrap of the base model
+   (:mod:`bayespilot.diagnose.calibrate`); a candidate that fails its
+   calibrated test gives way to the next.
 4. **Model**: the chosen extension's parameters with standard errors;
    :func:`~bayespilot.diagnose.posterior.sample_chosen` then samples the
    extended model's posterior (optional, tens of seconds).
@@ -50,8 +51,9 @@ __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "ge
 
 #: Default family-wise false-alarm level of the decision.
 ALPHA = 0.01
-#: Default replicates of the parametric bootstrap that calibrates the chosen candidate's test.
-N_CALIBRATE = 39
+#: Default replicates of the parametric bootstrap that calibrates the chosen candidate's test
+#: (0: off; see :mod:`bayespilot.diagnose.calibrate` for why it is not on by default).
+N_CALIBRATE = 0
 #: Seconds at the start of the record left out of the decision likelihood and the evidence.
 SKIP_SECONDS = 5.0
 #: A better base fit found from an extension's fit (``decide.null_refit``) by more than this
@@ -382,7 +384,7 @@ def _best_null(names, results, base_model, recording, noise):
     return best
 
 
-def _calibrator(runs, recordings, n_calibrate, seed, bar):
+def _calibrator(runs, recordings, n_calibrate, seed, bar, n_starts=4):
     """The calibration function of :func:`_calibrated_decision` for these runs."""
     from .calibrate import calibrate_candidate
 
@@ -395,7 +397,7 @@ def _calibrator(runs, recordings, n_calibrate, seed, bar):
         bar.refresh()
         return calibrate_candidate(get_extension(res.physics), runs, recordings,
                                    res.delta_neg_log_lik, n_replicates=n_calibrate,
-                                   seed=child, progress=bar.update)
+                                   seed=child, n_starts=n_starts, progress=bar.update)
     return calibrate
 
 
@@ -507,8 +509,10 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         replicate; its p-value is then the reference's at the statistic
         divided by the replicates' scale when that is above 1).  A choice
         that fails gives way to the next justified candidate.  0 keeps the
-        asymptotic test alone.  Costs about 0.5-1 s per replicate, only when
-        a candidate is justified.
+        asymptotic test alone (the default: see
+        :mod:`bayespilot.diagnose.calibrate` for what it was measured to do).
+        Costs about 2.5 s per replicate (each retraces the diagnosis' Eq. 4
+        and GLS fits), only when a candidate is justified.
     progress : bool
         Show a tqdm bar over the stages (base fit, located evidence, each
         candidate, the calibration's replicates).
@@ -591,7 +595,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     calibrate = None
     if n_calibrate > 0:
         calibrate = _calibrator([dataclasses.replace(run, base=base)], [recording],
-                                n_calibrate, seed, bar)
+                                n_calibrate, seed, bar, n_starts)
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
     bar.close()
     timings["calibrate"] = time.perf_counter() - t3

@@ -27,9 +27,10 @@ an AR noise model (a prediction-error likelihood, :class:`Whitened`):
    fit with the extension taken out (:func:`null_refit`), because an
    extension can carry the fit into a better basin of the *base* model
    (another delta_abs), which is not physics;
-5. the chosen candidate's test is then calibrated by a parametric bootstrap
-   of the base model (:mod:`bayespilot.diagnose.calibrate`), which replaces
-   its p-value when the asymptotic reference proves anti-conservative on the
+5. optionally (``diagnose(n_calibrate=B)``) the chosen candidate's test is
+   calibrated by a parametric bootstrap of the base model
+   (:mod:`bayespilot.diagnose.calibrate`), whose p-value replaces the
+   asymptotic one when the reference proves anti-conservative on the
    recording at hand.
 
 Why the low-pass: the likelihood runs the pilot model at the recording's

@@ -588,7 +588,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
             if r.physics in own:
                 shares[r.physics] = [float(run.base.neg_log_lik - g)
                                      for run, g in zip(runs, own[r.physics])]
-    calibrate = (_calibrator(runs, recs, n_calibrate, seed, bar) if n_calibrate > 0 else None)
+    calibrate = (_calibrator(runs, recs, n_calibrate, seed, bar, n_starts) if n_calibrate > 0
+                 else None)
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
     bar.close()
     run_d = []
