@@ -188,21 +188,43 @@ def pooled_seed(c: dict, j: int) -> int:
     return 500000 + 10 * c["id"] + j
 
 
-def run_pooled_case(c: dict) -> dict:
-    """``diagnose_pooled`` on POOLED runs of the case's condition and effect (new seeds)."""
-    from bayespilot.diagnose import diagnose_pooled
-    from bayespilot.likelihood import Likelihood
-    from bayespilot.model import paper_model
+def pooled_recordings(c: dict, runs: int) -> tuple[list, list, dict]:
+    """The ``runs`` blind recordings of a pooled case, their remnant fractions, its extras."""
     from bayespilot.recording import Recording
 
     recs, remnant, extra = [], [], {}
-    for j in range(POOLED):
+    for j in range(runs):
         sim, extra = simulate_case(dict(c, seed=pooled_seed(c, j)))
         rec = sim.recording
         meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
         recs.append(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta,
                               f"run{j + 1}"))
         remnant.append(float(np.var(sim.remnant) / np.var(rec.u)))
+    return recs, remnant, extra
+
+
+def null_recordings(i: int) -> tuple[dict, list]:
+    """Pooled null control ``i`` of :func:`pooled_null`: its case and its four recordings."""
+    from bayespilot.recording import Recording
+
+    task, kt, fn = CONDITIONS[i % len(CONDITIONS)]
+    c = {"id": 100000 + i, "truth": "none", "effect": "control", "extra": {},
+         "task": task, "K_theta": kt, "F_n": fn}
+    recs = []
+    for j in range(4):
+        rec = simulate_case(dict(c, seed=900000 + 10 * i + j))[0].recording
+        recs.append(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, {},
+                              f"run{j + 1}"))
+    return c, recs
+
+
+def run_pooled_case(c: dict) -> dict:
+    """``diagnose_pooled`` on POOLED runs of the case's condition and effect (new seeds)."""
+    from bayespilot.diagnose import diagnose_pooled
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
+
+    recs, remnant, extra = pooled_recordings(c, POOLED)
     t0 = time.perf_counter()
     res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP, omega_c=OMEGA_C,
                           oversample=OVERSAMPLE, n_calibrate=N_CALIBRATE)
@@ -888,7 +910,6 @@ def calibration_check(which: list[str], n_calibrate: int = 39) -> None:
     from bayespilot.diagnose import SKIP_SECONDS, _prepare, diagnose_pooled, get_extension
     from bayespilot.diagnose import decide as D
     from bayespilot.diagnose.calibrate import calibrate_candidate
-    from bayespilot.recording import Recording
     from tqdm import tqdm
 
     out = DEFAULT_OUT / "calibration_check.jsonl"
@@ -915,24 +936,11 @@ def calibration_check(which: list[str], n_calibrate: int = 39) -> None:
             line = {"item": item, "controls": rows}
         else:
             if item.startswith("null"):
-                i = int(item[4:])
-                task, kt, fn = CONDITIONS[i % len(CONDITIONS)]
-                c = {"id": 100000 + i, "truth": "none", "effect": "control", "extra": {},
-                     "task": task, "K_theta": kt, "F_n": fn}
-                recs = []
-                for j in range(4):  # as pooled_null() made them
-                    r = simulate_case(dict(c, seed=900000 + 10 * i + j))[0].recording
-                    recs.append(Recording(r.signals, r.sample_rate_hz, r.motion_gain, r.task, {},
-                                          f"run{j + 1}"))
+                _, recs = null_recordings(int(item[4:]))
                 nb = 0
             else:
                 c = next(c for c in cases() if c["id"] == int(item[4:]))
-                recs = []
-                for j in range(8):
-                    r = simulate_case(dict(c, seed=pooled_seed(c, j)))[0].recording
-                    meta = {k: v for k, v in r.metadata.items() if k != "notes"}
-                    recs.append(Recording(r.signals, r.sample_rate_hz, r.motion_gain, r.task,
-                                          meta, f"run{j + 1}"))
+                recs = pooled_recordings(c, 8)[0]
                 nb = N_BOOTSTRAP
             res = diagnose_pooled(recs, seed=0, n_bootstrap=nb, n_calibrate=n_calibrate)
             print(res.summary(), flush=True)
@@ -984,7 +992,6 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
     from bayespilot.diagnose import decide as D
     from bayespilot.diagnose.catalogue import get_extension
     from bayespilot.diagnose.pooled import _pooled_candidate
-    from bayespilot.recording import Recording
 
     out = ROOT / "analyses" / "results" / "diagnose_pooled"
     out.mkdir(parents=True, exist_ok=True)
@@ -994,14 +1001,8 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
             for line in f.read_text().splitlines() if line.strip()}
     todo = [i for i in range(n_cases) if i % n == k and i not in done]
     for i in tqdm(todo, desc="pooled null", unit="case"):
-        task, kt, fn = CONDITIONS[i % len(CONDITIONS)]
-        c = {"id": 100000 + i, "truth": "none", "effect": "control", "extra": {},
-             "task": task, "K_theta": kt, "F_n": fn}
-        recs = []
-        for j in range(4):
-            rec = simulate_case(dict(c, seed=900000 + 10 * i + j))[0].recording
-            recs.append(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, {},
-                                  f"run{j + 1}"))
+        c, recs = null_recordings(i)
+        task, kt, fn = c["task"], c["K_theta"], c["F_n"]
         runs = [_prepare(rec, seed=j, n_bootstrap=0, base_fit=None, skip_seconds=SKIP_SECONDS,
                          omega_c=D.OMEGA_C, n_starts=4, profile_noise=False,
                          bar=tqdm(disable=True)) for j, rec in enumerate(recs)]
