@@ -933,7 +933,7 @@ first calibrated by a parametric bootstrap of the base model (B replicates,
 each the closed loop simulated with the run's own remnant and the diagnosis
 retraced for that candidate); a candidate whose calibrated p-value fails gives
 way to the next. Reads only the recording. Under a minute at N = 8192; a
-calibration adds about 2.5 s per replicate and run (see docs/diagnose.md and
+calibration adds about 2 s per replicate and run (see docs/diagnose.md and
 docs/performance.md).
 
 The JSON (--json) has mismatch, physics (a catalogue name or 'none'), ranking
@@ -1180,7 +1180,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calibrate", type=_whole_number(0), default=0, metavar="B",
                    help="calibrate the chosen candidate's test by B replicates of a parametric "
                         "bootstrap of the base model before accepting it (default 0: the "
-                        "asymptotic test alone; 39 is a sensible B, about 2.5 s each per run)")
+                        "asymptotic test alone; 39 is a sensible B, about 2 s each per run)")
     p.add_argument("--posterior", metavar="POST.nc",
                    help="one recording: also sample the posterior of the chosen extended model "
                         "(emcee, coloured likelihood) and write it to this netCDF file; the "

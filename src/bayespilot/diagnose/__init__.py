@@ -511,7 +511,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         that fails gives way to the next justified candidate.  0 keeps the
         asymptotic test alone (the default: see
         :mod:`bayespilot.diagnose.calibrate` for what it was measured to do).
-        Costs about 2.5 s per replicate (each retraces the diagnosis' Eq. 4
+        Costs about 2 s per replicate (each retraces the diagnosis' Eq. 4
         and GLS fits), only when a candidate is justified.
     progress : bool
         Show a tqdm bar over the stages (base fit, located evidence, each
