@@ -159,4 +159,6 @@ def test_diagnose_calibrates_a_strong_washout(tmp_path):
     for bad in (-1, True, 2.5):
         with pytest.raises(ValueError, match="n_calibrate"):
             diagnose(rec, n_calibrate=bad)
+    with pytest.raises(ValueError, match="profile_noise"):
+        diagnose(rec, n_calibrate=3, profile_noise=True)
     assert math.isfinite(res.settings["timings"]["calibrate"])

@@ -536,6 +536,9 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
 
     names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample,
                    n_calibrate)
+    if profile_noise and n_calibrate:
+        raise ValueError("n_calibrate does not combine with profile_noise=True (the replicates "
+                         "retrace the decision with the noise model held)")
     t0 = time.perf_counter()
     from tqdm.auto import tqdm
 
