@@ -301,10 +301,10 @@ def run(chunk: int | None, shard: tuple[int, int] = (0, 1)) -> None:
     for c in todo:
         path = OUT / f"{case_key(c)}.json"
         before = uncalibrated / f"{case_key(c)}.json"
-        if N_CALIBRATE and before.exists() and json.loads(before.read_text())["decision"] == "none":
+        r = json.loads(before.read_text()) if N_CALIBRATE and before.exists() else None
+        if r is not None and r["decision"] == "none":
             # the calibration only ever raises a p-value: a case the asymptotic test leaves at
             # none (same seeds, same pipeline up to the decision) stays none; not rerun
-            r = json.loads(before.read_text())
             r["calibration"] = "none before calibration: not rerun"
             path.write_text(json.dumps(r, indent=1, default=float))
             continue
