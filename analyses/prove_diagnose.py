@@ -410,9 +410,11 @@ def summarize() -> dict:
         curves[e] = row
         print(f"  {e:<24} " + "   ".join(f"{lab}: {k}/{n} (concealed {c})" for lab, k, n, c in row))
     sweep = alpha_sweep(rs)
-    times = [r["elapsed_seconds"] for r in rs]
-    print(f"\ndiagnose time per case: median {np.median(times):.0f} s, max {np.max(times):.0f} s "
-          f"(B = {N_BOOTSTRAP}, one numba thread, shared machine)")
+    # a calibrated study's copied none cases keep the uncalibrated run's time: left out
+    times = [r["elapsed_seconds"] for r in rs if not isinstance(r.get("calibration"), str)]
+    rerun = " rerun" if N_CALIBRATE else ""
+    print(f"\ndiagnose time per case{rerun}: median {np.median(times):.0f} s, max "
+          f"{np.max(times):.0f} s (B = {N_BOOTSTRAP}, one numba thread, shared machine)")
     # figures
     FIG.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(2, 3, figsize=(11, 6), sharey=True)
@@ -459,8 +461,10 @@ def summarize() -> dict:
                "detection_curves": {e: [{"effect": lab, "correct": k, "n": n, "concealed": c}
                                         for lab, k, n, c in row] for e, row in curves.items()},
                "median_seconds": float(np.median(times)), "alpha_sweep": sweep}
-    if PROFILE_NOISE or POOLED or OMEGA_C is not None:
+    if PROFILE_NOISE or POOLED or OMEGA_C is not None or N_CALIBRATE:
         summary["paired_with_default"] = paired_with_default(rs)
+    if N_CALIBRATE:
+        summary["calibration_scales"] = calibration_scales(rs)
     if POOLED and OMEGA_C is None and OVERSAMPLE == 1:
         summary["against_optimal_test"] = pooled_against_oracle(rs)
     (OUT / "summary.json").write_text(json.dumps(summary, indent=1))
@@ -508,7 +512,9 @@ def alpha_sweep(rs: list[dict], alphas=(0.01, 0.02, 0.05)) -> list[dict]:
 
 
 def paired_with_default(rs: list[dict]) -> dict:
-    """Decisions of this (profile-noise, pooled or other-band) study beside the default study's on the same cases."""
+    """Decisions of this (profile-noise, pooled, other-band or calibrated) study beside the
+    default study's on the same cases; for a changed decision, the calibrated tests' scale
+    and p-values (nominal -> calibrated)."""
     out = {"cases": 0, "same": 0, "gained": [], "lost": [], "changed_wrong": []}
     for r in rs:
         key = case_key(r["case"])
@@ -529,10 +535,28 @@ def paired_with_default(rs: list[dict]) -> dict:
     print(f"\nPaired with the default study on {out['cases']} cases: same decision "
           f"{out['same']}, newly correct {len(out['gained'])}, newly wrong {len(out['lost'])}, "
           f"wrong either way but different {len(out['changed_wrong'])}")
+    cal = {case_key(r["case"]): [x for x in r["ranking"] if x.get("calibration")] for r in rs}
     for k in ("gained", "lost", "changed_wrong"):
         for key in out[k]:
-            print(f"  {k}: {key}")
+            tests = "; ".join(f"{x['physics']} scale {x['calibration']['scale']:.2f}, p "
+                              f"{x['calibration']['p_nominal']:.2g} -> {x['p_value']:.2g}"
+                              for x in cal.get(key, []))
+            print(f"  {k}: {key}" + (f" ({tests})" if tests else ""))
     return out
+
+
+def calibration_scales(rs: list[dict]) -> dict:
+    """Per tested entry, the scales the calibrated study measured (every calibrated test)."""
+    got: dict[str, list[float]] = {}
+    for r in rs:
+        for x in r["ranking"]:
+            if x.get("calibration"):
+                got.setdefault(x["physics"], []).append(x["calibration"]["scale"])
+    print("\nScales of the calibrated tests (replicates' mean d(-ln L) / the reference's):")
+    for e, v in sorted(got.items()):
+        print(f"  {e:<24} {len(v):>3} tests: median {np.median(v):.2f}, "
+              f"range {min(v):.2f}-{max(v):.2f}, above 1 in {sum(x > 1 for x in v)}")
+    return {e: sorted(v) for e, v in got.items()}
 
 
 def pooled_against_oracle(rs: list[dict]) -> dict:
