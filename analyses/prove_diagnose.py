@@ -77,6 +77,9 @@ OVERSAMPLE = 1
 #: Replicates of the bootstrap calibration of the chosen candidate's test (``--calibrate B``;
 #: 0: the asymptotic test alone, as the stored studies without the suffix _cal<B> were run).
 N_CALIBRATE = 0
+#: Passes of the noise model's estimation (``--noise-passes P``; 1: from the Eq. 4 fit's residual,
+#: as the stored studies without the suffix _np<P> were run).
+NOISE_PASSES = 1
 
 #: Effect sizes per entry, smallest effect first: (label, parameters).
 EFFECTS = {
@@ -227,7 +230,8 @@ def run_pooled_case(c: dict) -> dict:
     recs, remnant, extra = pooled_recordings(c, POOLED)
     t0 = time.perf_counter()
     res = diagnose_pooled(recs, seed=0, n_bootstrap=N_BOOTSTRAP, omega_c=OMEGA_C,
-                          oversample=OVERSAMPLE, n_calibrate=N_CALIBRATE)
+                          oversample=OVERSAMPLE, n_calibrate=N_CALIBRATE,
+                          noise_passes=NOISE_PASSES)
     el = time.perf_counter() - t0
     vafs = [r["base"]["vaf"] for r in res.runs]
     rms = []
@@ -271,7 +275,8 @@ def run_case(c: dict) -> dict:
     rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
     t0 = time.perf_counter()
     res = diagnose(rec, seed=0, n_bootstrap=N_BOOTSTRAP, profile_noise=PROFILE_NOISE,
-                   omega_c=OMEGA_C, oversample=OVERSAMPLE, n_calibrate=N_CALIBRATE)
+                   omega_c=OMEGA_C, oversample=OVERSAMPLE, n_calibrate=N_CALIBRATE,
+                   noise_passes=NOISE_PASSES)
     el = time.perf_counter() - t0
     resid = res.arrays["residual"]
     return {"case": {k: v for k, v in c.items()}, "true_params": extra,
@@ -461,7 +466,7 @@ def summarize() -> dict:
                "detection_curves": {e: [{"effect": lab, "correct": k, "n": n, "concealed": c}
                                         for lab, k, n, c in row] for e, row in curves.items()},
                "median_seconds": float(np.median(times)), "alpha_sweep": sweep}
-    if PROFILE_NOISE or POOLED or OMEGA_C is not None or N_CALIBRATE:
+    if PROFILE_NOISE or POOLED or OMEGA_C is not None or N_CALIBRATE or NOISE_PASSES != 1:
         summary["paired_with_default"] = paired_with_default(rs)
     if N_CALIBRATE:
         summary["calibration_scales"] = calibration_scales(rs)
@@ -1422,6 +1427,10 @@ def main(argv=None) -> int:
                     help="cut-off of the decision likelihood's low-pass (inf: the whole band, "
                          "no decimation); results and figures get the suffix _fullband (inf) "
                          "or _omega<RAD_S>")
+    ap.add_argument("--noise-passes", type=int, default=1, metavar="P",
+                    help="diagnose(noise_passes=P): the AR noise model estimated P times (2: "
+                         "again from the GLS base fit's residual); results and figures get "
+                         "the suffix _np<P>")
     ap.add_argument("--oracle", action="store_true",
                     help="per effect case, the power of the optimal likelihood-ratio test of the "
                          "true extension (noncentrality from the noise-free extended model), "
@@ -1460,7 +1469,8 @@ def main(argv=None) -> int:
                          "the washout's, platform's and drifts' null distributions in each "
                          "(analyses/results/diagnose/open_loop_null*.jsonl)")
     args = ap.parse_args(argv)
-    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE, N_CALIBRATE
+    global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE, N_CALIBRATE, \
+        NOISE_PASSES
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
@@ -1482,6 +1492,12 @@ def main(argv=None) -> int:
         OVERSAMPLE = args.oversample
         OUT = OUT.with_name(OUT.name + f"_os{OVERSAMPLE}")
         FIG_SUFFIX += f"_os{OVERSAMPLE}"
+    if args.noise_passes != 1:
+        if not 1 <= args.noise_passes <= 5:
+            ap.error(f"--noise-passes: 1 to 5, got {args.noise_passes}")
+        NOISE_PASSES = args.noise_passes
+        OUT = OUT.with_name(OUT.name + f"_np{NOISE_PASSES}")
+        FIG_SUFFIX += f"_np{NOISE_PASSES}"
     if args.calibrate:
         N_CALIBRATE = args.calibrate
         OUT = OUT.with_name(OUT.name + f"_cal{N_CALIBRATE}")

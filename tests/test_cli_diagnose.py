@@ -68,6 +68,10 @@ def test_diagnose_bad_option_is_a_usage_error(rec_stem, capsys):
     assert code == 2 and "bootstrap" in err
     code, out, err = _run(capsys, "diagnose", rec_stem, "--calibrate", "-1")
     assert code == 2 and "--calibrate" in err and out == ""
+    code, out, err = _run(capsys, "diagnose", rec_stem, "--noise-passes", "0")
+    assert code == 2 and "--noise-passes" in err and out == ""
+    code, out, err = _run(capsys, "diagnose", rec_stem, "--noise-passes", "6")
+    assert code == 2 and "noise_passes" in err and "Traceback" not in err
 
 
 def test_diagnose_unwritable_json_is_a_failure(rec_stem, tmp_path, capsys):

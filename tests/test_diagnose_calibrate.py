@@ -100,6 +100,66 @@ def test_a_replicates_statistic_retraced_by_hand(control_run):
     assert not np.any(np.isin(other.statistics, again.statistics))
 
 
+def test_a_second_noise_pass_and_its_calibration_retraced_by_hand(control_run):
+    """noise_passes=2: the AR model again from the GLS base fit's residual, the GLS fit again;
+    a calibration replicate of that run makes the same two passes."""
+    rec, run = control_run
+    run2 = _prepare(rec, seed=0, n_bootstrap=0, base_fit=run.base_fit,
+                    skip_seconds=SKIP_SECONDS, omega_c=None, n_starts=2, profile_noise=False,
+                    bar=_Silent(), noise_passes=2)
+    assert run2.noise_passes == 2
+    noise = D.noise_model(run.lik0.residual(run.base.params), rec.dt, skip=run.skip)
+    _, base = D.fit_base_gls(run.base_model, rec, run.base.params, noise)
+    np.testing.assert_array_equal(run2.noise.ar, noise.ar)
+    assert run2.base.neg_log_lik == base.neg_log_lik
+    # the second pass is not the first: another AR model, another -ln L
+    assert run2.noise.ar.shape != run.noise.ar.shape or \
+        np.max(np.abs(run2.noise.ar - run.noise.ar)) > 1e-6
+    assert run2.base.neg_log_lik != run.base.neg_log_lik
+    # replicate 0 of its calibration, by hand with two passes
+    ext = get_extension("time-varying-gains")
+    cal = calibrate_candidate(ext, [run2], [rec], 0.0, n_replicates=1, seed=9, n_starts=2)
+    K_n, T_n = L.remnant_like(run2.lik0.residual(run2.base.params)[run2.skip:], rec.dt)
+    seed0 = int(np.random.SeedSequence(9).generate_state(1)[0])
+    rep = simulate(run2.base_model, run2.base.params, task=L.task_of(rec, run2.forcing),
+                   remnant_gain=K_n, T_n=T_n, seed=seed0, oversample=10).recording
+    from bayespilot.likelihood import Likelihood
+
+    fit = fit_fast(rep, run2.base_model, seed=seed0, n_starts=2, profile_step=0.005)
+    at = {k: v for k, v in fit.params.items() if k in run2.base_model.parameter_names}
+    for _ in range(2):
+        noise = D.noise_model(Likelihood(run2.base_model, rep).residual(at), rep.dt,
+                              skip=run2.skip)
+        _, base = D.fit_base_gls(run2.base_model, rep, at, noise)
+        at = base.params
+    res, _ = D.fit_candidate(ext, run2.base_model, rep, base, noise)
+    null = D.null_refit(ext, run2.base_model, rep, res, noise)
+    ref = min(base.neg_log_lik, null.neg_log_lik)
+    assert cal.statistics[0] == pytest.approx(max(0.0, ref - res.fit.neg_log_lik), abs=1e-8)
+
+
+def test_diagnose_passes_noise_passes_on(control_run):
+    rec, run = control_run
+    res = diagnose(rec, n_bootstrap=0, base_fit=run.base_fit, n_starts=2,
+                   candidates=["motion-washout"], noise_passes=2)
+    assert res.settings["noise_passes"] == 2
+    noise = D.noise_model(run.lik0.residual(run.base.params), rec.dt, skip=run.skip)
+    _, base = D.fit_base_gls(run.base_model, rec, run.base.params, noise)
+    assert res.settings["noise_model"]["ar_order"] == noise.ar.size
+    # the GLS base fit under the second pass's noise model (no candidate's fit found a better
+    # base fit here, so it is the reported one), not the first pass's
+    assert res.settings["rebased"] == []
+    assert res.base["gls_neg_log_lik"] == pytest.approx(base.neg_log_lik, abs=1e-8)
+    assert abs(run.base.neg_log_lik - base.neg_log_lik) > 0.1
+
+
+@pytest.mark.parametrize("bad", [0, 6, True, 1.5])
+def test_bad_noise_passes_are_refused(control_run, bad):
+    rec, _ = control_run
+    with pytest.raises(ValueError, match="noise_passes"):
+        diagnose(rec, n_bootstrap=0, noise_passes=bad)
+
+
 def _result(name, p, bf):
     ext = get_extension(name)
     r = D.CandidateResult(name, True, "", 5.0, 10.0, ext.df, p, 2 * bf, bf)

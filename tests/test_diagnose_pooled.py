@@ -43,6 +43,28 @@ def test_pooled_rejects_bad_input(washout_runs):
         diagnose_pooled([washout_runs[0], washout_runs[1].u])
     with pytest.raises(ValueError, match="unknown extension"):
         diagnose_pooled(washout_runs, candidates=["gravity"])
+    with pytest.raises(ValueError, match="noise_passes"):
+        diagnose_pooled(washout_runs, noise_passes=0)
+
+
+def test_pooled_passes_noise_passes_to_every_run(washout_runs, monkeypatch):
+    from bayespilot.diagnose import pooled as P
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake(rec, **kw):
+        seen.append(kw["noise_passes"])
+        if len(seen) == len(washout_runs):
+            raise Stop
+        return None
+
+    monkeypatch.setattr(P, "_prepare", fake)
+    with pytest.raises(Stop):
+        diagnose_pooled(washout_runs, noise_passes=2)
+    assert seen == [2, 2]
 
 
 def test_pooled_names_a_shared_washout(washout_result):

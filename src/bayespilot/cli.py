@@ -646,7 +646,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             _say(args, f"diagnosing {rec.source}: base fit, located evidence ({args.bootstrap} "
                        f"bootstrap replicates), {len(NAMES)} catalogue extensions ...")
             res = diagnose(rec, seed=args.seed, n_bootstrap=args.bootstrap, alpha=args.alpha,
-                           n_calibrate=args.calibrate, progress=_progress(args))
+                           n_calibrate=args.calibrate, noise_passes=args.noise_passes,
+                           progress=_progress(args))
         else:
             _say(args, f"diagnosing {len(recs)} runs pooled (extension parameters shared, "
                        f"pilot parameters per run): base fits, located evidence "
@@ -654,7 +655,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                        f"extensions ...")
             res = diagnose_pooled(recs, seed=args.seed, n_bootstrap=args.bootstrap,
                                   alpha=args.alpha, n_calibrate=args.calibrate,
-                                  progress=_progress(args))
+                                  noise_passes=args.noise_passes, progress=_progress(args))
     except ValueError as exc:  # e.g. a recording too short for the analysis
         raise UsageError(str(exc)) from None
     if args.posterior is not None:
@@ -1181,6 +1182,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="calibrate the chosen candidate's test by B replicates of a parametric "
                         "bootstrap of the base model before accepting it (default 0: the "
                         "asymptotic test alone; 39 is a sensible B, about 2 s each per run)")
+    p.add_argument("--noise-passes", type=_whole_number(1), default=1, metavar="P",
+                   help="estimate the decision's AR noise model P times (default 1: from the "
+                        "Eq. 4 fit's residual; 2: again from the GLS base fit's, which "
+                        "removes the washout test's small excess on correct-model runs; "
+                        "at most 5)")
     p.add_argument("--posterior", metavar="POST.nc",
                    help="one recording: also sample the posterior of the chosen extended model "
                         "(emcee, coloured likelihood) and write it to this netCDF file; the "

@@ -490,7 +490,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                     n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
                     skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
                     n_starts: int = 4, oversample: int = 1, n_calibrate: int = N_CALIBRATE,
-                    progress: bool = False) -> PooledDiagnosisResult:
+                    noise_passes: int = 1, progress: bool = False) -> PooledDiagnosisResult:
     """Diagnose several runs of one condition together (see the module docs).
 
     Parameters
@@ -505,7 +505,9 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     n_calibrate : int
         As for :func:`~bayespilot.diagnose.diagnose`: each replicate simulates
         every run's base model and refits the candidate to all of them, so it
-        costs about R times a single run's.  With ``omega_c`` above
+        costs about R times a single run's.
+    noise_passes : int
+        As for :func:`~bayespilot.diagnose.diagnose`, for every run.  With ``omega_c`` above
         25 rad/s every extension is also started from its pooled fit on the
         25-rad/s band (:func:`_pooled_guide`).
 
@@ -528,13 +530,14 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     names = None
     for rec in recs:
         names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample,
-                       n_calibrate)
+                       n_calibrate, noise_passes)
     t0 = time.perf_counter()
     bar = tqdm(total=2 * len(recs) + len(names), desc="diagnose (pooled)", unit="stage",
                disable=not progress)
     runs = [_prepare(rec, seed=None if seed is None else seed + j, n_bootstrap=n_bootstrap,
                      base_fit=None, skip_seconds=skip_seconds, omega_c=omega_c,
-                     n_starts=n_starts, profile_noise=False, bar=bar, oversample=oversample)
+                     n_starts=n_starts, profile_noise=False, bar=bar, oversample=oversample,
+                     noise_passes=noise_passes)
             for j, rec in enumerate(recs)]
     keys = sorted(set.intersection(*(set(r.where) for r in runs)))
     where = {}
@@ -608,7 +611,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                       "params": chosen_params})
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "n_calibrate": n_calibrate,
-                "skip_seconds": skip_seconds,
+                "noise_passes": noise_passes, "skip_seconds": skip_seconds,
                 "candidates": list(names), "n_runs": len(recs), "rebased": rebased,
                 "decision_likelihood": "sum over runs of the GLS likelihood (each run's own AR "
                                        "noise model and level); extension parameters shared"}
