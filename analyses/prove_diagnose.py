@@ -1025,7 +1025,9 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
     out = ROOT / "analyses" / "results" / "diagnose_pooled"
     out.mkdir(parents=True, exist_ok=True)
     k, n = shard
-    path, files = _shard_files(out, "null_study_rebase" if REBASE else "null_study", shard)
+    stem = ("null_study_rebase" if REBASE else "null_study") + \
+        (f"_np{NOISE_PASSES}" if NOISE_PASSES != 1 else "")
+    path, files = _shard_files(out, stem, shard)
     done = {json.loads(line)["id"] for f in files()
             for line in f.read_text().splitlines() if line.strip()}
     todo = [i for i in range(n_cases) if i % n == k and i not in done]
@@ -1034,7 +1036,8 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
         task, kt, fn = c["task"], c["K_theta"], c["F_n"]
         runs = [_prepare(rec, seed=j, n_bootstrap=0, base_fit=None, skip_seconds=SKIP_SECONDS,
                          omega_c=D.OMEGA_C, n_starts=4, profile_noise=False,
-                         bar=tqdm(disable=True)) for j, rec in enumerate(recs)]
+                         bar=tqdm(disable=True), noise_passes=NOISE_PASSES)
+                for j, rec in enumerate(recs)]
         row = {"id": i, "task": task, "K_theta": kt, "F_n": fn}
         for name in NULL_ENTRIES:
             ext = get_extension(name)
