@@ -1076,6 +1076,22 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
             d = np.array([v[0] for v in vals])
             p = np.array([v[1] for v in vals])
             print(_null_line(name, label, d, p, 0.25) + f"  at the bound: {np.mean(d <= 0.0):.2f}")
+    if NOISE_PASSES != 1:
+        # the same controls (same ids, same recordings) with one pass of the noise model
+        _, one = _shard_files(out, "null_study_rebase" if REBASE else "null_study", (0, 1))
+        ref = {r["id"]: r for f in one() for line in f.read_text().splitlines()
+               if line.strip() for r in [json.loads(line)]}
+        both = [r for r in rows if r["id"] in ref]
+        print(f"paired with one noise pass on the same {len(both)} pooled controls:")
+        for name in NULL_ENTRIES:
+            a = np.array([ref[r["id"]][name]["pooled"][0] for r in both])
+            b = np.array([r[name]["pooled"][0] for r in both])
+            x = a - b
+            print(f"  {name:<24} pooled mean d: one pass {a.mean():.3f}, {NOISE_PASSES} passes "
+                  f"{b.mean():.3f}; difference {x.mean():+.3f} +- "
+                  f"{2 * x.std() / np.sqrt(max(1, x.size)):.3f}; p < 0.01: "
+                  f"{sum(ref[r['id']][name]['pooled'][1] < 0.01 for r in both)} -> "
+                  f"{sum(r[name]['pooled'][1] < 0.01 for r in both)}")
 
 
 def open_loop_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
