@@ -67,6 +67,34 @@ def test_calibration_of_a_washout_on_a_control(control_run):
     assert json.loads(json.dumps(cal.to_dict()))["replicates"] == 4
 
 
+def _replicate0(run, rec, seed=9):
+    """Replicate 0 of a calibration seeded ``seed``: the base model at the run's GLS fit
+    simulated with the run's remnant level and colour."""
+    K_n, T_n = L.remnant_like(run.lik0.residual(run.base.params)[run.skip:], rec.dt)
+    seed0 = int(np.random.SeedSequence(seed).generate_state(1)[0])
+    rep = simulate(run.base_model, run.base.params, task=L.task_of(rec, run.forcing),
+                   remnant_gain=K_n, T_n=T_n, seed=seed0, oversample=10).recording
+    return rep, seed0
+
+
+def _statistic_by_hand(run, rep, seed0, ext, passes=1):
+    """The candidate's d(-ln L) on a replicate, step by step: the Eq. 4 fit, ``passes`` times
+    the noise model and the GLS base fit, the extension's fit, the base refitted from it."""
+    from bayespilot.likelihood import Likelihood
+
+    fit = fit_fast(rep, run.base_model, seed=seed0, n_starts=2, profile_step=0.005)
+    at = {k: v for k, v in fit.params.items() if k in run.base_model.parameter_names}
+    for _ in range(passes):
+        noise = D.noise_model(Likelihood(run.base_model, rep).residual(at), rep.dt,
+                              skip=run.skip)
+        _, base = D.fit_base_gls(run.base_model, rep, at, noise)
+        at = base.params
+    res, _ = D.fit_candidate(ext, run.base_model, rep, base, noise)
+    null = D.null_refit(ext, run.base_model, rep, res, noise)
+    ref = min(base.neg_log_lik, null.neg_log_lik)
+    return max(0.0, ref - res.fit.neg_log_lik)
+
+
 def test_a_replicates_statistic_retraced_by_hand(control_run):
     """Replicate 0: the base model at the run's GLS fit simulated with the run's remnant level
     and colour, then the Eq. 4 fit, the noise model from its residual, the GLS base fit, the
@@ -74,10 +102,7 @@ def test_a_replicates_statistic_retraced_by_hand(control_run):
     rec, run = control_run
     ext = get_extension("time-varying-gains")
     cal = calibrate_candidate(ext, [run], [rec], 0.0, n_replicates=1, seed=9, n_starts=2)
-    K_n, T_n = L.remnant_like(run.lik0.residual(run.base.params)[run.skip:], rec.dt)
-    seed0 = int(np.random.SeedSequence(9).generate_state(1)[0])
-    rep = simulate(run.base_model, run.base.params, task=L.task_of(rec, run.forcing),
-                   remnant_gain=K_n, T_n=T_n, seed=seed0, oversample=10).recording
+    rep, seed0 = _replicate0(run, rec)
     # the replicate has the recording's forcing and a remnant of the residual's level
     np.testing.assert_allclose(rep.signals["f_t"], rec.signals["f_t"], atol=1e-9)
     from bayespilot.likelihood import Likelihood
@@ -85,14 +110,7 @@ def test_a_replicates_statistic_retraced_by_hand(control_run):
     eps = Likelihood(run.base_model, rep).residual(run.base.params)
     assert np.std(eps[run.skip:]) == pytest.approx(
         np.std(run.lik0.residual(run.base.params)[run.skip:]), rel=0.3)
-    fit = fit_fast(rep, run.base_model, seed=seed0, n_starts=2, profile_step=0.005)
-    start = {k: v for k, v in fit.params.items() if k in run.base_model.parameter_names}
-    noise = D.noise_model(Likelihood(run.base_model, rep).residual(start), rep.dt, skip=run.skip)
-    _, base = D.fit_base_gls(run.base_model, rep, start, noise)
-    res, _ = D.fit_candidate(ext, run.base_model, rep, base, noise)
-    null = D.null_refit(ext, run.base_model, rep, res, noise)
-    ref = min(base.neg_log_lik, null.neg_log_lik)
-    assert cal.statistics[0] == pytest.approx(max(0.0, ref - res.fit.neg_log_lik), abs=1e-8)
+    assert cal.statistics[0] == pytest.approx(_statistic_by_hand(run, rep, seed0, ext), abs=1e-8)
     # seeded: the same seed, the same replicates; another seed, others
     again = calibrate_candidate(ext, [run], [rec], 0.0, n_replicates=2, seed=9, n_starts=2)
     assert again.statistics[0] == cal.statistics[0]
@@ -119,23 +137,9 @@ def test_a_second_noise_pass_and_its_calibration_retraced_by_hand(control_run):
     # replicate 0 of its calibration, by hand with two passes
     ext = get_extension("time-varying-gains")
     cal = calibrate_candidate(ext, [run2], [rec], 0.0, n_replicates=1, seed=9, n_starts=2)
-    K_n, T_n = L.remnant_like(run2.lik0.residual(run2.base.params)[run2.skip:], rec.dt)
-    seed0 = int(np.random.SeedSequence(9).generate_state(1)[0])
-    rep = simulate(run2.base_model, run2.base.params, task=L.task_of(rec, run2.forcing),
-                   remnant_gain=K_n, T_n=T_n, seed=seed0, oversample=10).recording
-    from bayespilot.likelihood import Likelihood
-
-    fit = fit_fast(rep, run2.base_model, seed=seed0, n_starts=2, profile_step=0.005)
-    at = {k: v for k, v in fit.params.items() if k in run2.base_model.parameter_names}
-    for _ in range(2):
-        noise = D.noise_model(Likelihood(run2.base_model, rep).residual(at), rep.dt,
-                              skip=run2.skip)
-        _, base = D.fit_base_gls(run2.base_model, rep, at, noise)
-        at = base.params
-    res, _ = D.fit_candidate(ext, run2.base_model, rep, base, noise)
-    null = D.null_refit(ext, run2.base_model, rep, res, noise)
-    ref = min(base.neg_log_lik, null.neg_log_lik)
-    assert cal.statistics[0] == pytest.approx(max(0.0, ref - res.fit.neg_log_lik), abs=1e-8)
+    rep, seed0 = _replicate0(run2, rec)
+    assert cal.statistics[0] == pytest.approx(
+        _statistic_by_hand(run2, rep, seed0, ext, passes=2), abs=1e-8)
 
 
 def test_diagnose_passes_noise_passes_on(control_run):
