@@ -1025,8 +1025,8 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
     out = ROOT / "analyses" / "results" / "diagnose_pooled"
     out.mkdir(parents=True, exist_ok=True)
     k, n = shard
-    stem = ("null_study_rebase" if REBASE else "null_study") + \
-        (f"_np{NOISE_PASSES}" if NOISE_PASSES != 1 else "")
+    one_pass = "null_study_rebase" if REBASE else "null_study"
+    stem = one_pass + (f"_np{NOISE_PASSES}" if NOISE_PASSES != 1 else "")
     path, files = _shard_files(out, stem, shard)
     done = {json.loads(line)["id"] for f in files()
             for line in f.read_text().splitlines() if line.strip()}
@@ -1078,7 +1078,7 @@ def pooled_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
             print(_null_line(name, label, d, p, 0.25) + f"  at the bound: {np.mean(d <= 0.0):.2f}")
     if NOISE_PASSES != 1:
         # the same controls (same ids, same recordings) with one pass of the noise model
-        _, one = _shard_files(out, "null_study_rebase" if REBASE else "null_study", (0, 1))
+        _, one = _shard_files(out, one_pass, (0, 1))
         ref = {r["id"]: r for f in one() for line in f.read_text().splitlines()
                if line.strip() for r in [json.loads(line)]}
         both = [r for r in rows if r["id"] in ref]
@@ -1512,8 +1512,10 @@ def main(argv=None) -> int:
         OUT = OUT.with_name(OUT.name + f"_os{OVERSAMPLE}")
         FIG_SUFFIX += f"_os{OVERSAMPLE}"
     if args.noise_passes != 1:
-        if not 1 <= args.noise_passes <= 5:
-            ap.error(f"--noise-passes: 1 to 5, got {args.noise_passes}")
+        from bayespilot.diagnose import MAX_NOISE_PASSES
+
+        if not 1 <= args.noise_passes <= MAX_NOISE_PASSES:
+            ap.error(f"--noise-passes: 1 to {MAX_NOISE_PASSES}, got {args.noise_passes}")
         NOISE_PASSES = args.noise_passes
         OUT = OUT.with_name(OUT.name + f"_np{NOISE_PASSES}")
         FIG_SUFFIX += f"_np{NOISE_PASSES}"

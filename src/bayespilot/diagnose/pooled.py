@@ -501,15 +501,15 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     seed : int or None
         Seeds each run's base fit and bootstrap (run j uses ``seed + j``).
     alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample, progress
-        As for :func:`~bayespilot.diagnose.diagnose`.
+        As for :func:`~bayespilot.diagnose.diagnose`.  With ``omega_c`` above
+        25 rad/s every extension is also started from its pooled fit on the
+        25-rad/s band (:func:`_pooled_guide`).
     n_calibrate : int
         As for :func:`~bayespilot.diagnose.diagnose`: each replicate simulates
         every run's base model and refits the candidate to all of them, so it
         costs about R times a single run's.
     noise_passes : int
-        As for :func:`~bayespilot.diagnose.diagnose`, for every run.  With ``omega_c`` above
-        25 rad/s every extension is also started from its pooled fit on the
-        25-rad/s band (:func:`_pooled_guide`).
+        As for :func:`~bayespilot.diagnose.diagnose`, for every run.
 
     Returns
     -------
