@@ -407,6 +407,8 @@ class CampaignSummary:
     out_dir : Path
     elapsed : float
         Wall time of the call, s.
+    what : str
+        What was run, for the printed summary ("fits", "diagnoses").
     """
 
     total: int
@@ -416,22 +418,19 @@ class CampaignSummary:
     errors: dict[str, str]
     out_dir: Path
     elapsed: float
+    what: str = "fits"
 
     @property
     def ok(self) -> bool:
         return self.failed == 0
 
     def __str__(self) -> str:
-        return (f"{self.total} fits: {self.completed} run, {self.skipped} already done, "
+        return (f"{self.total} {self.what}: {self.completed} run, {self.skipped} already done, "
                 f"{self.failed} failed ({self.elapsed:.1f} s) -> {self.out_dir}")
 
 
 def _result_path(out_dir: Path, job: Job) -> Path:
     return out_dir / f"{job.key}.json"
-
-
-def _error_path(out_dir: Path, job: Job) -> Path:
-    return out_dir / f"{job.key}.error.json"
 
 
 def _read_json(path: Path) -> Any:
@@ -513,6 +512,71 @@ def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
         raise CampaignError(f"the dask scheduler at {scheduler!r} has no workers "
                             f"(waited {connect_timeout:g} s: {_first_line(exc)})") from None
     return client
+
+
+def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: Path, *,
+              total: int, skipped: int, scheduler: str | None, workers: int | None,
+              progress: bool, connect_timeout: float, warm: Any = None, desc: str = "fits",
+              unit: str = "fit", to_json: Any = None) -> tuple[int, dict[str, str]]:
+    """Run keyed tasks on dask.distributed, writing ``out/<key>.json`` as each one finishes.
+
+    The cluster loop that :func:`run_campaign` and
+    :func:`bayespilot.diagnose.batch.diagnose_batch` share.  ``tasks``: one
+    ``(key, function, args, context)`` each; ``function(*args)`` returns a
+    JSON-ready dict, written atomically to ``out/<key>.json``; a task that raises
+    leaves ``out/<key>.error.json`` (``context``, the error, its traceback) and
+    the others go on; a success removes an old error file.  ``to_json(key,
+    value)``, if given, turns a task's return value into that dict in this
+    process (where it may also write files of its own).  ``warm``: called
+    once in this process after connecting (numba's cache, module docs); a failure
+    there is a warning.  ``total`` and ``skipped`` set the progress bar (tasks
+    already done before the call).  Returns ``(completed, {key: one-line error})``.
+    """
+    completed, errors = 0, {}
+    if not tasks:
+        return completed, errors
+    from distributed import as_completed
+    from tqdm import tqdm
+
+    with ExitStack() as stack:
+        # connect first, so that an unreachable scheduler is reported at once
+        client = _connect(stack, scheduler, workers, connect_timeout)
+        if warm is not None:
+            try:
+                warm()
+            except Exception as exc:  # not fatal: the workers then compile for themselves
+                warnings.warn(f"warming numba's cache failed ({_first_line(exc)}); each "
+                              f"worker compiles the kernels itself", RuntimeWarning,
+                              stacklevel=3)
+        futures = {client.submit(fn, *args, pure=False): (key, ctx)
+                   for key, fn, args, ctx in tasks}
+        bar = stack.enter_context(tqdm(total=total, initial=skipped, desc=desc, unit=unit,
+                                       disable=not progress, file=sys.stderr,
+                                       smoothing=0.1, dynamic_ncols=True))
+        for fut in as_completed(futures):
+            key, ctx = futures.pop(fut)
+            if fut.status == "finished":
+                value = fut.result()
+                _write_json_atomic(out / f"{key}.json",
+                                   value if to_json is None else to_json(key, value))
+                completed += 1
+                try:
+                    (out / f"{key}.error.json").unlink()
+                except FileNotFoundError:
+                    pass
+            else:
+                exc = fut.exception()
+                tb = fut.traceback()
+                errors[key] = _first_line(exc)
+                _write_json_atomic(out / f"{key}.error.json", {
+                    "key": key, **ctx, "error": type(exc).__name__, "message": str(exc),
+                    "traceback": "".join(traceback.format_tb(tb)) if tb is not None else None,
+                    "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+                bar.write(f"failed: {key}: {errors[key]}", file=sys.stderr)
+            fut.release()
+            bar.update(1)
+            bar.set_postfix(failed=len(errors), refresh=False)
+    return completed, errors
 
 
 def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *, scheduler: str | None = None,
@@ -602,47 +666,12 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *, scheduler: str | N
                                 f"or delete it")
         skipped += 1
 
-    completed, errors = 0, {}
-    if pending:
-        from distributed import as_completed
-        from tqdm import tqdm
-
-        with ExitStack() as stack:
-            # connect first, so that an unreachable scheduler is reported at once
-            client = _connect(stack, scheduler, workers, connect_timeout)
-            if warm_cache:
-                try:
-                    _warm_numba_cache({j.method for j in pending})
-                except Exception as exc:  # not fatal: the workers then compile for themselves
-                    warnings.warn(f"warming numba's cache failed ({_first_line(exc)}); each "
-                                  f"worker compiles the kernels itself", RuntimeWarning,
-                                  stacklevel=2)
-            futures = {client.submit(run_job, j, pure=False): j for j in pending}
-            bar = stack.enter_context(tqdm(total=len(jobs), initial=skipped, desc="fits",
-                                           unit="fit", disable=not progress, file=sys.stderr,
-                                           smoothing=0.1, dynamic_ncols=True))
-            for fut in as_completed(futures):
-                job = futures.pop(fut)
-                if fut.status == "finished":
-                    _write_json_atomic(_result_path(out, job), fut.result())
-                    completed += 1
-                    try:
-                        _error_path(out, job).unlink()
-                    except FileNotFoundError:
-                        pass
-                else:
-                    exc = fut.exception()
-                    tb = fut.traceback()
-                    errors[job.key] = _first_line(exc)
-                    _write_json_atomic(_error_path(out, job), {
-                        "key": job.key, "job": job.to_dict(), "error": type(exc).__name__,
-                        "message": str(exc),
-                        "traceback": "".join(traceback.format_tb(tb)) if tb is not None else None,
-                        "time": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
-                    bar.write(f"failed: {job.key}: {errors[job.key]}", file=sys.stderr)
-                fut.release()
-                bar.update(1)
-                bar.set_postfix(failed=len(errors), refresh=False)
+    completed, errors = run_keyed(
+        [(j.key, run_job, (j,), {"job": j.to_dict()}) for j in pending], out,
+        total=len(jobs), skipped=skipped, scheduler=scheduler, workers=workers,
+        progress=progress, connect_timeout=connect_timeout,
+        warm=(lambda: _warm_numba_cache({j.method for j in pending})) if warm_cache else None,
+        desc="fits", unit="fit")
     return CampaignSummary(len(jobs), completed, skipped, len(errors), errors, out,
                            time.perf_counter() - t0)
 
