@@ -1,0 +1,346 @@
+"""Diagnose many recordings on dask.distributed: one result file per recording or per condition.
+
+A lab has hundreds of recordings (subjects x conditions x runs).
+:func:`diagnose_batch` diagnoses each one alone (:func:`~bayespilot.diagnose.diagnose`)
+or, with ``pool=True``, the runs of each subject and condition together
+(:func:`~bayespilot.diagnose.diagnose_pooled`), as independent tasks on a
+dask cluster: a local one by default, an existing one by address.  It shares
+the cluster loop of :func:`bayespilot.campaign.run_campaign` (atomic result
+files, an ``<key>.error.json`` for a task that raised while the others go on,
+a progress bar) and its resume semantics: a result file that exists, parses
+and was made from the same recordings and settings is not redone; one made
+from others is an error, not a silent mix.
+
+Every recording is read, and every setting checked, in this process before
+the cluster starts, so a bad file among hundreds is reported (all of them at
+once) before any work is done.  The workers receive the recordings
+themselves, not their paths, so a remote cluster needs no shared folder.  The
+results (and, with ``reports=True``, each diagnosis's HTML report) are
+written here.
+
+Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``,
+``diagnosis``: the same dict as ``bayespilot diagnose --json`` writes,
+``elapsed_seconds``, ``host``, ``versions``), ``<key>/`` (the report, with
+``reports=True``) and ``summary.csv`` (one row per key: the decision, the
+chosen extension's p-value, -ln L improvement and parameters, the candidate
+with the smallest p-value and that p-value (the nearest miss when the answer
+is ``none``), or the error).
+
+Keys: a recording alone is keyed by its file stem (by ``<folder>_<stem>`` when
+two recordings share a stem); a pooled condition by
+``<subject>_<task>_k<K_theta>``.  Pooling groups recordings by the
+recording's ``subject``, ``task`` and ``motion_gain`` (each must give
+``subject``); a group of one is diagnosed alone.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import platform
+import re
+import time
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+__all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
+           "batch_summary_rows", "SUMMARY_FIELDS"]
+
+#: Columns of ``summary.csv``.
+SUMMARY_FIELDS = ("key", "n_runs", "subject", "task", "motion_gain", "physics", "mismatch",
+                  "p_value", "delta_neg_log_lik", "params", "smallest_p_candidate",
+                  "smallest_p_value", "error")
+
+@dataclass(frozen=True)
+class DiagnoseTask:
+    """One diagnosis of a batch: a recording alone, or the runs of one condition pooled.
+
+    Attributes
+    ----------
+    key : str
+        Name of the result file (module docs, "Keys").
+    paths : tuple of str
+        The recordings, as given.
+    subject : str or None
+    task : str
+    motion_gain : float
+    """
+
+    key: str
+    paths: tuple[str, ...]
+    subject: str | None
+    task: str
+    motion_gain: float
+
+    @property
+    def pooled(self) -> bool:
+        return len(self.paths) > 1
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", text).strip("-") or "x"
+
+
+def _subject(rec) -> str | None:
+    s = rec.metadata.get("subject")
+    return None if s is None else str(s)
+
+
+def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
+               ) -> list[DiagnoseTask]:
+    """The batch's diagnoses: one per recording, or (``pool``) one per subject and condition.
+
+    Parameters
+    ----------
+    paths : sequence of str
+        Where each recording was read from (its key comes from the file stem).
+    recordings : sequence of Recording
+        The recordings read from ``paths``, in the same order.
+    pool : bool
+        Group the runs of one subject, task and motion gain into one pooled diagnosis.
+
+    Returns
+    -------
+    list of DiagnoseTask
+
+    Raises
+    ------
+    ValueError
+        ``pool`` and a recording without ``subject``; two recordings whose keys
+        cannot be told apart.
+    """
+    if len(paths) != len(recordings):
+        raise ValueError(f"{len(paths)} paths for {len(recordings)} recordings")
+    if not pool:
+        stems = [Path(p).stem if Path(p).suffix in (".csv", ".json", ".mat") else Path(p).name
+                 for p in paths]
+        count = defaultdict(int)
+        for s in stems:
+            count[s] += 1
+        keys = [_slug(f"{Path(p).parent.name}_{s}" if count[s] > 1 else s)
+                for p, s in zip(paths, stems)]
+        dupes = sorted({k for k in keys if keys.count(k) > 1})
+        if dupes:
+            raise ValueError(f"recordings that give the same result name: {', '.join(dupes)} "
+                             f"(the same file twice, or the same folder and stem)")
+        return [DiagnoseTask(k, (str(p),), _subject(r), r.task, float(r.motion_gain))
+                for k, p, r in zip(keys, paths, recordings)]
+    missing = [str(p) for p, r in zip(paths, recordings) if _subject(r) is None]
+    if missing:
+        raise ValueError("pooling groups runs by subject, and these recordings give no "
+                         f"'subject' in their JSON: {', '.join(missing[:5])}"
+                         f"{' ...' if len(missing) > 5 else ''}")
+    groups: dict[tuple, list[str]] = defaultdict(list)
+    for p, r in zip(paths, recordings):
+        groups[(_subject(r), r.task, float(r.motion_gain))].append(str(p))
+    dupes = sorted({f"{s}/{t}/{k:g}: {q}" for (s, t, k), ps in groups.items()
+                    for q in ps if ps.count(q) > 1})
+    if dupes:
+        raise ValueError(f"the same recording twice in one condition: {', '.join(dupes)}")
+    return [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(ps), s, t, k)
+            for (s, t, k), ps in sorted(groups.items())]
+
+
+def run_diagnose_task(task: DiagnoseTask, recordings: Sequence, options: Mapping[str, Any]):
+    """Diagnose one task (on a worker); returns the result object and the seconds it took."""
+    from . import diagnose, diagnose_pooled
+
+    t0 = time.perf_counter()
+    if task.pooled:
+        res = diagnose_pooled(list(recordings), **options)
+    else:
+        res = diagnose(recordings[0], **options)
+    return res, time.perf_counter() - t0
+
+
+def _warm() -> None:
+    """One short diagnosis here, so that the workers load numba's cache (campaign module docs)."""
+    from ..simulate import simulate
+    from . import diagnose
+
+    diagnose(simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=0,
+                      duration=20.0).recording, seed=0, n_bootstrap=1)
+
+
+def _settings(task: DiagnoseTask, options: Mapping[str, Any]) -> dict[str, Any]:
+    return json.loads(json.dumps({"recordings": list(task.paths), "settings": dict(options)}))
+
+
+def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
+                   seed: int = 0, alpha: float | None = None, n_bootstrap: int | None = None,
+                   n_calibrate: int | None = None, noise_passes: int = 1,
+                   candidates: Sequence[str] | None = None, reports: bool = False,
+                   scheduler: str | None = None, workers: int | None = None,
+                   progress: bool = True, connect_timeout: float = 10.0,
+                   warm_cache: bool = True):
+    """Diagnose many recordings as independent tasks on dask.distributed.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Recordings (stems, .csv, .json or .mat paths), as ``bayespilot diagnose`` takes them.
+    out_dir : str or Path
+        Created if missing; ``<key>.json`` per diagnosis and ``summary.csv`` (module docs).
+    pool : bool
+        Diagnose the runs of each subject and condition together (module docs).
+    seed, alpha, n_bootstrap, n_calibrate, noise_passes, candidates
+        As for :func:`~bayespilot.diagnose.diagnose` (None: its default), the
+        same for every diagnosis.
+    reports : bool
+        Also write each diagnosis's report (PNG figures and HTML) to ``out_dir/<key>/``.
+    scheduler, workers, progress, connect_timeout, warm_cache
+        As for :func:`~bayespilot.campaign.run_campaign`.
+
+    Returns
+    -------
+    CampaignSummary
+        ``total`` diagnoses, ``completed`` by this call, ``skipped`` (done
+        before), ``failed`` with one line per key in ``errors``.
+
+    Raises
+    ------
+    bayespilot.recording.RecordingError
+        A recording cannot be read (every such file is named); nothing is run.
+    ValueError
+        A bad setting, a recording the settings do not suit (too short), keys
+        that clash, ``pool`` without subjects; nothing is run.
+    CampaignError
+        The cluster cannot be reached or started, a result cannot be written,
+        or ``out_dir`` holds a result of the same key made from other
+        recordings or settings.
+
+    Examples
+    --------
+    >>> summary = diagnose_batch(["out/s1-run1", "out/s1-run2"], "diagnoses",
+    ...                          workers=2)  # doctest: +SKIP
+    """
+    import inspect
+
+    from .. import campaign as C
+    from ..io import read_recording
+    from ..recording import RecordingError
+    from . import SKIP_SECONDS, _check, diagnose
+
+    t0 = time.perf_counter()
+    paths = [str(p) for p in paths]
+    if not paths:
+        raise ValueError("no recordings given")
+    recs, bad = [], []
+    for p in paths:
+        try:
+            recs.append(read_recording(p))
+        except RecordingError as exc:
+            bad.append(str(exc))
+    if bad:
+        raise RecordingError(f"{len(bad)} of {len(paths)} recordings cannot be read; nothing "
+                             "was run:\n  " + "\n  ".join(bad))
+    options = {"seed": seed, "noise_passes": noise_passes}
+    for name, value in (("alpha", alpha), ("n_bootstrap", n_bootstrap),
+                        ("n_calibrate", n_calibrate)):
+        if value is not None:
+            options[name] = value
+    if candidates is not None:
+        options["candidates"] = list(candidates)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
+    default = {k: v.default for k, v in inspect.signature(diagnose).parameters.items()}
+    for rec, p in zip(recs, paths):
+        try:
+            _check(rec, options.get("alpha", default["alpha"]),
+                   options.get("n_bootstrap", default["n_bootstrap"]), SKIP_SECONDS,
+                   options.get("candidates"), 1,
+                   options.get("n_calibrate", default["n_calibrate"]), noise_passes)
+        except ValueError as exc:
+            raise ValueError(f"{p}: {exc}") from None
+    tasks = plan_batch(paths, recs, pool=pool)
+    by_path = dict(zip(paths, recs))
+    out = Path(out_dir)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise C.CampaignError(f"{out}: cannot create the output folder "
+                              f"({exc.strerror or exc})") from None
+    pending, skipped = [], 0
+    for t in tasks:
+        old = C._read_json(out / f"{t.key}.json")
+        if not (isinstance(old, dict) and old.get("key") == t.key and "diagnosis" in old):
+            pending.append(t)
+            continue
+        want = _settings(t, options)
+        if {k: old.get(k) for k in want} != want:
+            raise C.CampaignError(f"{out / (t.key + '.json')} holds a diagnosis of {t.key} "
+                                  f"from other recordings or settings; use another output "
+                                  f"folder or delete it")
+        skipped += 1
+
+    by_key = {t.key: t for t in pending}
+
+    def to_json(key: str, value) -> dict[str, Any]:
+        res, elapsed = value
+        t = by_key[key]
+        if reports:
+            try:
+                res.report(out / key)
+            except OSError as exc:
+                raise C.CampaignError(f"{out / key}: cannot write the report "
+                                      f"({exc.strerror or exc})") from None
+        return C._jsonable({"key": key, **_settings(t, options), "diagnosis": res.to_dict(),
+                            "elapsed_seconds": elapsed, "host": platform.node(),
+                            "versions": C._versions()})
+
+    completed, errors = C.run_keyed(
+        [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths], options),
+          _settings(t, options)) for t in pending], out,
+        total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
+        progress=progress, connect_timeout=connect_timeout, warm=_warm if warm_cache else None,
+        desc="diagnoses", unit="diagnosis", to_json=to_json)
+    write_summary(tasks, out)
+    return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
+                             time.perf_counter() - t0, "diagnoses")
+
+
+def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> list[dict]:
+    """One row per task from its result (or error) file in ``out_dir``: ``SUMMARY_FIELDS``."""
+    from .. import campaign as C
+
+    out = Path(out_dir)
+    rows = []
+    for t in tasks:
+        row = {"key": t.key, "n_runs": len(t.paths), "subject": t.subject or "",
+               "task": t.task, "motion_gain": t.motion_gain, "physics": "", "mismatch": "",
+               "p_value": "", "delta_neg_log_lik": "", "params": "",
+               "smallest_p_candidate": "", "smallest_p_value": "", "error": ""}
+        res = C._read_json(out / f"{t.key}.json")
+        if isinstance(res, dict) and "diagnosis" in res:
+            d = res["diagnosis"]
+            row.update(physics=d["physics"], mismatch=d["mismatch"])
+            chosen = next((c for c in d["ranking"] if c["physics"] == d["physics"]), None)
+            if chosen is not None:
+                row.update(p_value=chosen.get("p_value"),
+                           delta_neg_log_lik=chosen.get("delta_neg_log_lik"),
+                           params=json.dumps(chosen.get("params") or {}))
+            tested = [c for c in d["ranking"] if isinstance(c.get("p_value"), (int, float))]
+            if tested:  # the nearest miss when the answer is none
+                best = min(tested, key=lambda c: c["p_value"])
+                row.update(smallest_p_candidate=best["physics"], smallest_p_value=best["p_value"])
+        else:
+            err = C._read_json(out / f"{t.key}.error.json")
+            row["error"] = (f"{err.get('error')}: {err.get('message')}"
+                            if isinstance(err, dict) else "no result")
+        rows.append(row)
+    return rows
+
+
+def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
+    """Write ``out_dir/summary.csv`` (:func:`batch_summary_rows`); returns its path."""
+    path = Path(out_dir) / "summary.csv"
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.DictWriter(fh, fieldnames=SUMMARY_FIELDS)
+        w.writeheader()
+        for row in batch_summary_rows(tasks, out_dir):
+            w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else v)
+                        for k, v in row.items()})
+    return path

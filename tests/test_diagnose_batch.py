@@ -1,0 +1,154 @@
+"""Tests of :mod:`bayespilot.diagnose.batch` and ``bayespilot diagnose-batch``.
+
+The batch runs for real on a one-worker dask LocalCluster, on short simulated
+recordings with few candidates; each result is checked against the same
+diagnosis run directly in this process (the reference), not against itself.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+
+import pytest
+
+from bayespilot.campaign import CampaignError
+from bayespilot.cli import main
+from bayespilot.diagnose import diagnose, diagnose_pooled
+from bayespilot.diagnose.batch import batch_summary_rows, diagnose_batch, plan_batch
+from bayespilot.io import read_recording, write_recording
+from bayespilot.recording import Recording, RecordingError
+from bayespilot.simulate import simulate
+
+OPTIONS = {"n_bootstrap": 0, "candidates": ["motion-washout", "time-varying-gains"]}
+
+
+def _write(folder, name, *, subject, motion_gain=1.0, seed=0, duration=20.0):
+    """A short run written as a lab would (its metadata: the subject, no generator truth)."""
+    rec = simulate(task="FD", motion_gain=motion_gain, remnant_fraction=0.15, seed=seed,
+                   duration=duration).recording
+    meta = {"subject": subject} if subject is not None else {}
+    stem = folder / name
+    write_recording(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta),
+                    stem)
+    return str(stem)
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("recs")
+    return [_write(folder, "s1-run1", subject="s1", seed=1),
+            _write(folder, "s1-run2", subject="s1", seed=2),
+            _write(folder, "s2-run1", subject="s2", motion_gain=0.75, seed=3)]
+
+
+def _read_all(paths):
+    with pytest.warns(Warning):  # 20-s records are questionable; said, not refused
+        return [read_recording(p) for p in paths]
+
+
+def test_plan_keys_and_groups(recordings, tmp_path):
+    recs = _read_all(recordings)
+    alone = plan_batch(recordings, recs)
+    assert [t.key for t in alone] == ["s1-run1", "s1-run2", "s2-run1"]
+    assert [t.subject for t in alone] == ["s1", "s1", "s2"] and not any(t.pooled for t in alone)
+    pooled = plan_batch(recordings, recs, pool=True)
+    assert [(t.key, t.paths) for t in pooled] == [
+        ("s1_FD_k1", tuple(recordings[:2])), ("s2_FD_k0.75", (recordings[2],))]
+    assert pooled[0].pooled and not pooled[1].pooled
+    # the same stem in two folders: the folder goes into the key; the same file twice: refused
+    other = str(tmp_path / "elsewhere" / "s1-run1")
+    keys = [t.key for t in plan_batch([recordings[0], other], recs[:1] * 2)]
+    assert keys == [f"{os.path.basename(os.path.dirname(recordings[0]))}_s1-run1",
+                    "elsewhere_s1-run1"]
+    with pytest.raises(ValueError, match="same result name"):
+        plan_batch([recordings[0]] * 2, recs[:1] * 2)
+    with pytest.raises(ValueError, match="same recording twice"):
+        plan_batch([recordings[0]] * 2, recs[:1] * 2, pool=True)
+    nosubject = Recording(recs[0].signals, recs[0].sample_rate_hz, recs[0].motion_gain,
+                          recs[0].task, {})
+    with pytest.raises(ValueError, match="no 'subject'"):
+        plan_batch(["a"], [nosubject], pool=True)
+
+
+def test_batch_matches_direct_diagnoses_and_resumes(recordings, tmp_path):
+    out = tmp_path / "b"
+    s1 = diagnose_batch(recordings, out, pool=True, seed=3, workers=1, progress=False,
+                        **OPTIONS)
+    assert (s1.total, s1.completed, s1.skipped, s1.failed) == (2, 2, 0, 0)
+    assert "2 diagnoses: 2 run" in str(s1)
+    recs = _read_all(recordings)
+    direct = {"s1_FD_k1": diagnose_pooled(recs[:2], seed=3, **OPTIONS),
+              "s2_FD_k0.75": diagnose(recs[2], seed=3, **OPTIONS)}
+    for key, ref in direct.items():
+        got = json.loads((out / f"{key}.json").read_text())
+        assert got["key"] == key and got["settings"]["seed"] == 3
+        d = got["diagnosis"]
+        assert d["physics"] == ref.physics
+        for a, b in zip(d["ranking"], ref.ranking):
+            assert a["physics"] == b.physics
+            assert a["delta_neg_log_lik"] == pytest.approx(b.delta_neg_log_lik, rel=1e-6,
+                                                           abs=1e-6)
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [(r["key"], r["n_runs"], r["physics"]) for r in rows] == [
+        ("s1_FD_k1", "2", direct["s1_FD_k1"].physics),
+        ("s2_FD_k0.75", "1", direct["s2_FD_k0.75"].physics)]
+    for r in rows:  # the nearest miss, from the direct diagnosis's ranking
+        p_min, name = min((c.p_value, c.physics) for c in direct[r["key"]].ranking
+                          if math.isfinite(c.p_value))
+        assert r["smallest_p_candidate"] == name
+        assert float(r["smallest_p_value"]) == pytest.approx(p_min, rel=1e-5)
+
+    # again: nothing redone, files untouched; other settings in the same folder: refused
+    stamp = [(out / f"{k}.json").stat().st_mtime_ns for k in direct]
+    s2 = diagnose_batch(recordings, out, pool=True, seed=3, workers=1, progress=False,
+                        **OPTIONS)
+    assert (s2.completed, s2.skipped) == (0, 2)
+    assert [(out / f"{k}.json").stat().st_mtime_ns for k in direct] == stamp
+    with pytest.raises(CampaignError, match="other recordings or settings"):
+        diagnose_batch(recordings, out, pool=True, seed=4, workers=1, progress=False,
+                       **OPTIONS)
+
+
+def test_summary_reports_an_error_file(recordings, tmp_path):
+    recs = _read_all(recordings[:1])
+    tasks = plan_batch(recordings[:1], recs)
+    (tmp_path / "s1-run1.error.json").write_text(json.dumps(
+        {"key": "s1-run1", "error": "RuntimeError", "message": "worker lost"}))
+    (row,) = batch_summary_rows(tasks, tmp_path)
+    assert row["error"] == "RuntimeError: worker lost" and row["physics"] == ""
+    assert row["smallest_p_value"] == ""
+
+
+def test_bad_input_runs_nothing(recordings, tmp_path):
+    out = tmp_path / "never"
+    with pytest.raises(RecordingError, match=r"(?s)1 of 2 recordings cannot be read.*nope"):
+        diagnose_batch([recordings[0], str(tmp_path / "nope")], out, workers=1)
+    with pytest.raises(ValueError, match="noise_passes"):
+        diagnose_batch(recordings[:1], out, noise_passes=7, workers=1)
+    with pytest.raises(ValueError, match="seed"):
+        diagnose_batch(recordings[:1], out, seed=-1, workers=1)
+    assert not out.exists()
+
+
+def test_cli_folder_and_errors(recordings, tmp_path, capsys):
+    folder = os.path.dirname(recordings[0])
+    out = tmp_path / "cli"
+    code = main(["diagnose-batch", folder, "--out", str(out), "--bootstrap", "0",
+                 "--workers", "1", "--reports", "-q"])
+    stdout, err = capsys.readouterr()
+    assert code == 0, err
+    assert stdout.splitlines()[0].startswith("key,n_runs,subject,task,motion_gain,physics")
+    assert sorted(p.name for p in out.glob("*.json")) == [
+        "s1-run1.json", "s1-run2.json", "s2-run1.json"]
+    assert (out / "s1-run1" / "report.html").stat().st_size > 1000
+    assert "warning: " in err and "20 s long" in err
+    for argv, message in (([str(tmp_path / "nope")], "cannot be read"),
+                          ([str(tmp_path)], "a folder without recordings"),
+                          ([folder, "--workers", "1", "--scheduler", "tcp://127.0.0.1:9"],
+                           "not both")):
+        code = main(["diagnose-batch", *argv, "--out", str(tmp_path / "x"), "-q"])
+        err = capsys.readouterr().err
+        assert code == 2 and message in err, err
