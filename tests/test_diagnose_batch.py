@@ -71,6 +71,10 @@ def test_plan_keys_and_groups(recordings, tmp_path):
                           recs[0].task, {})
     with pytest.raises(ValueError, match="no 'subject'"):
         plan_batch(["a"], [nosubject], pool=True)
+    named = [Recording(recs[0].signals, recs[0].sample_rate_hz, recs[0].motion_gain,
+                       recs[0].task, {"subject": s}) for s in ("a b", "a-b")]
+    with pytest.raises(ValueError, match="subjects whose names give the same result name"):
+        plan_batch(["x", "y"], named, pool=True)
 
 
 def test_batch_matches_direct_diagnoses_and_resumes(recordings, tmp_path):

@@ -140,8 +140,14 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
                     for q in ps if ps.count(q) > 1})
     if dupes:
         raise ValueError(f"the same recording twice in one condition: {', '.join(dupes)}")
-    return [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(ps), s, t, k)
-            for (s, t, k), ps in sorted(groups.items())]
+    tasks = [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(ps), s, t, k)
+             for (s, t, k), ps in sorted(groups.items())]
+    keys = [t.key for t in tasks]
+    clash = sorted({k for k in keys if keys.count(k) > 1})
+    if clash:
+        raise ValueError(f"subjects whose names give the same result name: {', '.join(clash)} "
+                         "(only letters, digits, '.', '_' and '-' are kept)")
+    return tasks
 
 
 def run_diagnose_task(task: DiagnoseTask, recordings: Sequence, options: Mapping[str, Any]):
