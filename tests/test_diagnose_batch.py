@@ -44,6 +44,15 @@ def recordings(tmp_path_factory):
             _write(folder, "s2-run1", subject="s2", motion_gain=0.75, seed=3)]
 
 
+@pytest.fixture(scope="module")
+def lone_folder(tmp_path_factory):
+    """A folder with one recording (and nothing else a reader could take for one)."""
+    folder = tmp_path_factory.mktemp("lone")
+    _write(folder, "s9-run1", subject="s9", seed=9)
+    (folder / "notes.txt").write_text("not a recording")
+    return folder
+
+
 def _read_all(paths):
     with pytest.warns(Warning):  # 20-s records are questionable; said, not refused
         return [read_recording(p) for p in paths]
@@ -137,17 +146,19 @@ def test_bad_input_runs_nothing(recordings, tmp_path):
     assert not out.exists()
 
 
-def test_cli_folder_and_errors(recordings, tmp_path, capsys):
-    folder = os.path.dirname(recordings[0])
+def test_cli_folder_and_errors(lone_folder, tmp_path, capsys):
+    folder = str(lone_folder)
     out = tmp_path / "cli"
     code = main(["diagnose-batch", folder, "--out", str(out), "--bootstrap", "0",
                  "--workers", "1", "--reports", "-q"])
     stdout, err = capsys.readouterr()
     assert code == 0, err
-    assert stdout.splitlines()[0].startswith("key,n_runs,subject,task,motion_gain,physics")
-    assert sorted(p.name for p in out.glob("*.json")) == [
-        "s1-run1.json", "s1-run2.json", "s2-run1.json"]
-    assert (out / "s1-run1" / "report.html").stat().st_size > 1000
+    lines = stdout.splitlines()
+    assert lines[0].startswith("key,n_runs,subject,task,motion_gain,physics")
+    assert len(lines) == 2 and lines[1].startswith("s9-run1,1,s9,FD,1.0,")
+    assert [p.name for p in out.glob("*.json")] == ["s9-run1.json"]
+    assert (out / "s9-run1" / "report.html").stat().st_size > 1000
+    assert (out / "summary.png").stat().st_size > 1000
     assert "warning: " in err and "20 s long" in err
     for argv, message in (([str(tmp_path / "nope")], "cannot be read"),
                           ([str(tmp_path)], "a folder without recordings"),
@@ -156,3 +167,30 @@ def test_cli_folder_and_errors(recordings, tmp_path, capsys):
         code = main(["diagnose-batch", *argv, "--out", str(tmp_path / "x"), "-q"])
         err = capsys.readouterr().err
         assert code == 2 and message in err, err
+
+
+def test_plot_batch_cells():
+    """The figure's cells are -log10 p of each candidate; untested ones are masked."""
+    import matplotlib.pyplot as plt
+
+    from bayespilot.diagnose import NAMES
+    from bayespilot.diagnose.report import plot_batch
+
+    level = {"level_per_candidate": 0.002}
+    d1 = {"physics": "motion-washout", "settings": level,
+          "ranking": [{"physics": "motion-washout", "p_value": 1e-4, "testable": True},
+                      {"physics": "otolith-channel", "p_value": None, "testable": False},
+                      {"physics": "threshold-shape", "p_value": 0.5, "testable": True}]}
+    d2 = {"physics": "none", "settings": level,
+          "ranking": [{"physics": "time-varying-gains", "p_value": 0.01, "testable": True}]}
+    fig = plot_batch([("a", d1), ("b", d2)])
+    ax = fig.axes[0]
+    z = ax.images[0].get_array()
+    assert z[0, NAMES.index("motion-washout")] == pytest.approx(4.0)
+    assert z[0, NAMES.index("threshold-shape")] == pytest.approx(-math.log10(0.5))
+    assert z[1, NAMES.index("time-varying-gains")] == pytest.approx(2.0)
+    assert z.mask[0, NAMES.index("otolith-channel")] and z.mask[1, 0]
+    assert len(ax.patches) == 1  # the chosen washout's box
+    assert len([ln for ln in ax.lines if ln.get_marker() == "."]) == 1  # below the level
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["a: motion-washout", "b: none"]
+    plt.close(fig)

@@ -1032,7 +1032,9 @@ DIR/<key>.json as it finishes (key: the recording's stem, or
 DIR/<key>.error.json and the others go on; running the same command again
 skips the finished ones and retries the failed. DIR/summary.csv has one row
 per key: the decision (physics, mismatch), the chosen extension's p_value,
-delta_neg_log_lik and params, or the error. About 15 s per recording of
+delta_neg_log_lik and params, the candidate with the smallest p-value, or
+the error; DIR/summary.png draws every candidate's p-value in every
+diagnosis. About 15 s per recording of
 81.92 s on one core (with --bootstrap 39), see docs/diagnose.md.
 
 Examples:

@@ -21,7 +21,9 @@ written here.
 Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``,
 ``diagnosis``: the same dict as ``bayespilot diagnose --json`` writes,
 ``elapsed_seconds``, ``host``, ``versions``), ``<key>/`` (the report, with
-``reports=True``) and ``summary.csv`` (one row per key: the decision, the
+``reports=True``), ``summary.png`` (every candidate's p-value in every
+diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`) and
+``summary.csv`` (one row per key: the decision, the
 chosen extension's p-value, -ln L improvement and parameters, the candidate
 with the smallest p-value and that p-value (the nearest miss when the answer
 is ``none``), or the error).
@@ -341,12 +343,25 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> li
 
 
 def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
-    """Write ``out_dir/summary.csv`` (:func:`batch_summary_rows`); returns its path."""
-    path = Path(out_dir) / "summary.csv"
+    """Write ``out_dir/summary.csv`` (:func:`batch_summary_rows`) and, when any diagnosis
+    finished, ``out_dir/summary.png`` (:func:`~bayespilot.diagnose.report.plot_batch`);
+    returns the CSV's path."""
+    from .. import campaign as C
+    from .report import _pyplot, plot_batch
+
+    out = Path(out_dir)
+    path = out / "summary.csv"
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=SUMMARY_FIELDS)
         w.writeheader()
-        for row in batch_summary_rows(tasks, out_dir):
+        for row in batch_summary_rows(tasks, out):
             w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else v)
                         for k, v in row.items()})
+    done = [(t.key, res["diagnosis"]) for t in tasks
+            if isinstance(res := C._read_json(out / f"{t.key}.json"), dict)
+            and "diagnosis" in res]
+    if done:
+        fig = plot_batch(done)
+        fig.savefig(out / "summary.png", dpi=110)
+        _pyplot().close(fig)
     return path

@@ -11,12 +11,12 @@ import base64
 import html
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
-           "plot_posterior", "write_report"]
+           "plot_posterior", "plot_batch", "write_report"]
 
 
 def _pyplot():
@@ -198,6 +198,62 @@ def plot_candidates(result, ax: Any = None):
     ax.set_xscale("symlog", linthresh=1.0)
     ax.set_xlabel("-ln L(base) - -ln L(extension) (black: threshold of the test)")
     ax.set_title(f"Candidates (decision: {result.physics})")
+    fig.tight_layout()
+    return fig
+
+
+def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = None):
+    """Every candidate's p-value in every diagnosis of a batch, at a glance.
+
+    Parameters
+    ----------
+    diagnoses : sequence of (str, dict)
+        ``(key, diagnosis)`` with ``diagnosis`` as ``DiagnosisResult.to_dict()``
+        (or the pooled one) writes it.
+    ax : matplotlib Axes, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One row per diagnosis, one column per catalogue entry, coloured by
+        -log10 p (grey: not testable on that recording); a dot where p is
+        below the decision's level per candidate, a box around the chosen
+        extension, the decision at the right.
+    """
+    from .catalogue import NAMES
+
+    plt = _pyplot()
+    n = len(diagnoses)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(8.5, min(1.6 + 0.28 * n, 60.0)))
+    else:
+        fig = ax.figure
+    z = np.full((n, len(NAMES)), np.nan)
+    for i, (_, d) in enumerate(diagnoses):
+        level = d["settings"]["level_per_candidate"]
+        for c in d["ranking"]:
+            p = c.get("p_value")
+            if c["physics"] in NAMES and isinstance(p, (int, float)) and c.get("testable", True):
+                j = NAMES.index(c["physics"])
+                z[i, j] = -math.log10(max(p, 1e-16))
+                if p < level:
+                    ax.plot(j, i, "k.", ms=5)
+        if d["physics"] in NAMES:
+            j = NAMES.index(d["physics"])
+            ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="k", lw=2))
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")
+    im = ax.imshow(np.ma.masked_invalid(z), aspect="auto", cmap=cmap, vmin=0, vmax=6,
+                   interpolation="nearest")
+    cb = fig.colorbar(im, ax=ax, label="-log10 p (dot: below the level; box: chosen)",
+                      shrink=0.8)
+    levels = [d["settings"]["level_per_candidate"] for _, d in diagnoses]
+    if levels:  # the decision's level per candidate (the median, should they differ)
+        cb.ax.axhline(-math.log10(float(np.median(levels))), color="w", lw=2)
+    ax.set_xticks(range(len(NAMES)))
+    ax.set_xticklabels(NAMES, rotation=30, ha="right", fontsize=8)
+    ax.set_yticks(range(n))
+    ax.set_yticklabels([f"{k}: {d['physics']}" for k, d in diagnoses], fontsize=7)
+    ax.set_title(f"{n} diagnoses: every candidate's p-value")
     fig.tight_layout()
     return fig
 
