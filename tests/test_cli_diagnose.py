@@ -97,6 +97,23 @@ def test_diagnose_several_runs_pools_them(rec_stem, tmp_path, capsys):
     assert d["pooled"] is True and d["n_runs"] == 2 and d["physics"] == "none"
     assert len(d["runs"]) == 2 and len(d["ranking"]) == len(NAMES)
     assert (tmp_path / "rep" / "runs.png").stat().st_size > 0
+    assert "warning" not in err  # one subject and condition: nothing to warn about
+
+
+def test_diagnose_warns_before_pooling_runs_that_differ(rec_stem, tmp_path, capsys):
+    """Runs of another K_theta are said at once, in one line (here the run then stops on a
+    bad setting, so that the test does not pay for the pooled diagnosis)."""
+    rec = simulate(task="FT", motion_gain=0.75, remnant_gain=0.06, seed=33, duration=30.0).recording
+    stem2 = tmp_path / "other"
+    write_recording(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, {}),
+                    stem2)
+    code, _, err = _run(capsys, "diagnose", rec_stem, stem2, "--noise-passes", "9")
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 2, err
+    assert lines[0] == ("bayespilot: warning: the runs are not of one subject and condition "
+                        "(K_theta 0.75, 1); pooling assumes the physics left out is the same "
+                        "in every run")
+    assert lines[1].startswith("bayespilot: error: noise_passes")
 
 
 def test_diagnose_posterior_needs_one_recording_and_a_netcdf_name(rec_stem, tmp_path, capsys):

@@ -67,6 +67,37 @@ def test_pooled_passes_noise_passes_to_every_run(washout_runs, monkeypatch):
     assert seen == [2, 2]
 
 
+def test_pooled_warns_when_the_runs_say_they_differ(washout_runs, monkeypatch):
+    """Runs whose metadata give other subjects or K_theta are pooled with a PoolingWarning."""
+    import warnings
+
+    from bayespilot.diagnose import pooled as P
+    from bayespilot.recording import Recording
+
+    class Stop(Exception):
+        pass
+
+    def stop(rec, **kw):
+        raise Stop
+
+    monkeypatch.setattr(P, "_prepare", stop)
+
+    def relabel(rec, subject, k=None):
+        return Recording(rec.signals, rec.sample_rate_hz,
+                         rec.motion_gain if k is None else k, rec.task, {"subject": subject})
+
+    a, b = washout_runs
+    with pytest.warns(P.PoolingWarning, match=r"subject s1, s2; K_theta 0.75, 1\)"):
+        with pytest.raises(Stop):
+            diagnose_pooled([relabel(a, "s1"), relabel(b, "s2", 0.75)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", P.PoolingWarning)
+        with pytest.raises(Stop):  # one subject (or none said): no warning
+            diagnose_pooled([relabel(a, "s1"), relabel(b, "s1")])
+        with pytest.raises(Stop):
+            diagnose_pooled(washout_runs)
+
+
 def test_pooled_names_a_shared_washout(washout_result):
     res = washout_result
     assert isinstance(res, PooledDiagnosisResult)

@@ -646,6 +646,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     from .diagnose import NAMES, diagnose, diagnose_pooled, get_extension, sample_chosen
+    from .diagnose.pooled import PoolingWarning, pooling_disagreements
 
     if args.posterior is not None:
         if len(args.recording) > 1:
@@ -668,9 +669,16 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                        f"pilot parameters per run): base fits, located evidence "
                        f"({args.bootstrap} bootstrap replicates each), {len(NAMES)} catalogue "
                        f"extensions ...")
-            res = diagnose_pooled(recs, seed=args.seed, n_bootstrap=args.bootstrap,
-                                  alpha=args.alpha, n_calibrate=args.calibrate,
-                                  noise_passes=args.noise_passes, progress=_progress(args))
+            mixed = pooling_disagreements(recs)
+            if mixed:  # said now, before the long computation
+                print(f"{PROG}: warning: the runs are not of one subject and condition "
+                      f"({mixed}); pooling assumes the physics left out is the same in every "
+                      "run", file=sys.stderr)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", PoolingWarning)
+                res = diagnose_pooled(recs, seed=args.seed, n_bootstrap=args.bootstrap,
+                                      alpha=args.alpha, n_calibrate=args.calibrate,
+                                      noise_passes=args.noise_passes, progress=_progress(args))
     except ValueError as exc:  # e.g. a recording too short for the analysis
         raise UsageError(str(exc)) from None
     if args.posterior is not None:

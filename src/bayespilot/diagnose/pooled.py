@@ -45,7 +45,40 @@ from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibr
                _saturation)
 from .catalogue import get_extension
 
-__all__ = ["diagnose_pooled", "PooledDiagnosisResult"]
+__all__ = ["diagnose_pooled", "PooledDiagnosisResult", "PoolingWarning", "pooling_disagreements"]
+
+
+class PoolingWarning(UserWarning):
+    """Runs given to :func:`diagnose_pooled` that say they are not of one subject and condition."""
+
+
+def pooling_disagreements(recordings: Sequence) -> str | None:
+    """What the runs' own metadata disagree on (subject, task, K_theta), or None.
+
+    Pooling shares the extension's parameters over the runs, which assumes the
+    physics left out is the same in every run.  Runs of several subjects or
+    conditions may still be pooled on purpose (a platform's bandwidth is the
+    same for every subject), so :func:`diagnose_pooled` warns
+    (:class:`PoolingWarning`) and does not refuse.
+
+    Examples
+    --------
+    >>> from bayespilot.recording import Recording
+    >>> import numpy as np
+    >>> sig = {k: np.zeros(4) for k in ("e", "u", "theta_ddot_m")}
+    >>> sig["t"] = np.arange(4) / 100.0
+    >>> runs = [Recording(sig, 100.0, 1.0, "FD", {"subject": s}) for s in ("s1", "s2")]
+    >>> pooling_disagreements(runs)
+    'subject s1, s2'
+    """
+    said = []
+    for what, values in (("subject", [r.metadata.get("subject") for r in recordings]),
+                         ("task", [r.task for r in recordings]),
+                         ("K_theta", [f"{r.motion_gain:g}" for r in recordings])):
+        given = sorted({str(v) for v in values if v is not None})
+        if len(given) > 1:
+            said.append(f"{what} {', '.join(given)}")
+    return "; ".join(said) or None
 
 
 @dataclass
@@ -519,6 +552,11 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     ------
     ValueError
         Fewer than two recordings, or a bad setting (named).
+
+    Warns
+    -----
+    PoolingWarning
+        The recordings give different subjects, tasks or K_theta.
     """
     from tqdm.auto import tqdm
 
@@ -531,6 +569,11 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     for rec in recs:
         names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample,
                        n_calibrate, noise_passes)
+    mixed = pooling_disagreements(recs)
+    if mixed:
+        warnings.warn(f"the runs are not of one subject and condition ({mixed}); pooling "
+                      "assumes the physics left out is the same in every run", PoolingWarning,
+                      stacklevel=2)
     t0 = time.perf_counter()
     bar = tqdm(total=2 * len(recs) + len(names), desc="diagnose (pooled)", unit="stage",
                disable=not progress)
