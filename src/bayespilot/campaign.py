@@ -517,7 +517,8 @@ def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
 def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: Path, *,
               total: int, skipped: int, scheduler: str | None, workers: int | None,
               progress: bool, connect_timeout: float, warm: Any = None, desc: str = "fits",
-              unit: str = "fit", to_json: Any = None) -> tuple[int, dict[str, str]]:
+              unit: str = "fit", to_json: Any = None,
+              scatter: bool = False) -> tuple[int, dict[str, str]]:
     """Run keyed tasks on dask.distributed, writing ``out/<key>.json`` as each one finishes.
 
     The cluster loop that :func:`run_campaign` and
@@ -530,7 +531,10 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
     process (where it may also write files of its own).  ``warm``: called
     once in this process after connecting (numba's cache, module docs); a failure
     there is a warning.  ``total`` and ``skipped`` set the progress bar (tasks
-    already done before the call).  Returns ``(completed, {key: one-line error})``.
+    already done before the call).  ``scatter``: send each task's arguments to
+    the cluster first (one future per argument), so that large data (recordings)
+    is not embedded in the task graph.  Returns ``(completed, {key: one-line
+    error})``.
     """
     completed, errors = 0, {}
     if not tasks:
@@ -548,8 +552,11 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
                 warnings.warn(f"warming numba's cache failed ({_first_line(exc)}); each "
                               f"worker compiles the kernels itself", RuntimeWarning,
                               stacklevel=3)
-        futures = {client.submit(fn, *args, pure=False): (key, ctx)
-                   for key, fn, args, ctx in tasks}
+        futures = {}
+        for key, fn, args, ctx in tasks:
+            if scatter:  # each argument whole, as one future ([a]: not its items one by one)
+                args = tuple(client.scatter([a], hash=False)[0] for a in args)
+            futures[client.submit(fn, *args, pure=False)] = (key, ctx)
         bar = stack.enter_context(tqdm(total=total, initial=skipped, desc=desc, unit=unit,
                                        disable=not progress, file=sys.stderr,
                                        smoothing=0.1, dynamic_ncols=True))

@@ -304,7 +304,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
           _settings(t, options)) for t in pending], out,
         total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
         progress=progress, connect_timeout=connect_timeout, warm=_warm if warm_cache else None,
-        desc="diagnoses", unit="diagnosis", to_json=to_json)
+        desc="diagnoses", unit="diagnosis", to_json=to_json, scatter=True)
     write_summary(tasks, out)
     return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
                              time.perf_counter() - t0, "diagnoses")
