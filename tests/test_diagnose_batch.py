@@ -89,7 +89,7 @@ def test_plan_keys_and_groups(recordings, tmp_path):
 def test_batch_matches_direct_diagnoses_and_resumes(recordings, tmp_path):
     out = tmp_path / "b"
     s1 = diagnose_batch(recordings, out, pool=True, seed=3, workers=1, progress=False,
-                        **OPTIONS)
+                        warm_cache=False, **OPTIONS)
     assert (s1.total, s1.completed, s1.skipped, s1.failed) == (2, 2, 0, 0)
     assert "2 diagnoses: 2 run" in str(s1)
     recs = _read_all(recordings)
