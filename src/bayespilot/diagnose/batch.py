@@ -43,7 +43,7 @@ import math
 import platform
 import re
 import time
-from collections import defaultdict
+from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -91,6 +91,11 @@ def _subject(rec) -> str | None:
     return None if s is None else str(s)
 
 
+def _clashes(keys: Sequence[str]) -> list[str]:
+    """The keys that occur more than once, sorted."""
+    return sorted(k for k, n in Counter(keys).items() if n > 1)
+
+
 def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
                ) -> list[DiagnoseTask]:
     """The batch's diagnoses: one per recording, or (``pool``) one per subject and condition.
@@ -119,12 +124,10 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
     if not pool:
         stems = [Path(p).stem if Path(p).suffix in (".csv", ".json", ".mat") else Path(p).name
                  for p in paths]
-        count = defaultdict(int)
-        for s in stems:
-            count[s] += 1
+        count = Counter(stems)
         keys = [_slug(f"{Path(p).parent.name}_{s}" if count[s] > 1 else s)
                 for p, s in zip(paths, stems)]
-        dupes = sorted({k for k in keys if keys.count(k) > 1})
+        dupes = _clashes(keys)
         if dupes:
             raise ValueError(f"recordings that give the same result name: {', '.join(dupes)} "
                              f"(the same file twice, or the same folder and stem)")
@@ -144,8 +147,7 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
         raise ValueError(f"the same recording twice in one condition: {', '.join(dupes)}")
     tasks = [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(ps), s, t, k)
              for (s, t, k), ps in sorted(groups.items())]
-    keys = [t.key for t in tasks]
-    clash = sorted({k for k in keys if keys.count(k) > 1})
+    clash = _clashes([t.key for t in tasks])
     if clash:
         raise ValueError(f"subjects whose names give the same result name: {', '.join(clash)} "
                          "(only letters, digits, '.', '_' and '-' are kept)")
@@ -310,20 +312,36 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                              time.perf_counter() - t0, "diagnoses")
 
 
-def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> list[dict]:
-    """One row per task from its result (or error) file in ``out_dir``: ``SUMMARY_FIELDS``."""
+def _diagnoses(tasks: Sequence[DiagnoseTask], out: Path) -> dict[str, dict | None]:
+    """Each task's diagnosis dict from its result file in ``out`` (None: no result)."""
+    from .. import campaign as C
+
+    found = {}
+    for t in tasks:
+        res = C._read_json(out / f"{t.key}.json")
+        found[t.key] = res["diagnosis"] if isinstance(res, dict) and "diagnosis" in res else None
+    return found
+
+
+def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
+                       diagnoses: Mapping[str, dict | None] | None = None) -> list[dict]:
+    """One row per task from its result (or error) file in ``out_dir``: ``SUMMARY_FIELDS``.
+
+    ``diagnoses``: the result files' diagnoses by key, if already read.
+    """
     from .. import campaign as C
 
     out = Path(out_dir)
+    if diagnoses is None:
+        diagnoses = _diagnoses(tasks, out)
     rows = []
     for t in tasks:
         row = {"key": t.key, "n_runs": len(t.paths), "subject": t.subject or "",
                "task": t.task, "motion_gain": t.motion_gain, "physics": "", "mismatch": "",
                "p_value": "", "delta_neg_log_lik": "", "params": "",
                "smallest_p_candidate": "", "smallest_p_value": "", "error": ""}
-        res = C._read_json(out / f"{t.key}.json")
-        if isinstance(res, dict) and "diagnosis" in res:
-            d = res["diagnosis"]
+        d = diagnoses.get(t.key)
+        if d is not None:
             row.update(physics=d["physics"], mismatch=d["mismatch"])
             chosen = next((c for c in d["ranking"] if c["physics"] == d["physics"]), None)
             if chosen is not None:
@@ -346,20 +364,18 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
     """Write ``out_dir/summary.csv`` (:func:`batch_summary_rows`) and, when any diagnosis
     finished, ``out_dir/summary.png`` (:func:`~bayespilot.diagnose.report.plot_batch`);
     returns the CSV's path."""
-    from .. import campaign as C
     from .report import _pyplot, plot_batch
 
     out = Path(out_dir)
+    found = _diagnoses(tasks, out)
     path = out / "summary.csv"
     with open(path, "w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=SUMMARY_FIELDS)
         w.writeheader()
-        for row in batch_summary_rows(tasks, out):
+        for row in batch_summary_rows(tasks, out, found):
             w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else v)
                         for k, v in row.items()})
-    done = [(t.key, res["diagnosis"]) for t in tasks
-            if isinstance(res := C._read_json(out / f"{t.key}.json"), dict)
-            and "diagnosis" in res]
+    done = [(key, d) for key, d in found.items() if d is not None]
     if done:
         fig = plot_batch(done)
         fig.savefig(out / "summary.png", dpi=110)
