@@ -30,6 +30,8 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --posterior-check 8      # s.e. and posterior vs spread
     python analyses/prove_diagnose.py --locate-null           # located p-values on controls
     python analyses/prove_diagnose.py --pooled 8 --shard 0/2   # eight runs per case, pooled
+    python analyses/prove_diagnose.py --pooled 16 --misses-of 8 --shard 0/2   # sixteen runs,
+                                          # first the cases eight runs got wrong (and 1/2)
     python analyses/prove_diagnose.py --compare-runs           # 1, 4 and 8 runs, same cases
     python analyses/prove_diagnose.py --pooled-null 100        # pooled vs one-run null tests
     python analyses/prove_diagnose.py --pooled-null 100 --rebase   # the same, tests against the
@@ -291,14 +293,31 @@ def run_case(c: dict) -> dict:
             "elapsed_seconds": el}
 
 
-def run(chunk: int | None, shard: tuple[int, int] = (0, 1)) -> None:
+def wrong_ids(runs: int) -> set[int]:
+    """The ids of the cases that the stored study with ``runs`` runs per case (1: one run,
+    ``diagnose``; R: ``--pooled R``) decided wrongly: a name other than the truth."""
+    folder = DEFAULT_OUT if runs == 1 else DEFAULT_OUT.with_name(
+        "diagnose_pooled" if runs == 4 else f"diagnose_pooled{runs}")
+    rs = [json.loads(p.read_text()) for p in sorted(folder.glob("[0-9]*.json"))]
+    if len(rs) < len(cases()):
+        raise SystemExit(f"--misses-of {runs}: {folder} holds {len(rs)} of {len(cases())} "
+                         "cases; that study is not complete")
+    return {r["case"]["id"] for r in rs if r["decision"] != r["case"]["truth"]}
+
+
+def run(chunk: int | None, shard: tuple[int, int] = (0, 1),
+        only: set[int] | None = None) -> None:
     import numba
 
     numba.set_num_threads(1)
     OUT.mkdir(parents=True, exist_ok=True)
     k, n = shard
+    # a selection is shared out by rank, not id, so that both shards get half of it
+    rank = {i: j for j, i in enumerate(sorted(only))} if only is not None else None
     todo = [c for c in cases()
-            if c["id"] % n == k and not (OUT / f"{case_key(c)}.json").exists()]
+            if (c["id"] if rank is None else rank.get(c["id"], -1)) % n == k
+            and (rank is None or c["id"] in rank)
+            and not (OUT / f"{case_key(c)}.json").exists()]
     if chunk is not None:
         todo = todo[:chunk]
     print(f"{len(todo)} case(s) to run", flush=True)
@@ -1434,6 +1453,9 @@ def main(argv=None) -> int:
                     help="diagnose R runs of each case's condition together (diagnose_pooled, "
                          "new seeds); results in analyses/results/diagnose_pooled/, figures "
                          "with the suffix _pooled (R = 4) or diagnose_pooledR/, _pooledR")
+    ap.add_argument("--misses-of", type=int, default=0, metavar="R",
+                    help="run only the cases that the stored study with R runs per case (1: "
+                         "one run) decided wrongly: what more data changes, first")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
     ap.add_argument("--pooled-null", type=int, default=0, metavar="N",
@@ -1574,7 +1596,7 @@ def main(argv=None) -> int:
         width_profile([int(v) for v in args.width_profile.split(",")])
         return 0
     if not args.summarize:
-        run(args.chunk, (k, n))
+        run(args.chunk, (k, n), wrong_ids(args.misses_of) if args.misses_of else None)
     summarize()
     return 0
 
