@@ -305,6 +305,40 @@ def wrong_ids(runs: int) -> set[int]:
     return {r["case"]["id"] for r in rs if r["decision"] != r["case"]["truth"]}
 
 
+def misses_table(runs: int) -> None:
+    """The cases the ``runs``-run study decided wrongly, decided again by this study (more
+    runs): truth, effect, condition, the optimal test's power with ``runs`` and with this
+    study's runs (the oracle's single-run lambda times the runs, from ``--oracle``), and both
+    decisions."""
+    from bayespilot.diagnose import get_extension
+
+    ids = wrong_ids(runs)
+    lam = {r["id"]: r["lowpass"]["lambda"] for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl"))
+           for r in map(json.loads, f.read_text().splitlines()) if r}
+    now = {r["case"]["id"]: r for r in load()}
+    folder = DEFAULT_OUT.with_name("diagnose_pooled" if runs == 4 else f"diagnose_pooled{runs}")
+    before = {r["case"]["id"]: r for r in
+              (json.loads(q.read_text()) for q in folder.glob("[0-9]*.json"))}
+    print(f"The {len(ids)} cases the {runs}-run study got wrong, with {POOLED} runs "
+          f"({sum(i in now for i in ids)} done)")
+    print(f"{'id':>4}  {'truth / effect / condition':<52}{'power ' + str(runs):>9}"
+          f"{'power ' + str(POOLED):>10}  {str(runs) + ' runs':<24}{POOLED} runs")
+    named = expected = 0.0
+    for i in sorted(ids):
+        c = before[i]["case"]
+        what = f"{c['truth']} {c['effect']} {c['task']} k{c['K_theta']:g} fn{c['F_n']:g}"
+        pw = (["-", "-"] if i not in lam else
+              [f"{optimal_power(get_extension(c['truth']), k * lam[i]):.2f}"
+               for k in (runs, POOLED)])
+        dec = now[i]["decision"] if i in now else "(not run)"
+        print(f"{i:>4}  {what:<52}{pw[0]:>9}{pw[1]:>10}  {before[i]['decision']:<24}{dec}")
+        if i in now and c["truth"] != "none":
+            named += dec == c["truth"]
+            expected += float(pw[1]) if i in lam else 1.0
+    print(f"effect cases done: named {named:.0f}, the optimal test with {POOLED} runs expects "
+          f"{expected:.1f}")
+
+
 def run(chunk: int | None, shard: tuple[int, int] = (0, 1),
         only: set[int] | None = None) -> None:
     import numba
@@ -1597,6 +1631,9 @@ def main(argv=None) -> int:
         return 0
     if not args.summarize:
         run(args.chunk, (k, n), wrong_ids(args.misses_of) if args.misses_of else None)
+    if args.misses_of:
+        misses_table(args.misses_of)
+        return 0
     summarize()
     return 0
 
