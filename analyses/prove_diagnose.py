@@ -32,6 +32,8 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --pooled 8 --shard 0/2   # eight runs per case, pooled
     python analyses/prove_diagnose.py --pooled 16 --misses-of 8 --shard 0/2   # sixteen runs,
                                           # first the cases eight runs got wrong (and 1/2)
+    python analyses/prove_diagnose.py --pooled 8 --open-loop --entry threshold-shape \
+        --shard 0/2                       # open-loop twins of the soft thresholds (and 1/2)
     python analyses/prove_diagnose.py --compare-runs           # 1, 4 and 8 runs, same cases
     python analyses/prove_diagnose.py --pooled-null 100        # pooled vs one-run null tests
     python analyses/prove_diagnose.py --pooled-null 100 --rebase   # the same, tests against the
@@ -69,6 +71,9 @@ FIG_SUFFIX = ""
 PROFILE_NOISE = False
 #: Runs per case of the pooled study (``--pooled R`` sets it; 0: one run, ``diagnose``).
 POOLED = 0
+#: ``--open-loop``: each pooled run's control replaced by an open-loop twin (see
+#: :func:`pooled_recordings`).
+OPEN_LOOP = False
 #: --pooled-null: test against the base model's best fit found (decide.null_refit), as diagnose.
 REBASE = False
 #: Cut-off of the decision likelihood's low-pass, rad/s (``--omega-c`` sets it; None:
@@ -194,7 +199,17 @@ def pooled_seed(c: dict, j: int) -> int:
 
 
 def pooled_recordings(c: dict, runs: int) -> tuple[list, list, dict]:
-    """The ``runs`` blind recordings of a pooled case, their remnant fractions, its extras."""
+    """The ``runs`` blind recordings of a pooled case, their remnant fractions, its extras.
+
+    With ``OPEN_LOOP`` each run is an open-loop twin: its recorded e and theta
+    are kept, but u is the true model's noise-free output on them plus the
+    remnant of another closed-loop run of the case (seed + OPEN_LOOP_SEED), so
+    the remnant no longer feeds back into the pilot's inputs.
+    """
+    from bayespilot import presets
+    from bayespilot.diagnose import get_extension
+    from bayespilot.likelihood import Likelihood
+    from bayespilot.model import paper_model
     from bayespilot.recording import Recording
 
     recs, remnant, extra = [], [], {}
@@ -202,10 +217,53 @@ def pooled_recordings(c: dict, runs: int) -> tuple[list, list, dict]:
         sim, extra = simulate_case(dict(c, seed=pooled_seed(c, j)))
         rec = sim.recording
         meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
-        recs.append(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta,
-                              f"run{j + 1}"))
-        remnant.append(float(np.var(sim.remnant) / np.var(rec.u)))
+        u, n = rec.u, sim.remnant
+        if OPEN_LOOP:
+            model = (paper_model() if c["truth"] == "none"
+                     else get_extension(c["truth"]).build(paper_model()))
+            truth = dict(presets.paper_parameters(c["task"]), **extra)
+            n = simulate_case(dict(c, seed=pooled_seed(c, j) + OPEN_LOOP_SEED))[0].remnant
+            u = Likelihood(model, rec).response(truth) + n
+        recs.append(Recording(dict(rec.signals, u=u), rec.sample_rate_hz, rec.motion_gain,
+                              rec.task, meta, f"run{j + 1}"))
+        remnant.append(float(np.var(n) / np.var(u)))
     return recs, remnant, extra
+
+
+#: Seed offset of the remnant an open-loop twin borrows (``--open-loop``).
+OPEN_LOOP_SEED = 777777
+
+
+def open_loop_table(entry: str) -> None:
+    """``entry``'s cases decided by the closed-loop study and by its open-loop twins (same
+    runs, same inputs), per effect size, beside the optimal test's expectation."""
+    from bayespilot.diagnose import get_extension
+
+    lam = {r["id"]: r["lowpass"]["lambda"] for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl"))
+           for r in map(json.loads, f.read_text().splitlines()) if r}
+    twin = {r["case"]["id"]: r for r in load()}
+    closed_dir = OUT.with_name(OUT.name.removesuffix("_openloop"))
+    closed = {r["case"]["id"]: r for r in
+              (json.loads(q.read_text()) for q in closed_dir.glob("[0-9]*.json"))}
+    rows: dict[str, list] = {}
+    for i, t in sorted(twin.items()):
+        c = t["case"]
+        if c["truth"] != entry or i not in closed:
+            continue
+        v = rows.setdefault(c["effect"], [0, 0, 0, 0.0])
+        v[0] += 1
+        v[1] += closed[i]["decision"] == entry
+        v[2] += t["decision"] == entry
+        v[3] += (optimal_power(get_extension(entry), POOLED * lam[i]) if i in lam
+                 else math.nan)
+    print(f"{entry}, {POOLED} runs pooled: named in closed loop (the study) and in the "
+          "open-loop twins, against the optimal test's expectation")
+    print(f"{'effect':<16}{'cases':>6}{'closed loop':>13}{'open loop':>11}{'optimal':>9}")
+    tot = [0, 0, 0, 0.0]
+    for e, v in sorted(rows.items()):
+        print(f"{e:<16}{v[0]:>6}{v[1]:>13}{v[2]:>11}{v[3]:>9.1f}")
+        tot = [a + b for a, b in zip(tot, v)]
+    print(f"{'all':<16}{tot[0]:>6}{tot[1]:>13}{tot[2]:>11}{tot[3]:>9.1f}")
 
 
 def null_recordings(i: int) -> tuple[dict, list]:
@@ -1490,6 +1548,12 @@ def main(argv=None) -> int:
     ap.add_argument("--misses-of", type=int, default=0, metavar="R",
                     help="run only the cases that the stored study with R runs per case (1: "
                          "one run) decided wrongly: what more data changes, first")
+    ap.add_argument("--open-loop", action="store_true",
+                    help="with --pooled R: each run an open-loop twin (the true model's output "
+                         "on the recorded inputs plus another run's remnant); results get the "
+                         "suffix _openloop")
+    ap.add_argument("--entry", metavar="NAME",
+                    help="run only this catalogue entry's cases (or none: the controls)")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
     ap.add_argument("--pooled-null", type=int, default=0, metavar="N",
@@ -1545,7 +1609,7 @@ def main(argv=None) -> int:
                          "(analyses/results/diagnose/open_loop_null*.jsonl)")
     args = ap.parse_args(argv)
     global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE, N_CALIBRATE, \
-        NOISE_PASSES
+        NOISE_PASSES, OPEN_LOOP
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
@@ -1579,6 +1643,14 @@ def main(argv=None) -> int:
         N_CALIBRATE = args.calibrate
         OUT = OUT.with_name(OUT.name + f"_cal{N_CALIBRATE}")
         FIG_SUFFIX += f"_cal{N_CALIBRATE}"
+    if args.open_loop:
+        if not args.pooled:
+            ap.error("--open-loop needs --pooled R")
+        OPEN_LOOP = True
+        OUT = OUT.with_name(OUT.name + "_openloop")
+        FIG_SUFFIX += "_openloop"
+    if args.entry is not None and args.entry not in ("none", *EFFECTS):
+        ap.error(f"--entry: one of none, {', '.join(EFFECTS)}; got {args.entry!r}")
     if args.tag:
         if not re.fullmatch(r"[A-Za-z0-9_.-]+", args.tag):
             ap.error(f"--tag: letters, digits, _ . - only, got {args.tag!r}")
@@ -1629,8 +1701,15 @@ def main(argv=None) -> int:
     if args.width_profile:
         width_profile([int(v) for v in args.width_profile.split(",")])
         return 0
+    only = wrong_ids(args.misses_of) if args.misses_of else None
+    if args.entry is not None:
+        only = {c["id"] for c in cases() if c["truth"] == args.entry
+                and (only is None or c["id"] in only)}
     if not args.summarize:
-        run(args.chunk, (k, n), wrong_ids(args.misses_of) if args.misses_of else None)
+        run(args.chunk, (k, n), only)
+    if OPEN_LOOP and args.entry is not None:
+        open_loop_table(args.entry)
+        return 0
     if args.misses_of:
         misses_table(args.misses_of)
         return 0
