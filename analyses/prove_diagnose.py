@@ -1555,7 +1555,8 @@ def main(argv=None) -> int:
     ap.add_argument("--entry", metavar="NAME",
                     help="run only this catalogue entry's cases (or none: the controls)")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
-                    help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2)")
+                    help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2); "
+                         "with --misses-of or --entry, whose rank in that selection is")
     ap.add_argument("--pooled-null", type=int, default=0, metavar="N",
                     help="N new pooled controls (four runs each): the pooled washout and "
                          "platform tests' null distributions beside one run's on the same runs")
