@@ -351,11 +351,16 @@ def run_case(c: dict) -> dict:
             "elapsed_seconds": el}
 
 
+def study_folder(runs: int) -> Path:
+    """The stored study's results with ``runs`` runs per case (1: one run, ``diagnose``)."""
+    return DEFAULT_OUT if runs == 1 else DEFAULT_OUT.with_name(
+        "diagnose_pooled" if runs == 4 else f"diagnose_pooled{runs}")
+
+
 def wrong_ids(runs: int) -> set[int]:
     """The ids of the cases that the stored study with ``runs`` runs per case (1: one run,
     ``diagnose``; R: ``--pooled R``) decided wrongly: a name other than the truth."""
-    folder = DEFAULT_OUT if runs == 1 else DEFAULT_OUT.with_name(
-        "diagnose_pooled" if runs == 4 else f"diagnose_pooled{runs}")
+    folder = study_folder(runs)
     rs = [json.loads(p.read_text()) for p in sorted(folder.glob("[0-9]*.json"))]
     if len(rs) < len(cases()):
         raise SystemExit(f"--misses-of {runs}: {folder} holds {len(rs)} of {len(cases())} "
@@ -374,26 +379,26 @@ def misses_table(runs: int) -> None:
     lam = {r["id"]: r["lowpass"]["lambda"] for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl"))
            for r in map(json.loads, f.read_text().splitlines()) if r}
     now = {r["case"]["id"]: r for r in load()}
-    folder = DEFAULT_OUT.with_name("diagnose_pooled" if runs == 4 else f"diagnose_pooled{runs}")
     before = {r["case"]["id"]: r for r in
-              (json.loads(q.read_text()) for q in folder.glob("[0-9]*.json"))}
-    print(f"The {len(ids)} cases the {runs}-run study got wrong, with {POOLED} runs "
+              (json.loads(q.read_text()) for q in study_folder(runs).glob("[0-9]*.json"))}
+    now_runs = POOLED or 1
+    print(f"The {len(ids)} cases the {runs}-run study got wrong, with {now_runs} runs "
           f"({sum(i in now for i in ids)} done)")
     print(f"{'id':>4}  {'truth / effect / condition':<52}{'power ' + str(runs):>9}"
-          f"{'power ' + str(POOLED):>10}  {str(runs) + ' runs':<24}{POOLED} runs")
+          f"{'power ' + str(now_runs):>10}  {str(runs) + ' runs':<24}{now_runs} runs")
     named = expected = 0.0
     for i in sorted(ids):
         c = before[i]["case"]
         what = f"{c['truth']} {c['effect']} {c['task']} k{c['K_theta']:g} fn{c['F_n']:g}"
         pw = (["-", "-"] if i not in lam else
               [f"{optimal_power(get_extension(c['truth']), k * lam[i]):.2f}"
-               for k in (runs, POOLED)])
+               for k in (runs, now_runs)])
         dec = now[i]["decision"] if i in now else "(not run)"
         print(f"{i:>4}  {what:<52}{pw[0]:>9}{pw[1]:>10}  {before[i]['decision']:<24}{dec}")
         if i in now and c["truth"] != "none":
             named += dec == c["truth"]
             expected += float(pw[1]) if i in lam else 1.0
-    print(f"effect cases done: named {named:.0f}, the optimal test with {POOLED} runs expects "
+    print(f"effect cases done: named {named:.0f}, the optimal test with {now_runs} runs expects "
           f"{expected:.1f}")
 
 
