@@ -71,7 +71,7 @@ FIG_SUFFIX = ""
 PROFILE_NOISE = False
 #: Runs per case of the pooled study (``--pooled R`` sets it; 0: one run, ``diagnose``).
 POOLED = 0
-#: ``--open-loop``: each pooled run's control replaced by an open-loop twin (see
+#: ``--open-loop``: each pooled run's u replaced by an open-loop twin's (see
 #: :func:`pooled_recordings`).
 OPEN_LOOP = False
 #: --pooled-null: test against the base model's best fit found (decide.null_refit), as diagnose.
@@ -239,8 +239,7 @@ def open_loop_table(entry: str) -> None:
     runs, same inputs), per effect size, beside the optimal test's expectation."""
     from bayespilot.diagnose import get_extension
 
-    lam = {r["id"]: r["lowpass"]["lambda"] for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl"))
-           for r in map(json.loads, f.read_text().splitlines()) if r}
+    lam = oracle_lambdas()
     twin = {r["case"]["id"]: r for r in load()}
     closed_dir = OUT.with_name(OUT.name.removesuffix("_openloop"))
     closed = {r["case"]["id"]: r for r in
@@ -376,8 +375,7 @@ def misses_table(runs: int) -> None:
     from bayespilot.diagnose import get_extension
 
     ids = wrong_ids(runs)
-    lam = {r["id"]: r["lowpass"]["lambda"] for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl"))
-           for r in map(json.loads, f.read_text().splitlines()) if r}
+    lam = oracle_lambdas()
     now = {r["case"]["id"]: r for r in load()}
     before = {r["case"]["id"]: r for r in
               (json.loads(q.read_text()) for q in study_folder(runs).glob("[0-9]*.json"))}
@@ -680,6 +678,18 @@ def calibration_scales(rs: list[dict]) -> dict:
     return {e: sorted(v) for e, v in got.items()}
 
 
+def oracle_lambdas() -> dict[int, float]:
+    """Each effect case's single-run noncentrality at the default decision likelihood
+    (``--oracle``'s stored rows), by case id."""
+    lam = {}
+    for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl")):
+        for line in f.read_text().splitlines():
+            if line.strip():
+                row = json.loads(line)
+                lam[row["id"]] = row["lowpass"]["lambda"]
+    return lam
+
+
 def pooled_against_oracle(rs: list[dict]) -> dict:
     """A pooled study's naming beside the optimal test's expectation with as many runs.
 
@@ -693,12 +703,7 @@ def pooled_against_oracle(rs: list[dict]) -> dict:
     """
     from bayespilot.diagnose import get_extension
 
-    lam = {}
-    for f in sorted(DEFAULT_OUT.glob("oracle*.jsonl")):
-        for line in f.read_text().splitlines():
-            if line.strip():
-                row = json.loads(line)
-                lam[row["id"]] = row["lowpass"]["lambda"]
+    lam = oracle_lambdas()
     per: dict[str, list] = {}
     for r in rs:
         c = r["case"]
