@@ -213,14 +213,15 @@ def pooled_recordings(c: dict, runs: int) -> tuple[list, list, dict]:
     from bayespilot.recording import Recording
 
     recs, remnant, extra = [], [], {}
+    if OPEN_LOOP:
+        model = (paper_model() if c["truth"] == "none"
+                 else get_extension(c["truth"]).build(paper_model()))
     for j in range(runs):
         sim, extra = simulate_case(dict(c, seed=pooled_seed(c, j)))
         rec = sim.recording
         meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
         u, n = rec.u, sim.remnant
         if OPEN_LOOP:
-            model = (paper_model() if c["truth"] == "none"
-                     else get_extension(c["truth"]).build(paper_model()))
             truth = dict(presets.paper_parameters(c["task"]), **extra)
             n = simulate_case(dict(c, seed=pooled_seed(c, j) + OPEN_LOOP_SEED))[0].remnant
             u = Likelihood(model, rec).response(truth) + n
@@ -242,8 +243,7 @@ def open_loop_table(entry: str) -> None:
     lam = oracle_lambdas()
     twin = {r["case"]["id"]: r for r in load()}
     closed_dir = OUT.with_name(OUT.name.removesuffix("_openloop"))
-    closed = {r["case"]["id"]: r for r in
-              (json.loads(q.read_text()) for q in closed_dir.glob("[0-9]*.json"))}
+    closed = {r["case"]["id"]: r for r in load(closed_dir)}
     rows: dict[str, list] = {}
     for i, t in sorted(twin.items()):
         c = t["case"]
@@ -356,11 +356,12 @@ def study_folder(runs: int) -> Path:
         "diagnose_pooled" if runs == 4 else f"diagnose_pooled{runs}")
 
 
-def wrong_ids(runs: int) -> set[int]:
+def wrong_ids(runs: int, rs: list[dict] | None = None) -> set[int]:
     """The ids of the cases that the stored study with ``runs`` runs per case (1: one run,
-    ``diagnose``; R: ``--pooled R``) decided wrongly: a name other than the truth."""
+    ``diagnose``; R: ``--pooled R``) decided wrongly: a name other than the truth.
+    ``rs``: that study's results, if already loaded."""
     folder = study_folder(runs)
-    rs = [json.loads(p.read_text()) for p in sorted(folder.glob("[0-9]*.json"))]
+    rs = load(folder) if rs is None else rs
     if len(rs) < len(cases()):
         raise SystemExit(f"--misses-of {runs}: {folder} holds {len(rs)} of {len(cases())} "
                          "cases; that study is not complete")
@@ -374,11 +375,11 @@ def misses_table(runs: int) -> None:
     decisions."""
     from bayespilot.diagnose import get_extension
 
-    ids = wrong_ids(runs)
+    stored = load(study_folder(runs))
+    ids = wrong_ids(runs, stored)
     lam = oracle_lambdas()
     now = {r["case"]["id"]: r for r in load()}
-    before = {r["case"]["id"]: r for r in
-              (json.loads(q.read_text()) for q in study_folder(runs).glob("[0-9]*.json"))}
+    before = {r["case"]["id"]: r for r in stored}
     now_runs = POOLED or 1
     print(f"The {len(ids)} cases the {runs}-run study got wrong, with {now_runs} runs "
           f"({sum(i in now for i in ids)} done)")
@@ -439,8 +440,9 @@ def run(chunk: int | None, shard: tuple[int, int] = (0, 1),
         print(f"{case_key(c)}: {r['decision']} ({r['elapsed_seconds']:.0f} s)", flush=True)
 
 
-def load() -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted(OUT.glob("[0-9]*.json"))]
+def load(folder: Path | None = None) -> list[dict]:
+    """Every case result in ``folder`` (default: this study's ``OUT``)."""
+    return [json.loads(p.read_text()) for p in sorted((folder or OUT).glob("[0-9]*.json"))]
 
 
 def mark_concealed(rs: list[dict]) -> None:
