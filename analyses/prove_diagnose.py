@@ -1563,6 +1563,218 @@ def model_error(n_controls: int = 16, oversample: int = 1) -> None:
     print(f"{'max':<22}" + "".join(f"{v:>10.2f}" for v in lams.max(axis=0)))
 
 
+class _Twins:
+    """Open-loop twins of a pooled case's runs with fresh remnants (``--simulated-power``,
+    ``--delta-freedom``): the runs' recorded inputs fixed, u = the true model's noise-free
+    output on them plus the remnant of another closed-loop run of the case; set ``r``
+    borrows the remnants of seeds pooled_seed + OPEN_LOOP_SEED + 1000 (r + 1), set -1
+    those of the ``--open-loop`` study."""
+
+    def __init__(self, case_id: int, runs: int):
+        from bayespilot import presets
+        from bayespilot.diagnose import get_extension
+        from bayespilot.likelihood import Likelihood
+        from bayespilot.model import paper_model
+
+        by_id = {c["id"]: c for c in cases()}
+        if case_id not in by_id or by_id[case_id]["truth"] in ("none", "control-saturation"):
+            raise SystemExit(f"case {case_id}: not an effect case with a GLS test")
+        self.case = c = by_id[case_id]
+        self.base_model = paper_model()
+        self.ext = get_extension(c["truth"])
+        self.model = self.ext.build(self.base_model)
+        sims = [simulate_case(dict(c, seed=pooled_seed(c, j))) for j in range(runs)]
+        self.extra = sims[0][1]
+        self.truth = dict(presets.paper_parameters(c["task"]), **self.extra)
+        self.recordings = [s.recording for s, _ in sims]
+        self.clean = [Likelihood(self.model, rec).response(self.truth) for rec in self.recordings]
+
+    def run(self, j: int, r: int):
+        from bayespilot.recording import Recording
+
+        c, rec = self.case, self.recordings[j]
+        n = simulate_case(dict(c, seed=pooled_seed(c, j) + OPEN_LOOP_SEED + 1000 * (r + 1)))[0]
+        return Recording(dict(rec.signals, u=self.clean[j] + n.remnant), rec.sample_rate_hz,
+                         rec.motion_gain, rec.task, {}, f"run{j + 1}")
+
+    def base_stages(self, rec, seed: int):
+        """diagnose's base fit, noise model and GLS fit of one recording."""
+        from bayespilot.diagnose import SKIP_SECONDS, _base_gls
+        from bayespilot.diagnose import decide as D
+        from bayespilot.fit.fast import fit_fast
+
+        fit = fit_fast(rec, self.base_model, seed=seed, n_starts=4, profile_step=0.005)
+        start = {q: v for q, v in fit.params.items() if q in self.base_model.parameter_names}
+        _, noise, base = _base_gls(rec, self.base_model, start,
+                                   skip=int(round(SKIP_SECONDS * rec.sample_rate_hz)),
+                                   omega_c=D.OMEGA_C)
+        return noise, base
+
+    def best_imitation(self, j: int, noise):
+        """The base model's best fit to run j's noise-free extended response (``_best_base``)."""
+        from bayespilot.diagnose import decide as D
+        from bayespilot.recording import Recording
+
+        rec = self.recordings[j]
+        clean = Recording(dict(rec.signals, u=self.clean[j]), rec.sample_rate_hz,
+                          rec.motion_gain, rec.task, {}, "clean")
+        wl, fit = D.fit_base_gls(self.base_model, clean,
+                                 {q: self.truth[q] for q in self.base_model.parameter_names},
+                                 noise)
+        return wl, _best_base(wl, fit)
+
+
+def _power_file(case_id: int, runs: int, stem: str, shard: tuple[int, int]) -> Path:
+    folder = DEFAULT_OUT.with_name(f"diagnose_pooled{runs}_openloop")
+    folder.mkdir(parents=True, exist_ok=True)
+    k, n = shard
+    return folder / (f"{stem}_{case_id}_{k}of{n}.jsonl" if n > 1 else f"{stem}_{case_id}.jsonl")
+
+
+def simulated_power(case_id: int, runs: int, n_sets: int, shard: tuple[int, int]) -> None:
+    """The pooled test's real power on one case against the noncentral chi2's.
+
+    ``n_sets`` sets of ``runs`` open-loop twins of the case (:class:`_Twins`, set r
+    its own remnants), each diagnosed as the study does (``diagnose_pooled``, every
+    candidate, B = 0: the decision does not use the bootstrap).  The oracle's
+    lambda is computed run by run on set -1's noise models.  One line per set in
+    ``analyses/results/diagnose_pooled<R>_openloop/power_<id>*.jsonl`` (resumable);
+    the summary reads every shard's file.
+    """
+    import warnings
+
+    from scipy import stats
+    from tqdm import tqdm
+
+    from bayespilot.diagnose import ALPHA, diagnose_pooled
+    from bayespilot.diagnose import decide as D
+
+    import numba
+
+    numba.set_num_threads(1)
+    tw = _Twins(case_id, runs)
+    out = _power_file(case_id, runs, "power", shard)
+    files = sorted(out.parent.glob(f"power_{case_id}*.jsonl"))
+    rows = [json.loads(line) for f in files for line in f.read_text().splitlines() if line.strip()]
+    if not any("lambda" in row for row in rows) and shard[0] == 0:
+        lam = []
+        for j in range(runs):
+            rec = tw.run(j, -1)
+            noise, base = tw.base_stages(rec, 0)
+            s2 = math.exp(2.0 * base.neg_log_lik / D.Whitened(tw.base_model, rec, noise).m - 1.0)
+            wl, fit = tw.best_imitation(j, noise)
+            lam.append(wl.m * math.exp(2.0 * fit.neg_log_lik / wl.m - 1.0) / s2)
+        rows.append({"lambda": lam})
+        with open(out, "a") as f:
+            f.write(json.dumps(rows[-1]) + "\n")
+    done = {row["set"] for row in rows if "set" in row}
+    todo = [r for r in range(n_sets) if r % shard[1] == shard[0] and r not in done]
+    for r in tqdm(todo, desc=f"case {case_id}, {runs} twins", unit="set"):
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = diagnose_pooled([tw.run(j, r) for j in range(runs)], seed=0, n_bootstrap=0)
+        cand = next(x for x in res.ranking if x.physics == tw.ext.name)
+        row = {"set": r, "decision": res.physics, "stat": cand.statistic, "p": cand.p_value,
+               "params": cand.params, "rebase_gain": sum(g["gain"] for g in res.settings["rebased"]),
+               "seconds": time.perf_counter() - t0}
+        rows.append(row)
+        with open(out, "a") as f:
+            f.write(json.dumps(row) + "\n")
+    sets = [row for row in rows if "set" in row]
+    lam = next((row["lambda"] for row in rows if "lambda" in row), None)
+    if not sets or lam is None:
+        return
+    st = np.array([row["stat"] for row in sets])
+    named = sum(row["decision"] == tw.ext.name for row in sets)
+    big = float(sum(lam))
+    power = optimal_power(tw.ext, big)
+    crit = math.sqrt(stats.chi2.isf(2.0 * ALPHA / 6, 1))
+    print(f"case {case_id} ({case_key(tw.case)}), {runs} open-loop twins, {len(sets)} sets:")
+    print(f"  lambda per run {np.round(lam, 2).tolist()}, in all {big:.1f}")
+    print(f"  2 d(-ln L): mean {st.mean():.2f} +- {st.std() / math.sqrt(len(st)):.2f} (noncentral "
+          f"chi2: {1 + big:.1f}); named {named} of {len(sets)} ({named / len(sets):.2f}; "
+          f"noncentral chi2: {power:.2f}); other names: "
+          f"{sorted({row['decision'] for row in sets} - {tw.ext.name, 'none'}) or 'none'}")
+    if tw.ext.boundary_null and tw.ext.df == 1 and 0 < named < len(sets):
+        implied = (crit - stats.norm.isf(named / len(sets))) ** 2
+        print(f"  the lambda that gives the measured power: {implied:.1f} ({implied / big:.0%} of "
+              "the oracle's)")
+    print(f"  the base model refitted from the extensions' fits gained a mean "
+          f"{np.mean([row['rebase_gain'] for row in sets]):.2f} in -ln L per set")
+
+
+def delta_freedom(case_id: int, runs: int, n_sets: int, shard: tuple[int, int]) -> None:
+    """What delta_abs's freedom buys the crisp dead zone on twins of a soft-threshold case.
+
+    Per run of ``n_sets`` sets of open-loop twins (:class:`_Twins`): the soft model at
+    the true width (every other parameter refitted, from the truth and from the crisp
+    fit) against the crisp dead zone with delta_abs held at delta* (its value in the
+    base model's best imitation of the noise-free soft response, the others refitted)
+    and with delta_abs free (scanned, refined, and multi-started over delta_abs,
+    ``_best_base``).  Linear theory: 2 d(-ln L) has mean lambda + 1 against the first,
+    lambda against the second, and freeing delta_abs gains 1 (one parameter).  One
+    line per run in ``.../delta_freedom_<id>*.jsonl`` (resumable by set).
+    """
+    from tqdm import tqdm
+
+    from bayespilot.diagnose import decide as D
+
+    import numba
+
+    numba.set_num_threads(1)
+    tw = _Twins(case_id, runs)
+    if tw.case["truth"] != "threshold-shape":
+        raise SystemExit(f"--delta-freedom: case {case_id} is not a threshold-shape case")
+    out = _power_file(case_id, runs, "delta_freedom", shard)
+    files = sorted(out.parent.glob(f"delta_freedom_{case_id}*.jsonl"))
+    rows = [json.loads(line) for f in files for line in f.read_text().splitlines() if line.strip()]
+    done = {row["set"] for row in rows}
+    bm, em = tw.base_model, tw.model
+    names = bm.parameter_names
+    but_delta = tuple(q for q in names if q != "delta_abs")
+    but_w = tuple(q for q in em.parameter_names if q != "w_soft")
+    todo = [r for r in range(n_sets) if r % shard[1] == shard[0] and r not in done]
+    for r in tqdm(todo, desc=f"case {case_id}, delta's freedom", unit="set"):
+        for j in range(runs):
+            rec = tw.run(j, r)
+            noise, base = tw.base_stages(rec, j)
+            wl_clean, star = tw.best_imitation(j, noise)
+            wl, wle = D.Whitened(bm, rec, noise), D.Whitened(em, rec, noise)
+            s2 = math.exp(2.0 * base.neg_log_lik / wl.m - 1.0)
+            fixed = D._gls_refine(wl, star.params, but_delta)
+            free = _best_base(wl, D.refine_threshold(bm, rec, base, noise))
+            free = min(free, D._gls_refine(wl, fixed.params, names), key=lambda f: f.neg_log_lik)
+            soft = min(D._gls_refine(wle, tw.truth, but_w),
+                       D._gls_refine(wle, {**free.params, "w_soft": tw.extra["w_soft"]}, but_w),
+                       key=lambda f: f.neg_log_lik)
+            row = {"set": r, "run": j,
+                   "lambda": wl_clean.m * math.exp(2.0 * star.neg_log_lik / wl_clean.m - 1.0) / s2,
+                   "delta_star": star.params["delta_abs"], "delta_free": free.params["delta_abs"],
+                   "T_fixed": 2.0 * (fixed.neg_log_lik - soft.neg_log_lik),
+                   "T_free": 2.0 * (free.neg_log_lik - soft.neg_log_lik),
+                   "delta_gain": 2.0 * (fixed.neg_log_lik - free.neg_log_lik)}
+            rows.append(row)
+            with open(out, "a") as f:
+                f.write(json.dumps(row) + "\n")
+    if not rows:
+        return
+
+    def mean(key):
+        v = np.array([row[key] for row in rows])
+        return f"{v.mean():.2f} +- {v.std() / math.sqrt(len(v)):.2f}"
+
+    lam = np.mean([row["lambda"] for row in rows])
+    gain = np.array([row["delta_gain"] for row in rows])
+    print(f"case {case_id}, {len(rows)} twin runs ({len({row['set'] for row in rows})} sets), "
+          f"mean lambda {lam:.2f}:")
+    print(f"  2 d(-ln L), crisp with delta_abs at delta* against soft at the true width: "
+          f"{mean('T_fixed')} (theory lambda + 1 = {lam + 1:.2f})")
+    print(f"  the same with delta_abs free: {mean('T_free')} (theory lambda = {lam:.2f})")
+    print(f"  what freeing delta_abs gains: {mean('delta_gain')} (one parameter: 1); more than 3 "
+          f"in {int((gain > 3).sum())} of {len(gain)} runs")
+
+
 def width_profile(ids: list[int]) -> None:
     """-ln L of the soft dead zone over fixed corner widths, against the crisp dead zone.
 
@@ -1685,6 +1897,16 @@ def main(argv=None) -> int:
                     help="N controls, closed loop and with the remnant replaced (open loop): "
                          "the washout's, platform's and drifts' null distributions in each "
                          "(analyses/results/diagnose/open_loop_null*.jsonl)")
+    ap.add_argument("--simulated-power", type=int, default=None, metavar="ID",
+                    help="with --pooled R: the pooled test's power on --sets sets of R open-loop "
+                         "twins of case ID with fresh remnants, against the noncentral chi2's "
+                         "(analyses/results/diagnose_pooled<R>_openloop/power_<ID>*.jsonl)")
+    ap.add_argument("--delta-freedom", type=int, default=None, metavar="ID",
+                    help="with --pooled R: per run of --sets sets of twins of soft-threshold "
+                         "case ID, what delta_abs's freedom buys the crisp dead zone "
+                         "(.../delta_freedom_<ID>*.jsonl)")
+    ap.add_argument("--sets", type=int, default=48, metavar="N",
+                    help="sets of twins for --simulated-power / --delta-freedom (default 48)")
     args = ap.parse_args(argv)
     global OUT, FIG_SUFFIX, PROFILE_NOISE, POOLED, OMEGA_C, OVERSAMPLE, REBASE, N_CALIBRATE, \
         NOISE_PASSES, OPEN_LOOP
@@ -1740,6 +1962,14 @@ def main(argv=None) -> int:
             raise ValueError
     except ValueError:
         ap.error(f"--shard: K/N with 0 <= K < N, got {args.shard!r}")
+    if args.simulated_power is not None or args.delta_freedom is not None:
+        if not args.pooled or args.sets < 1:
+            ap.error("--simulated-power / --delta-freedom need --pooled R and --sets >= 1")
+        if args.simulated_power is not None:
+            simulated_power(args.simulated_power, args.pooled, args.sets, (k, n))
+        else:
+            delta_freedom(args.delta_freedom, args.pooled, args.sets, (k, n))
+        return 0
     if args.example:
         example()
         return 0
