@@ -1300,6 +1300,25 @@ def open_loop_null(n_cases: int, shard: tuple[int, int] = (0, 1)) -> None:
             print(_null_line(name, label, d, p, null))
 
 
+def critical_value(ext) -> float:
+    """The critical 2 d(-ln L) of extension ``ext``'s test at diagnose's per-candidate level
+    (alpha over six candidates; the chi-bar-squared value for a one-parameter boundary null)."""
+    from scipy import stats
+
+    from bayespilot.diagnose import ALPHA
+
+    level = ALPHA / 6
+    if ext.boundary_null and ext.df == 1:
+        return float(stats.chi2.isf(2.0 * level, 1))
+    return float(stats.chi2.isf(level, ext.df))
+
+
+def _mean_square(neg_log_lik: float, m: int) -> float:
+    """The whitened residual's mean square of a GLS fit from its -ln L over m samples
+    (-ln L = m/2 (ln s2 + 1), the noise level profiled out)."""
+    return math.exp(2.0 * neg_log_lik / m - 1.0)
+
+
 def conditional_power(ext, stat_before: float, runs_before: int, runs: int, lam: float) -> float:
     """Power of the optimal test with ``runs`` runs when ``runs_before`` of them are already
     recorded and gave the statistic ``stat_before`` (2 d(-ln L) of the right extension).
@@ -1315,14 +1334,11 @@ def conditional_power(ext, stat_before: float, runs_before: int, runs: int, lam:
     """
     from scipy import stats
 
-    from bayespilot.diagnose import ALPHA
-
-    level = ALPHA / 6
     a, b = math.sqrt(runs_before / runs), math.sqrt((runs - runs_before) / runs)
     m = a * math.sqrt(max(stat_before, 0.0)) + b * math.sqrt(max((runs - runs_before) * lam, 0.0))
+    crit = critical_value(ext)
     if ext.boundary_null and ext.df == 1:
-        return float(stats.norm.sf((math.sqrt(stats.chi2.isf(2.0 * level, 1)) - m) / b))
-    crit = stats.chi2.isf(level, ext.df)
+        return float(stats.norm.sf((math.sqrt(crit) - m) / b))
     return float(stats.ncx2.sf(crit / b ** 2, ext.df, max((m / b) ** 2, 1e-12)))
 
 
@@ -1332,12 +1348,7 @@ def optimal_power(ext, lam: float) -> float:
     chi-bar-squared critical value for a one-parameter boundary null)."""
     from scipy import stats
 
-    from bayespilot.diagnose import ALPHA
-
-    level = ALPHA / 6
-    crit = (stats.chi2.isf(2.0 * level, 1) if ext.boundary_null and ext.df == 1
-            else stats.chi2.isf(level, ext.df))
-    return float(stats.ncx2.sf(crit, ext.df, max(lam, 1e-12)))
+    return float(stats.ncx2.sf(critical_value(ext), ext.df, max(lam, 1e-12)))
 
 
 #: Starts of delta_abs (IPUT) for the oracle's base fit of the noise-free extended response.
@@ -1425,11 +1436,11 @@ def oracle(shard: tuple[int, int] = (0, 1)) -> None:
                "K_theta": c["K_theta"], "F_n": c["F_n"], "df": ext.df}
         for tag, om in (("lowpass", D.OMEGA_C), ("fullband", math.inf)):
             _, noise, base = _base_gls(rec, base_model, start, skip=skip, omega_c=om)
-            s2 = math.exp(2.0 * base.neg_log_lik / D.Whitened(base_model, rec, noise).m - 1.0)
+            s2 = _mean_square(base.neg_log_lik, D.Whitened(base_model, rec, noise).m)
             base_truth = {q: truth[q] for q in base_model.parameter_names}
             wl, misfit = D.fit_base_gls(base_model, clean, base_truth, noise)
             misfit = _best_base(wl, misfit)
-            ms = math.exp(2.0 * misfit.neg_log_lik / wl.m - 1.0)
+            ms = _mean_square(misfit.neg_log_lik, wl.m)
             lam = wl.m * ms / s2
             row[tag] = {"lambda": lam, "power": optimal_power(ext, lam)}
         with open(out, "a") as f:
@@ -1646,7 +1657,7 @@ def simulated_power(case_id: int, runs: int, n_sets: int, shard: tuple[int, int]
     from scipy import stats
     from tqdm import tqdm
 
-    from bayespilot.diagnose import ALPHA, diagnose_pooled
+    from bayespilot.diagnose import diagnose_pooled
     from bayespilot.diagnose import decide as D
 
     import numba
@@ -1661,9 +1672,9 @@ def simulated_power(case_id: int, runs: int, n_sets: int, shard: tuple[int, int]
         for j in range(runs):
             rec = tw.run(j, -1)
             noise, base = tw.base_stages(rec, 0)
-            s2 = math.exp(2.0 * base.neg_log_lik / D.Whitened(tw.base_model, rec, noise).m - 1.0)
+            s2 = _mean_square(base.neg_log_lik, D.Whitened(tw.base_model, rec, noise).m)
             wl, fit = tw.best_imitation(j, noise)
-            lam.append(wl.m * math.exp(2.0 * fit.neg_log_lik / wl.m - 1.0) / s2)
+            lam.append(wl.m * _mean_square(fit.neg_log_lik, wl.m) / s2)
         rows.append({"lambda": lam})
         with open(out, "a") as f:
             f.write(json.dumps(rows[-1]) + "\n")
@@ -1689,7 +1700,7 @@ def simulated_power(case_id: int, runs: int, n_sets: int, shard: tuple[int, int]
     named = sum(row["decision"] == tw.ext.name for row in sets)
     big = float(sum(lam))
     power = optimal_power(tw.ext, big)
-    crit = math.sqrt(stats.chi2.isf(2.0 * ALPHA / 6, 1))
+    crit = math.sqrt(critical_value(tw.ext))
     print(f"case {case_id} ({case_key(tw.case)}), {runs} open-loop twins, {len(sets)} sets:")
     print(f"  lambda per run {np.round(lam, 2).tolist()}, in all {big:.1f}")
     print(f"  2 d(-ln L): mean {st.mean():.2f} +- {st.std() / math.sqrt(len(st)):.2f} (noncentral "
@@ -1741,7 +1752,7 @@ def delta_freedom(case_id: int, runs: int, n_sets: int, shard: tuple[int, int]) 
             noise, base = tw.base_stages(rec, j)
             wl_clean, star = tw.best_imitation(j, noise)
             wl, wle = D.Whitened(bm, rec, noise), D.Whitened(em, rec, noise)
-            s2 = math.exp(2.0 * base.neg_log_lik / wl.m - 1.0)
+            s2 = _mean_square(base.neg_log_lik, wl.m)
             fixed = D._gls_refine(wl, star.params, but_delta)
             free = _best_base(wl, D.refine_threshold(bm, rec, base, noise))
             free = min(free, D._gls_refine(wl, fixed.params, names), key=lambda f: f.neg_log_lik)
@@ -1749,7 +1760,7 @@ def delta_freedom(case_id: int, runs: int, n_sets: int, shard: tuple[int, int]) 
                        D._gls_refine(wle, {**free.params, "w_soft": tw.extra["w_soft"]}, but_w),
                        key=lambda f: f.neg_log_lik)
             row = {"set": r, "run": j,
-                   "lambda": wl_clean.m * math.exp(2.0 * star.neg_log_lik / wl_clean.m - 1.0) / s2,
+                   "lambda": wl_clean.m * _mean_square(star.neg_log_lik, wl_clean.m) / s2,
                    "delta_star": star.params["delta_abs"], "delta_free": free.params["delta_abs"],
                    "T_fixed": 2.0 * (fixed.neg_log_lik - soft.neg_log_lik),
                    "T_free": 2.0 * (free.neg_log_lik - soft.neg_log_lik),
