@@ -3,6 +3,7 @@
 Run:  python benchmarks/bench_diagnose.py [--repeats 1] [--bootstrap 39] [--runs R]
                                           [--omega-c RAD_S] [--oversample M]
                                           [--washout OMEGA_W] [--calibrate B]
+                                          [--bayes-factor]
 
 Simulates task FD, K_theta = 1, K_n = 0.104 (F_n ~ 0.2, Table 4) with the
 paper's model, loads the kernels once (a short diagnose), then times the full
@@ -11,7 +12,8 @@ diagnosis with numba limited to one thread; prints the wall time per stage.
 ``--omega-c inf --oversample 8`` the whole-band decision likelihood with the
 motion channel at 8x.  ``--washout 0.5`` simulates a washout of 0.5 rad/s, so
 that a candidate is chosen and its test calibrated (``--calibrate`` replicates,
-default 39): the slowest path.
+default 39): the slowest path.  ``--bayes-factor`` then also times
+``bayes_factor`` (nested sampling, its defaults) on the diagnosed run.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import numba
 import numpy as np
 
 from bayespilot import presets
-from bayespilot.diagnose import diagnose, diagnose_pooled, get_extension
+from bayespilot.diagnose import bayes_factor, diagnose, diagnose_pooled, get_extension
 from bayespilot.model import paper_model
 from bayespilot.simulate import simulate
 
@@ -41,7 +43,11 @@ def main(argv=None):
                     help="simulate a washout of this break frequency (rad/s)")
     ap.add_argument("--calibrate", type=int, default=39, metavar="B",
                     help="replicates of the chosen candidate's calibration (default 39)")
+    ap.add_argument("--bayes-factor", action="store_true",
+                    help="also time bayes_factor on the diagnosed run (one recording only)")
     args = ap.parse_args(argv)
+    if args.bayes_factor and args.runs > 1:
+        ap.error("--bayes-factor takes one run")
     numba.set_num_threads(1)
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs; "
           f"numba threads {numba.get_num_threads()}; load {os.getloadavg()}")
@@ -77,6 +83,16 @@ def main(argv=None):
     print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
     print("stages (last run): " + ", ".join(f"{k} {v:.1f} s"
                                             for k, v in res.settings["timings"].items()))
+    if args.bayes_factor:
+        t0 = time.perf_counter()
+        bf = bayes_factor(res, rec, seed=0)
+        print(f"bayes_factor: {time.perf_counter() - t0:.1f} s; {bf.summary_line()}")
+        print("  likelihood calls: base "
+              f"{bf.base.n_calls}, extended {bf.extended.n_calls}; runs kept: base "
+              f"{sum(r['used'] for r in bf.settings['runs_base'])}/"
+              f"{len(bf.settings['runs_base'])}, extended "
+              f"{sum(r['used'] for r in bf.settings['runs_extended'])}/"
+              f"{len(bf.settings['runs_extended'])}")
     print(f"load at the end: {os.getloadavg()}")
 
 

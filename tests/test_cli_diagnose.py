@@ -158,3 +158,45 @@ def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, 
     d = json.loads(out.read_text())["chosen"]["posterior"]
     assert d["params"]["omega_w"]["median"] == pytest.approx(
         float(np.median(back.draws("omega_w"))))
+
+
+def test_diagnose_bayes_factor_option(rec_stem, tmp_path, capsys, monkeypatch):
+    """--bayes-factor weighs the decision's candidate (nested sampling stubbed: its numbers
+    are tests/test_diagnose.py's) and puts ln BF in the summary and JSON; with two
+    recordings it is a usage error, and what cannot be weighed is a warning."""
+    import bayespilot.diagnose as dg
+
+    code, _, err = _run(capsys, "diagnose", rec_stem, rec_stem, "--bayes-factor")
+    assert code == 2 and "--bayes-factor: takes one recording" in err
+
+    class Stub:
+        physics = "threshold-shape"
+
+        def summary_line(self):
+            return "Bayes factor (threshold-shape : base, nested sampling): ln BF = -1.50"
+
+        def to_dict(self):
+            return {"physics": self.physics, "log_bayes_factor": -1.5}
+
+    seen = {}
+
+    def stub(res, rec, **kw):
+        seen.update(kw, physics=res.physics, n=rec.n_samples)
+        res.bayes_factor = Stub()
+        return res.bayes_factor
+
+    monkeypatch.setattr(dg, "bayes_factor", stub)
+    out = tmp_path / "d.json"
+    code, stdout, err = _run(capsys, "diagnose", rec_stem, "--bootstrap", "0", "--seed", "4",
+                             "--bayes-factor", "--json", out)
+    assert code == 0, err
+    assert seen["seed"] == 4 and seen["physics"] == "none" and seen["n"] == 3000
+    assert stdout.count("ln BF = -1.50") == 2  # said when computed, and in the summary
+    assert json.loads(out.read_text())["bayes_factor"]["log_bayes_factor"] == -1.5
+
+    def refuse(res, rec, **kw):
+        raise ValueError("no candidate of this diagnosis has a GLS fit to weigh")
+
+    monkeypatch.setattr(dg, "bayes_factor", refuse)
+    code, stdout, err = _run(capsys, "diagnose", rec_stem, "--bootstrap", "0", "--bayes-factor")
+    assert code == 0 and "warning: no Bayes factor: no candidate" in err

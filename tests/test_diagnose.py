@@ -381,3 +381,118 @@ def test_summary_says_when_the_base_was_refitted(control_result):
         assert "-ln L (GLS) better by 1.23" in res.summary()
     finally:
         res.settings["rebased"] = rebased
+
+
+def _laplace_log_z(lik, model, start):
+    """ln Z by the Laplace approximation: the optimum (Nelder-Mead, then BFGS), the Hessian
+    of -ln L by central differences, a prior uniform on the model's bounds (plain NumPy and
+    scipy.optimize; no nested sampling)."""
+    from scipy import optimize
+
+    names = model.parameter_names
+    lo, hi = model.bounds
+
+    def f(x):
+        return lik.neg_log_lik(dict(zip(names, x)))
+
+    x0 = np.array([start[n] for n in names])
+    sol = optimize.minimize(f, x0, method="Nelder-Mead",
+                            options={"maxiter": 20000, "xatol": 1e-7, "fatol": 1e-7})
+    sol = optimize.minimize(f, sol.x, method="BFGS")
+    x, k = sol.x, sol.x.size
+    h = 1e-4 * np.maximum(np.abs(x), 1e-2)
+    H = np.empty((k, k))
+    for i in range(k):
+        for j in range(k):
+            ei, ej = np.zeros(k), np.zeros(k)
+            ei[i], ej[j] = h[i], h[j]
+            H[i, j] = (f(x + ei + ej) - f(x + ei - ej) - f(x - ei + ej) + f(x - ei - ej)) \
+                / (4 * h[i] * h[j])
+    return (-sol.fun + 0.5 * k * np.log(2 * np.pi) - 0.5 * np.linalg.slogdet(H)[1]
+            - np.sum(np.log(hi - lo)))
+
+
+def test_nested_bayes_factor_matches_the_laplace_approximation():
+    """A linear pilot (delta_abs fixed at 0, so both posteriors are one near-Gaussian mode)
+    with a 0.8-rad/s washout, 40.96 s: ln BF(washout : base) by nested sampling equals the
+    Laplace approximation of the same two evidences within its stated error (measured: 40.3
+    +- 1.6 at 50 live points, 39.4 +- 0.8 at 2 x 100, Laplace 39.7)."""
+    from bayespilot.diagnose.nested import nested_bayes_factor
+    from bayespilot.noise import ARNoise
+    from bayespilot.sample import COLOURED_DISCARD
+
+    base = paper_model().fix(delta_abs=0.0)
+    ext = get_extension("motion-washout").build(base)
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8, delta_abs=0.0)
+    rec = simulate(get_extension("motion-washout").build(paper_model()), p, task="FD",
+                   motion_gain=1.0, remnant_gain=0.063, seed=22, duration=40.96).recording
+    lik = Likelihood(ext, rec, discard=COLOURED_DISCARD)
+    noise = ARNoise.from_residual(lik.residual({n: p[n] for n in ext.parameter_names})[lik.used],
+                                  order=4)
+    ref = (_laplace_log_z(Likelihood(ext, rec, noise=noise, discard=COLOURED_DISCARD), ext, p)
+           - _laplace_log_z(Likelihood(base, rec, noise=noise, discard=COLOURED_DISCARD), base, p))
+    bf = nested_bayes_factor(rec, base, ext, noise=noise, physics="motion-washout", nlive=50,
+                             runs=1, seed=0)
+    assert abs(bf.log_bayes_factor - ref) < 3 * bf.log_bayes_factor_err
+    assert bf.log_bayes_factor > 30 and bf.favours == "motion-washout"
+    assert bf.category == "decisive"
+    assert bf.prior == {"omega_w": [0.02, 5.0]}
+    # the extended model nests the base one: it reaches at least the base model's best
+    assert bf.extended.max_log_lik > bf.base.max_log_lik
+    d = bf.to_dict()
+    assert d["log_bayes_factor"] == pytest.approx(d["log_z_extended"] - d["log_z_base"])
+    with pytest.raises(ValueError, match="runs"):
+        nested_bayes_factor(rec, base, ext, noise=noise, runs=0)
+    with pytest.raises(TypeError, match="ARNoise"):
+        nested_bayes_factor(rec, base, ext, noise=None)
+
+
+def test_bayes_factor_weighs_the_chosen_or_the_top_candidate(washout_case, control_result,
+                                                             monkeypatch, tmp_path):
+    """bayes_factor passes the diagnosis's own models and fits to the nested sampler (stubbed
+    here: its numbers are the test above's), stores the result where JSON, summary and report
+    find it, and refuses what it cannot weigh."""
+    import json
+
+    from bayespilot.diagnose import bayes_factor
+    from bayespilot.diagnose import nested as bf_module
+    from bayespilot.noise import ARNoise
+
+    calls = []
+
+    def stub(recording, base_model, extended_model, **kw):
+        calls.append((recording, base_model, extended_model, kw))
+        ev = type("Ev", (), {"log_z": 10.0, "log_z_err": 0.5, "max_log_lik": 20.0})()
+        return bf_module.ExtensionBayesFactor(kw["physics"], 4.0, 0.7, "very strong",
+                                              kw["physics"], None, ev, ev, {"omega_w": [0.02, 5]},
+                                              {"runs": 3, "nlive": 200})
+
+    monkeypatch.setattr(bf_module, "nested_bayes_factor", stub)
+    rec, res = washout_case
+    out = bayes_factor(res, rec, seed=3)
+    assert res.bayes_factor is out and out.schwarz == pytest.approx(res.chosen.log_bayes_factor)
+    r, base_model, ext_model, kw = calls[-1]
+    assert r is rec and base_model is res.base_model and ext_model is res.chosen.model
+    assert isinstance(kw["noise"], ARNoise) and kw["seed"] == 3
+    assert kw["base_params"] == res.base["gls_params"] and kw["physics"] == "motion-washout"
+    assert kw["extended_params"]["omega_w"] == pytest.approx(res.chosen.params["omega_w"])
+    d = json.loads(res.to_json())["bayes_factor"]
+    assert d["physics"] == "motion-washout" and d["log_bayes_factor"] == 4.0
+    assert "ln BF = +4.00 +- 0.70" in res.summary()
+    assert "<h2>Bayes factor</h2>" in res.report(tmp_path / "rep")["html"].read_text()
+    # 'none': the top-ranked candidate with a GLS fit
+    crec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=21,
+                    duration=40.96).recording
+    out = bayes_factor(control_result, crec)
+    top = next(c for c in control_result.ranking if c.physics != "control-saturation")
+    assert out.physics == top.physics == calls[-1][3]["physics"]
+    with pytest.raises(ValueError, match="flat tops"):
+        bayes_factor(control_result, crec, physics="control-saturation")
+    with pytest.raises(ValueError, match="unknown extension"):
+        bayes_factor(control_result, crec, physics="wind")
+    short = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=3,
+                     duration=20.48).recording
+    with pytest.raises(ValueError, match="not the recording that was diagnosed"):
+        bayes_factor(res, short)
+    with pytest.raises(TypeError, match="Recording"):
+        bayes_factor(res, rec.u)

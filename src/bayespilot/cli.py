@@ -644,10 +644,30 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
 
 
+def _weigh(args: argparse.Namespace, res, rec) -> None:
+    """--bayes-factor: ln BF of the chosen (or top-ranked) extension, stored on ``res``."""
+    from .diagnose import bayes_factor
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            name = res.physics if res.physics != "none" else "the top-ranked candidate"
+            _say(args, f"weighing {name} against the base model by nested sampling (three "
+                       "runs per model, minutes) ...")
+            bf = bayes_factor(res, rec, seed=args.seed, progress=_progress(args))
+    except ValueError as exc:  # e.g. control-saturation: nothing to weigh
+        print(f"{PROG}: warning: no Bayes factor: {exc}", file=sys.stderr)
+        return
+    _say(args, bf.summary_line())
+
+
 def _cmd_diagnose(args: argparse.Namespace) -> int:
     from .diagnose import NAMES, diagnose, diagnose_pooled, get_extension, sample_chosen
     from .diagnose.pooled import PoolingWarning, pooling_disagreements
 
+    if args.bayes_factor and len(args.recording) > 1:
+        raise UsageError("argument --bayes-factor: takes one recording (the evidence of a "
+                         "pooled model is not built)")
     if args.posterior is not None:
         if len(args.recording) > 1:
             raise UsageError("argument --posterior: takes one recording (the posterior of a "
@@ -702,6 +722,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                 raise CommandFailed(f"{args.posterior}: cannot write the posterior "
                                     f"({exc.strerror or exc})") from None
             _say(args, f"wrote {args.posterior}")
+    if args.bayes_factor:
+        _weigh(args, res, recs[0])
     print(res.summary())
     if args.json:
         try:
@@ -1078,7 +1100,10 @@ residuals.png, evidence.png, candidates.png, diagnosis.json and report.html
 posterior of the chosen extended model (emcee, started at its fit; tens of
 seconds), writes it as netCDF (readable by 'bayespilot plot') and adds its
 medians and 90 % intervals to the summary and JSON and posterior.png to the
-report.
+report. --bayes-factor also weighs the chosen extension (on 'none': the
+top-ranked candidate) against the base model by nested sampling: ln BF with
+priors uniform on the bounds, three runs per model, several minutes at
+N = 8192; beside the decision, which stays the likelihood-ratio test's.
 
 Several recordings (runs of one condition) are diagnosed together: each run
 keeps its own pilot parameters, the extension's parameters are shared, and
@@ -1302,6 +1327,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="one recording: also sample the posterior of the chosen extended model "
                         "(emcee, coloured likelihood) and write it to this netCDF file; the "
                         "summary, JSON and report then include it")
+    p.add_argument("--bayes-factor", action="store_true",
+                   help="one recording: also weigh the chosen extension (on 'none': the "
+                        "top-ranked candidate) against the base model by nested sampling "
+                        "(ln BF, minutes); the summary, JSON and report then include it")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_diagnose)
 

@@ -23,7 +23,9 @@
    calibrated test gives way to the next.
 4. **Model**: the chosen extension's parameters with standard errors;
    :func:`~bayespilot.diagnose.posterior.sample_chosen` then samples the
-   extended model's posterior (optional, tens of seconds).
+   extended model's posterior (optional, tens of seconds), and
+   :func:`~bayespilot.diagnose.nested.bayes_factor` weighs an extension
+   against the base model by nested sampling (optional, minutes).
 5. **Show**: :meth:`DiagnosisResult.report` writes PNG figures, a
    self-contained HTML report and a JSON summary.
 
@@ -131,6 +133,11 @@ class DiagnosisResult(_JSONSummary):
     posterior : Posterior or None
         The chosen extended model's posterior, once
         :func:`~bayespilot.diagnose.posterior.sample_chosen` has sampled it.
+    bayes_factor : ExtensionBayesFactor or None
+        ln BF of an extension against the base model by nested sampling, once
+        :func:`~bayespilot.diagnose.nested.bayes_factor` has computed it.
+    base_model : PilotModel or None
+        The base model the candidates extend.
     """
 
     mismatch: bool
@@ -144,6 +151,8 @@ class DiagnosisResult(_JSONSummary):
     source: str | None = None
     arrays: dict = field(default_factory=dict, repr=False)
     posterior: Any = field(default=None, repr=False)
+    bayes_factor: Any = field(default=None, repr=False)
+    base_model: Any = field(default=None, repr=False)
 
     def _posterior_dict(self) -> dict[str, Any] | None:
         if self.posterior is None or self.chosen is None:
@@ -169,6 +178,7 @@ class DiagnosisResult(_JSONSummary):
             "ranking": [c.to_dict() for c in self.ranking],
             "where": {k: e.to_dict() for k, e in self.where.items()},
             "base": self.base, "chosen": chosen, "settings": self.settings,
+            "bayes_factor": None if self.bayes_factor is None else self.bayes_factor.to_dict(),
             "elapsed_seconds": self.elapsed, "source": self.source})
 
     def summary(self) -> str:
@@ -213,6 +223,8 @@ class DiagnosisResult(_JSONSummary):
                     d = post["params"][k]
                     lines.append(f"  {k:<10} {d['median']:12.5g}  [{d['hdi_90'][0]:.4g}, "
                                  f"{d['hdi_90'][1]:.4g}]")
+        if self.bayes_factor is not None:
+            lines += ["", self.bayes_factor.summary_line()]
         lines += ["", "located evidence (bootstrap p-values):"]
         for k, e in self.where.items():
             if not math.isfinite(e.value):
@@ -670,7 +682,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
                                        "AR model of the base residual"}
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
                            where, base_d, chosen, settings, time.perf_counter() - t0,
-                           recording.source, arrays)
+                           recording.source, arrays, base_model=base_model)
 
 
 def _saturation(recording, base_model, base, where, boot_info):
@@ -710,5 +722,6 @@ def _saturation(recording, base_model, base, where, boot_info):
 
 from .pooled import PooledDiagnosisResult, diagnose_pooled  # noqa: E402  (uses the helpers above)
 from .posterior import sample_chosen  # noqa: E402
+from .nested import bayes_factor  # noqa: E402
 
-__all__ += ["diagnose_pooled", "PooledDiagnosisResult", "sample_chosen"]
+__all__ += ["diagnose_pooled", "PooledDiagnosisResult", "sample_chosen", "bayes_factor"]

@@ -46,6 +46,13 @@ def _checked_chosen(result: Any, recording: Recording):
     if ext.likelihood != "gls" or getattr(chosen, "model", None) is None:
         raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
                          "likelihood; its limits are read from the data, not sampled")
+    check_same_recording(result, recording)
+    return chosen
+
+
+def check_same_recording(result: Any, recording: Recording) -> None:
+    """Raise ValueError unless ``recording`` has the sample interval and length that
+    ``result`` (a single-run diagnosis) was made on."""
     dt = result.settings.get("dt")
     n = np.size(result.arrays.get("residual", ()))
     if (dt is not None and not math.isclose(dt, recording.dt, rel_tol=1e-9)) or \
@@ -53,7 +60,6 @@ def _checked_chosen(result: Any, recording: Recording):
         raise ValueError(f"this is not the recording that was diagnosed ({result.source}: "
                          f"dt {dt}, {n} samples; given: dt {recording.dt}, "
                          f"{recording.n_samples} samples)")
-    return chosen
 
 
 def sample_chosen(result: Any, recording: Recording, *, likelihood: str = "coloured",

@@ -332,6 +332,14 @@ def write_report(result, directory) -> dict[str, Path]:
 
     cal = "".join(f"<p>{html.escape(line)}</p>" for line in _calibration_lines(result.ranking)
                   if line)
+    bf = getattr(result, "bayes_factor", None)
+    bf_html = "" if bf is None else (
+        f"<h2>Bayes factor</h2><p>{html.escape(bf.summary_line())}: ln Z(extended) = "
+        f"{bf.extended.log_z:.2f}, ln Z(base) = {bf.base.log_z:.2f}; priors uniform on the "
+        f"bounds (new parameters: "
+        f"{html.escape(', '.join(f'{k} in [{lo:g}, {hi:g}]' for k, (lo, hi) in bf.prior.items()))}"
+        f"); {bf.settings['runs']} nested-sampling runs per model, {bf.settings['nlive']} live "
+        f"points. The decision is the likelihood-ratio test's.</p>")
     title = f"bayespilot diagnosis: {html.escape(result.physics)}"
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
@@ -347,6 +355,7 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 {''.join(rows)}</table>
 {cal}
 {img(paths['candidates'])}
+{bf_html}
 <h2>Where</h2>
 <table><tr><th>evidence</th><th>what</th><th>value</th><th>bootstrap p</th></tr>{ev}</table>
 {img(paths['evidence'])}
