@@ -991,6 +991,86 @@ def posterior_check(n: int = 8) -> None:
           f"{sum(r['hdi_90'][0] < truth < r['hdi_90'][1] for r in rows)}/{len(rows)}")
 
 
+def bayes_factor_check(n: int, shard: tuple[int, int] = (0, 1)) -> None:
+    """How the nested-sampling Bayes factor (``bayes_factor``) reads against the LR decision.
+
+    The first ``n`` controls and the first ``n`` effect cases of the GLS entries (case order:
+    round-robin over entries and conditions, so a mix of sizes and of named and missed) of
+    the single-run study, each diagnosed blind (no bootstrap: the decision does not use it)
+    and then weighed by :func:`bayespilot.diagnose.bayes_factor` with its defaults (200 live
+    points, three slice-sampling runs per model): the chosen extension, or on ``none`` the
+    top-ranked candidate.  Resumable; ``--shard K/N`` splits the cases.  Writes
+    ``analyses/results/diagnose_bayes_factor/bf[_KofN].jsonl`` and prints the table.
+    """
+    import warnings
+
+    import numba
+
+    from bayespilot.diagnose import bayes_factor, diagnose
+    from bayespilot.recording import Recording
+
+    numba.set_num_threads(1)
+    out_dir = DEFAULT_OUT.with_name("diagnose_bayes_factor")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path, every = _shard_files(out_dir, "bf", shard)
+    all_cases = cases()
+    ctl = [c for c in all_cases if c["truth"] == "none"][:n]
+    eff = [c for c in all_cases if c["truth"] not in ("none", "control-saturation")][:n]
+    todo = [c for i, c in enumerate(ctl + eff) if i % shard[1] == shard[0]]
+    done = {json.loads(line)["id"] for f in every() for line in f.read_text().splitlines()
+            if line.strip()}
+    for c in todo:
+        if c["id"] in done:
+            continue
+        sim, _ = simulate_case(c)
+        rec = sim.recording
+        meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+        rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
+        res = diagnose(rec, seed=0, n_bootstrap=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            bf = bayes_factor(res, rec, seed=0)
+        cand = next(r for r in res.ranking if r.physics == bf.physics)
+        row = {"id": c["id"], "truth": c["truth"], "effect": c["effect"], "task": c["task"],
+               "K_theta": c["K_theta"], "F_n": c["F_n"], "decision": res.physics,
+               "weighed": bf.physics, "lr_statistic": cand.statistic, "p_value": cand.p_value,
+               "schwarz": bf.schwarz, "log_bayes_factor": bf.log_bayes_factor,
+               "log_bayes_factor_err": bf.log_bayes_factor_err, "favours": bf.favours,
+               "runs_base": [(r["log_z"], r["max_log_lik"], r["used"])
+                             for r in bf.settings["runs_base"]],
+               "runs_extended": [(r["log_z"], r["max_log_lik"], r["used"])
+                                 for r in bf.settings["runs_extended"]],
+               "elapsed_seconds": bf.elapsed}
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        print(json.dumps(row), flush=True)
+    rows = sorted((json.loads(line) for f in every() for line in f.read_text().splitlines()
+                   if line.strip()), key=lambda r: (r["truth"] != "none", r["id"]))
+    print(f"{'id':>4} {'truth':<24} {'effect':<14} {'decision':<24} {'weighed':<24} "
+          f"{'2dlnL':>7} {'Schwarz':>8} {'ln BF':>7} {'+-':>5}  favours")
+    for r in rows:
+        print(f"{r['id']:4d} {r['truth']:<24} {r['effect']:<14} {r['decision']:<24} "
+              f"{r['weighed']:<24} {r['lr_statistic']:7.2f} {r['schwarz']:8.2f} "
+              f"{r['log_bayes_factor']:7.2f} {r['log_bayes_factor_err']:5.2f}  {r['favours']}")
+    for who, sel in (("controls", [r for r in rows if r["truth"] == "none"]),
+                     ("effects", [r for r in rows if r["truth"] != "none"])):
+        if not sel:
+            continue
+        fav = [r["favours"] for r in sel]
+        line = (f"{who}: {len(sel)}; ln BF favours an extension in "
+                f"{sum(f not in ('none', 'inconclusive') for f in fav)}")
+        if who == "effects":
+            line += (f" (the truth in {sum(f == r['truth'] for f, r in zip(fav, sel))}, of them "
+                     f"{sum(f == r['truth'] != r['decision'] for f, r in zip(fav, sel))} the "
+                     f"LR test missed; the truth weighed in "
+                     f"{sum(r['weighed'] == r['truth'] for r in sel)})")
+        line += (f", 'none' in {fav.count('none')}, inconclusive in "
+                 f"{fav.count('inconclusive')}; the LR test's decision right in "
+                 f"{sum(r['decision'] == r['truth'] for r in sel)}; mean time "
+                 f"{np.mean([r['elapsed_seconds'] for r in sel]):.0f} s")
+        print(line)
+
+
 def example_pooled() -> None:
     """The pooled walk-through of docs/diagnose.md: a weak washout, one run against four.
 
@@ -1916,6 +1996,9 @@ def main(argv=None) -> int:
                     help="with --pooled R: per run of --sets sets of twins of soft-threshold "
                          "case ID, what delta_abs's freedom buys the crisp dead zone "
                          "(.../delta_freedom_<ID>*.jsonl)")
+    ap.add_argument("--bayes-factor-check", type=int, default=0, metavar="N",
+                    help="the nested-sampling Bayes factor on the first N controls and N effect "
+                         "cases (resumable, --shard)")
     ap.add_argument("--sets", type=int, default=48, metavar="N",
                     help="sets of twins for --simulated-power / --delta-freedom (default 48)")
     args = ap.parse_args(argv)
@@ -2013,6 +2096,9 @@ def main(argv=None) -> int:
         return 0
     if args.locate_null:
         locate_null(shard=(k, n))
+        return 0
+    if args.bayes_factor_check:
+        bayes_factor_check(args.bayes_factor_check, (k, n))
         return 0
     if args.posterior_check:
         posterior_check(args.posterior_check)
