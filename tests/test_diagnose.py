@@ -312,12 +312,18 @@ def test_posterior_of_the_chosen_extension(washout_case, control_result, tmp_pat
     assert "Posterior of the extended model" in paths["html"].read_text()
     with pytest.raises(ValueError, match="chose no extension"):
         sample_chosen(control_result, rec)
+    _refuses_another_recording(sample_chosen, res, rec)
+
+
+def _refuses_another_recording(step, res, rec):
+    """``step(res, r)`` (a step after the diagnosis) refuses a recording of another length
+    and anything that is not a Recording."""
     short = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=3,
                      duration=20.48).recording
     with pytest.raises(ValueError, match="not the recording that was diagnosed"):
-        sample_chosen(res, short)
+        step(res, short)
     with pytest.raises(TypeError, match="Recording"):
-        sample_chosen(res, rec.u)
+        step(res, rec.u)
 
 
 def test_profiled_noise_model_is_the_least_squares_ar_of_the_fits_residual():
@@ -490,9 +496,4 @@ def test_bayes_factor_weighs_the_chosen_or_the_top_candidate(washout_case, contr
         bayes_factor(control_result, crec, physics="control-saturation")
     with pytest.raises(ValueError, match="unknown extension"):
         bayes_factor(control_result, crec, physics="wind")
-    short = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=3,
-                     duration=20.48).recording
-    with pytest.raises(ValueError, match="not the recording that was diagnosed"):
-        bayes_factor(res, short)
-    with pytest.raises(TypeError, match="Recording"):
-        bayes_factor(res, rec.u)
+    _refuses_another_recording(bayes_factor, res, rec)

@@ -30,9 +30,10 @@ likelihood; for the extended model also the base model's best, which a
 nested model cannot beat) are replaced, runs more than three combined
 standard errors below the highest are dropped, the rest averaged.
 
-It costs minutes (about 2 min for the base model and 3.5 min for a
-one-parameter extension at N = 8192 with the defaults, one core) against
-the diagnosis's one, so it is a separate step.  The decision stays the
+It costs minutes (251 s for a washout at N = 8192 with the defaults, one
+core: 2.3 million single-vector likelihood calls; ``python
+benchmarks/bench_diagnose.py --washout 0.5 --calibrate 0 --bayes-factor``)
+against the diagnosis's 15-20 s, so it is a separate step.  The decision stays the
 calibrated likelihood-ratio test's; the Bayes factor is reported beside it
 on Jeffreys' scale (:func:`bayespilot.compare.jeffreys_category`).  It
 depends on the prior width of the new parameters (a wider box costs the
@@ -120,9 +121,10 @@ class ExtensionBayesFactor:
     def summary_line(self) -> str:
         """One line for a diagnosis summary."""
         sch = "" if self.schwarz is None else f"; Schwarz approximation {self.schwarz:+.1f}"
+        notes = "".join(f"; {n}" for n in self.settings.get("notes", ()))
         return (f"Bayes factor ({self.physics} : base, nested sampling): ln BF = "
                 f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} "
-                f"({self.category}, favours {self.favours}{sch})")
+                f"({self.category}, favours {self.favours}{sch}){notes}")
 
 
 def _ln_l_at(model: PilotModel, recording: Recording, noise: ARNoise, discard: float,
