@@ -111,7 +111,8 @@ class ExtensionBayesFactor:
         return {"physics": self.physics, "log_bayes_factor": self.log_bayes_factor,
                 "log_bayes_factor_err": self.log_bayes_factor_err, "category": self.category,
                 "favours": self.favours, "schwarz_log_bayes_factor": self.schwarz,
-                "log_z_extended": self.extended.log_z, "log_z_extended_err": self.extended.log_z_err,
+                "log_z_extended": self.extended.log_z,
+                "log_z_extended_err": self.extended.log_z_err,
                 "log_z_base": self.base.log_z, "log_z_base_err": self.base.log_z_err,
                 "max_log_lik_extended": self.extended.max_log_lik,
                 "max_log_lik_base": self.base.max_log_lik,
@@ -216,14 +217,11 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
     if not ok1:
         why.append("every run of the extended model fell below its known fit (ln Z(extended) "
                    "is a lower bound, so ln BF a lower one)")
-    if why and fav != "inconclusive":
-        # a bound that points the way of the decision does not support it
-        if (not ok0 and fav == physics) or (not ok1 and fav == "none"):
-            fav = "inconclusive"
-    lo1, hi1 = extended_model.bounds
-    new = [n for n in extended_model.parameter_names if n not in base_model.parameter_names]
-    prior = {n: [float(lo1[extended_model.parameter_names.index(n)]),
-                 float(hi1[extended_model.parameter_names.index(n)])] for n in new}
+    # a bound that points the way of the decision does not support it
+    if (not ok0 and fav == physics) or (not ok1 and fav == "none"):
+        fav = "inconclusive"
+    prior = {n: [float(extended_model.parameter(n).lower), float(extended_model.parameter(n).upper)]
+             for n in extended_model.parameter_names if n not in base_model.parameter_names}
     settings = {"likelihood": "coloured (whole band, one AR model for both)",
                 "noise": noise.to_dict(), "discard_seconds": discard, "nlive": nlive,
                 "runs": runs, "sample": sample, "seed": seed,
@@ -318,9 +316,8 @@ def bayes_factor(result: Any, recording: Recording, *, physics: str | None = Non
     if base_model is None:
         raise ValueError("this diagnosis does not carry its base model (read back from JSON?); "
                          "diagnose the recording again")
-    base_params = result.base.get("gls_params") or result.base.get("params")
     out = nested_bayes_factor(recording, base_model, model, noise=noise,
-                              base_params=base_params, extended_params=ext_params,
+                              base_params=result.base["gls_params"], extended_params=ext_params,
                               physics=cand.physics, nlive=nlive, runs=runs, sample=sample,
                               seed=seed, progress=progress)
     out.schwarz = float(cand.log_bayes_factor) if math.isfinite(cand.log_bayes_factor) else None
