@@ -38,6 +38,10 @@ Run (from the repository root):
     python analyses/prove_diagnose.py --pooled-null 100        # pooled vs one-run null tests
     python analyses/prove_diagnose.py --pooled-null 100 --rebase   # the same, tests against the
                                                                    # base's best fit (as diagnose)
+    python analyses/prove_diagnose.py --bayes-factor-check 12 --shard 0/2   # nested-sampling
+                                          # Bayes factors on 12 controls, 12 effects (and 1/2)
+    python analyses/prove_diagnose.py --platform-band          # the platform's gain by band on
+                                          # the controls the Bayes factor weighed it on
 
 The case list is ordered round-robin over the entries and the controls (with
 the conditions shuffled by a fixed seed), so any prefix of it is a balanced
@@ -886,8 +890,11 @@ def locate_null(n_bootstrap: int = 39, shard: tuple[int, int] = (0, 1)) -> None:
     runs by default, 39), and every statistic's p-value.  Under a calibrated
     (or conservative) bootstrap P(p <= a) <= a for every a on the replicates'
     grid.  One JSON line per control in
-    ``analyses/results/diagnose/locate_null.jsonl`` (resumable); the summary
-    prints per statistic the fraction at p <= 0.05 and 0.10 and the mean p.
+    ``analyses/results/diagnose/locate_null_refit*.jsonl`` (resumable; each
+    replicate refitted, as ``diagnose`` does since 2026-11-27); the summary
+    prints per statistic the fraction at p <= 0.05 and 0.10 and the mean p,
+    beside the same for the replicates at fixed parameters
+    (``locate_null_fixed.jsonl``, made before the refit).
     """
     from tqdm import tqdm
 
@@ -898,8 +905,9 @@ def locate_null(n_bootstrap: int = 39, shard: tuple[int, int] = (0, 1)) -> None:
 
     numba.set_num_threads(1)
     k, n = shard
-    out = DEFAULT_OUT / (f"locate_null_{k}of{n}.jsonl" if n > 1 else "locate_null.jsonl")
-    files = sorted(DEFAULT_OUT.glob("locate_null*.jsonl"))
+    out = DEFAULT_OUT / (f"locate_null_refit_{k}of{n}.jsonl" if n > 1
+                         else "locate_null_refit.jsonl")
+    files = sorted(DEFAULT_OUT.glob("locate_null_refit*.jsonl"))
     done = {json.loads(line)["id"] for f in files for line in f.read_text().splitlines()
             if line.strip()}
     todo = [c for c in cases() if c["truth"] == "none" and c["id"] % n == k
@@ -917,25 +925,36 @@ def locate_null(n_bootstrap: int = 39, shard: tuple[int, int] = (0, 1)) -> None:
                "p": {q: e.p_value for q, e in run.where.items()}}
         with open(out, "a") as f:
             f.write(json.dumps(row) + "\n")
-    rows = [json.loads(line) for f in sorted(DEFAULT_OUT.glob("locate_null*.jsonl"))
-            for line in f.read_text().splitlines() if line.strip()]
+    def rows_of(pattern):
+        return [json.loads(line) for f in sorted(DEFAULT_OUT.glob(pattern))
+                for line in f.read_text().splitlines() if line.strip()]
+
+    rows, fixed = rows_of("locate_null_refit*.jsonl"), rows_of("locate_null_fixed.jsonl")
     if not rows:
         print("no results yet")
         return
     print(f"located evidence on {len(rows)} correct-model runs, B = {n_bootstrap} "
-          f"(p = (1 + #replicates >= observed) / (B + 1)):")
-    print(f"  {'statistic':<30}{'n':>4}{'p<=0.05':>9}{'p<=0.10':>9}{'mean p':>8}")
-    anyp = np.zeros(len(rows), bool)
-    for key in rows[0]["p"]:
-        ps = np.array([r["p"].get(key) for r in rows], dtype=float)
+          f"(p = (1 + #replicates >= observed) / (B + 1)); replicates refitted "
+          f"(left) and at fixed parameters ({len(fixed)} runs, right):")
+    print(f"  {'statistic':<30}{'n':>4}{'p<=0.05':>9}{'p<=0.10':>9}{'mean p':>8}"
+          f"  |{'p<=0.05':>9}{'p<=0.10':>9}{'mean p':>8}")
+
+    def cols(rs, key):
+        ps = np.array([r["p"].get(key) for r in rs], dtype=float)
         ps = ps[np.isfinite(ps)]
         if not ps.size:
-            continue
-        print(f"  {key:<30}{ps.size:>4}{np.mean(ps <= 0.05):>9.3f}{np.mean(ps <= 0.10):>9.3f}"
-              f"{ps.mean():>8.3f}")
-    for i, r in enumerate(rows):
-        anyp[i] = any(v is not None and v <= 0.05 for v in r["p"].values())
-    print(f"  runs with any statistic at p <= 0.05: {anyp.sum()}/{len(rows)}")
+            return ps.size, " " * 26
+        return ps.size, f"{np.mean(ps <= 0.05):>9.3f}{np.mean(ps <= 0.10):>9.3f}{ps.mean():>8.3f}"
+
+    for key in rows[0]["p"]:
+        m, left = cols(rows, key)
+        print(f"  {key:<30}{m:>4}{left}  |{cols(fixed, key)[1]}")
+
+    def anyp(rs):
+        return sum(any(v is not None and v <= 0.05 for v in r["p"].values()) for r in rs)
+
+    print(f"  runs with any statistic at p <= 0.05: {anyp(rows)}/{len(rows)}  |  "
+          f"{anyp(fixed)}/{len(fixed)}")
 
 
 def posterior_check(n: int = 8) -> None:
@@ -1069,6 +1088,62 @@ def bayes_factor_check(n: int, shard: tuple[int, int] = (0, 1)) -> None:
                  f"{sum(r['decision'] == r['truth'] for r in sel)}; mean time "
                  f"{np.mean([r['elapsed_seconds'] for r in sel]):.0f} s")
         print(line)
+
+
+def platform_band() -> None:
+    """The platform's gain on the controls the Bayes-factor check weighed it on, by band.
+
+    For each such control of ``--bayes-factor-check`` (its ``bf*.jsonl``):
+    the platform candidate's d(-ln L) under the decision's GLS likelihood
+    low-passed at 25 rad/s (the default), on the whole band with the model at
+    the recording's rate (what the Bayes factor's likelihood sees) and on the
+    whole band with the motion channel at 8x; beside the Bayes factor and the
+    gain in best ln L over its nested-sampling runs.  Does the model's own
+    discretisation error give the platform something to fit on the whole
+    band?  ``analyses/results/diagnose_bayes_factor/platform_band.jsonl``.
+    """
+    import numba
+
+    from bayespilot.diagnose import diagnose
+    from bayespilot.recording import Recording
+
+    numba.set_num_threads(1)
+    out_dir = DEFAULT_OUT.with_name("diagnose_bayes_factor")
+    path = out_dir / "platform_band.jsonl"
+    bf = [json.loads(line) for f in sorted(out_dir.glob("bf*.jsonl"))
+          for line in f.read_text().splitlines() if line.strip()]
+    bf = sorted((r for r in bf if r["truth"] == "none"
+                 and r["weighed"] == "motion-system-dynamics"), key=lambda r: r["id"])
+    done = {json.loads(line)["id"]: json.loads(line)
+            for line in (path.read_text().splitlines() if path.exists() else []) if line.strip()}
+    by_id = {c["id"]: c for c in cases()}
+    for r in bf:
+        if r["id"] in done:
+            continue
+        sim, _ = simulate_case(by_id[r["id"]])
+        rec = sim.recording
+        rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, {}, "case")
+        row = {"id": r["id"]}
+        for key, opts in (("band25", {}), ("whole_1x", {"omega_c": math.inf}),
+                          ("whole_8x", {"omega_c": math.inf, "oversample": 8})):
+            # every candidate, as the decision sees it: the tests are against the best base
+            # fit reached from any extension's fit (alone, the platform reached a better basin
+            # of the base model on control 56 at 8x and "gained" 24.7)
+            res = diagnose(rec, seed=0, n_bootstrap=0, **opts)
+            c = next(x for x in res.ranking if x.physics == "motion-system-dynamics")
+            row[key] = [float(c.delta_neg_log_lik), float(c.params.get("omega_ms", math.nan))]
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        done[r["id"]] = row
+    print("platform on the controls the Bayes factor weighed it on: d(-ln L) (omega_ms, rad/s)")
+    print(f"{'id':>4} {'25 rad/s':>14} {'whole, 1x':>14} {'whole, 8x':>14} "
+          f"{'nested best-lnL gain':>21} {'ln BF':>12}")
+    for r in bf:
+        d = done[r["id"]]
+        gain = (max(x[1] for x in r["runs_extended"]) - max(x[1] for x in r["runs_base"]))
+        print(f"{r['id']:4d} " + " ".join(f"{d[k][0]:7.2f} ({d[k][1]:4.0f})"
+                                          for k in ("band25", "whole_1x", "whole_8x"))
+              + f" {gain:21.2f} {r['log_bayes_factor']:+6.2f} +- {r['log_bayes_factor_err']:.2f}")
 
 
 def example_pooled() -> None:
@@ -1999,6 +2074,9 @@ def main(argv=None) -> int:
     ap.add_argument("--bayes-factor-check", type=int, default=0, metavar="N",
                     help="the nested-sampling Bayes factor on the first N controls and N effect "
                          "cases (resumable, --shard)")
+    ap.add_argument("--platform-band", action="store_true",
+                    help="the platform's gain by band (25 rad/s, whole at 1x and 8x) on the "
+                         "controls --bayes-factor-check weighed it on")
     ap.add_argument("--sets", type=int, default=48, metavar="N",
                     help="sets of twins for --simulated-power / --delta-freedom (default 48)")
     args = ap.parse_args(argv)
@@ -2099,6 +2177,9 @@ def main(argv=None) -> int:
         return 0
     if args.bayes_factor_check:
         bayes_factor_check(args.bayes_factor_check, (k, n))
+        return 0
+    if args.platform_band:
+        platform_band()
         return 0
     if args.posterior_check:
         posterior_check(args.posterior_check)

@@ -131,6 +131,42 @@ def test_remnant_like_recovers_eq6():
     assert K_n == pytest.approx(0.1, rel=0.05)
 
 
+def test_bootstrap_replicates_are_measured_at_their_own_refit():
+    """Each replicate's statistics are at what ``refit`` returns for it: rebuilt here from the
+    replicate's own seed and remnant by a direct simulation and ``statistics`` call."""
+    from bayespilot.diagnose import locate as L
+
+    model = paper_model()
+    p = presets.paper_parameters("FD")
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063,
+                   seed=3).recording  # whole periods of the forcing: 81.92 s
+    forcing = forcing_of(rec)
+    eps = Likelihood(model, rec).residual(p)
+    seen = []
+
+    def refit(rep):
+        seen.append(rep.n_samples)
+        return dict(p, K_v=1.2 * p["K_v"], tau_m=p["tau_m"] + 0.02)
+
+    null, info = L.bootstrap(rec, model, p, forcing, eps, n_replicates=2, seed=7, refit=refit)
+    fixed, info0 = L.bootstrap(rec, model, p, forcing, eps, n_replicates=2, seed=7)
+    assert seen == [rec.n_samples] * 2 and info["refitted"] and not info0["refitted"]
+    K_n, T_n = remnant_like(eps, rec.dt)
+    seeds = np.random.SeedSequence(7).generate_state(2)
+    for b in range(2):
+        rep = simulate(model, p, task=L.task_of(rec, forcing), remnant_gain=K_n, T_n=T_n,
+                       seed=int(seeds[b]), oversample=10).recording
+        want = L.statistics(rep, model, dict(p, K_v=1.2 * p["K_v"], tau_m=p["tau_m"] + 0.02),
+                            forcing)["values"]
+        at_p = L.statistics(rep, model, p, forcing)["values"]
+        for k in ("frequency.visual", "frequency.motion_high", "time.gain_drift_visual"):
+            assert null[k][b] == pytest.approx(want[k], rel=1e-9)
+            assert fixed[k][b] == pytest.approx(at_p[k], rel=1e-9)
+        # and they are not the statistics at the generating parameters
+        assert null["amplitude.control"][b] != pytest.approx(fixed["amplitude.control"][b],
+                                                             rel=0.01)
+
+
 def test_fit_ar_recovers_an_ar2():
     rng = make_rng(2)
     w = rng.standard_normal(20000)

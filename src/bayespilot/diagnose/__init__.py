@@ -352,9 +352,14 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
     null = None
     boot_info: dict[str, Any] = {"replicates": 0}
     if n_bootstrap > 0 and forcing is not None:
+        def refit(rep, start=base.params):
+            # the GLS base fit again, from the generating parameters under the recording's
+            # noise model (the Eq. 4 fit's multi-start search would cost ~1.5 s a replicate)
+            return D.fit_base_gls(base_model, rep, start, noise)[1].params
+
         null, boot_info = L.bootstrap(recording, base_model, base.params, forcing,
                                       st["arrays"]["residual"], n_replicates=n_bootstrap,
-                                      seed=seed, skip=skip)
+                                      seed=seed, skip=skip, refit=refit)
     where = L.calibrate(st["values"], null)
     timings["locate"] = time.perf_counter() - t1
     bar.update(1)
