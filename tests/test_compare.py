@@ -20,8 +20,8 @@ from scipy import special, stats
 
 from conftest import make_rng
 from bayespilot.compare import (PLATEAU_LEVEL, Comparison, Evidence, SavageDickey,
-                                _guarded_decision, _robust_evidence, compare,
-                                decide, information_criteria,
+                                _guarded_decision, robust_evidence, compare,
+                                decide, information_criteria, log_likelihood_at,
                                 jeffreys_category, nested_evidence, plateau_onset, pool,
                                 savage_dickey, savage_dickey_from_posterior,
                                 threshold_input_max)
@@ -120,19 +120,37 @@ def _ev(log_z, err, max_log_lik, seed):
 def test_robust_evidence_replaces_lost_runs_and_drops_late_ones():
     """Run 1 lost the mode (best ln L below the reference), run 3 is 12 below run 2."""
     script = [_ev(-900.0, 0.8, 50.0, 1), _ev(10.0, 0.6, 101.0, 2), _ev(-2.0, 0.8, 100.5, 3)]
-    ev, record, ok = _robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
+    ev, record, ok = robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
     assert ok and [r["used"] for r in record] == [False, True, False]
     assert "lost the main mode" in record[0]["why"] and "below the highest" in record[2]["why"]
     assert ev.log_z == 10.0 and ev.log_z_err == 0.6 and ev.n_calls == 300
     # two runs that agree: inverse-variance mean; the error is at least their spread's
     script = [_ev(10.0, 0.5, 101.0, 1), _ev(11.0, 1.0, 101.0, 2)]
-    ev, record, ok = _robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
+    ev, record, ok = robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
     assert ev.log_z == pytest.approx((10.0 / 0.25 + 11.0) / (1 / 0.25 + 1))
     assert ev.log_z_err == pytest.approx(max(math.sqrt(1 / 5), math.sqrt(0.5) / math.sqrt(2)))
     # every run lost the mode: not ok, the last run comes back
     script = [_ev(-900.0 - a, 0.8, 50.0, a) for a in range(4)]
-    ev, record, ok = _robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
+    ev, record, ok = robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
     assert not ok and len(record) == 4 and ev.log_z == -903.0
+
+
+def test_log_likelihood_at_is_eq4_in_closed_form():
+    """Without a noise model it is Eq. 4 profiled over sigma: -(N/2) ln(mean eps^2) - N/2,
+    with eps computed here from the simulated run's own u and the model's output; a
+    parameter outside its bounds is clipped to them."""
+    from bayespilot.likelihood import Likelihood
+
+    model = paper_model()
+    p = paper_parameters("FD")
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=3,
+                   duration=20.0).recording
+    eps = Likelihood(model, rec).residual(p)
+    n = eps.size
+    want = -(0.5 * n * math.log(np.mean(eps * eps)) + 0.5 * n)
+    assert log_likelihood_at(model, rec, p) == pytest.approx(want, rel=1e-10)
+    assert log_likelihood_at(model, rec, dict(p, K_v=-5.0)) == pytest.approx(
+        log_likelihood_at(model, rec, dict(p, K_v=0.0)), rel=1e-12)
 
 
 # --- Savage-Dickey ------------------------------------------------------------------------------

@@ -42,7 +42,7 @@ recording, three ways:
    ``runs`` times (default 2, each with its own seed); runs whose best ln L
    is below the best ln L without threshold (impossible for the nested
    model) are replaced, runs whose ln Z is far below the others are
-   dropped, and the rest are averaged (:func:`_robust_evidence`).
+   dropped, and the rest are averaged (:func:`robust_evidence`).
 
 3. **Information criteria** from the maximum-likelihood fits:
    AIC = 2k + 2(-ln L), BIC = k ln n + 2(-ln L), with k counting the output
@@ -116,7 +116,7 @@ __all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested
            "evidence", "savage_dickey", "savage_dickey_from_posterior", "information_criteria",
            "decide", "jeffreys_category", "compare", "pool", "JEFFREYS", "DECISION_LEVEL",
            "DECISION_Z", "THRESHOLD", "threshold_input_max", "plateau_onset", "PLATEAU_LEVEL",
-           "PLATEAU_ACTIVE_FRACTION"]
+           "PLATEAU_ACTIVE_FRACTION", "robust_evidence", "log_likelihood_at"]
 
 #: The nested parameter: the model without threshold has it fixed at 0.
 THRESHOLD = "delta_abs"
@@ -367,6 +367,34 @@ def _check_noise(noise):
     if noise is not None and not isinstance(noise, ARNoise):
         raise TypeError(f"noise must be None or an ARNoise, got {type(noise).__name__}")
     return noise
+
+
+def log_likelihood_at(model: PilotModel, recording: Recording, params: Mapping[str, float],
+                      *, noise: ARNoise | None = None, discard: float = 0.0) -> float:
+    """ln L of ``model`` at ``params`` under the likelihood :func:`evidence` integrates.
+
+    Parameters
+    ----------
+    model : PilotModel
+    recording : Recording
+    params : mapping
+        Values of the model's free parameters (others are ignored); clipped
+        to the model's bounds.
+    noise : ARNoise, optional
+        The fixed AR model of ``likelihood="coloured", ar="fixed"``; None: Eq. 4.
+    discard : float
+        Seconds at the start left out.
+
+    Returns
+    -------
+    float
+        ln L, or ``-inf`` where the closed loop is unstable.
+    """
+    nll = _NegLogLik(model, recording, 0, noise, discard)
+    x = np.clip(model.free_vector({k: v for k, v in params.items()
+                                   if k in model.parameter_names}), *model.bounds)
+    v = nll(x)
+    return -v if math.isfinite(v) else -math.inf
 
 
 class _NegLogLik:
@@ -662,21 +690,36 @@ def _ml(nll: _NegLogLik, start: Mapping[str, float], threshold: bool) -> tuple[f
     return float(best_v), dict(zip(nll.names, best_x.tolist()))
 
 
-def _robust_evidence(run: Callable[[int], Evidence], n_runs: int,
-                     reference_max_log_lik: float) -> tuple[Evidence, list, bool]:
-    """ln Z of the model with threshold from ``n_runs`` nested-sampling runs that agree.
+def robust_evidence(run: Callable[[int], Evidence], n_runs: int,
+                    reference_max_log_lik: float) -> tuple[Evidence, list, bool]:
+    """ln Z of a model from ``n_runs`` nested-sampling runs that agree.
 
-    ``run(attempt)`` makes one run with its own seed.  A run whose best ln L
-    is more than MODE_TOLERANCE below ``reference_max_log_lik`` (the best
-    ln L without threshold, which the nested model cannot beat) lost the
-    main mode and is dropped, and another run is made (at most MAX_RERUNS
-    extra).  Of the runs kept, those whose ln Z lies more than 3 combined
-    standard errors below the highest are dropped too: the failure of
-    nested sampling on this likelihood is to find the main mode late,
-    which only ever lowers ln Z.  The rest are combined by inverse-variance
-    weighting; the error is the larger of the weighted one and the standard
-    error of their spread.  Returns (combined Evidence, record of every run,
-    whether any run passed the mode check).
+    A run whose best ln L is more than :data:`MODE_TOLERANCE` below
+    ``reference_max_log_lik`` lost the main mode and is dropped, and another
+    run is made (at most :data:`MAX_RERUNS` extra).  Of the runs kept, those
+    whose ln Z lies more than 3 combined standard errors below the highest
+    are dropped too: the failure of nested sampling on this likelihood is to
+    find the main mode late, which only ever lowers ln Z.  The rest are
+    combined by inverse-variance weighting; the error is the larger of the
+    weighted one and the standard error of their spread.
+
+    Parameters
+    ----------
+    run : callable
+        ``run(attempt) -> Evidence``: one nested-sampling run with its own
+        seed (e.g. :func:`evidence` with ``seed=s0 + attempt``).
+    n_runs : int
+        Runs to combine.
+    reference_max_log_lik : float
+        A ln L the model is known to reach: the model without threshold's
+        best (which the model with threshold nests), or a fit's.
+
+    Returns
+    -------
+    (Evidence, list of dict, bool)
+        The combined evidence, a record of every run (``used``, ``why``),
+        and whether any run passed the mode check (if not, the Evidence is the
+        last run's, a lower bound).
     """
     kept: list[Evidence] = []
     made: list[Evidence] = []
@@ -954,7 +997,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         dynesty settings (:func:`nested_evidence`).
     runs : int
         Independent nested-sampling runs of the model with threshold, combined
-        by :func:`_robust_evidence` (the model without threshold runs once;
+        by :func:`robust_evidence` (the model without threshold runs once;
         see the module docs).
     seed : int, optional
         Seeds the nested-sampling runs (and the emcee run, if one is made).
@@ -1030,7 +1073,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         return evidence(recording, model, **lik_opts, nlive=nlive, dlogz=dlogz, sample=sample,
                         seed=s1 + attempt, progress=progress)
 
-    ev1, reruns, mode_ok = _robust_evidence(run_threshold, runs, ev0.max_log_lik)
+    ev1, reruns, mode_ok = robust_evidence(run_threshold, runs, ev0.max_log_lik)
     log_bf = ev1.log_z - ev0.log_z
     err = math.hypot(ev1.log_z_err, ev0.log_z_err)
 

@@ -24,7 +24,7 @@ ever lowers ln Z (on the walk-through's washout run, single runs of the
 extended model spread over 11 units of ln Z with random walks and over 6
 with slice sampling, each with a stated error under 1).  So every model is
 run ``runs`` times (slice sampling by default) and combined by
-:func:`bayespilot.compare._robust_evidence`: runs whose best ln L falls
+:func:`bayespilot.compare.robust_evidence`: runs whose best ln L falls
 below what the model is known to reach (the diagnosis's fit under this
 likelihood; for the extended model also the base model's best, which a
 nested model cannot beat) are replaced, runs more than three combined
@@ -60,7 +60,7 @@ __all__ = ["ExtensionBayesFactor", "bayes_factor", "nested_bayes_factor"]
 #: dynesty's sampling method for these evidences: slice sampling spread half as far as
 #: random walks over repeated runs on the walk-through's washout run (module docs).
 SAMPLE = "rslice"
-#: Nested-sampling runs per model (combined by :func:`bayespilot.compare._robust_evidence`).
+#: Nested-sampling runs per model (combined by :func:`bayespilot.compare.robust_evidence`).
 RUNS = 3
 
 
@@ -128,18 +128,6 @@ class ExtensionBayesFactor:
                 f"({self.category}, favours {self.favours}{sch}){notes}")
 
 
-def _ln_l_at(model: PilotModel, recording: Recording, noise: ARNoise, discard: float,
-             params) -> float:
-    """ln L of ``model`` at ``params`` under the evidence's likelihood (-inf if unstable)."""
-    from ..compare import _NegLogLik
-
-    nll = _NegLogLik(model, recording, 0, noise, discard)
-    x = np.clip(model.free_vector({k: v for k, v in params.items()
-                                   if k in model.parameter_names}), *model.bounds)
-    v = nll(x)
-    return -v if math.isfinite(v) else -math.inf
-
-
 @one_blas_thread
 def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_model: PilotModel,
                         *, noise: ARNoise, discard: float | None = None,
@@ -169,6 +157,8 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
         per model (the base model's seeds are ``seed + k``, the extended
         model's ``seed + 1000 + k``).
     seed : int or None
+        The same seed gives the same Bayes factor; None draws one from fresh
+        entropy (recorded in ``settings["seed"]``).
     progress : bool
         dynesty's progress line.
 
@@ -176,7 +166,8 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
     -------
     ExtensionBayesFactor
     """
-    from ..compare import _robust_evidence, decide, evidence, jeffreys_category
+    from ..compare import (decide, evidence, jeffreys_category, log_likelihood_at,
+                           robust_evidence)
     from ..sample import COLOURED_DISCARD
 
     if not isinstance(recording, Recording):
@@ -190,20 +181,22 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
         raise ValueError(f"runs must be an integer >= 1, got {runs!r}")
     discard = COLOURED_DISCARD if discard is None else float(discard)
     t0 = time.perf_counter()
-    s0 = 0 if seed is None else int(seed)
+    # seed None: fresh entropy, as evidence() takes it; the seed drawn is recorded
+    s0 = int(np.random.SeedSequence().generate_state(1)[0] >> 1) if seed is None else int(seed)
     opts = dict(likelihood="coloured", ar="fixed", noise=noise, discard=discard, nlive=nlive,
                 sample=sample, progress=progress)
 
     def at(model, params):
-        return -math.inf if params is None else _ln_l_at(model, recording, noise, discard, params)
+        return -math.inf if params is None else log_likelihood_at(model, recording, params,
+                                                                  noise=noise, discard=discard)
 
     ref_base = at(base_model, base_params)
-    ev0, rec0, ok0 = _robust_evidence(
+    ev0, rec0, ok0 = robust_evidence(
         lambda k: evidence(recording, base_model, seed=s0 + k, **opts), runs,
         ref_base)
     # the extended model nests the base model: it reaches at least the base model's best
     ref_ext = max(at(extended_model, extended_params), ev0.max_log_lik)
-    ev1, rec1, ok1 = _robust_evidence(
+    ev1, rec1, ok1 = robust_evidence(
         lambda k: evidence(recording, extended_model, seed=s0 + 1000 + k, **opts), runs,
         ref_ext)
     lbf = float(ev1.log_z - ev0.log_z)
@@ -224,7 +217,7 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
              for n in extended_model.parameter_names if n not in base_model.parameter_names}
     settings = {"likelihood": "coloured (whole band, one AR model for both)",
                 "noise": noise.to_dict(), "discard_seconds": discard, "nlive": nlive,
-                "runs": runs, "sample": sample, "seed": seed,
+                "runs": runs, "sample": sample, "seed": s0,
                 "runs_base": rec0, "runs_extended": rec1, "mode_found_base": ok0,
                 "mode_found_extended": ok1, "notes": why}
     return ExtensionBayesFactor(physics, lbf, err, jeffreys_category(lbf), fav, None, ev1, ev0,
