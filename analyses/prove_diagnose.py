@@ -40,6 +40,8 @@ Run (from the repository root):
                                                                    # base's best fit (as diagnose)
     python analyses/prove_diagnose.py --bayes-factor-check 12 --shard 0/2   # nested-sampling
                                           # Bayes factors on 12 controls, 12 effects (and 1/2)
+    python analyses/prove_diagnose.py --bayes-factor-repeat 28,42 --shard 0/2   # 4 more
+                                          # seeds each: scatter vs stated error (and 1/2)
     python analyses/prove_diagnose.py --platform-band          # the platform's gain by band on
                                           # the controls the Bayes factor weighed it on
 
@@ -1146,16 +1148,81 @@ def platform_band() -> None:
               + f" {gain:21.2f} {r['log_bayes_factor']:+6.2f} +- {r['log_bayes_factor_err']:.2f}")
 
 
+def bayes_factor_repeat(ids: list[int], seeds: int = 4,
+                        shard: tuple[int, int] = (0, 1)) -> None:
+    """Is the Bayes factor's stated error its scatter?  ``bayes_factor`` on each case of
+    ``ids`` again with nested-sampling seeds 1, 2, ... ``seeds`` (the check used 0), same
+    diagnosis, same noise model; per case the mean and sd of ln BF over the seeds (the
+    check's seed 0 included) beside the mean stated error.  Resumable, ``--shard K/N``
+    splits the (case, seed) pairs; ``analyses/results/diagnose_bayes_factor/repeat*.jsonl``.
+    """
+    import warnings
+
+    import numba
+
+    from bayespilot.diagnose import bayes_factor, diagnose
+    from bayespilot.recording import Recording
+
+    numba.set_num_threads(1)
+    out_dir = DEFAULT_OUT.with_name("diagnose_bayes_factor")
+    path, every = _shard_files(out_dir, "repeat", shard)
+    done = {(r["id"], r["seed"]) for f in every() for line in f.read_text().splitlines()
+            if line.strip() for r in [json.loads(line)]}
+    pairs = [(i, s) for i in ids for s in range(1, seeds + 1)]
+    todo = [p for j, p in enumerate(pairs) if j % shard[1] == shard[0] and p not in done]
+    by_id = {c["id"]: c for c in cases()}
+    res_of: dict = {}
+    for i, s in todo:
+        sim, _ = simulate_case(by_id[i])
+        rec = sim.recording
+        meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+        rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, "case")
+        if i not in res_of:
+            res_of[i] = diagnose(rec, seed=0, n_bootstrap=0)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            bf = bayes_factor(res_of[i], rec, seed=s)
+        row = {"id": i, "seed": s, "weighed": bf.physics, "log_bayes_factor": bf.log_bayes_factor,
+               "log_bayes_factor_err": bf.log_bayes_factor_err,
+               "best_gain": max(r["max_log_lik"] for r in bf.settings["runs_extended"])
+               - max(r["max_log_lik"] for r in bf.settings["runs_base"]),
+               "elapsed_seconds": bf.elapsed}
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        print(json.dumps(row), flush=True)
+    first = {json.loads(line)["id"]: json.loads(line)
+             for f in sorted(out_dir.glob("bf*.jsonl")) for line in f.read_text().splitlines()
+             if line.strip()}
+    rows = [json.loads(line) for f in every() for line in f.read_text().splitlines()
+            if line.strip()]
+    print(f"{'id':>4} {'weighed':<24} {'ln BF over the seeds':<44} {'mean':>6} {'sd':>5} "
+          f"{'mean stated err':>16}")
+    for i in ids:
+        got = sorted((r for r in rows if r["id"] == i), key=lambda r: r["seed"])
+        if i in first:
+            got.insert(0, {"seed": 0, "log_bayes_factor": first[i]["log_bayes_factor"],
+                           "log_bayes_factor_err": first[i]["log_bayes_factor_err"],
+                           "weighed": first[i]["weighed"]})
+        if not got:
+            continue
+        v = np.array([r["log_bayes_factor"] for r in got])
+        e = np.array([r["log_bayes_factor_err"] for r in got])
+        print(f"{i:4d} {got[0]['weighed']:<24} "
+              f"{' '.join(f'{x:+.2f}' for x in v):<44} {v.mean():+6.2f} "
+              f"{v.std(ddof=1) if v.size > 1 else float('nan'):5.2f} {e.mean():16.2f}")
+
+
 def example_pooled() -> None:
     """The pooled walk-through of docs/diagnose.md: a weak washout, one run against four.
 
     Four runs (FD, K_theta = 1, F_n = 0.25, omega_w = 0.15 rad/s) diagnosed one
-    at a time and together; writes docs/figures/diagnose_pooled_runs.png and
-    diagnose_pooled_candidates.png and analyses/results/diagnose_pooled/example.txt.
+    at a time and together, then the shared omega_w's posterior; writes
+    docs/figures/diagnose_pooled_runs.png, diagnose_pooled_candidates.png,
+    diagnose_pooled_posterior.png and analyses/results/diagnose_pooled/example.txt.
     """
     import shutil
 
-    from bayespilot.diagnose import diagnose, diagnose_pooled
+    from bayespilot.diagnose import diagnose, diagnose_pooled, shared_posterior
     from bayespilot.recording import Recording
 
     recs = []
@@ -1173,6 +1240,9 @@ def example_pooled() -> None:
         lines.append(f"  {rec.source}: decision {r.physics}; washout d(-ln L) = "
                      f"{w.delta_neg_log_lik:.2f}, p = {w.p_value:.3g}")
     res = diagnose_pooled(recs, seed=0, n_bootstrap=9)
+    if res.physics == "motion-washout":
+        # the shared omega_w's posterior (grid; each run's pilot parameters integrated out)
+        shared_posterior(res, recs)
     lines += ["", res.summary()]
     text = "\n".join(lines)
     print(text)
@@ -1181,8 +1251,9 @@ def example_pooled() -> None:
     (out / "example.txt").write_text(text + "\n")
     paths = res.report(out / "example_report")
     FIG.mkdir(parents=True, exist_ok=True)
-    for key in ("runs", "candidates"):
-        shutil.copy(paths[key], FIG / f"diagnose_pooled_{key}.png")
+    for key in ("runs", "candidates", "posterior"):
+        if key in paths:
+            shutil.copy(paths[key], FIG / f"diagnose_pooled_{key}.png")
 
 
 def threshold_null() -> None:
@@ -2074,6 +2145,12 @@ def main(argv=None) -> int:
     ap.add_argument("--bayes-factor-check", type=int, default=0, metavar="N",
                     help="the nested-sampling Bayes factor on the first N controls and N effect "
                          "cases (resumable, --shard)")
+    ap.add_argument("--bayes-factor-repeat", metavar="IDS",
+                    help="bayes_factor again on these case ids (comma-separated) with "
+                         "--seeds more nested-sampling seeds: scatter against stated error "
+                         "(resumable, --shard)")
+    ap.add_argument("--seeds", type=int, default=4, metavar="N",
+                    help="seeds for --bayes-factor-repeat (default 4)")
     ap.add_argument("--platform-band", action="store_true",
                     help="the platform's gain by band (25 rad/s, whole at 1x and 8x) on the "
                          "controls --bayes-factor-check weighed it on")
@@ -2177,6 +2254,10 @@ def main(argv=None) -> int:
         return 0
     if args.bayes_factor_check:
         bayes_factor_check(args.bayes_factor_check, (k, n))
+        return 0
+    if args.bayes_factor_repeat:
+        bayes_factor_repeat([int(x) for x in args.bayes_factor_repeat.split(",")], args.seeds,
+                            (k, n))
         return 0
     if args.platform_band:
         platform_band()

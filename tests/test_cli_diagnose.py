@@ -116,13 +116,49 @@ def test_diagnose_warns_before_pooling_runs_that_differ(rec_stem, tmp_path, caps
     assert lines[1].startswith("bayespilot: error: noise_passes")
 
 
-def test_diagnose_posterior_needs_one_recording_and_a_netcdf_name(rec_stem, tmp_path, capsys):
+def test_diagnose_posterior_file_name_says_what_it_holds(rec_stem, tmp_path, capsys):
+    """One recording: draws as netCDF (.nc); several: the shared parameters' grid (.json)."""
     code, out, err = _run(capsys, "diagnose", rec_stem, rec_stem, "--posterior",
                           tmp_path / "p.nc")
-    assert code == 2 and "takes one recording" in err and err.count("\n") == 1
+    assert code == 2 and "must end in .json" in err and err.count("\n") == 1
     code, out, err = _run(capsys, "diagnose", rec_stem, "--posterior", tmp_path / "p.txt")
     assert code == 2 and "must end in .nc" in err
     assert not list(tmp_path.iterdir())
+
+
+def test_diagnose_pooled_posterior_writes_the_shared_parameters_json(tmp_path, capsys,
+                                                                    monkeypatch):
+    """Two runs with a washout: --posterior POST.json holds the shared omega_w's grid
+    posterior, which the summary and --json also carry (grid shortened here)."""
+    import bayespilot.diagnose as dg
+    from bayespilot import presets
+    from bayespilot.diagnose import get_extension
+    from bayespilot.model import paper_model
+
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    stems = []
+    for seed in (22, 23):
+        rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=seed,
+                       duration=40.96).recording
+        meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
+        stems.append(tmp_path / f"wash{seed}")
+        write_recording(Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task,
+                                  meta), stems[-1])
+    real = dg.shared_posterior
+    monkeypatch.setattr(dg, "shared_posterior", lambda res, r, **kw: real(res, r, n_grid=7,
+                                                                         **kw))
+    post, out = tmp_path / "post.json", tmp_path / "d.json"
+    code, stdout, err = _run(capsys, "diagnose", *stems, "--bootstrap", "0", "--posterior",
+                             post, "--json", out)
+    assert code == 0, err
+    assert "decision: motion-washout" in stdout
+    assert "posterior of the shared parameters" in stdout
+    got = json.loads(post.read_text())
+    assert got["names"] == ["omega_w"] and len(got["grid"][0]) == 7
+    lo, hi = got["marginals"]["omega_w"]["interval"]
+    assert lo < 0.8 < hi
+    assert json.loads(out.read_text())["posterior"]["marginals"] == got["marginals"]
 
 
 @pytest.mark.filterwarnings("ignore::bayespilot.sample.ConvergenceWarning")

@@ -194,3 +194,77 @@ def test_pooled_whole_band_starts_from_the_low_band_fit(monkeypatch):
     monkeypatch.setattr(P, "_pooled_guide", lambda *a: None)
     alone = diagnose_pooled(recs, **kw)
     assert alone.ranking[0].delta_neg_log_lik < res.chosen.delta_neg_log_lik - 10
+
+
+def _fd_hessian(f, x, rel=1e-3):
+    """Central-difference Hessian of a scalar function (plain NumPy)."""
+    x = np.asarray(x, float)
+    h = rel * np.maximum(np.abs(x), 0.05)
+    n = x.size
+    H = np.empty((n, n))
+    f0 = f(x)
+    for i in range(n):
+        for j in range(i, n):
+            if i == j:
+                e = np.zeros(n)
+                e[i] = h[i]
+                H[i, i] = (f(x + e) - 2 * f0 + f(x - e)) / h[i] ** 2
+            else:
+                ei, ej = np.zeros(n), np.zeros(n)
+                ei[i], ej[j] = h[i], h[j]
+                H[i, j] = H[j, i] = (f(x + ei + ej) - f(x + ei - ej) - f(x - ei + ej)
+                                     + f(x - ei - ej)) / (4 * h[i] * h[j])
+    return H
+
+
+def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
+        washout_runs, washout_result, tmp_path):
+    """Reference: at three grid values of omega_w, each run's pilot parameters refitted on its
+    own and integrated out with a central-difference Hessian of its GLS -ln L (not the
+    Gauss-Newton one the module uses); the log density's differences must agree."""
+    from bayespilot.diagnose import shared_posterior
+
+    res = washout_result
+    post = shared_posterior(res, washout_runs, n_grid=11)
+    assert res.posterior is post and post.names == ("omega_w",)
+    g, logp = post.grid[0], post.log_density
+    model = res.chosen.model
+    names = tuple(n for n in model.parameter_names if n not in ("omega_w", "delta_abs"))
+    wls = [D.Whitened(model, rec, nz) for rec, nz in zip(washout_runs, res.arrays["noise"])]
+
+    def reference(w):
+        total = 0.0
+        for wl, run in zip(wls, res.runs):
+            fit = D._gls_refine(wl, dict(run["params"], omega_w=float(w)), names)
+            x0 = np.array([fit.params[n] for n in names])
+
+            def f(x, fit=fit, wl=wl):
+                return wl.neg_log_lik(dict(fit.params, **dict(zip(names, x))))
+
+            sign, ld = np.linalg.slogdet(_fd_hessian(f, x0))
+            assert sign > 0
+            total += -fit.neg_log_lik - 0.5 * ld
+        return total
+
+    k0 = int(np.argmax(logp))
+    pts = [k for k in (k0 - 3, k0, k0 + 3) if 0 <= k < g.size]
+    assert len(pts) >= 2
+    ref = {k: reference(g[k]) for k in pts}
+    for k in pts:  # (measured: within 0.003 of each other, 5-7 units from the mode)
+        assert logp[k] - logp[k0] == pytest.approx(ref[k] - ref[k0], abs=0.02)
+    # a near-Gaussian posterior: its spread is the pooled fit's standard error, its centre the fit
+    m = post.marginals["omega_w"]
+    assert m["sd"] == pytest.approx(res.chosen.stderr["omega_w"], rel=0.3)
+    assert m["interval"][0] < res.chosen.params["omega_w"] < m["interval"][1]
+    assert m["interval"][0] < 0.4 < m["interval"][1] and post.edge_mass < 0.01
+    # JSON, summary and report carry it
+    d = json.loads(res.to_json())
+    assert d["posterior"]["marginals"]["omega_w"]["median"] == pytest.approx(m["median"])
+    assert "posterior of the shared parameters" in res.summary()
+    paths = res.report(tmp_path / "rep")
+    assert paths["posterior"].stat().st_size > 0
+    # refusals: another number of recordings, the runs in another order
+    with pytest.raises(ValueError, match="2 runs"):
+        shared_posterior(res, washout_runs[:1])
+    with pytest.raises(ValueError, match="not the recordings"):
+        shared_posterior(res, washout_runs[::-1])

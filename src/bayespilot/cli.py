@@ -662,19 +662,20 @@ def _weigh(args: argparse.Namespace, res, rec) -> None:
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from .diagnose import NAMES, diagnose, diagnose_pooled, get_extension, sample_chosen
+    from .diagnose import (NAMES, diagnose, diagnose_pooled, get_extension, sample_chosen,
+                           shared_posterior)
     from .diagnose.pooled import PoolingWarning, pooling_disagreements
 
     if args.bayes_factor and len(args.recording) > 1:
         raise UsageError("argument --bayes-factor: takes one recording (the evidence of a "
                          "pooled model is not built)")
     if args.posterior is not None:
-        if len(args.recording) > 1:
-            raise UsageError("argument --posterior: takes one recording (the posterior of a "
-                             "pooled diagnosis is not built)")
-        if Path(args.posterior).suffix != ".nc":
-            raise UsageError(f"argument --posterior: {args.posterior} must end in .nc "
-                             "(a netCDF file)")
+        want = ".nc" if len(args.recording) == 1 else ".json"
+        if Path(args.posterior).suffix != want:
+            raise UsageError(f"argument --posterior: {args.posterior} must end in {want} "
+                             + ("(a netCDF file of the draws)" if want == ".nc" else
+                                "(several runs: the shared parameters' posterior on a grid, "
+                                "as JSON)"))
     recs = [_read(r) for r in args.recording]
     try:
         if len(recs) == 1:
@@ -706,6 +707,20 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             # asked for a file and none is written: a warning, even with --quiet
             print(f"{PROG}: warning: decision {res.physics}: no extended model to sample; "
                   f"{args.posterior} not written", file=sys.stderr)
+        elif len(recs) > 1:
+            _say(args, f"the posterior of {res.physics}'s shared parameters (a grid; each "
+                       "run's pilot parameters refitted and integrated out) ...")
+            from ._files import dumps, write_text_atomic
+
+            try:
+                shared_posterior(res, recs, progress=_progress(args))
+                write_text_atomic(args.posterior, dumps(res.posterior.to_dict()))
+            except ValueError as exc:
+                raise CommandFailed(str(exc)) from None
+            except OSError as exc:
+                raise CommandFailed(f"{args.posterior}: cannot write the posterior "
+                                    f"({exc.strerror or exc})") from None
+            _say(args, f"wrote {args.posterior}")
         else:
             _say(args, f"sampling the posterior of the model with {res.physics} (coloured "
                        "likelihood, started at its fit) ...")
@@ -1325,8 +1340,10 @@ def build_parser() -> argparse.ArgumentParser:
     _diagnose_arguments(p)
     p.add_argument("--posterior", metavar="POST.nc",
                    help="one recording: also sample the posterior of the chosen extended model "
-                        "(emcee, coloured likelihood) and write it to this netCDF file; the "
-                        "summary, JSON and report then include it")
+                        "(emcee, coloured likelihood) and write it to this netCDF file; "
+                        "several (POST.json): the posterior of the extension's shared "
+                        "parameters on a grid, as JSON; the summary, JSON and report then "
+                        "include it")
     p.add_argument("--bayes-factor", action="store_true",
                    help="one recording: also weigh the chosen extension (on 'none': the "
                         "top-ranked candidate) against the base model by nested sampling "

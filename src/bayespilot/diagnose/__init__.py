@@ -726,7 +726,8 @@ def _saturation(recording, base_model, base, where, boot_info):
 
 
 from .pooled import PooledDiagnosisResult, diagnose_pooled  # noqa: E402  (uses the helpers above)
-from .posterior import sample_chosen  # noqa: E402
+from .posterior import SharedPosterior, sample_chosen, shared_posterior  # noqa: E402
 from .nested import bayes_factor  # noqa: E402
 
-__all__ += ["diagnose_pooled", "PooledDiagnosisResult", "sample_chosen", "bayes_factor"]
+__all__ += ["diagnose_pooled", "PooledDiagnosisResult", "sample_chosen", "shared_posterior",
+            "SharedPosterior", "bayes_factor"]

@@ -116,6 +116,7 @@ class PooledDiagnosisResult(_JSONSummary):
     settings: dict
     elapsed: float
     arrays: dict = field(default_factory=dict, repr=False)
+    posterior: Any = field(default=None, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``runs``, ... ."""
@@ -126,6 +127,7 @@ class PooledDiagnosisResult(_JSONSummary):
                       "n_runs": len(self.runs),
                       "ranking": [c.to_dict() for c in self.ranking],
                       "where": self.where, "runs": runs, "chosen": chosen,
+                      "posterior": None if self.posterior is None else self.posterior.to_dict(),
                       "settings": self.settings, "elapsed_seconds": self.elapsed})
 
     def summary(self) -> str:
@@ -156,6 +158,8 @@ class PooledDiagnosisResult(_JSONSummary):
             lines += ["", f"fitted {self.chosen.physics} (shared by the {R} runs):"]
             for k, v in self.chosen.params.items():
                 lines.append(f"  {k:<10} {v:12.5g} +- {self.chosen.stderr.get(k, math.nan):.2g}")
+            if self.posterior is not None:
+                lines += self.posterior.summary_lines()
         lines += ["", "runs:"]
         for r in self.runs:
             lines.append(f"  {str(r['source']):<40} base VAF {r['base']['vaf']:6.2f} %, "
@@ -166,17 +170,21 @@ class PooledDiagnosisResult(_JSONSummary):
     __str__ = summary
 
     def report(self, directory: str | Path) -> dict[str, Path]:
-        """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``."""
+        """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``
+        (and ``posterior.png`` once :func:`~bayespilot.diagnose.shared_posterior` has run)."""
         import base64
         import html
 
-        from .report import _png, plot_candidates
+        from .report import _png, plot_candidates, plot_shared_posterior
 
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
         paths = {"candidates": _png(plot_candidates(self), out / "candidates.png"),
                  "runs": _png(plot_runs(self), out / "runs.png"),
                  "json": out / "diagnosis.json"}
+        if self.posterior is not None:
+            paths["posterior"] = _png(plot_shared_posterior(self.posterior),
+                                      out / "posterior.png")
         self.to_json(paths["json"])
 
         def img(p):
@@ -191,6 +199,8 @@ class PooledDiagnosisResult(_JSONSummary):
                 f"run. Mismatch: <b>{self.mismatch}</b>.</p>"
                 f"<h2>Candidates (pooled)</h2>{img(paths['candidates'])}"
                 f"<h2>Each run's share</h2>{img(paths['runs'])}"
+                + (f"<h2>Posterior of the shared parameters</h2>{img(paths['posterior'])}"
+                   if "posterior" in paths else "") +
                 f"<pre>{html.escape(self.summary())}</pre></body></html>\n")
         paths["html"] = out / "report.html"
         write_text_atomic(paths["html"], page)
@@ -660,4 +670,5 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                                        "noise model and level); extension parameters shared"}
     return PooledDiagnosisResult(chosen is not None, chosen.physics if chosen else "none",
                                  ranking, run_d, where, chosen, settings,
-                                 time.perf_counter() - t0)
+                                 time.perf_counter() - t0,
+                                 {"noise": [run.noise for run in runs]})

@@ -15,19 +15,29 @@ makes sense once an extension is chosen.
 The decision likelihood of :func:`diagnose` (low-passed at 25 rad/s and
 decimated) is not the posterior's (the whole band), so the two can differ:
 the posterior uses more of the record.
+
+:func:`shared_posterior` does the same for a pooled diagnosis
+(:func:`~bayespilot.diagnose.diagnose_pooled`), whose model has every run's
+pilot parameters and the extension's shared ones (about 30 dimensions for
+four runs): the shared parameters' marginal posterior on a grid, each run's
+pilot parameters refitted and integrated out by Laplace's method, under the
+decision likelihood the pooled fit and test use.
 """
 
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.integrate import trapezoid
 
 from ..recording import Recording
 from .catalogue import get_extension
 
-__all__ = ["sample_chosen"]
+__all__ = ["sample_chosen", "shared_posterior", "SharedPosterior"]
 
 
 def _checked_chosen(result: Any, recording: Recording):
@@ -35,8 +45,8 @@ def _checked_chosen(result: Any, recording: Recording):
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     if getattr(result, "runs", None) is not None:
-        raise ValueError("sample_chosen takes a single-run diagnosis; the posterior of a "
-                         "pooled diagnosis (parameters shared over runs) is not built")
+        raise ValueError("sample_chosen takes a single-run diagnosis; for a pooled one use "
+                         "shared_posterior (the shared parameters' posterior on a grid)")
     chosen = getattr(result, "chosen", None)
     if chosen is None:
         raise ValueError(f"the diagnosis chose no extension (physics = "
@@ -126,3 +136,263 @@ def posterior_dict(post: Any, names: tuple[str, ...]) -> dict[str, Any]:
             "seed": post.seed, "elapsed_seconds": post.settings.get("elapsed_seconds"),
             "new_parameters": [n for n in names if n in summ],
             "params": params}
+
+
+# --- the posterior of a pooled diagnosis's shared parameters --------------------------------------
+
+#: Grid points per shared parameter (one parameter; two parameters take ``GRID_2D`` each).
+GRID_1D = 41
+GRID_2D = 15
+#: Half-width of the grid in the pooled fit's standard errors (clipped to the bounds).
+GRID_WIDTH = 6.0
+
+
+@dataclass
+class SharedPosterior:
+    """The marginal posterior of a pooled diagnosis's shared extension parameters.
+
+    Attributes
+    ----------
+    physics : str
+        The chosen extension.
+    names : tuple of str
+        Its new parameters, shared by the runs.
+    grid : list of ndarray
+        The grid of each parameter.
+    log_density : ndarray
+        ln of the posterior density on the grid (shape: the grids' lengths),
+        normalised.
+    marginals : dict
+        Per parameter: ``median``, ``mean``, ``sd``, ``interval`` (the central
+        90 %), ``mode``.
+    ml : dict
+        The pooled maximum-likelihood fit and ``stderr`` its standard errors.
+    stderr : dict
+    edge_mass : float
+        Posterior mass in the outermost grid cells (large: the grid is too narrow).
+    settings : dict
+    elapsed : float
+        Wall time, s.
+    """
+
+    physics: str
+    names: tuple
+    grid: list
+    log_density: np.ndarray
+    marginals: dict
+    ml: dict
+    stderr: dict
+    edge_mass: float
+    settings: dict
+    elapsed: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the marginals, the grid and its density, the settings."""
+        return {"physics": self.physics, "names": list(self.names),
+                "marginals": self.marginals, "ml": self.ml, "stderr": self.stderr,
+                "grid": [g.tolist() for g in self.grid],
+                "density": np.exp(self.log_density).tolist(), "edge_mass": self.edge_mass,
+                "settings": self.settings, "elapsed_seconds": self.elapsed}
+
+    def summary_lines(self) -> list[str]:
+        """Lines for a summary: per parameter the median and central 90 % interval."""
+        lines = [f"  posterior of the shared parameters ({self.settings['method']}): "
+                 f"median, central 90 %"]
+        for n in self.names:
+            m = self.marginals[n]
+            lines.append(f"  {n:<10} {m['median']:12.5g}  [{m['interval'][0]:.5g}, "
+                         f"{m['interval'][1]:.5g}]")
+        if self.edge_mass > 0.01:
+            lines.append(f"  (posterior mass {self.edge_mass:.2g} at the grid's edge: the "
+                         "interval may be cut)")
+        return lines
+
+
+def _check_pooled(result: Any, recordings) -> tuple[Any, list]:
+    """The chosen GLS candidate of a pooled ``result`` and its recordings, or a clear error."""
+    recs = list(recordings)
+    if getattr(result, "runs", None) is None:
+        raise ValueError("shared_posterior takes a pooled diagnosis (diagnose_pooled); for one "
+                         "run use sample_chosen")
+    for rec in recs:
+        if not isinstance(rec, Recording):
+            raise TypeError(f"recordings must be Recordings, got {type(rec).__name__}")
+    if len(recs) != len(result.runs):
+        raise ValueError(f"the diagnosis pooled {len(result.runs)} runs; {len(recs)} "
+                         "recordings given")
+    chosen = result.chosen
+    if chosen is None:
+        raise ValueError(f"the diagnosis chose no extension (physics = {result.physics!r}): "
+                         "there is no shared parameter to weigh")
+    ext = get_extension(chosen.physics)
+    if ext.likelihood != "gls" or getattr(chosen, "model", None) is None:
+        raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
+                         "likelihood; its limits are read from the data, not sampled")
+    noise = result.arrays.get("noise")
+    if not noise or any(r.get("params") is None for r in result.runs):
+        raise ValueError("this diagnosis does not carry its runs' noise models and fits "
+                         "(read back from JSON?); diagnose the runs again")
+    return chosen, recs
+
+
+def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
+                     width: float = GRID_WIDTH, progress: bool = False) -> SharedPosterior:
+    """The posterior of the shared parameters of the extension a pooled diagnosis chose.
+
+    The pooled model has every run's pilot parameters (R x 7) and the
+    extension's shared ones; sampling all of them is costly (about 30
+    dimensions for four runs).  Here the shared parameters' marginal posterior
+    is computed on a grid: at each grid value the runs' pilot parameters are
+    refitted (the pooled fit of :func:`~bayespilot.diagnose.diagnose_pooled`,
+    its decision likelihood) and integrated out by Laplace's method,
+
+        ln p(s | data) = const - sum_r [ -ln L_r(theta_r*(s), s)
+                                         + 1/2 ln det H_r(s) ],
+
+    with H_r = J_r^T J_r / sigma_r^2 the Gauss-Newton Hessian of run r's GLS
+    -ln L in its pilot parameters and a uniform prior on the grid.  Laplace's
+    method is exact for a likelihood Gaussian in the pilot parameters; the
+    shared parameters' own shape (a bound, a skew) is kept exactly.  (A grid
+    rather than emcee: the method's cost is R refits per grid point.)
+
+    Parameters
+    ----------
+    result : PooledDiagnosisResult
+        A pooled diagnosis whose decision is a GLS catalogue extension.
+    recordings : sequence of Recording
+        The runs it pooled, in its order.
+    n_grid : int, optional
+        Grid points per parameter (default 41 for one shared parameter, 15
+        for two).
+    width : float
+        Half-width of the grid in the pooled fit's standard errors, clipped to
+        the parameter's bounds (the whole bounds if the standard error is not
+        finite).
+    progress : bool
+        A tqdm bar over the grid.
+
+    Returns
+    -------
+    SharedPosterior
+        Also stored as ``result.posterior``, so that ``result.to_json()``,
+        ``result.summary()`` and ``result.report()`` include it.
+
+    Raises
+    ------
+    ValueError
+        Not a pooled diagnosis, no GLS extension chosen, another number of
+        recordings, or recordings that are not the ones diagnosed (their
+        pooled -ln L at the fit differs from the diagnosis's).
+    TypeError
+        A recording is not a Recording.
+    """
+    from tqdm.auto import tqdm
+
+    from . import decide as D
+    from .pooled import _pooled_refine
+
+    chosen, recs = _check_pooled(result, recordings)
+    t0 = time.perf_counter()
+    ext = get_extension(chosen.physics)
+    model = chosen.model
+    shared = tuple(ext.new_parameters)
+    names = tuple(n for n in model.parameter_names if n not in shared
+                  and (ext.refine_threshold or n != "delta_abs"))
+    noise = result.arrays["noise"]
+    wls = [D.Whitened(model, rec, nz) for rec, nz in zip(recs, noise)]
+    fits = [dict(r["params"]) for r in result.runs]
+    f_fit = float(sum(wl.neg_log_lik(q) for wl, q in zip(wls, fits)))
+    if chosen.fit is not None and not math.isclose(f_fit, chosen.fit.neg_log_lik,
+                                                   rel_tol=1e-9, abs_tol=1e-6):
+        raise ValueError(f"these are not the recordings that were diagnosed (pooled -ln L at "
+                         f"the fit {f_fit:.6f}, the diagnosis's {chosen.fit.neg_log_lik:.6f})")
+    k = len(shared)
+    n_grid = (GRID_1D if k == 1 else GRID_2D) if n_grid is None else int(n_grid)
+    if n_grid < 5:
+        raise ValueError(f"n_grid must be at least 5, got {n_grid}")
+    if k > 2:
+        raise ValueError(f"{chosen.physics} shares {k} parameters; the grid takes 1 or 2")
+    grids = []
+    for n in shared:
+        p = model.parameter(n)
+        c, se = float(chosen.params[n]), float(chosen.stderr.get(n, math.nan))
+        lo, hi = float(p.lower), float(p.upper)
+        if math.isfinite(se) and se > 0:
+            lo, hi = max(lo, c - width * se), min(hi, c + width * se)
+        grids.append(np.linspace(lo, hi, n_grid))
+    mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, k)
+    # walk outward from the fit, each point started from its nearest finished neighbour
+    scale = np.array([g[-1] - g[0] for g in grids]) / (n_grid - 1)
+    centre = np.array([float(chosen.params[n]) for n in shared])
+    order = np.argsort(np.sum(((mesh - centre) / scale) ** 2, axis=1))
+    logp = np.full(len(mesh), -np.inf)
+    starts: dict[int, list] = {}
+    bar = tqdm(total=len(mesh), desc="shared posterior", unit="point", disable=not progress)
+    for i in order:
+        done = [j for j in starts]
+        near = min(done, key=lambda j: float(np.sum(((mesh[j] - mesh[i]) / scale) ** 2))) \
+            if done else None
+        base = fits if near is None else starts[near]
+        value = dict(zip(shared, (float(v) for v in mesh[i])))
+        try:
+            ps, f, _ = _pooled_refine(wls, [D.FitSummary(dict(q, **value), math.nan, (),
+                                                         np.zeros((0, 0))) for q in base],
+                                      names, (), value)
+        except (ValueError, np.linalg.LinAlgError):
+            bar.update(1)
+            continue
+        logdet = 0.0
+        for wl, q in zip(wls, ps):
+            _, J = wl.lik.jacobian(q, names)
+            w = wl.whiten(wl.u - wl.lik.response(q))
+            Jw = wl.whiten(J) / math.sqrt(max(float(np.mean(w * w)), 1e-300))
+            sign, ld = np.linalg.slogdet(Jw.T @ Jw)
+            logdet += ld if sign > 0 else math.inf
+        if math.isfinite(f) and math.isfinite(logdet):
+            logp[i] = -f - 0.5 * logdet
+            starts[i] = ps
+        bar.update(1)
+    bar.close()
+    if not np.any(np.isfinite(logp)):
+        raise ValueError("the pooled fit failed at every grid point")
+    shape = tuple(len(g) for g in grids)
+    logp = logp.reshape(shape)
+    dens = np.exp(logp - np.max(logp))
+    # normalise on the grid (trapezoid over each axis)
+    norm = dens
+    for axis in reversed(range(k)):
+        norm = trapezoid(norm, grids[axis], axis=axis)
+    log_density = np.log(np.maximum(dens / norm, 1e-300))
+    marginals = {}
+    edge = 0.0
+    for a, n in enumerate(shared):
+        m = dens
+        for b in reversed(range(k)):
+            if b != a:
+                m = trapezoid(m, grids[b], axis=b)
+        g = grids[a]
+        m = m / trapezoid(m, g)
+        cdf = np.concatenate([[0.0], np.cumsum(0.5 * (m[1:] + m[:-1]) * np.diff(g))])
+        cdf /= cdf[-1]
+        q = lambda x, cdf=cdf, g=g: float(np.interp(x, cdf, g))  # noqa: E731
+        mean = float(trapezoid(g * m, g))
+        sd = float(math.sqrt(max(trapezoid((g - mean) ** 2 * m, g), 0.0)))
+        marginals[n] = {"median": q(0.5), "mean": mean, "sd": sd,
+                        "interval": [q(0.05), q(0.95)], "mode": float(g[int(np.argmax(m))])}
+        # mass in the outer cells of a grid cut inside the bounds
+        p = model.parameter(n)
+        if g[0] > p.lower:
+            edge = max(edge, float(cdf[1]))
+        if g[-1] < p.upper:
+            edge = max(edge, float(1.0 - cdf[-2]))
+    settings = {"method": "grid; each run's pilot parameters refitted and integrated out by "
+                          "Laplace's method; decision likelihood",
+                "n_grid": n_grid, "width_stderr": width, "points": int(len(mesh)),
+                "failed_points": int(np.sum(~np.isfinite(logp))),
+                "prior": "uniform on the grid", "n_runs": len(recs)}
+    post = SharedPosterior(chosen.physics, shared, grids, log_density, marginals,
+                           {n: float(chosen.params[n]) for n in shared},
+                           {n: float(chosen.stderr.get(n, math.nan)) for n in shared},
+                           edge, settings, time.perf_counter() - t0)
+    result.posterior = post
+    return post

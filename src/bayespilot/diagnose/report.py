@@ -14,9 +14,10 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from scipy.integrate import trapezoid
 
 __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
-           "plot_posterior", "plot_batch", "write_report"]
+           "plot_posterior", "plot_shared_posterior", "plot_batch", "write_report"]
 
 
 def _pyplot():
@@ -280,6 +281,40 @@ def plot_posterior(result, axes: Any = None):
             ax.axvspan(v - se, v + se, color="C3", alpha=0.12, label="+-1 s.e.")
         ax.legend(fontsize=7)
     fig.suptitle(f"{chosen.physics}: posterior of its new parameters", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def plot_shared_posterior(post, axes: Any = None):
+    """The marginal posteriors of a pooled diagnosis's shared parameters
+    (:func:`~bayespilot.diagnose.shared_posterior`), with the pooled fit and its +-1 standard
+    error and the central 90 % interval marked."""
+    names = list(post.names)
+    if axes is None:
+        plt = _pyplot()
+        fig, axes = plt.subplots(1, len(names), figsize=(4.5 * len(names), 3.4), squeeze=False)
+        axes = axes[0]
+    else:
+        axes = np.atleast_1d(axes)
+        fig = axes[0].figure
+    dens = np.exp(post.log_density)
+    for a, (ax, n) in enumerate(zip(axes, names)):
+        g = post.grid[a]
+        m = dens.sum(axis=tuple(b for b in range(dens.ndim) if b != a)) if dens.ndim > 1 else dens
+        m = m / trapezoid(m, g)
+        ax.plot(g, m, color="C0", lw=1.5, label="posterior (grid, Laplace)")
+        lo, hi = post.marginals[n]["interval"]
+        inside = (g >= lo) & (g <= hi)
+        ax.fill_between(g[inside], m[inside], color="C0", alpha=0.2, label="central 90 %")
+        v, se = post.ml[n], post.stderr.get(n, math.nan)
+        ax.axvline(v, color="C3", ls="--", lw=1, label="pooled ML fit")
+        if math.isfinite(se):
+            ax.axvspan(v - se, v + se, color="C3", alpha=0.12, label="+-1 s.e.")
+        ax.set_xlabel(n)
+        ax.set_ylabel("density")
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{post.physics}: posterior of the parameters shared by "
+                 f"{post.settings['n_runs']} runs", fontsize=9)
     fig.tight_layout()
     return fig
 
