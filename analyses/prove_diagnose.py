@@ -1012,6 +1012,24 @@ def posterior_check(n: int = 8) -> None:
           f"{sum(r['hdi_90'][0] < truth < r['hdi_90'][1] for r in rows)}/{len(rows)}")
 
 
+def _rescale_bayes_factors(rows: list[dict]) -> None:
+    """Rows made before the Bayes factor's error was scaled by ``nested.ERR_SCALE`` (no
+    ``err_scale`` key): scale their error and re-read ``favours`` with it (the scale only
+    widens the error, so an ``inconclusive`` - also one from a lost-mode bound - stays)."""
+    from bayespilot.compare import decide
+    from bayespilot.diagnose.nested import ERR_SCALE
+
+    for r in rows:
+        k = ERR_SCALE / r.get("err_scale", 1.0)
+        if k == 1.0:
+            continue
+        r["log_bayes_factor_err"] *= k
+        r["err_scale"] = ERR_SCALE
+        if r["favours"] != "inconclusive":
+            f = decide(r["log_bayes_factor"], r["log_bayes_factor_err"])
+            r["favours"] = {"threshold": r["weighed"], "none": "none"}.get(f, "inconclusive")
+
+
 def bayes_factor_check(n: int, shard: tuple[int, int] = (0, 1)) -> None:
     """How the nested-sampling Bayes factor (``bayes_factor``) reads against the LR decision.
 
@@ -1057,6 +1075,7 @@ def bayes_factor_check(n: int, shard: tuple[int, int] = (0, 1)) -> None:
                "weighed": bf.physics, "lr_statistic": cand.statistic, "p_value": cand.p_value,
                "schwarz": bf.schwarz, "log_bayes_factor": bf.log_bayes_factor,
                "log_bayes_factor_err": bf.log_bayes_factor_err, "favours": bf.favours,
+               "err_scale": bf.settings.get("err_scale", 1.0),
                "runs_base": [(r["log_z"], r["max_log_lik"], r["used"])
                              for r in bf.settings["runs_base"]],
                "runs_extended": [(r["log_z"], r["max_log_lik"], r["used"])
@@ -1067,6 +1086,7 @@ def bayes_factor_check(n: int, shard: tuple[int, int] = (0, 1)) -> None:
         print(json.dumps(row), flush=True)
     rows = sorted((json.loads(line) for f in every() for line in f.read_text().splitlines()
                    if line.strip()), key=lambda r: (r["truth"] != "none", r["id"]))
+    _rescale_bayes_factors(rows)
     print(f"{'id':>4} {'truth':<24} {'effect':<14} {'decision':<24} {'weighed':<24} "
           f"{'2dlnL':>7} {'Schwarz':>8} {'ln BF':>7} {'+-':>5}  favours")
     for r in rows:
@@ -1184,6 +1204,7 @@ def bayes_factor_repeat(ids: list[int], seeds: int = 4,
             bf = bayes_factor(res_of[i], rec, seed=s)
         row = {"id": i, "seed": s, "weighed": bf.physics, "log_bayes_factor": bf.log_bayes_factor,
                "log_bayes_factor_err": bf.log_bayes_factor_err,
+               "err_scale": bf.settings.get("err_scale", 1.0),
                "best_gain": max(r["max_log_lik"] for r in bf.settings["runs_extended"])
                - max(r["max_log_lik"] for r in bf.settings["runs_base"]),
                "elapsed_seconds": bf.elapsed}
@@ -1202,11 +1223,13 @@ def bayes_factor_repeat(ids: list[int], seeds: int = 4,
         if i in first:
             got.insert(0, {"seed": 0, "log_bayes_factor": first[i]["log_bayes_factor"],
                            "log_bayes_factor_err": first[i]["log_bayes_factor_err"],
+                           "err_scale": first[i].get("err_scale", 1.0),
                            "weighed": first[i]["weighed"]})
         if not got:
             continue
         v = np.array([r["log_bayes_factor"] for r in got])
-        e = np.array([r["log_bayes_factor_err"] for r in got])
+        # the runs' own (stated) error, whatever scale a row was written with
+        e = np.array([r["log_bayes_factor_err"] / r.get("err_scale", 1.0) for r in got])
         print(f"{i:4d} {got[0]['weighed']:<24} "
               f"{' '.join(f'{x:+.2f}' for x in v):<44} {v.mean():+6.2f} "
               f"{v.std(ddof=1) if v.size > 1 else float('nan'):5.2f} {e.mean():16.2f}")

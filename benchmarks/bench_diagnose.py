@@ -3,7 +3,7 @@
 Run:  python benchmarks/bench_diagnose.py [--repeats 1] [--bootstrap 39] [--runs R]
                                           [--omega-c RAD_S] [--oversample M]
                                           [--washout OMEGA_W] [--calibrate B]
-                                          [--bayes-factor]
+                                          [--bayes-factor] [--shared-posterior]
 
 Simulates task FD, K_theta = 1, K_n = 0.104 (F_n ~ 0.2, Table 4) with the
 paper's model, loads the kernels once (a short diagnose), then times the full
@@ -13,7 +13,9 @@ diagnosis with numba limited to one thread; prints the wall time per stage.
 motion channel at 8x.  ``--washout 0.5`` simulates a washout of 0.5 rad/s, so
 that a candidate is chosen and its test calibrated (``--calibrate`` replicates,
 default 39): the slowest path.  ``--bayes-factor`` then also times
-``bayes_factor`` (nested sampling, its defaults) on the diagnosed run.
+``bayes_factor`` (nested sampling, its defaults) on the diagnosed run;
+``--runs R --washout W --shared-posterior`` times ``shared_posterior`` of the
+pooled diagnosis's chosen extension (its default grid).
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ import numba
 import numpy as np
 
 from bayespilot import presets
-from bayespilot.diagnose import bayes_factor, diagnose, diagnose_pooled, get_extension
+from bayespilot.diagnose import (bayes_factor, diagnose, diagnose_pooled, get_extension,
+                                 shared_posterior)
 from bayespilot.model import paper_model
 from bayespilot.simulate import simulate
 
@@ -45,7 +48,11 @@ def main(argv=None):
                     help="replicates of the chosen candidate's calibration (default 39)")
     ap.add_argument("--bayes-factor", action="store_true",
                     help="also time bayes_factor on the diagnosed run (one recording only)")
+    ap.add_argument("--shared-posterior", action="store_true",
+                    help="with --runs R: also time shared_posterior of the chosen extension")
     args = ap.parse_args(argv)
+    if args.shared_posterior and args.runs < 2:
+        ap.error("--shared-posterior needs --runs R >= 2")
     if args.bayes_factor and args.runs > 1:
         ap.error("--bayes-factor takes one run")
     numba.set_num_threads(1)
@@ -78,6 +85,15 @@ def main(argv=None):
     print(f"N = {rec.n_samples}, {runs}bootstrap B = {args.bootstrap}: decision {res.physics}")
     if args.runs > 1:
         print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
+        if args.shared_posterior:
+            if res.chosen is None:
+                print("shared_posterior: nothing chosen (simulate an effect: --washout)")
+            else:
+                t0 = time.perf_counter()
+                post = shared_posterior(res, recs)
+                print(f"shared_posterior: {time.perf_counter() - t0:.1f} s for "
+                      f"{post.settings['points']} grid points x {args.runs} runs")
+                print("\n".join(post.summary_lines()))
         print(f"load at the end: {os.getloadavg()}")
         return
     print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
