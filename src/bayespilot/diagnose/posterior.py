@@ -164,7 +164,7 @@ class SharedPosterior:
         normalised.
     marginals : dict
         Per parameter: ``median``, ``mean``, ``sd``, ``interval`` (the central
-        90 %), ``mode``.
+        90 %), ``mode`` and ``density`` (the marginal density on its grid).
     ml : dict
         The pooled maximum-likelihood fit and ``stderr`` its standard errors.
     stderr : dict
@@ -378,7 +378,8 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
         mean = float(trapezoid(g * m, g))
         sd = float(math.sqrt(max(trapezoid((g - mean) ** 2 * m, g), 0.0)))
         marginals[n] = {"median": q(0.5), "mean": mean, "sd": sd,
-                        "interval": [q(0.05), q(0.95)], "mode": float(g[int(np.argmax(m))])}
+                        "interval": [q(0.05), q(0.95)], "mode": float(g[int(np.argmax(m))]),
+                        "density": m.tolist()}
         # mass in the outer cells of a grid cut inside the bounds
         p = model.parameter(n)
         if g[0] > p.lower:

@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from scipy.integrate import trapezoid
 
 __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
            "plot_posterior", "plot_shared_posterior", "plot_batch", "write_report"]
@@ -259,6 +258,23 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     return fig
 
 
+def _axes_row(n: int, axes: Any = None):
+    """(figure, n axes in a row): new ones, or the given ones'."""
+    if axes is None:
+        plt = _pyplot()
+        fig, axes = plt.subplots(1, n, figsize=(4.5 * n, 3.4), squeeze=False)
+        return fig, axes[0]
+    axes = np.atleast_1d(axes)
+    return axes[0].figure, axes
+
+
+def _mark_fit(ax, value: float, stderr: float, label: str) -> None:
+    """A maximum-likelihood fit and its +-1 standard error on a marginal's axes."""
+    ax.axvline(value, color="C3", ls="--", lw=1, label=label)
+    if math.isfinite(stderr):
+        ax.axvspan(value - stderr, value + stderr, color="C3", alpha=0.12, label="+-1 s.e.")
+
+
 def plot_posterior(result, axes: Any = None):
     """Marginal posteriors of the chosen extension's new parameters, with the maximum-likelihood
     fit and its +-1 standard error (from the decision likelihood) marked."""
@@ -266,19 +282,11 @@ def plot_posterior(result, axes: Any = None):
 
     post, chosen = result.posterior, result.chosen
     names = [n for n in chosen.params if n in post.parameter_names]
-    if axes is None:
-        plt = _pyplot()
-        fig, axes = plt.subplots(1, len(names), figsize=(4.5 * len(names), 3.4), squeeze=False)
-        axes = axes[0]
-    else:
-        axes = np.atleast_1d(axes)
-        fig = axes[0].figure
+    fig, axes = _axes_row(len(names), axes)
     for ax, n in zip(axes, names):
         plot_marginal(post, n, ax=ax)
-        v, se = chosen.params[n], chosen.stderr.get(n, math.nan)
-        ax.axvline(v, color="C3", ls="--", lw=1, label="ML fit (decision likelihood)")
-        if math.isfinite(se):
-            ax.axvspan(v - se, v + se, color="C3", alpha=0.12, label="+-1 s.e.")
+        _mark_fit(ax, chosen.params[n], chosen.stderr.get(n, math.nan),
+                  "ML fit (decision likelihood)")
         ax.legend(fontsize=7)
     fig.suptitle(f"{chosen.physics}: posterior of its new parameters", fontsize=9)
     fig.tight_layout()
@@ -290,26 +298,14 @@ def plot_shared_posterior(post, axes: Any = None):
     (:func:`~bayespilot.diagnose.shared_posterior`), with the pooled fit and its +-1 standard
     error and the central 90 % interval marked."""
     names = list(post.names)
-    if axes is None:
-        plt = _pyplot()
-        fig, axes = plt.subplots(1, len(names), figsize=(4.5 * len(names), 3.4), squeeze=False)
-        axes = axes[0]
-    else:
-        axes = np.atleast_1d(axes)
-        fig = axes[0].figure
-    dens = np.exp(post.log_density)
+    fig, axes = _axes_row(len(names), axes)
     for a, (ax, n) in enumerate(zip(axes, names)):
-        g = post.grid[a]
-        m = dens.sum(axis=tuple(b for b in range(dens.ndim) if b != a)) if dens.ndim > 1 else dens
-        m = m / trapezoid(m, g)
+        g, m = post.grid[a], np.asarray(post.marginals[n]["density"])
         ax.plot(g, m, color="C0", lw=1.5, label="posterior (grid, Laplace)")
         lo, hi = post.marginals[n]["interval"]
         inside = (g >= lo) & (g <= hi)
         ax.fill_between(g[inside], m[inside], color="C0", alpha=0.2, label="central 90 %")
-        v, se = post.ml[n], post.stderr.get(n, math.nan)
-        ax.axvline(v, color="C3", ls="--", lw=1, label="pooled ML fit")
-        if math.isfinite(se):
-            ax.axvspan(v - se, v + se, color="C3", alpha=0.12, label="+-1 s.e.")
+        _mark_fit(ax, post.ml[n], post.stderr.get(n, math.nan), "pooled ML fit")
         ax.set_xlabel(n)
         ax.set_ylabel("density")
         ax.legend(fontsize=7)
