@@ -268,3 +268,28 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
         shared_posterior(res, washout_runs[:1])
     with pytest.raises(ValueError, match="not the recordings"):
         shared_posterior(res, washout_runs[::-1])
+
+
+def test_shared_posterior_of_two_shared_parameters():
+    """Two shared drifts on a 7 x 7 grid: near-Gaussian, so each marginal's sd is the pooled
+    fit's standard error and its central 90 % interval the fit +- 1.645 of them; a grid too
+    coarse is refused."""
+    from bayespilot.diagnose import shared_posterior
+
+    model = get_extension("time-varying-gains").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), drift_v=0.6, drift_m=0.3)
+    recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=s,
+                     duration=40.96).recording for s in (5, 6)]
+    res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2,
+                          candidates=["time-varying-gains"])
+    assert res.physics == "time-varying-gains"
+    post = shared_posterior(res, recs, n_grid=7)
+    assert post.log_density.shape == (7, 7) and post.settings["failed_points"] == 0
+    for n in ("drift_v", "drift_m"):
+        m, v, se = post.marginals[n], res.chosen.params[n], res.chosen.stderr[n]
+        assert m["sd"] == pytest.approx(se, rel=0.2)
+        assert m["interval"][0] == pytest.approx(v - 1.645 * se, abs=0.3 * se)
+        assert m["interval"][1] == pytest.approx(v + 1.645 * se, abs=0.3 * se)
+        assert m["interval"][0] < p[n] < m["interval"][1]
+    with pytest.raises(ValueError, match="n_grid"):
+        shared_posterior(res, recs, n_grid=3)
