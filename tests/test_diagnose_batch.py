@@ -194,3 +194,43 @@ def test_plot_batch_cells():
     assert len([ln for ln in ax.lines if ln.get_marker() == "."]) == 1  # below the level
     assert [t.get_text() for t in ax.get_yticklabels()] == ["a: motion-washout", "b: none"]
     plt.close(fig)
+
+
+def test_task_posterior_pooled_and_a_failure_kept(tmp_path, monkeypatch):
+    """posterior=True: a pooled task carries the shared parameters' grid posterior, the same as
+    shared_posterior run here on a direct diagnosis, and summary.csv's cell reads it; a single
+    run whose sampling fails keeps its diagnosis with the error recorded."""
+    import bayespilot.diagnose as dg
+    from bayespilot import presets
+    from bayespilot.diagnose import get_extension, shared_posterior
+    from bayespilot.diagnose.batch import DiagnoseTask, run_diagnose_task
+    from bayespilot.model import paper_model
+
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=s,
+                     duration=40.96).recording for s in (22, 23)]
+    opts = {"n_bootstrap": 0, "candidates": ["motion-washout"], "seed": 0}
+    task = DiagnoseTask("s1_FD_k1", ("a", "b"), "s1", "FD", 1.0)
+    res, _ = run_diagnose_task(task, recs, dict(opts, posterior=True))
+    ref = diagnose_pooled(recs, **opts)
+    shared_posterior(ref, recs)
+    assert res.physics == ref.physics == "motion-washout"
+    got, want = res.posterior.marginals["omega_w"], ref.posterior.marginals["omega_w"]
+    assert got["median"] == pytest.approx(want["median"], rel=1e-9)
+    assert got["interval"] == pytest.approx(want["interval"], rel=1e-9)
+    (tmp_path / "s1_FD_k1.json").write_text(json.dumps({"key": task.key,
+                                                        "diagnosis": res.to_dict()}))
+    row = batch_summary_rows([task], tmp_path)[0]
+    assert json.loads(row["posterior"]) == {"omega_w": [got["median"], *got["interval"]]}
+
+    def fail(*a, **k):
+        raise RuntimeError("the chain diverged")
+
+    monkeypatch.setattr(dg, "sample_chosen", fail)
+    one = DiagnoseTask("a", ("a",), "s1", "FD", 1.0)
+    res1, _ = run_diagnose_task(one, recs[:1], dict(opts, posterior=True))
+    assert res1.physics == "motion-washout" and res1.posterior is None
+    assert res1.settings["posterior_error"] == "RuntimeError: the chain diverged"
+    with pytest.raises(ValueError, match="posterior"):
+        diagnose_batch(["x"], tmp_path / "o", posterior="yes")

@@ -792,6 +792,7 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
                                      alpha=args.alpha, n_bootstrap=args.bootstrap,
                                      n_calibrate=args.calibrate,
                                      noise_passes=args.noise_passes, reports=args.reports,
+                                     posterior=args.posterior,
                                      scheduler=args.scheduler, workers=args.workers,
                                      progress=_progress(args),
                                      connect_timeout=args.connect_timeout)
@@ -1085,6 +1086,7 @@ diagnosis. About 15 s per recording of
 Examples:
   bayespilot diagnose-batch recordings/ --out diagnoses
   bayespilot diagnose-batch recordings/ --out pooled --pool --reports
+  bayespilot diagnose-batch recordings/ --out pooled --pool --posterior
   bayespilot diagnose-batch recordings/ --out diagnoses --scheduler tcp://10.0.0.5:8786
 """
 
@@ -1366,6 +1368,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reports", action="store_true",
                    help="also write each diagnosis's report (PNG figures, report.html) to "
                         "DIR/<key>/")
+    p.add_argument("--posterior", action="store_true",
+                   help="where an extension is chosen, also its posterior (one run: emcee, "
+                        "minutes; pooled: the shared parameters on a grid, seconds), in each "
+                        "<key>.json and summary.csv")
     _diagnose_arguments(p)
     _cluster_arguments(p)
     _common(p, sub=True)

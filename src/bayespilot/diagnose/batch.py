@@ -24,7 +24,8 @@ Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``,
 ``reports=True``), ``summary.png`` (every candidate's p-value in every
 diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`) and
 ``summary.csv`` (one row per key: the decision, the
-chosen extension's p-value, -ln L improvement and parameters, the candidate
+chosen extension's p-value, -ln L improvement and parameters, with
+``posterior=True`` its posterior's medians and 90 % intervals, the candidate
 with the smallest p-value and that p-value (the nearest miss when the answer
 is ``none``), or the error).
 
@@ -53,7 +54,7 @@ __all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
 
 #: Columns of ``summary.csv``.
 SUMMARY_FIELDS = ("key", "n_runs", "subject", "task", "motion_gain", "physics", "mismatch",
-                  "p_value", "delta_neg_log_lik", "params", "smallest_p_candidate",
+                  "p_value", "delta_neg_log_lik", "params", "posterior", "smallest_p_candidate",
                   "smallest_p_value", "error")
 
 @dataclass(frozen=True)
@@ -155,14 +156,36 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
 
 
 def run_diagnose_task(task: DiagnoseTask, recordings: Sequence, options: Mapping[str, Any]):
-    """Diagnose one task (on a worker); returns the result object and the seconds it took."""
-    from . import diagnose, diagnose_pooled
+    """Diagnose one task (on a worker); returns the result object and the seconds it took.
 
+    ``options`` are :func:`~bayespilot.diagnose.diagnose`'s keywords and
+    ``posterior`` (bool): when an extension fitted by the GLS likelihood is
+    chosen, also its posterior (:func:`~bayespilot.diagnose.sample_chosen` for
+    one run, :func:`~bayespilot.diagnose.shared_posterior` pooled); a failure
+    there is recorded in the result's ``settings["posterior_error"]``, the
+    diagnosis kept.
+    """
+    import warnings
+
+    from . import diagnose, diagnose_pooled, get_extension, sample_chosen, shared_posterior
+
+    opts = dict(options)
+    want = bool(opts.pop("posterior", False))
     t0 = time.perf_counter()
     if task.pooled:
-        res = diagnose_pooled(list(recordings), **options)
+        res = diagnose_pooled(list(recordings), **opts)
     else:
-        res = diagnose(recordings[0], **options)
+        res = diagnose(recordings[0], **opts)
+    if want and res.chosen is not None and get_extension(res.physics).likelihood == "gls":
+        try:
+            if task.pooled:
+                shared_posterior(res, list(recordings))
+            else:
+                with warnings.catch_warnings():  # a short chain says so in its own settings
+                    warnings.simplefilter("ignore")
+                    sample_chosen(res, recordings[0], seed=opts.get("seed", 0))
+        except (ValueError, RuntimeError) as exc:
+            res.settings["posterior_error"] = f"{type(exc).__name__}: {exc}"
     return res, time.perf_counter() - t0
 
 
@@ -182,8 +205,9 @@ def _settings(task: DiagnoseTask, options: Mapping[str, Any]) -> dict[str, Any]:
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
                    seed: int = 0, alpha: float | None = None, n_bootstrap: int | None = None,
                    n_calibrate: int | None = None, noise_passes: int = 1,
-                   candidates: Sequence[str] | None = None, reports: bool = False,
-                   scheduler: str | None = None, workers: int | None = None,
+                   candidates: Sequence[str] | None = None, posterior: bool = False,
+                   reports: bool = False, scheduler: str | None = None,
+                   workers: int | None = None,
                    progress: bool = True, connect_timeout: float = 10.0,
                    warm_cache: bool = True):
     """Diagnose many recordings as independent tasks on dask.distributed.
@@ -199,6 +223,14 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     seed, alpha, n_bootstrap, n_calibrate, noise_passes, candidates
         As for :func:`~bayespilot.diagnose.diagnose` (None: its default), the
         same for every diagnosis.
+    posterior : bool
+        Where an extension fitted by the GLS likelihood is chosen, also its
+        posterior: the extended model sampled by emcee for one run
+        (:func:`~bayespilot.diagnose.sample_chosen`, tens of seconds to
+        minutes), the shared parameters on a grid for a pooled condition
+        (:func:`~bayespilot.diagnose.shared_posterior`, seconds).  In each
+        result's ``diagnosis`` and in ``summary.csv`` (``posterior``: per new
+        parameter the median and the 90 % interval).
     reports : bool
         Also write each diagnosis's report (PNG figures and HTML) to ``out_dir/<key>/``.
     scheduler, workers, progress, connect_timeout, warm_cache
@@ -235,6 +267,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     from . import SKIP_SECONDS, _check, diagnose
 
     t0 = time.perf_counter()
+    if not isinstance(posterior, bool):
+        raise ValueError(f"posterior must be True or False, got {posterior!r}")
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no recordings given")
@@ -254,6 +288,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             options[name] = value
     if candidates is not None:
         options["candidates"] = list(candidates)
+    if posterior:  # (absent when False: results made before the option still resume)
+        options["posterior"] = True
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     default = {k: v.default for k, v in inspect.signature(diagnose).parameters.items()}
@@ -323,6 +359,24 @@ def _diagnoses(tasks: Sequence[DiagnoseTask], out: Path) -> dict[str, dict | Non
     return found
 
 
+def _posterior_cell(d: Mapping[str, Any], chosen: Mapping[str, Any]) -> str:
+    """JSON {new parameter: [median, 90 % lower, upper]} of a diagnosis dict's posterior (a
+    single run's draws: the HDI; pooled: the central interval), or ''."""
+    post = d.get("posterior")
+    if not post:
+        return ""
+    if "marginals" in post:  # pooled: SharedPosterior.to_dict()
+        cells = {n: [m["median"], *m["interval"]] for n, m in post["marginals"].items()}
+    else:  # one run: posterior_dict
+        cells = {}
+        for n in chosen.get("params") or {}:
+            p = post.get("params", {}).get(n)
+            if p is not None:
+                lo, hi = p.get("hdi_90", [math.nan, math.nan])
+                cells[n] = [p.get("median"), lo, hi]
+    return json.dumps(cells)
+
+
 def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
                        diagnoses: Mapping[str, dict | None] | None = None) -> list[dict]:
     """One row per task from its result (or error) file in ``out_dir``: ``SUMMARY_FIELDS``.
@@ -338,7 +392,7 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
     for t in tasks:
         row = {"key": t.key, "n_runs": len(t.paths), "subject": t.subject or "",
                "task": t.task, "motion_gain": t.motion_gain, "physics": "", "mismatch": "",
-               "p_value": "", "delta_neg_log_lik": "", "params": "",
+               "p_value": "", "delta_neg_log_lik": "", "params": "", "posterior": "",
                "smallest_p_candidate": "", "smallest_p_value": "", "error": ""}
         d = diagnoses.get(t.key)
         if d is not None:
@@ -347,7 +401,8 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
             if chosen is not None:
                 row.update(p_value=chosen.get("p_value"),
                            delta_neg_log_lik=chosen.get("delta_neg_log_lik"),
-                           params=json.dumps(chosen.get("params") or {}))
+                           params=json.dumps(chosen.get("params") or {}),
+                           posterior=_posterior_cell(d, chosen))
             tested = [c for c in d["ranking"] if isinstance(c.get("p_value"), (int, float))]
             if tested:  # the nearest miss when the answer is none
                 best = min(tested, key=lambda c: c["p_value"])
