@@ -9,8 +9,8 @@
    (:class:`~bayespilot.diagnose.decide.Whitened`).
 2. **Locate** where the data and the model differ (frequency, time,
    amplitude statistics of the residual), each calibrated by a parametric
-   bootstrap of the fitted model with its own remnant
-   (:mod:`bayespilot.diagnose.locate`).
+   bootstrap of the fitted model with its own remnant, every replicate
+   refitted (:mod:`bayespilot.diagnose.locate`).
 3. **Name**: fit every entry of the catalogue
    (:mod:`bayespilot.diagnose.catalogue`) and test it against the base model
    (likelihood-ratio test on the decision likelihood; flat tops and the
@@ -23,7 +23,9 @@
    calibrated test gives way to the next.
 4. **Model**: the chosen extension's parameters with standard errors;
    :func:`~bayespilot.diagnose.posterior.sample_chosen` then samples the
-   extended model's posterior (optional, tens of seconds), and
+   extended model's posterior (optional, tens of seconds;
+   :func:`~bayespilot.diagnose.posterior.shared_posterior` the shared
+   parameters' of a pooled diagnosis), and
    :func:`~bayespilot.diagnose.nested.bayes_factor` weighs an extension
    against the base model by nested sampling (optional, minutes).
 5. **Show**: :meth:`DiagnosisResult.report` writes PNG figures, a
@@ -501,8 +503,9 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         Family-wise false-alarm level of the decision, split over the
         candidates tested (Bonferroni).
     n_bootstrap : int
-        Replicates of the parametric bootstrap behind the located evidence
-        (0: no calibration; the decision does not depend on it except through
+        Replicates of the parametric bootstrap behind the located evidence,
+        each simulated and refitted (about 0.5 s a replicate at N = 8192;
+        0: no calibration; the decision does not depend on it except through
         the signature scores and the quantised-flat-top case).
     candidates : sequence of str, optional
         Catalogue names to test (default all).
