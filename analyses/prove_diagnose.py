@@ -42,6 +42,8 @@ Run (from the repository root):
                                           # Bayes factors on 12 controls, 12 effects (and 1/2)
     python analyses/prove_diagnose.py --bayes-factor-repeat 28,42 --shard 0/2   # 4 more
                                           # seeds each: scatter vs stated error (and 1/2)
+    python analyses/prove_diagnose.py --shared-posterior-check 40 --shard 0/2   # pooled
+                                          # posterior's intervals vs the truth (and 1/2)
     python analyses/prove_diagnose.py --platform-band          # the platform's gain by band on
                                           # the controls the Bayes factor weighed it on
 
@@ -1010,6 +1012,67 @@ def posterior_check(n: int = 8) -> None:
     print(f"posterior: mean median {m.mean():.3f}, sd over runs {m.std(ddof=1):.3f}, mean "
           f"posterior sd {np.mean([r['sd'] for r in rows]):.3f}; truth in the 90 % HDI "
           f"{sum(r['hdi_90'][0] < truth < r['hdi_90'][1] for r in rows)}/{len(rows)}")
+
+
+def shared_posterior_check(n: int = 40, runs: int = 2,
+                           shard: tuple[int, int] = (0, 1)) -> None:
+    """Are the pooled posterior's intervals honest?  ``n`` sets of ``runs`` runs (FD, 40.96 s,
+    K_theta = 1, K_n = 0.063) with a washout at omega_w = 0.8 rad/s shared by the set (set k:
+    seeds 200 + runs k, ...): per set the pooled GLS fit with its standard error and
+    ``shared_posterior``'s median, sd and central 90 % interval.  Over the sets the truth
+    should fall in the interval about 9 times in 10, and the medians' spread match the
+    posterior sd.  Resumable, ``--shard K/N``;
+    ``analyses/results/diagnose_pooled/shared_posterior_check*.jsonl``.
+    """
+    from bayespilot import presets
+    from bayespilot.diagnose import diagnose_pooled, get_extension, shared_posterior
+    from bayespilot.model import paper_model
+    from bayespilot.simulate import simulate
+
+    import numba
+
+    numba.set_num_threads(1)
+    model = get_extension("motion-washout").build(paper_model())
+    truth = 0.8
+    p = dict(presets.paper_parameters("FD"), omega_w=truth)
+    out_dir = DEFAULT_OUT.with_name("diagnose_pooled")
+    path, every = _shard_files(out_dir, "shared_posterior_check", shard)
+    done = {json.loads(line)["set"] for f in every() for line in f.read_text().splitlines()
+            if line.strip()}
+    for k in range(n):
+        if k % shard[1] != shard[0] or k in done:
+            continue
+        recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063,
+                         seed=200 + runs * k + j, duration=40.96).recording for j in range(runs)]
+        res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2,
+                              candidates=["motion-washout"])
+        c = res.ranking[0]
+        row = {"set": k, "runs": runs, "decision": res.physics, "gls": c.params.get("omega_w"),
+               "se": c.stderr.get("omega_w")}
+        if res.chosen is not None:
+            post = shared_posterior(res, recs)
+            m = post.marginals["omega_w"]
+            row.update(median=m["median"], sd=m["sd"], interval=m["interval"],
+                       edge_mass=post.edge_mass, seconds=post.elapsed)
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        print(json.dumps(row), flush=True)
+    rows = [json.loads(line) for f in every() for line in f.read_text().splitlines()
+            if line.strip()]
+    got = [r for r in rows if "median" in r]
+    if not got:
+        print("no results yet")
+        return
+    g = np.array([r["gls"] for r in got])
+    med = np.array([r["median"] for r in got])
+    inside = sum(r["interval"][0] < truth < r["interval"][1] for r in got)
+    print(f"{len(rows)} sets of {runs} runs, omega_w = {truth} rad/s; named {len(got)}")
+    print(f"pooled GLS fit: mean {g.mean():.3f}, sd over sets {g.std(ddof=1):.3f}, mean s.e. "
+          f"{np.mean([r['se'] for r in got]):.3f}")
+    print(f"shared posterior: mean median {med.mean():.3f}, sd over sets {med.std(ddof=1):.3f}, "
+          f"mean posterior sd {np.mean([r['sd'] for r in got]):.3f}; truth in the central "
+          f"90 % interval {inside}/{len(got)} (binomial sd {math.sqrt(len(got) * 0.09):.1f}); "
+          f"median time {np.median([r['seconds'] for r in got]):.1f} s")
 
 
 def _rescale_bayes_factors(rows: list[dict]) -> None:
@@ -2174,6 +2237,9 @@ def main(argv=None) -> int:
                          "(resumable, --shard)")
     ap.add_argument("--seeds", type=int, default=4, metavar="N",
                     help="seeds for --bayes-factor-repeat (default 4)")
+    ap.add_argument("--shared-posterior-check", type=int, default=0, metavar="N",
+                    help="N sets of two runs with a shared washout: shared_posterior's "
+                         "intervals against the truth (resumable, --shard)")
     ap.add_argument("--platform-band", action="store_true",
                     help="the platform's gain by band (25 rad/s, whole at 1x and 8x) on the "
                          "controls --bayes-factor-check weighed it on")
@@ -2281,6 +2347,9 @@ def main(argv=None) -> int:
     if args.bayes_factor_repeat:
         bayes_factor_repeat([int(x) for x in args.bayes_factor_repeat.split(",")], args.seeds,
                             (k, n))
+        return 0
+    if args.shared_posterior_check:
+        shared_posterior_check(args.shared_posterior_check, shard=(k, n))
         return 0
     if args.platform_band:
         platform_band()
