@@ -1015,14 +1015,16 @@ def posterior_check(n: int = 8) -> None:
 
 
 def shared_posterior_check(n: int = 40, runs: int = 2,
-                           shard: tuple[int, int] = (0, 1)) -> None:
+                           shard: tuple[int, int] = (0, 1), weak: bool = False) -> None:
     """Are the pooled posterior's intervals honest?  ``n`` sets of ``runs`` runs (FD, 40.96 s,
     K_theta = 1, K_n = 0.063) with a washout at omega_w = 0.8 rad/s shared by the set (set k:
     seeds 200 + runs k, ...): per set the pooled GLS fit with its standard error and
     ``shared_posterior``'s median, sd and central 90 % interval.  Over the sets the truth
     should fall in the interval about 9 times in 10, and the medians' spread match the
-    posterior sd.  Resumable, ``--shard K/N``;
-    ``analyses/results/diagnose_pooled/shared_posterior_check*.jsonl``.
+    posterior sd.  ``weak``: a weaker washout in longer, noisier runs, the proof study's
+    condition (four 81.92-s runs, omega_w = 0.3 rad/s, F_n = 0.25; seeds 300 + 4 k, ...).
+    Resumable, ``--shard K/N``;
+    ``analyses/results/diagnose_pooled/shared_posterior_check[_weak]*.jsonl``.
     """
     from bayespilot import presets
     from bayespilot.diagnose import diagnose_pooled, get_extension, shared_posterior
@@ -1033,17 +1035,22 @@ def shared_posterior_check(n: int = 40, runs: int = 2,
 
     numba.set_num_threads(1)
     model = get_extension("motion-washout").build(paper_model())
-    truth = 0.8
+    truth, duration, k_n, seed0 = 0.8, 40.96, 0.063, 200
+    if weak:
+        runs, truth, duration, seed0 = 4, 0.3, 81.92, 300
+        k_n = presets.TABLE4_K_N[("FD", 0.25)][presets.MOTION_GAINS.index(1.0)]
     p = dict(presets.paper_parameters("FD"), omega_w=truth)
     out_dir = DEFAULT_OUT.with_name("diagnose_pooled")
-    path, every = _shard_files(out_dir, "shared_posterior_check", shard)
+    path, every = _shard_files(out_dir, "shared_posterior_check" + ("_weak" if weak else ""),
+                               shard)
     done = {json.loads(line)["set"] for f in every() for line in f.read_text().splitlines()
             if line.strip()}
     for k in range(n):
         if k % shard[1] != shard[0] or k in done:
             continue
-        recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063,
-                         seed=200 + runs * k + j, duration=40.96).recording for j in range(runs)]
+        recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=k_n,
+                         seed=seed0 + runs * k + j, duration=duration).recording
+                for j in range(runs)]
         res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2,
                               candidates=["motion-washout"])
         c = res.ranking[0]
@@ -1066,7 +1073,8 @@ def shared_posterior_check(n: int = 40, runs: int = 2,
     g = np.array([r["gls"] for r in got])
     med = np.array([r["median"] for r in got])
     inside = sum(r["interval"][0] < truth < r["interval"][1] for r in got)
-    print(f"{len(rows)} sets of {runs} runs, omega_w = {truth} rad/s; named {len(got)}")
+    print(f"{len(rows)} sets of {runs} runs of {duration} s (K_n {k_n:.3f}), omega_w = {truth} "
+          f"rad/s; named {len(got)}")
     print(f"pooled GLS fit: mean {g.mean():.3f}, sd over sets {g.std(ddof=1):.3f}, mean s.e. "
           f"{np.mean([r['se'] for r in got]):.3f}")
     print(f"shared posterior: mean median {med.mean():.3f}, sd over sets {med.std(ddof=1):.3f}, "
@@ -2240,6 +2248,9 @@ def main(argv=None) -> int:
     ap.add_argument("--shared-posterior-check", type=int, default=0, metavar="N",
                     help="N sets of two runs with a shared washout: shared_posterior's "
                          "intervals against the truth (resumable, --shard)")
+    ap.add_argument("--weak", action="store_true",
+                    help="with --shared-posterior-check: four 81.92-s runs, omega_w 0.3 rad/s, "
+                         "F_n 0.25")
     ap.add_argument("--platform-band", action="store_true",
                     help="the platform's gain by band (25 rad/s, whole at 1x and 8x) on the "
                          "controls --bayes-factor-check weighed it on")
@@ -2349,7 +2360,7 @@ def main(argv=None) -> int:
                             (k, n))
         return 0
     if args.shared_posterior_check:
-        shared_posterior_check(args.shared_posterior_check, shard=(k, n))
+        shared_posterior_check(args.shared_posterior_check, shard=(k, n), weak=args.weak)
         return 0
     if args.platform_band:
         platform_band()
