@@ -6,7 +6,7 @@ bootstrap (:func:`bootstrap`): the fitted model is simulated in closed loop
 with a remnant whose level and colour match the fitted residual (Eq. 6 with
 K_n and T_n estimated from it, :func:`remnant_like`), each replicate is
 refitted as the recording was (``refit``; :func:`bayespilot.diagnose.diagnose`
-refits the GLS base fit from the generating parameters, about 0.1 s a
+refits the GLS base fit from the generating parameters, about 0.15 s a
 replicate), and the same statistic is computed on the replicate's residual at
 its own fit.  Without the refit the replicates' residuals are those at fixed
 parameters, larger at the forcing frequencies than a fitted one, and the

@@ -48,16 +48,21 @@ def _checked_chosen(result: Any, recording: Recording):
     if getattr(result, "runs", None) is not None:
         raise ValueError("sample_chosen takes a single-run diagnosis; for a pooled one use "
                          "shared_posterior (the shared parameters' posterior on a grid)")
+    chosen = _gls_chosen(result, "there is no extended model to sample")
+    check_same_recording(result, recording)
+    return chosen
+
+
+def _gls_chosen(result: Any, nothing: str):
+    """``result.chosen`` if it is an extension fitted by the GLS likelihood, else a clear
+    error (``nothing``: what is missing when no extension was chosen)."""
     chosen = getattr(result, "chosen", None)
     if chosen is None:
         raise ValueError(f"the diagnosis chose no extension (physics = "
-                         f"{getattr(result, 'physics', 'none')!r}): there is no extended model "
-                         "to sample")
-    ext = get_extension(chosen.physics)
-    if ext.likelihood != "gls" or getattr(chosen, "model", None) is None:
+                         f"{getattr(result, 'physics', 'none')!r}): {nothing}")
+    if get_extension(chosen.physics).likelihood != "gls" or getattr(chosen, "model", None) is None:
         raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
                          "likelihood; its limits are read from the data, not sampled")
-    check_same_recording(result, recording)
     return chosen
 
 
@@ -221,14 +226,7 @@ def _check_pooled(result: Any, recordings) -> tuple[Any, list]:
     if len(recs) != len(result.runs):
         raise ValueError(f"the diagnosis pooled {len(result.runs)} runs; {len(recs)} "
                          "recordings given")
-    chosen = result.chosen
-    if chosen is None:
-        raise ValueError(f"the diagnosis chose no extension (physics = {result.physics!r}): "
-                         "there is no shared parameter to weigh")
-    ext = get_extension(chosen.physics)
-    if ext.likelihood != "gls" or getattr(chosen, "model", None) is None:
-        raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
-                         "likelihood; its limits are read from the data, not sampled")
+    chosen = _gls_chosen(result, "there is no shared parameter to weigh")
     noise = result.arrays.get("noise")
     if not noise or any(r.get("params") is None for r in result.runs):
         raise ValueError("this diagnosis does not carry its runs' noise models and fits "
@@ -332,10 +330,10 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
     starts: dict[int, list] = {}
     bar = tqdm(total=len(mesh), desc="shared posterior", unit="point", disable=not progress)
     for i in order:
-        done = [j for j in starts]
-        near = min(done, key=lambda j: float(np.sum(((mesh[j] - mesh[i]) / scale) ** 2))) \
-            if done else None
-        base = fits if near is None else starts[near]
+        base = fits
+        if starts:
+            near = min(starts, key=lambda j: float(np.sum(((mesh[j] - mesh[i]) / scale) ** 2)))
+            base = starts[near]
         value = dict(zip(shared, (float(v) for v in mesh[i])))
         try:
             ps, f, _ = _pooled_refine(wls, [D.FitSummary(dict(q, **value), math.nan, (),
@@ -346,8 +344,8 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
             continue
         logdet = 0.0
         for wl, q in zip(wls, ps):
-            _, J = wl.lik.jacobian(q, names)
-            w = wl.whiten(wl.u - wl.lik.response(q))
+            y, J = wl.lik.jacobian(q, names)  # (the response comes with it)
+            w = wl.whiten(wl.u - y)
             Jw = wl.whiten(J) / math.sqrt(max(float(np.mean(w * w)), 1e-300))
             sign, ld = np.linalg.slogdet(Jw.T @ Jw)
             logdet += ld if sign > 0 else math.inf
