@@ -133,6 +133,8 @@ def test_robust_evidence_replaces_lost_runs_and_drops_late_ones():
     script = [_ev(-900.0 - a, 0.8, 50.0, a) for a in range(4)]
     ev, record, ok = robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
     assert not ok and len(record) == 4 and ev.log_z == -903.0
+    with pytest.raises(ValueError, match="n_runs"):
+        robust_evidence(lambda a: script[a], 0, reference_max_log_lik=100.0)
 
 
 def test_log_likelihood_at_is_eq4_in_closed_form():
@@ -151,6 +153,10 @@ def test_log_likelihood_at_is_eq4_in_closed_form():
     assert log_likelihood_at(model, rec, p) == pytest.approx(want, rel=1e-10)
     assert log_likelihood_at(model, rec, dict(p, K_v=-5.0)) == pytest.approx(
         log_likelihood_at(model, rec, dict(p, K_v=0.0)), rel=1e-12)
+    with pytest.raises(TypeError, match="Recording"):
+        log_likelihood_at(model, rec.u, p)
+    with pytest.raises(TypeError, match="ARNoise"):
+        log_likelihood_at(model, rec, p, noise=0.5)
 
 
 # --- Savage-Dickey ------------------------------------------------------------------------------

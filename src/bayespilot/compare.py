@@ -389,7 +389,18 @@ def log_likelihood_at(model: PilotModel, recording: Recording, params: Mapping[s
     -------
     float
         ln L, or ``-inf`` where the closed loop is unstable.
+
+    Raises
+    ------
+    TypeError
+        ``model``, ``recording`` or ``noise`` of the wrong type.
     """
+    if not isinstance(model, PilotModel):
+        raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    if noise is not None and not isinstance(noise, ARNoise):
+        raise TypeError(f"noise must be an ARNoise or None, got {type(noise).__name__}")
     nll = _NegLogLik(model, recording, 0, noise, discard)
     x = np.clip(model.free_vector({k: v for k, v in params.items()
                                    if k in model.parameter_names}), *model.bounds)
@@ -721,6 +732,8 @@ def robust_evidence(run: Callable[[int], Evidence], n_runs: int,
         and whether any run passed the mode check (if not, the Evidence is the
         last run's, a lower bound).
     """
+    if isinstance(n_runs, bool) or not isinstance(n_runs, (int, np.integer)) or n_runs < 1:
+        raise ValueError(f"n_runs must be an integer >= 1, got {n_runs!r}")
     kept: list[Evidence] = []
     made: list[Evidence] = []
     record: list[dict] = []
