@@ -4,6 +4,7 @@ shared parameter (each run fitted on its own at fixed values), and decisions on 
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -252,6 +253,28 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
     ref = {k: reference(g[k]) for k in pts}
     for k in pts:  # (measured: within 0.003 of each other, 5-7 units from the mode)
         assert logp[k] - logp[k0] == pytest.approx(ref[k] - ref[k0], abs=0.02)
+    # the Bayes factor: the reference's three values fitted by a parabola in omega_w, integrated
+    # in closed form (a Gaussian) over the prior box, against each run's base model refitted on
+    # its own and integrated out with the central-difference Hessian
+    assert len(pts) == 3
+    c2, c1, c0 = np.polyfit(g[pts], [ref[k] for k in pts], 2)
+    assert c2 < 0
+    log_int = c0 - c1 ** 2 / (4 * c2) + 0.5 * math.log(math.pi / -c2)
+    base_model = res.arrays["base_model"]
+    base_ref = 0.0
+    for rec, nz, run in zip(washout_runs, res.arrays["noise"], res.runs):
+        wl = D.Whitened(base_model, rec, nz)
+        fit = D._gls_refine(wl, dict(run["base"]["gls_params"]), names)
+        x0 = np.array([fit.params[n] for n in names])
+        sign, ld = np.linalg.slogdet(_fd_hessian(
+            lambda x, fit=fit, wl=wl: wl.neg_log_lik(dict(fit.params, **dict(zip(names, x)))),
+            x0))
+        base_ref += -fit.neg_log_lik - 0.5 * ld
+    width = model.parameter("omega_w").upper - model.parameter("omega_w").lower
+    lbf_ref = log_int - math.log(width) - base_ref
+    assert post.log_bayes_factor == pytest.approx(lbf_ref, abs=0.15)  # (measured: 14.78, 14.87)
+    # the Schwarz approximation is a few units off, both decisive
+    assert post.log_bayes_factor > 5 and res.chosen.log_bayes_factor > 5
     # a near-Gaussian posterior: its spread is the pooled fit's standard error, its centre the fit
     m = post.marginals["omega_w"]
     assert m["sd"] == pytest.approx(res.chosen.stderr["omega_w"], rel=0.3)
@@ -260,7 +283,9 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
     # JSON, summary and report carry it
     d = json.loads(res.to_json())
     assert d["posterior"]["marginals"]["omega_w"]["median"] == pytest.approx(m["median"])
+    assert d["posterior"]["log_bayes_factor"] == pytest.approx(post.log_bayes_factor)
     assert "posterior of the shared parameters" in res.summary()
+    assert "ln BF (motion-washout : none)" in res.summary()
     paths = res.report(tmp_path / "rep")
     assert paths["posterior"].stat().st_size > 0
     # refusals: another number of recordings, the runs in another order
@@ -268,6 +293,16 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
         shared_posterior(res, washout_runs[:1])
     with pytest.raises(ValueError, match="not the recordings"):
         shared_posterior(res, washout_runs[::-1])
+    # a candidate not chosen: the drifts improve -ln L by about 1 for two parameters, so the
+    # runs speak against them (measured: -2.9 on this 5 x 5 grid; Schwarz -6.1)
+    drift = next(c for c in res.ranking if c.physics == "time-varying-gains")
+    assert 0 < drift.delta_neg_log_lik < 3
+    other = shared_posterior(res, washout_runs, physics="time-varying-gains", n_grid=5)
+    assert other.names == ("drift_v", "drift_m") and res.posterior is other
+    assert -8 < other.log_bayes_factor < -1 and drift.log_bayes_factor < -1
+    for bad in ("otolith-channel", "control-saturation"):
+        with pytest.raises(ValueError, match="no pooled GLS fit"):
+            shared_posterior(res, washout_runs, physics=bad)
 
 
 def test_shared_posterior_of_two_shared_parameters():

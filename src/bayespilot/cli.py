@@ -708,8 +708,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             print(f"{PROG}: warning: decision {res.physics}: no extended model to sample; "
                   f"{args.posterior} not written", file=sys.stderr)
         elif len(recs) > 1:
-            _say(args, f"the posterior of {res.physics}'s shared parameters (a grid; each "
-                       "run's pilot parameters refitted and integrated out) ...")
+            _say(args, f"the posterior of {res.physics}'s shared parameters and its Bayes "
+                       "factor (a grid; each run's pilot parameters refitted and integrated "
+                       "out) ...")
             from ._files import dumps, write_text_atomic
 
             try:

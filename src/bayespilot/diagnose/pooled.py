@@ -105,6 +105,12 @@ class PooledDiagnosisResult(_JSONSummary):
     settings : dict
     elapsed : float
         Wall time, s.
+    arrays : dict
+        Not in the JSON: ``noise`` (each run's noise model), ``base_model`` and
+        ``fits`` (each GLS candidate's pooled fit, the parameters per run),
+        which :func:`~bayespilot.diagnose.shared_posterior` starts from.
+    posterior : SharedPosterior or None
+        Set by :func:`~bayespilot.diagnose.shared_posterior`.
     """
 
     mismatch: bool
@@ -671,4 +677,6 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     return PooledDiagnosisResult(chosen is not None, chosen.physics if chosen else "none",
                                  ranking, run_d, where, chosen, settings,
                                  time.perf_counter() - t0,
-                                 {"noise": [run.noise for run in runs]})
+                                 {"noise": [run.noise for run in runs],
+                                  "base_model": runs[0].base_model,
+                                  "fits": {n: [dict(q) for q in ps] for n, ps in fits.items()}})

@@ -151,6 +151,9 @@ GRID_1D = 41
 GRID_2D = 15
 #: Half-width of the grid in the pooled fit's standard errors (clipped to the bounds).
 GRID_WIDTH = 6.0
+#: A grid edge inside the bounds where the log density is within this of its maximum is
+#: widened to the bound (the density there is not yet negligible: e^-12 ~ 6e-6).
+EDGE_DROP = 12.0
 
 
 @dataclass
@@ -179,6 +182,10 @@ class SharedPosterior:
     settings : dict
     elapsed : float
         Wall time, s.
+    log_bayes_factor : float
+        ln BF (extension : base model) by the same Laplace integration, priors
+        uniform on the bounds (``settings["bayes_factor"]`` says how); NaN if
+        the diagnosis does not carry its base model.
     """
 
     physics: str
@@ -191,10 +198,14 @@ class SharedPosterior:
     edge_mass: float
     settings: dict
     elapsed: float
+    log_bayes_factor: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the marginals, the grid and its density, the settings."""
+        """JSON-ready: the marginals, the grid and its density, the Bayes factor, the
+        settings."""
+        lbf = self.log_bayes_factor if math.isfinite(self.log_bayes_factor) else None
         return {"physics": self.physics, "names": list(self.names),
+                "log_bayes_factor": lbf,
                 "marginals": self.marginals, "ml": self.ml, "stderr": self.stderr,
                 "grid": [g.tolist() for g in self.grid],
                 "density": np.exp(self.log_density).tolist(), "edge_mass": self.edge_mass,
@@ -211,11 +222,77 @@ class SharedPosterior:
         if self.edge_mass > 0.01:
             lines.append(f"  (posterior mass {self.edge_mass:.2g} at the grid's edge: the "
                          "interval may be cut)")
+        if math.isfinite(self.log_bayes_factor):
+            from ..compare import jeffreys_category
+
+            lbf = self.log_bayes_factor
+            lines.append(f"  ln BF ({self.physics} : none) {lbf:+.2f} ({jeffreys_category(lbf)}"
+                         f", {'for' if lbf > 0 else 'against'} the extension; Laplace, priors "
+                         "uniform on the bounds)")
         return lines
 
 
-def _check_pooled(result: Any, recordings) -> tuple[Any, list]:
-    """The chosen GLS candidate of a pooled ``result`` and its recordings, or a clear error."""
+def _laplace_term(wls, ps, names) -> float:
+    """Laplace's ln of each run's integral over its pilot parameters ``names``, summed over
+    the runs, less the terms common to every grid point and both models:
+
+        sum_r [ -1/2 ln det H_r + ln P_r(box) ],
+
+    H_r = J_r^T J_r / sigma_r^2 the Gauss-Newton Hessian of run r's GLS -ln L at its
+    parameters ``ps[r]``, P_r the mass of the Gaussian N(theta_r, H_r^-1) inside the
+    parameters' bounds (the uniform prior's box), taken as the product of its marginals'
+    masses.  Without P a parameter at or near a bound (a threshold fitted at 0, as soft
+    corners wide enough to imitate it put it) would count Gaussian volume outside the prior
+    (-inf if an H_r is singular).
+    """
+    from scipy import stats
+
+    model = wls[0].model
+    lo = np.array([model.parameter(n).lower for n in names])
+    hi = np.array([model.parameter(n).upper for n in names])
+    total = 0.0
+    for wl, q in zip(wls, ps):
+        y, J = wl.lik.jacobian(q, names)  # (the response comes with it)
+        w = wl.whiten(wl.u - y)
+        Jw = wl.whiten(J) / math.sqrt(max(float(np.mean(w * w)), 1e-300))
+        H = Jw.T @ Jw
+        sign, ld = np.linalg.slogdet(H)
+        if sign <= 0:
+            return -math.inf
+        x = np.array([q[n] for n in names])
+        sd = np.sqrt(np.clip(np.diag(np.linalg.inv(H)), 1e-300, None))
+        mass = stats.norm.cdf((hi - x) / sd) - stats.norm.cdf((lo - x) / sd)
+        total += -0.5 * ld + float(np.sum(np.log(np.maximum(mass, 1e-300))))
+    return total
+
+
+def _log_bayes_factor(result: Any, chosen: Any, recs: list, noise: list, names: tuple,
+                      shared: tuple, log_integral: float) -> tuple[float, float]:
+    """ln BF(extended : base) of a pooled candidate (see :func:`shared_posterior`) and the
+    base model's Laplace term.  ``log_integral``: ln of the integral over the grid of
+    exp(ln p~(s)), the unnormalised log density of the shared parameters."""
+    from . import decide as D
+    from .pooled import _pooled_refine
+
+    model = chosen.model
+    base_model = result.arrays.get("base_model")
+    if base_model is None:
+        return math.nan, math.nan
+    # the base model refitted in the same parameters as the extended one (delta_abs too for
+    # the threshold shape, as its test's reference is), from each run's GLS base fit
+    wls = [D.Whitened(base_model, rec, nz) for rec, nz in zip(recs, noise)]
+    bases = [D.FitSummary(dict(r["base"]["gls_params"]), math.nan, (), np.zeros((0, 0)))
+             for r in result.runs]
+    ps, f, _ = _pooled_refine(wls, bases, names, (), {})
+    base_term = -f + _laplace_term(wls, ps, names)
+    log_w = float(sum(math.log(model.parameter(n).upper - model.parameter(n).lower)
+                      for n in shared))
+    return float(log_integral - log_w - base_term), float(base_term)
+
+
+def _check_pooled(result: Any, recordings, physics: str | None = None) -> tuple[Any, list, list]:
+    """The GLS candidate of a pooled ``result`` to weigh (``physics``, else the chosen one),
+    its fit per run, and the recordings; or a clear error."""
     recs = list(recordings)
     if getattr(result, "runs", None) is None:
         raise ValueError("shared_posterior takes a pooled diagnosis (diagnose_pooled); for one "
@@ -226,17 +303,34 @@ def _check_pooled(result: Any, recordings) -> tuple[Any, list]:
     if len(recs) != len(result.runs):
         raise ValueError(f"the diagnosis pooled {len(result.runs)} runs; {len(recs)} "
                          "recordings given")
-    chosen = _gls_chosen(result, "there is no shared parameter to weigh")
     noise = result.arrays.get("noise")
-    if not noise or any(r.get("params") is None for r in result.runs):
+    if not noise:
         raise ValueError("this diagnosis does not carry its runs' noise models and fits "
                          "(read back from JSON?); diagnose the runs again")
-    return chosen, recs
+    if physics is None:
+        chosen = _gls_chosen(result, "there is no shared parameter to weigh (name a "
+                                     "candidate with physics=...)")
+        fits = [r.get("params") for r in result.runs]
+    else:
+        get_extension(physics)  # an unknown name: a clear error
+        chosen = next((c for c in result.ranking if c.physics == physics), None)
+        fits = result.arrays.get("fits", {}).get(physics)
+        if (chosen is None or get_extension(physics).likelihood != "gls" or not chosen.testable
+                or getattr(chosen, "model", None) is None or not fits):
+            raise ValueError(f"{physics!r} has no pooled GLS fit in this diagnosis (not a "
+                             "candidate, not testable on these runs, or control-saturation, "
+                             "whose limits are read from the flat tops)")
+    if any(q is None for q in fits):
+        raise ValueError("this diagnosis does not carry its runs' noise models and fits "
+                         "(read back from JSON?); diagnose the runs again")
+    return chosen, [dict(q) for q in fits], recs
 
 
-def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
-                     width: float = GRID_WIDTH, progress: bool = False) -> SharedPosterior:
-    """The posterior of the shared parameters of the extension a pooled diagnosis chose.
+def shared_posterior(result: Any, recordings, *, physics: str | None = None,
+                     n_grid: int | None = None, width: float = GRID_WIDTH,
+                     progress: bool = False) -> SharedPosterior:
+    """The posterior of the shared parameters of the extension a pooled diagnosis chose,
+    and its Bayes factor against the base model.
 
     The pooled model has every run's pilot parameters (R x 7) and the
     extension's shared ones; sampling all of them is costly (about 30
@@ -254,19 +348,40 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
     shared parameters' own shape (a bound, a skew) is kept exactly.  (A grid
     rather than emcee: the method's cost is R refits per grid point.)
 
+    The same integral gives the extension's Bayes factor against the base
+    model, each run's base fit integrated out the same way: with priors
+    uniform on the bounds (the pilot parameters' are the same in both models
+    and cancel; the shared parameters' box has volume W),
+
+        ln BF = ln[ (1/W) integral exp(ln p~(s)) ds ]
+                - sum_r [ -ln L_r(theta_r*) + 1/2 ln det H_r ]   (base model),
+
+    ln p~ the unnormalised log density above.  The grid spans the posterior,
+    not the whole prior box; the likelihood outside it is taken as nil.
+    Unlike :func:`~bayespilot.diagnose.bayes_factor` (nested sampling, one
+    run, the whole band) it is under the decision likelihood and costs no
+    more than the grid.
+
     Parameters
     ----------
     result : PooledDiagnosisResult
-        A pooled diagnosis whose decision is a GLS catalogue extension.
+        A pooled diagnosis whose decision is a GLS catalogue extension (or
+        any whose ranking holds ``physics``).
     recordings : sequence of Recording
         The runs it pooled, in its order.
+    physics : str, optional
+        The candidate to weigh (a GLS extension the diagnosis fitted).
+        Default: the chosen one.  Naming the top-ranked candidate of a
+        ``"none"`` decision says how strongly the runs speak against it.
     n_grid : int, optional
         Grid points per parameter (default 41 for one shared parameter, 15
         for two).
     width : float
         Half-width of the grid in the pooled fit's standard errors, clipped to
         the parameter's bounds (the whole bounds if the standard error is not
-        finite).
+        finite).  A side where the log density at the grid's edge is within
+        :data:`EDGE_DROP` of its maximum is widened to the bound and the grid
+        evaluated again (``settings["widened_to_bounds"]``).
     progress : bool
         A tqdm bar over the grid.
 
@@ -279,9 +394,10 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
     Raises
     ------
     ValueError
-        Not a pooled diagnosis, no GLS extension chosen, another number of
-        recordings, or recordings that are not the ones diagnosed (their
-        pooled -ln L at the fit differs from the diagnosis's).
+        Not a pooled diagnosis, no GLS extension chosen (and no ``physics``
+        named) or ``physics`` not fitted, another number of recordings, or
+        recordings that are not the ones diagnosed (their pooled -ln L at the
+        fit differs from the diagnosis's).
     TypeError
         A recording is not a Recording.
     """
@@ -290,7 +406,7 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
     from . import decide as D
     from .pooled import _pooled_refine
 
-    chosen, recs = _check_pooled(result, recordings)
+    chosen, fits, recs = _check_pooled(result, recordings, physics)
     t0 = time.perf_counter()
     ext = get_extension(chosen.physics)
     model = chosen.model
@@ -307,63 +423,79 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
                   and (ext.refine_threshold or n != "delta_abs"))
     noise = result.arrays["noise"]
     wls = [D.Whitened(model, rec, nz) for rec, nz in zip(recs, noise)]
-    fits = [dict(r["params"]) for r in result.runs]
     f_fit = float(sum(wl.neg_log_lik(q) for wl, q in zip(wls, fits)))
     if chosen.fit is not None and not math.isclose(f_fit, chosen.fit.neg_log_lik,
                                                    rel_tol=1e-9, abs_tol=1e-6):
         raise ValueError(f"these are not the recordings that were diagnosed (pooled -ln L at "
                          f"the fit {f_fit:.6f}, the diagnosis's {chosen.fit.neg_log_lik:.6f})")
-    grids = []
-    for n in shared:
-        p = model.parameter(n)
+    bounds = [(float(model.parameter(n).lower), float(model.parameter(n).upper))
+              for n in shared]
+    spans = []
+    for n, (lo, hi) in zip(shared, bounds):
         c, se = float(chosen.params[n]), float(chosen.stderr.get(n, math.nan))
-        lo, hi = float(p.lower), float(p.upper)
         if math.isfinite(se) and se > 0:
             lo, hi = max(lo, c - width * se), min(hi, c + width * se)
-        grids.append(np.linspace(lo, hi, n_grid))
-    mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, k)
-    # walk outward from the fit, each point started from its nearest finished neighbour
-    scale = np.array([g[-1] - g[0] for g in grids]) / (n_grid - 1)
+        spans.append([lo, hi])
     centre = np.array([float(chosen.params[n]) for n in shared])
-    order = np.argsort(np.sum(((mesh - centre) / scale) ** 2, axis=1))
-    logp = np.full(len(mesh), -np.inf)
-    starts: dict[int, list] = {}
-    bar = tqdm(total=len(mesh), desc="shared posterior", unit="point", disable=not progress)
-    for i in order:
-        base = fits
-        if starts:
-            near = min(starts, key=lambda j: float(np.sum(((mesh[j] - mesh[i]) / scale) ** 2)))
-            base = starts[near]
-        value = dict(zip(shared, (float(v) for v in mesh[i])))
-        try:
-            ps, f, _ = _pooled_refine(wls, [D.FitSummary(dict(q, **value), math.nan, (),
-                                                         np.zeros((0, 0))) for q in base],
-                                      names, (), value)
-        except (ValueError, np.linalg.LinAlgError):
+    bar = tqdm(total=n_grid ** k, desc="shared posterior", unit="point", disable=not progress)
+
+    def evaluate(grids):
+        mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, k)
+        # walk outward from the fit, each point started from its nearest finished neighbour
+        scale = np.array([g[-1] - g[0] for g in grids]) / (n_grid - 1)
+        order = np.argsort(np.sum(((mesh - centre) / scale) ** 2, axis=1))
+        logp = np.full(len(mesh), -np.inf)
+        starts: dict[int, list] = {}
+        for i in order:
+            base = fits
+            if starts:
+                near = min(starts,
+                           key=lambda j: float(np.sum(((mesh[j] - mesh[i]) / scale) ** 2)))
+                base = starts[near]
+            value = dict(zip(shared, (float(v) for v in mesh[i])))
+            try:
+                ps, f, _ = _pooled_refine(wls, [D.FitSummary(dict(q, **value), math.nan, (),
+                                                             np.zeros((0, 0))) for q in base],
+                                          names, (), value)
+            except (ValueError, np.linalg.LinAlgError):
+                bar.update(1)
+                continue
+            lap = _laplace_term(wls, ps, names)
+            if math.isfinite(f) and math.isfinite(lap):
+                logp[i] = -f + lap
+                starts[i] = ps
             bar.update(1)
-            continue
-        logdet = 0.0
-        for wl, q in zip(wls, ps):
-            y, J = wl.lik.jacobian(q, names)  # (the response comes with it)
-            w = wl.whiten(wl.u - y)
-            Jw = wl.whiten(J) / math.sqrt(max(float(np.mean(w * w)), 1e-300))
-            sign, ld = np.linalg.slogdet(Jw.T @ Jw)
-            logdet += ld if sign > 0 else math.inf
-        if math.isfinite(f) and math.isfinite(logdet):
-            logp[i] = -f - 0.5 * logdet
-            starts[i] = ps
-        bar.update(1)
+        return logp.reshape(tuple(len(g) for g in grids))
+
+    grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
+    logp = evaluate(grids)
+    # the pooled fit's standard error is a local curvature; where the density has not fallen
+    # off at an edge of the grid inside the bounds (a ridge, a skew), that side is widened to
+    # the bound and the grid evaluated again
+    widened = []
+    if np.any(np.isfinite(logp)):
+        top = float(np.max(logp))
+        for a in range(k):
+            for side, j in ((0, 0), (1, -1)):
+                face = np.take(logp, j, axis=a)
+                if spans[a][side] != bounds[a][side] and np.max(face) > top - EDGE_DROP:
+                    spans[a][side] = bounds[a][side]
+                    widened.append(f"{shared[a]} {'lower' if side == 0 else 'upper'}")
+    if widened:
+        bar.reset(total=n_grid ** k)
+        grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
+        logp = evaluate(grids)
     bar.close()
     if not np.any(np.isfinite(logp)):
         raise ValueError("the pooled fit failed at every grid point")
-    shape = tuple(len(g) for g in grids)
-    logp = logp.reshape(shape)
     dens = np.exp(logp - np.max(logp))
     # normalise on the grid (trapezoid over each axis)
     norm = dens
     for axis in reversed(range(k)):
         norm = trapezoid(norm, grids[axis], axis=axis)
     log_density = np.log(np.maximum(dens / norm, 1e-300))
+    lbf, base_term = _log_bayes_factor(result, chosen, recs, noise, names, shared,
+                                       float(np.max(logp)) + math.log(norm))
     marginals = {}
     edge = 0.0
     for a, n in enumerate(shared):
@@ -397,12 +529,20 @@ def shared_posterior(result: Any, recordings, *, n_grid: int | None = None,
             edge = max(edge, float(1.0 - cdf[-1 - cell]))
     settings = {"method": "grid; each run's pilot parameters refitted and integrated out by "
                           "Laplace's method; decision likelihood",
-                "n_grid": n_grid, "width_stderr": width, "points": int(len(mesh)),
-                "failed_points": int(np.sum(~np.isfinite(logp))),
-                "prior": "uniform on the grid", "n_runs": len(recs)}
+                "n_grid": n_grid, "width_stderr": width, "points": int(logp.size),
+                "failed_points": int(np.sum(~np.isfinite(logp))), "widened_to_bounds": widened,
+                "prior": "uniform on the grid", "n_runs": len(recs),
+                "bayes_factor": {
+                    "method": "Laplace over each run's pilot parameters (Gauss-Newton "
+                              "Hessian), the grid over the shared ones; decision likelihood",
+                    "prior": {n: [float(model.parameter(n).lower),
+                                  float(model.parameter(n).upper)] for n in shared},
+                    "log_laplace_base": base_term,
+                    "schwarz": (float(chosen.log_bayes_factor)
+                                if math.isfinite(chosen.log_bayes_factor) else None)}}
     post = SharedPosterior(chosen.physics, shared, grids, log_density, marginals,
                            {n: float(chosen.params[n]) for n in shared},
                            {n: float(chosen.stderr.get(n, math.nan)) for n in shared},
-                           edge, settings, time.perf_counter() - t0)
+                           edge, settings, time.perf_counter() - t0, lbf)
     result.posterior = post
     return post
