@@ -293,6 +293,13 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
         shared_posterior(res, washout_runs[:1])
     with pytest.raises(ValueError, match="not the recordings"):
         shared_posterior(res, washout_runs[::-1])
+    # a grid too narrow (+-2 standard errors, where the density has fallen by about 2) is
+    # moved out by its span on both sides: +-6, the default grid again, the same density
+    narrow = shared_posterior(res, washout_runs, n_grid=11, width=2.0)
+    assert len(narrow.settings["widened"]) == 2
+    np.testing.assert_allclose(narrow.grid[0], g, rtol=1e-9)
+    np.testing.assert_allclose(narrow.log_density, logp, atol=1e-6)
+    assert narrow.log_bayes_factor == pytest.approx(post.log_bayes_factor, abs=1e-6)
     # a candidate not chosen: the drifts improve -ln L by about 1 for two parameters, so the
     # runs speak against them (measured: -2.9 on this 5 x 5 grid; Schwarz -6.1)
     drift = next(c for c in res.ranking if c.physics == "time-varying-gains")

@@ -152,8 +152,10 @@ GRID_2D = 15
 #: Half-width of the grid in the pooled fit's standard errors (clipped to the bounds).
 GRID_WIDTH = 6.0
 #: A grid edge inside the bounds where the log density is within this of its maximum is
-#: widened to the bound (the density there is not yet negligible: e^-12 ~ 6e-6).
+#: moved out (the density there is not yet negligible: e^-12 ~ 6e-6) ...
 EDGE_DROP = 12.0
+#: ... at most this many times, each by the grid's span.
+MAX_WIDEN = 3
 
 
 @dataclass
@@ -380,8 +382,9 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
         Half-width of the grid in the pooled fit's standard errors, clipped to
         the parameter's bounds (the whole bounds if the standard error is not
         finite).  A side where the log density at the grid's edge is within
-        :data:`EDGE_DROP` of its maximum is widened to the bound and the grid
-        evaluated again (``settings["widened_to_bounds"]``).
+        :data:`EDGE_DROP` of its maximum is moved out by the grid's span (at
+        most to the bound) and the grid evaluated again, up to
+        :data:`MAX_WIDEN` times (``settings["widened"]``).
     progress : bool
         A tqdm bar over the grid.
 
@@ -470,18 +473,26 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
     grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
     logp = evaluate(grids)
     # the pooled fit's standard error is a local curvature; where the density has not fallen
-    # off at an edge of the grid inside the bounds (a ridge, a skew), that side is widened to
-    # the bound and the grid evaluated again
+    # off at an edge of the grid inside the bounds (a ridge, a skew), that side is moved out
+    # by the grid's span (at most to the bound) and the grid evaluated again
     widened = []
-    if np.any(np.isfinite(logp)):
-        top = float(np.max(logp))
+    for _ in range(MAX_WIDEN):
+        if not np.any(np.isfinite(logp)):
+            break
+        top, moved = float(np.max(logp)), False
         for a in range(k):
-            for side, j in ((0, 0), (1, -1)):
-                face = np.take(logp, j, axis=a)
-                if spans[a][side] != bounds[a][side] and np.max(face) > top - EDGE_DROP:
-                    spans[a][side] = bounds[a][side]
-                    widened.append(f"{shared[a]} {'lower' if side == 0 else 'upper'}")
-    if widened:
+            span = spans[a][1] - spans[a][0]
+            for side, j, sign in ((0, 0, -1.0), (1, -1, 1.0)):
+                if spans[a][side] != bounds[a][side] and \
+                        np.max(np.take(logp, j, axis=a)) > top - EDGE_DROP:
+                    edge = spans[a][side] + sign * span
+                    spans[a][side] = max(edge, bounds[a][0]) if side == 0 else \
+                        min(edge, bounds[a][1])
+                    widened.append(f"{shared[a]} {'lower' if side == 0 else 'upper'} to "
+                                   f"{spans[a][side]:.6g}")
+                    moved = True
+        if not moved:
+            break
         bar.reset(total=n_grid ** k)
         grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
         logp = evaluate(grids)
@@ -530,7 +541,7 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
     settings = {"method": "grid; each run's pilot parameters refitted and integrated out by "
                           "Laplace's method; decision likelihood",
                 "n_grid": n_grid, "width_stderr": width, "points": int(logp.size),
-                "failed_points": int(np.sum(~np.isfinite(logp))), "widened_to_bounds": widened,
+                "failed_points": int(np.sum(~np.isfinite(logp))), "widened": widened,
                 "prior": "uniform on the grid", "n_runs": len(recs),
                 "bayes_factor": {
                     "method": "Laplace over each run's pilot parameters (Gauss-Newton "
