@@ -44,6 +44,8 @@ Run (from the repository root):
                                           # seeds each: scatter vs stated error (and 1/2)
     python analyses/prove_diagnose.py --shared-posterior-check 40 --shard 0/2   # pooled
                                           # posterior's intervals vs the truth (and 1/2)
+    python analyses/prove_diagnose.py --pooled-bayes-factor 12 # the pooled Laplace Bayes
+                                          # factor on 12 controls, 12 effects of four runs
     python analyses/prove_diagnose.py --platform-band          # the platform's gain by band on
                                           # the controls the Bayes factor weighed it on
 
@@ -1183,6 +1185,95 @@ def bayes_factor_check(n: int, shard: tuple[int, int] = (0, 1)) -> None:
         print(line)
 
 
+def pooled_bayes_factor(n: int, runs: int = 4, shard: tuple[int, int] = (0, 1)) -> None:
+    """How the pooled Laplace Bayes factor (``shared_posterior``) reads against the LR decision.
+
+    The first ``n`` controls and the first ``n`` effect cases of the GLS entries of the
+    ``runs``-run pooled study (the same runs: ``pooled_recordings``), each diagnosed again
+    (no bootstrap: the decision does not use it) and then weighed by
+    :func:`bayespilot.diagnose.shared_posterior`: the chosen extension, or on ``none`` the
+    top-ranked GLS candidate.  Prints per case the LR statistic, the Schwarz and the Laplace
+    ln BF, and which way the Bayes factor points at Jeffreys' "strong" level (|ln BF| > ln 10).
+    Resumable, ``--shard K/N``;
+    ``analyses/results/diagnose_pooled/bayes_factor[_KofN].jsonl``.
+    """
+    import warnings
+
+    import numba
+
+    from bayespilot.diagnose import diagnose_pooled, get_extension, shared_posterior
+
+    numba.set_num_threads(1)
+    out_dir = DEFAULT_OUT.with_name("diagnose_pooled")
+    path, every = _shard_files(out_dir, "bayes_factor", shard)
+    all_cases = cases()
+    ctl = [c for c in all_cases if c["truth"] == "none"][:n]
+    eff = [c for c in all_cases if c["truth"] not in ("none", "control-saturation")][:n]
+    todo = [c for i, c in enumerate(ctl + eff) if i % shard[1] == shard[0]]
+    done = {json.loads(line)["id"] for f in every() for line in f.read_text().splitlines()
+            if line.strip()}
+    study = {r["case"]["id"]: r for r in load(study_folder(runs))}
+    for c in todo:
+        if c["id"] in done:
+            continue
+        recs = pooled_recordings(c, runs)[0]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = diagnose_pooled(recs, seed=0, n_bootstrap=0)
+        weigh = res.chosen or next(r for r in res.ranking if r.testable
+                                   and get_extension(r.physics).likelihood == "gls")
+        t0 = time.perf_counter()
+        post = shared_posterior(res, recs, physics=weigh.physics)
+        row = {"id": c["id"], "truth": c["truth"], "effect": c["effect"], "task": c["task"],
+               "K_theta": c["K_theta"], "F_n": c["F_n"], "runs": runs, "decision": res.physics,
+               "study_decision": study.get(c["id"], {}).get("decision"),
+               "weighed": weigh.physics, "lr_statistic": weigh.statistic,
+               "p_value": weigh.p_value, "schwarz": weigh.log_bayes_factor,
+               "log_bayes_factor": post.log_bayes_factor, "edge_mass": post.edge_mass,
+               "gain": post.settings["bayes_factor"]["gain"],
+               "widened": post.settings["widened"],
+               "medians": {k: v["median"] for k, v in post.marginals.items()},
+               "seconds_posterior": time.perf_counter() - t0}
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        print(json.dumps(row), flush=True)
+    rows = sorted((json.loads(line) for f in every() for line in f.read_text().splitlines()
+                   if line.strip()), key=lambda r: (r["truth"] != "none", r["id"]))
+    level = math.log(10.0)
+    fav = {r["id"]: (r["weighed"] if r["log_bayes_factor"] > level else
+                     "none" if r["log_bayes_factor"] < -level else "inconclusive")
+           for r in rows}
+    # ln BF above the likelihood's gain (rows before the gain was kept: the LR statistic / 2,
+    # the gain at the pooled fit): the extension's evidence is the pilot parameters' volume
+    vol = {r["id"]: r["log_bayes_factor"] > r.get("gain", r["lr_statistic"] / 2) for r in rows}
+    print(f"{'id':>4} {'truth':<24} {'effect':<14} {'decision':<24} {'weighed':<24} "
+          f"{'2dlnL':>7} {'Schwarz':>8} {'ln BF':>7}  favours")
+    for r in rows:
+        print(f"{r['id']:4d} {r['truth']:<24} {r['effect']:<14} {r['decision']:<24} "
+              f"{r['weighed']:<24} {r['lr_statistic']:7.2f} {r['schwarz']:8.2f} "
+              f"{r['log_bayes_factor']:7.2f}{'v' if vol[r['id']] else ' '} {fav[r['id']]}")
+    print("(v: ln BF above the gain in ln L, the extension's evidence is the pilot parameters' "
+          "wider posterior under it)")
+    same = sum(r["decision"] == r["study_decision"] for r in rows)
+    print(f"decisions as in the {runs}-run study: {same}/{len(rows)}")
+    for who, sel in (("controls", [r for r in rows if r["truth"] == "none"]),
+                     ("effects", [r for r in rows if r["truth"] != "none"])):
+        if not sel:
+            continue
+        f = [fav[r["id"]] for r in sel]
+        line = (f"{who}: {len(sel)}; ln BF > ln 10 for an extension in "
+                f"{sum(x not in ('none', 'inconclusive') for x in f)}")
+        if who == "effects":
+            line += (f" (the truth in {sum(x == r['truth'] for x, r in zip(f, sel))}, of them "
+                     f"{sum(x == r['truth'] != r['decision'] for x, r in zip(f, sel))} the "
+                     f"LR test missed)")
+        line += (f", < -ln 10 in {f.count('none')}, between in {f.count('inconclusive')}; "
+                 f"the LR test right in {sum(r['decision'] == r['truth'] for r in sel)}; "
+                 f"Laplace - Schwarz: median "
+                 f"{np.median([r['log_bayes_factor'] - r['schwarz'] for r in sel]):+.2f}")
+        print(line)
+
+
 def platform_band() -> None:
     """The platform's gain on the controls the Bayes-factor check weighed it on, by band.
 
@@ -1287,8 +1378,11 @@ def bayes_factor_repeat(ids: list[int], seeds: int = 4,
              if line.strip()}
     rows = [json.loads(line) for f in every() for line in f.read_text().splitlines()
             if line.strip()]
+    from bayespilot.compare import MODE_TOLERANCE
+
     print(f"{'id':>4} {'weighed':<24} {'ln BF over the seeds':<44} {'mean':>6} {'sd':>5} "
           f"{'mean stated err':>16}")
+    pooled_var = []
     for i in ids:
         got = sorted((r for r in rows if r["id"] == i), key=lambda r: r["seed"])
         if i in first:
@@ -1301,9 +1395,21 @@ def bayes_factor_repeat(ids: list[int], seeds: int = 4,
         v = np.array([r["log_bayes_factor"] for r in got])
         # the runs' own (stated) error, whatever scale a row was written with
         e = np.array([r["log_bayes_factor_err"] / r.get("err_scale", 1.0) for r in got])
+        # a seed whose extended model never reached the base model's best ln L lost the mode
+        # (bayes_factor flags it and reads it as inconclusive): not scatter, left out of sd
+        lost = np.array([r.get("best_gain", 0.0) < -MODE_TOLERANCE for r in got])
+        keep = v[~lost]
+        sd = keep.std(ddof=1) if keep.size > 1 else float("nan")
         print(f"{i:4d} {got[0]['weighed']:<24} "
-              f"{' '.join(f'{x:+.2f}' for x in v):<44} {v.mean():+6.2f} "
-              f"{v.std(ddof=1) if v.size > 1 else float('nan'):5.2f} {e.mean():16.2f}")
+              f"{' '.join(f'{x:+.2f}' + ('*' if m else '') for x, m in zip(v, lost)):<44} "
+              f"{keep.mean():+6.2f} {sd:5.2f} {e.mean():16.2f}")
+        if keep.size > 1:
+            pooled_var.append((keep.size - 1, keep.var(ddof=1) / e[~lost].mean() ** 2))
+    if pooled_var:
+        dof = sum(d for d, _ in pooled_var)
+        scale = math.sqrt(sum(d * r for d, r in pooled_var) / dof)
+        print(f"(* lost the mode: left out.)  sd / stated error pooled over the cases: "
+              f"{scale:.2f} ({dof} degrees of freedom)")
 
 
 def example_pooled() -> None:
@@ -2251,6 +2357,10 @@ def main(argv=None) -> int:
     ap.add_argument("--weak", action="store_true",
                     help="with --shared-posterior-check: four 81.92-s runs, omega_w 0.3 rad/s, "
                          "F_n 0.25")
+    ap.add_argument("--pooled-bayes-factor", type=int, default=0, metavar="N",
+                    help="the pooled Laplace Bayes factor (shared_posterior) on the first N "
+                         "controls and N effect cases of the four-run study (resumable, "
+                         "--shard)")
     ap.add_argument("--platform-band", action="store_true",
                     help="the platform's gain by band (25 rad/s, whole at 1x and 8x) on the "
                          "controls --bayes-factor-check weighed it on")
@@ -2361,6 +2471,9 @@ def main(argv=None) -> int:
         return 0
     if args.shared_posterior_check:
         shared_posterior_check(args.shared_posterior_check, shard=(k, n), weak=args.weak)
+        return 0
+    if args.pooled_bayes_factor:
+        pooled_bayes_factor(args.pooled_bayes_factor, shard=(k, n))
         return 0
     if args.platform_band:
         platform_band()

@@ -273,6 +273,11 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
     width = model.parameter("omega_w").upper - model.parameter("omega_w").lower
     lbf_ref = log_int - math.log(width) - base_ref
     assert post.log_bayes_factor == pytest.approx(lbf_ref, abs=0.15)  # (measured: 14.78, 14.87)
+    # the best ln L on the grid is the pooled fit's, a grid step's quadratic drop at most,
+    # against the base model refitted here: the diagnosis's d(-ln L)
+    bf = post.settings["bayes_factor"]
+    assert 0 <= res.chosen.delta_neg_log_lik - bf["gain"] < 0.3
+    assert not bf["volume_driven"]
     # the Schwarz approximation is a few units off, both decisive
     assert post.log_bayes_factor > 5 and res.chosen.log_bayes_factor > 5
     # a near-Gaussian posterior: its spread is the pooled fit's standard error, its centre the fit

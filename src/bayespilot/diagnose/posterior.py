@@ -231,6 +231,11 @@ class SharedPosterior:
             lines.append(f"  ln BF ({self.physics} : none) {lbf:+.2f} ({jeffreys_category(lbf)}"
                          f", {'for' if lbf > 0 else 'against'} the extension; Laplace, priors "
                          "uniform on the bounds)")
+            bf = self.settings.get("bayes_factor", {})
+            if bf.get("volume_driven"):
+                lines.append(f"  (above the best gain in ln L, {bf['gain']:.2f}: the extension "
+                             "leaves the pilot parameters less determined, and that volume, "
+                             "not a better fit, is what the Bayes factor counts)")
         return lines
 
 
@@ -269,17 +274,18 @@ def _laplace_term(wls, ps, names) -> float:
 
 
 def _log_bayes_factor(result: Any, chosen: Any, recs: list, noise: list, names: tuple,
-                      shared: tuple, log_integral: float) -> tuple[float, float]:
-    """ln BF(extended : base) of a pooled candidate (see :func:`shared_posterior`) and the
-    base model's Laplace term.  ``log_integral``: ln of the integral over the grid of
-    exp(ln p~(s)), the unnormalised log density of the shared parameters."""
+                      shared: tuple, log_integral: float) -> tuple[float, float, float]:
+    """ln BF(extended : base) of a pooled candidate (see :func:`shared_posterior`), the
+    base model's Laplace term and its pooled ln L at its fit.  ``log_integral``: ln of the
+    integral over the grid of exp(ln p~(s)), the unnormalised log density of the shared
+    parameters."""
     from . import decide as D
     from .pooled import _pooled_refine
 
     model = chosen.model
     base_model = result.arrays.get("base_model")
     if base_model is None:
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan
     # the base model refitted in the same parameters as the extended one (delta_abs too for
     # the threshold shape, as its test's reference is), from each run's GLS base fit
     wls = [D.Whitened(base_model, rec, nz) for rec, nz in zip(recs, noise)]
@@ -289,7 +295,7 @@ def _log_bayes_factor(result: Any, chosen: Any, recs: list, noise: list, names: 
     base_term = -f + _laplace_term(wls, ps, names)
     log_w = float(sum(math.log(model.parameter(n).upper - model.parameter(n).lower)
                       for n in shared))
-    return float(log_integral - log_w - base_term), float(base_term)
+    return float(log_integral - log_w - base_term), float(base_term), float(-f)
 
 
 def _check_pooled(result: Any, recordings, physics: str | None = None) -> tuple[Any, list, list]:
@@ -359,7 +365,11 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
                 - sum_r [ -ln L_r(theta_r*) + 1/2 ln det H_r ]   (base model),
 
     ln p~ the unnormalised log density above.  The grid spans the posterior,
-    not the whole prior box; the likelihood outside it is taken as nil.
+    not the whole prior box; the likelihood outside it is taken as nil.  When
+    ln BF exceeds the best gain in pooled ln L on the grid
+    (``settings["bayes_factor"]["volume_driven"]``), what it counts is that
+    the extension leaves the pilot parameters less determined (a soft
+    threshold's delta_abs), not a better fit.
     Unlike :func:`~bayespilot.diagnose.bayes_factor` (nested sampling, one
     run, the whole band) it is under the decision likelihood and costs no
     more than the grid.
@@ -448,6 +458,7 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
         scale = np.array([g[-1] - g[0] for g in grids]) / (n_grid - 1)
         order = np.argsort(np.sum(((mesh - centre) / scale) ** 2, axis=1))
         logp = np.full(len(mesh), -np.inf)
+        best[0] = -math.inf
         starts: dict[int, list] = {}
         for i in order:
             base = fits
@@ -466,10 +477,12 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
             lap = _laplace_term(wls, ps, names)
             if math.isfinite(f) and math.isfinite(lap):
                 logp[i] = -f + lap
+                best[0] = max(best[0], -f)
                 starts[i] = ps
             bar.update(1)
         return logp.reshape(tuple(len(g) for g in grids))
 
+    best = [-math.inf]  # the highest pooled ln L on the grid
     grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
     logp = evaluate(grids)
     # the pooled fit's standard error is a local curvature; where the density has not fallen
@@ -505,7 +518,7 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
     for axis in reversed(range(k)):
         norm = trapezoid(norm, grids[axis], axis=axis)
     log_density = np.log(np.maximum(dens / norm, 1e-300))
-    lbf, base_term = _log_bayes_factor(result, chosen, recs, noise, names, shared,
+    lbf, base_term, base_log_lik = _log_bayes_factor(result, chosen, recs, noise, names, shared,
                                        float(np.max(logp)) + math.log(norm))
     marginals = {}
     edge = 0.0
@@ -549,6 +562,10 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
                     "prior": {n: [float(model.parameter(n).lower),
                                   float(model.parameter(n).upper)] for n in shared},
                     "log_laplace_base": base_term,
+                    # ln BF above the likelihood's own gain: the extension's evidence is the
+                    # pilot parameters' wider posterior under it, not a better fit
+                    "gain": best[0] - base_log_lik,
+                    "volume_driven": bool(lbf > best[0] - base_log_lik),
                     "schwarz": (float(chosen.log_bayes_factor)
                                 if math.isfinite(chosen.log_bayes_factor) else None)}}
     post = SharedPosterior(chosen.physics, shared, grids, log_density, marginals,
