@@ -348,10 +348,13 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
     its decision likelihood) and integrated out by Laplace's method,
 
         ln p(s | data) = const - sum_r [ -ln L_r(theta_r*(s), s)
-                                         + 1/2 ln det H_r(s) ],
+                                         + 1/2 ln det H_r(s) - ln P_r(s) ],
 
     with H_r = J_r^T J_r / sigma_r^2 the Gauss-Newton Hessian of run r's GLS
-    -ln L in its pilot parameters and a uniform prior on the grid.  Laplace's
+    -ln L in its pilot parameters, P_r the mass of the Gaussian
+    N(theta_r*, H_r^-1) inside the pilot parameters' bounds (product of the
+    marginals'; near 1 unless a parameter sits near a bound), and a uniform
+    prior on the grid.  Laplace's
     method is exact for a likelihood Gaussian in the pilot parameters; the
     shared parameters' own shape (a bound, a skew) is kept exactly.  (A grid
     rather than emcee: the method's cost is R refits per grid point.)
@@ -362,7 +365,7 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
     and cancel; the shared parameters' box has volume W),
 
         ln BF = ln[ (1/W) integral exp(ln p~(s)) ds ]
-                - sum_r [ -ln L_r(theta_r*) + 1/2 ln det H_r ]   (base model),
+                - sum_r [ -ln L_r(theta_r*) + 1/2 ln det H_r - ln P_r ]   (base model),
 
     ln p~ the unnormalised log density above.  The grid spans the posterior,
     not the whole prior box; the likelihood outside it is taken as nil.  When
