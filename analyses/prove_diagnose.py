@@ -44,6 +44,8 @@ Run (from the repository root):
                                           # seeds each: scatter vs stated error (and 1/2)
     python analyses/prove_diagnose.py --shared-posterior-check 40 --shard 0/2   # pooled
                                           # posterior's intervals vs the truth (and 1/2)
+    python analyses/prove_diagnose.py --shared-posterior-check 40 --entry \
+        motion-system-dynamics --shard 0/2  # the same for a platform (or time-varying-gains)
     python analyses/prove_diagnose.py --pooled-bayes-factor 12 # the pooled Laplace Bayes
                                           # factor on 12 controls, 12 effects of four runs
     python analyses/prove_diagnose.py --platform-band          # the platform's gain by band on
@@ -1083,6 +1085,80 @@ def shared_posterior_check(n: int = 40, runs: int = 2,
           f"mean posterior sd {np.mean([r['sd'] for r in got]):.3f}; truth in the central "
           f"90 % interval {inside}/{len(got)} (binomial sd {math.sqrt(len(got) * 0.09):.1f}); "
           f"median time {np.median([r['seconds'] for r in got]):.1f} s")
+
+
+#: ``--shared-posterior-check --entry``: the truth, runs, run length and first seed per entry
+#: (FD, K_theta = 1, K_n = 0.063).
+POSTERIOR_CHECK = {
+    "motion-system-dynamics": ({"omega_ms": 6.0}, 2, 81.92, 400),
+    "time-varying-gains": ({"drift_v": 0.6, "drift_m": 0.3}, 2, 40.96, 500),
+}
+
+
+def shared_posterior_check_entry(entry: str, n: int, shard: tuple[int, int] = (0, 1)) -> None:
+    """:func:`shared_posterior_check` for another entry (``POSTERIOR_CHECK``): a platform,
+    whose posterior is bounded and skewed (omega_ms up to 100 rad/s is nearly the base model),
+    or two shared drifts on a 15 x 15 grid.  Per set and parameter the pooled fit, its
+    standard error, and the posterior's median, sd and central 90 % interval; over the sets
+    the truth's coverage.  Sets where the extension is not named have no posterior and are
+    counted apart.  Resumable, ``--shard K/N``;
+    ``analyses/results/diagnose_pooled/shared_posterior_check_<entry>*.jsonl``.
+    """
+    from bayespilot import presets
+    from bayespilot.diagnose import diagnose_pooled, get_extension, shared_posterior
+    from bayespilot.model import paper_model
+    from bayespilot.simulate import simulate
+
+    import numba
+
+    numba.set_num_threads(1)
+    truth, runs, duration, seed0 = POSTERIOR_CHECK[entry]
+    model = get_extension(entry).build(paper_model())
+    p = dict(presets.paper_parameters("FD"), **truth)
+    out_dir = DEFAULT_OUT.with_name("diagnose_pooled")
+    path, every = _shard_files(out_dir, f"shared_posterior_check_{entry}", shard)
+    done = {json.loads(line)["set"] for f in every() for line in f.read_text().splitlines()
+            if line.strip()}
+    for k in range(n):
+        if k % shard[1] != shard[0] or k in done:
+            continue
+        recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063,
+                         seed=seed0 + runs * k + j, duration=duration).recording
+                for j in range(runs)]
+        res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2, candidates=[entry])
+        c = res.ranking[0]
+        row = {"set": k, "runs": runs, "decision": res.physics,
+               "params": {m: {"gls": c.params.get(m), "se": c.stderr.get(m)} for m in truth}}
+        if res.chosen is not None:
+            post = shared_posterior(res, recs)
+            for m in truth:
+                q = post.marginals[m]
+                row["params"][m].update(median=q["median"], sd=q["sd"], interval=q["interval"])
+            row.update(edge_mass=post.edge_mass, widened=post.settings["widened"],
+                       log_bayes_factor=post.log_bayes_factor, seconds=post.elapsed)
+        with open(path, "a") as f:
+            f.write(json.dumps(row) + "\n")
+        print(json.dumps(row), flush=True)
+    rows = [json.loads(line) for f in every() for line in f.read_text().splitlines()
+            if line.strip()]
+    got = [r for r in rows if "seconds" in r]
+    print(f"{len(rows)} sets of {runs} runs of {duration} s with {entry} at {truth}; named "
+          f"{len(got)}")
+    if not got:
+        return
+    for m, v in truth.items():
+        med = np.array([r["params"][m]["median"] for r in got])
+        inside = sum(r["params"][m]["interval"][0] < v < r["params"][m]["interval"][1]
+                     for r in got)
+        below = sum(v <= r["params"][m]["interval"][0] for r in got)
+        print(f"{m} = {v}: pooled fit mean {np.mean([r['params'][m]['gls'] for r in got]):.3f}, "
+              f"mean s.e. {np.mean([r['params'][m]['se'] for r in got]):.3f}; posterior "
+              f"median mean {med.mean():.3f}, sd over sets {med.std(ddof=1):.3f}, mean "
+              f"posterior sd {np.mean([r['params'][m]['sd'] for r in got]):.3f}; truth in the "
+              f"central 90 % interval {inside}/{len(got)} (below it {below}, above "
+              f"{len(got) - inside - below}; binomial sd {math.sqrt(len(got) * 0.09):.1f})")
+    print(f"median time {np.median([r['seconds'] for r in got]):.1f} s; grids widened in "
+          f"{sum(bool(r['widened']) for r in got)}")
 
 
 def _rescale_bayes_factors(rows: list[dict]) -> None:
@@ -2279,7 +2355,9 @@ def main(argv=None) -> int:
                          "on the recorded inputs plus another run's remnant); results get the "
                          "suffix _openloop")
     ap.add_argument("--entry", metavar="NAME",
-                    help="run only this catalogue entry's cases (or none: the controls)")
+                    help="run only this catalogue entry's cases (or none: the controls); "
+                         "with --shared-posterior-check, the entry whose posterior is checked "
+                         "(motion-washout, motion-system-dynamics, time-varying-gains)")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2); "
                          "with --misses-of or --entry, whose rank in that selection is")
@@ -2470,7 +2548,13 @@ def main(argv=None) -> int:
                             (k, n))
         return 0
     if args.shared_posterior_check:
-        shared_posterior_check(args.shared_posterior_check, shard=(k, n), weak=args.weak)
+        if args.entry is not None and args.entry != "motion-washout":
+            if args.entry not in POSTERIOR_CHECK:
+                ap.error(f"--shared-posterior-check checks motion-washout, "
+                         f"{', '.join(POSTERIOR_CHECK)}; not {args.entry}")
+            shared_posterior_check_entry(args.entry, args.shared_posterior_check, (k, n))
+        else:
+            shared_posterior_check(args.shared_posterior_check, shard=(k, n), weak=args.weak)
         return 0
     if args.pooled_bayes_factor:
         pooled_bayes_factor(args.pooled_bayes_factor, shard=(k, n))
