@@ -1065,11 +1065,8 @@ def shared_posterior_check(n: int = 40, runs: int = 2,
             m = post.marginals["omega_w"]
             row.update(median=m["median"], sd=m["sd"], interval=m["interval"],
                        edge_mass=post.edge_mass, seconds=post.elapsed)
-        with open(path, "a") as f:
-            f.write(json.dumps(row) + "\n")
-        print(json.dumps(row), flush=True)
-    rows = [json.loads(line) for f in every() for line in f.read_text().splitlines()
-            if line.strip()]
+        _append_row(path, row)
+    rows = _rows(every)
     got = [r for r in rows if "median" in r]
     if not got:
         print("no results yet")
@@ -1136,11 +1133,8 @@ def shared_posterior_check_entry(entry: str, n: int, shard: tuple[int, int] = (0
                 row["params"][m].update(median=q["median"], sd=q["sd"], interval=q["interval"])
             row.update(edge_mass=post.edge_mass, widened=post.settings["widened"],
                        log_bayes_factor=post.log_bayes_factor, seconds=post.elapsed)
-        with open(path, "a") as f:
-            f.write(json.dumps(row) + "\n")
-        print(json.dumps(row), flush=True)
-    rows = [json.loads(line) for f in every() for line in f.read_text().splitlines()
-            if line.strip()]
+        _append_row(path, row)
+    rows = _rows(every)
     got = [r for r in rows if "seconds" in r]
     print(f"{len(rows)} sets of {runs} runs of {duration} s with {entry} at {truth}; named "
           f"{len(got)}")
@@ -1159,6 +1153,18 @@ def shared_posterior_check_entry(entry: str, n: int, shard: tuple[int, int] = (0
               f"{len(got) - inside - below}; binomial sd {math.sqrt(len(got) * 0.09):.1f})")
     print(f"median time {np.median([r['seconds'] for r in got]):.1f} s; grids widened in "
           f"{sum(bool(r['widened']) for r in got)}")
+
+
+def _first_cases(n: int, shard: tuple[int, int], every) -> list[dict]:
+    """The first ``n`` controls and the first ``n`` effect cases of the GLS entries (case
+    order: round-robin over entries and conditions), this shard's, less those already in
+    the study's files (``every``)."""
+    all_cases = cases()
+    ctl = [c for c in all_cases if c["truth"] == "none"][:n]
+    eff = [c for c in all_cases if c["truth"] not in ("none", "control-saturation")][:n]
+    done = {r["id"] for r in _rows(every)}
+    return [c for i, c in enumerate(ctl + eff) if i % shard[1] == shard[0]
+            and c["id"] not in done]
 
 
 def _rescale_bayes_factors(rows: list[dict]) -> None:
@@ -1201,15 +1207,8 @@ def bayes_factor_check(n: int, shard: tuple[int, int] = (0, 1)) -> None:
     out_dir = DEFAULT_OUT.with_name("diagnose_bayes_factor")
     out_dir.mkdir(parents=True, exist_ok=True)
     path, every = _shard_files(out_dir, "bf", shard)
-    all_cases = cases()
-    ctl = [c for c in all_cases if c["truth"] == "none"][:n]
-    eff = [c for c in all_cases if c["truth"] not in ("none", "control-saturation")][:n]
-    todo = [c for i, c in enumerate(ctl + eff) if i % shard[1] == shard[0]]
-    done = {json.loads(line)["id"] for f in every() for line in f.read_text().splitlines()
-            if line.strip()}
+    todo = _first_cases(n, shard, every)
     for c in todo:
-        if c["id"] in done:
-            continue
         sim, _ = simulate_case(c)
         rec = sim.recording
         meta = {k: v for k, v in rec.metadata.items() if k != "notes"}
@@ -1282,16 +1281,9 @@ def pooled_bayes_factor(n: int, runs: int = 4, shard: tuple[int, int] = (0, 1)) 
     numba.set_num_threads(1)
     out_dir = DEFAULT_OUT.with_name("diagnose_pooled")
     path, every = _shard_files(out_dir, "bayes_factor", shard)
-    all_cases = cases()
-    ctl = [c for c in all_cases if c["truth"] == "none"][:n]
-    eff = [c for c in all_cases if c["truth"] not in ("none", "control-saturation")][:n]
-    todo = [c for i, c in enumerate(ctl + eff) if i % shard[1] == shard[0]]
-    done = {json.loads(line)["id"] for f in every() for line in f.read_text().splitlines()
-            if line.strip()}
+    todo = _first_cases(n, shard, every)
     study = {r["case"]["id"]: r for r in load(study_folder(runs))}
     for c in todo:
-        if c["id"] in done:
-            continue
         recs = pooled_recordings(c, runs)[0]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -1623,6 +1615,20 @@ def _shard_files(out: Path, stem: str, shard: tuple[int, int]):
     path = out / (f"{stem}_{k}of{n}.jsonl" if n > 1 else f"{stem}.jsonl")
     mine = re.compile(rf"{stem}(_\d+of\d+)?\.jsonl")
     return path, lambda: sorted(f for f in out.glob("*.jsonl") if mine.fullmatch(f.name))
+
+
+def _append_row(path: Path, row: dict) -> None:
+    """Append ``row`` to a resumable study's JSON-lines file and print it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as f:
+        f.write(json.dumps(row) + "\n")
+    print(json.dumps(row), flush=True)
+
+
+def _rows(every) -> list[dict]:
+    """Every row of every shard's file (``every`` from :func:`_shard_files`)."""
+    return [json.loads(line) for f in every() for line in f.read_text().splitlines()
+            if line.strip()]
 
 
 def _null_line(name: str, label: str, d: np.ndarray, p: np.ndarray, null: float) -> str:
