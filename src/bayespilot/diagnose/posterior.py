@@ -318,19 +318,16 @@ def _check_pooled(result: Any, recordings, physics: str | None = None) -> tuple[
     if physics is None:
         chosen = _gls_chosen(result, "there is no shared parameter to weigh (name a "
                                      "candidate with physics=...)")
-        fits = [r.get("params") for r in result.runs]
     else:
         get_extension(physics)  # an unknown name: a clear error
         chosen = next((c for c in result.ranking if c.physics == physics), None)
-        fits = result.arrays.get("fits", {}).get(physics)
-        if (chosen is None or get_extension(physics).likelihood != "gls" or not chosen.testable
-                or getattr(chosen, "model", None) is None or not fits):
-            raise ValueError(f"{physics!r} has no pooled GLS fit in this diagnosis (not a "
-                             "candidate, not testable on these runs, or control-saturation, "
-                             "whose limits are read from the flat tops)")
-    if any(q is None for q in fits):
-        raise ValueError("this diagnosis does not carry its runs' noise models and fits "
-                         "(read back from JSON?); diagnose the runs again")
+    # each GLS candidate's pooled fit, the parameters per run (the chosen one's too)
+    fits = result.arrays.get("fits", {}).get(getattr(chosen, "physics", None))
+    if (chosen is None or get_extension(chosen.physics).likelihood != "gls"
+            or not chosen.testable or getattr(chosen, "model", None) is None or not fits):
+        raise ValueError(f"{physics!r} has no pooled GLS fit in this diagnosis (not a "
+                         "candidate, not testable on these runs, or control-saturation, "
+                         "whose limits are read from the flat tops)")
     return chosen, [dict(q) for q in fits], recs
 
 
@@ -461,7 +458,7 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
         scale = np.array([g[-1] - g[0] for g in grids]) / (n_grid - 1)
         order = np.argsort(np.sum(((mesh - centre) / scale) ** 2, axis=1))
         logp = np.full(len(mesh), -np.inf)
-        best[0] = -math.inf
+        best = -math.inf  # the highest pooled ln L on the grid
         starts: dict[int, list] = {}
         for i in order:
             base = fits
@@ -480,14 +477,13 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
             lap = _laplace_term(wls, ps, names)
             if math.isfinite(f) and math.isfinite(lap):
                 logp[i] = -f + lap
-                best[0] = max(best[0], -f)
+                best = max(best, -f)
                 starts[i] = ps
             bar.update(1)
-        return logp.reshape(tuple(len(g) for g in grids))
+        return logp.reshape(tuple(len(g) for g in grids)), best
 
-    best = [-math.inf]  # the highest pooled ln L on the grid
     grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
-    logp = evaluate(grids)
+    logp, best = evaluate(grids)
     # the pooled fit's standard error is a local curvature; where the density has not fallen
     # off at an edge of the grid inside the bounds (a ridge, a skew), that side is moved out
     # by the grid's span (at most to the bound) and the grid evaluated again
@@ -511,7 +507,7 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
             break
         bar.reset(total=n_grid ** k)
         grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
-        logp = evaluate(grids)
+        logp, best = evaluate(grids)
     bar.close()
     if not np.any(np.isfinite(logp)):
         raise ValueError("the pooled fit failed at every grid point")
@@ -567,8 +563,8 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
                     "log_laplace_base": base_term,
                     # ln BF above the likelihood's own gain: the extension's evidence is the
                     # pilot parameters' wider posterior under it, not a better fit
-                    "gain": best[0] - base_log_lik,
-                    "volume_driven": bool(lbf > best[0] - base_log_lik),
+                    "gain": best - base_log_lik,
+                    "volume_driven": bool(lbf > best - base_log_lik),
                     "schwarz": (float(chosen.log_bayes_factor)
                                 if math.isfinite(chosen.log_bayes_factor) else None)}}
     post = SharedPosterior(chosen.physics, shared, grids, log_density, marginals,
