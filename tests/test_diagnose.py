@@ -285,6 +285,51 @@ def test_diagnose_names_a_strong_washout(washout_case):
     assert res.chosen.p_value < 1e-4
 
 
+def test_reported_fit_has_its_own_noise_model_and_threshold(washout_case):
+    """The chosen extension's estimates are reported from decide.final_fit: the AR model of its
+    own residual, delta_abs at the minimum of a plain grid scan of that likelihood, and its own
+    standard errors matching a central-difference Jacobian of the whitened residual; the
+    reported standard errors and statistics stay the test's."""
+    from bayespilot.diagnose import decide as D
+
+    rec, res = washout_case
+    c = res.chosen
+    assert c.refit is not None and c.noise is not None
+    assert set(c.refit["test_params"]) == {"omega_w"}
+    assert res.to_dict()["chosen"]["refit"]["noise_model"] == c.noise.to_dict()
+    assert c.params["omega_w"] == pytest.approx(0.8, abs=2.5 * c.stderr["omega_w"])
+    assert c.stderr["omega_w"] != c.refit["own_stderr"]["omega_w"]  # the test's, kept
+    # the noise model is the least-squares AR model of the reported fit's own residual (the
+    # fixed point of final_fit: one more round moves omega_w by a small part of its s.e.)
+    wl = D.Whitened(c.model, rec, c.noise)
+    again, _ = D.final_fit(get_extension("motion-washout"), res.base_model, rec, c.fit, c.noise,
+                           rounds=1)
+    own = c.refit["own_stderr"]["omega_w"]
+    assert abs(again.params["omega_w"] - c.params["omega_w"]) < 0.2 * own
+    # delta_abs: the minimum of the reported likelihood over a 5e-4 grid, found by a plain loop
+    grid = np.arange(0.0, c.model.parameter("delta_abs").upper + 2.5e-4, 5e-4)
+    best = min(grid, key=lambda d: wl.neg_log_lik(dict(c.fit.params, delta_abs=float(d))))
+    assert abs(c.all_params["delta_abs"] - best) <= 5e-4 + 1e-12
+    # the standard error of omega_w against a central-difference Jacobian of the whitened residual
+    names = c.fit.refined
+    x0 = np.array([c.fit.params[n] for n in names])
+
+    def w(x):
+        return wl.whiten(wl.u - wl.lik.response(dict(c.fit.params, **dict(zip(names, x)))))
+
+    r0 = w(x0)
+    J = np.empty((r0.size, x0.size))
+    for j in range(x0.size):
+        h = 1e-5 * max(abs(x0[j]), 1e-3)
+        e = np.zeros_like(x0)
+        e[j] = h
+        J[:, j] = (w(x0 + e) - w(x0 - e)) / (2 * h)
+    cov = np.mean(r0 * r0) * np.linalg.inv(J.T @ J)
+    k = names.index("omega_w")
+    assert own == pytest.approx(np.sqrt(cov[k, k]), rel=0.05)
+    assert "delta_abs" in res.summary() and "test's fit" in res.summary()
+
+
 def test_diagnose_on_another_plant_rate_and_forcing():
     """Not the paper's task: K/(s (s + 1)) at 50 Hz with twelve forcing sines of its own. The
     located evidence sits at that task's forcing frequencies, its bootstrap simulates that plant,
