@@ -37,6 +37,31 @@ def washout_result(washout_runs):
                            candidates=["motion-washout", "time-varying-gains"])
 
 
+def test_pooled_reports_the_fit_with_each_runs_own_noise_model(washout_runs, washout_result):
+    """The reported pooled fit (pooled_final_fit): each run's delta_abs at the minimum of a
+    plain grid scan of its own GLS likelihood (the run's own noise model, the other
+    parameters at the reported fit), and the pooled -ln L recomputed from the runs' own
+    likelihoods; the test's fit stays beside it and in arrays["fits"]."""
+    res = washout_result
+    c = res.chosen
+    assert c.physics == "motion-washout" and c.refit is not None and len(c.noise) == 2
+    assert c.refit["test_params"]["omega_w"] == res.arrays["fits"]["motion-washout"][0]["omega_w"]
+    assert c.params["omega_w"] == pytest.approx(0.4, abs=2.5 * c.stderr["omega_w"])
+    total = 0.0
+    for rec, run, nz in zip(washout_runs, res.runs, c.noise):
+        q = run["params"]
+        assert q["omega_w"] == c.params["omega_w"]
+        wl = D.Whitened(c.model, rec, nz)
+        total += wl.neg_log_lik(q)
+        grid = np.arange(0.0, c.model.parameter("delta_abs").upper + 2.5e-4, 5e-4)
+        best = min(grid, key=lambda d: wl.neg_log_lik(dict(q, delta_abs=float(d))))
+        assert abs(q["delta_abs"] - best) <= 5e-4 + 1e-12
+    assert total == pytest.approx(c.refit["neg_log_lik"], abs=1e-6)
+    assert res.to_dict()["chosen"]["refit"]["delta_abs"][1] == [r["params"]["delta_abs"]
+                                                               for r in res.runs]
+    assert "each run's delta_abs" in res.summary()
+
+
 def test_pooled_rejects_bad_input(washout_runs):
     with pytest.raises(ValueError, match="at least two"):
         diagnose_pooled(washout_runs[:1])
@@ -235,8 +260,9 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
 
     def reference(w):
         total = 0.0
-        for wl, run in zip(wls, res.runs):
-            fit = D._gls_refine(wl, dict(run["params"], omega_w=float(w)), names)
+        # the test's per-run fits (run["params"] is the fit reported after it, own delta_abs)
+        for wl, q in zip(wls, res.arrays["fits"]["motion-washout"]):
+            fit = D._gls_refine(wl, dict(q, omega_w=float(w)), names)
             x0 = np.array([fit.params[n] for n in names])
 
             def f(x, fit=fit, wl=wl):
@@ -333,7 +359,11 @@ def test_shared_posterior_of_two_shared_parameters():
     post = shared_posterior(res, recs, n_grid=7)
     assert post.log_density.shape == (7, 7) and post.settings["failed_points"] == 0
     for n in ("drift_v", "drift_m"):
-        m, v, se = post.marginals[n], res.chosen.params[n], res.chosen.stderr[n]
+        # the grid is of the decision likelihood: against the test's pooled fit (the reported
+        # one, refitted after the test with each run's own noise model, is beside it)
+        v, se = res.chosen.refit["test_params"][n], res.chosen.stderr[n]
+        assert (post.ml[n], post.stderr[n]) == (v, se)
+        m = post.marginals[n]
         assert m["sd"] == pytest.approx(se, rel=0.2)
         assert m["interval"][0] == pytest.approx(v - 1.645 * se, abs=0.3 * se)
         assert m["interval"][1] == pytest.approx(v + 1.645 * se, abs=0.3 * se)

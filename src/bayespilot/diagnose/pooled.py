@@ -41,11 +41,16 @@ from scipy import linalg, optimize, stats
 from .._blas import one_blas_thread
 from .._files import write_text_atomic
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
-               _calibration_lines, _calibrator, _check, _json_ready, _JSONSummary, _prepare,
-               _saturation)
+               _calibration_lines, _calibrator, _check, _fitted_lines, _json_ready, _JSONSummary,
+               _prepare, _saturation)
 from .catalogue import get_extension
 
-__all__ = ["diagnose_pooled", "PooledDiagnosisResult", "PoolingWarning", "pooling_disagreements"]
+__all__ = ["diagnose_pooled", "PooledDiagnosisResult", "PoolingWarning", "pooling_disagreements",
+           "pooled_final_fit"]
+
+#: How the chosen extension's reported pooled fit is made (``diagnose_pooled(refit=True)``).
+POOLED_FINAL_FIT = ("refitted after the test: each run's AR noise model re-estimated from its "
+                    "extended model's residual, each run's delta_abs rescanned, three times")
 
 
 class PoolingWarning(UserWarning):
@@ -161,9 +166,8 @@ class PooledDiagnosisResult(_JSONSummary):
                          f"{c.delta_bic:9.1f}  {per}  {ps}{'  *' if c.justified else ''}")
         lines += _calibration_lines(self.ranking)
         if self.chosen is not None and self.chosen.params:
-            lines += ["", f"fitted {self.chosen.physics} (shared by the {R} runs):"]
-            for k, v in self.chosen.params.items():
-                lines.append(f"  {k:<10} {v:12.5g} +- {self.chosen.stderr.get(k, math.nan):.2g}")
+            lines += ["", f"fitted {self.chosen.physics} (shared by the {R} runs):",
+                      *_fitted_lines(self.chosen)]
             if self.posterior is not None:
                 lines += self.posterior.summary_lines()
         lines += ["", "runs:"]
@@ -332,6 +336,55 @@ def _pooled_refine(wls, bases, names, shared, start_shared, *, max_nfev: int = 6
         warnings.simplefilter("ignore")
         cov = linalg.pinvh(J.T @ J) if J is not None else np.full((R * p + k,) * 2, np.nan)
     return ps, f, cov[R * p:, R * p:]
+
+
+def pooled_final_fit(ext, base_model, recordings, params, noises, *, rounds: int = 3):
+    """The pooled counterpart of :func:`bayespilot.diagnose.decide.final_fit`: the chosen
+    extension refitted to all runs with each run's own noise model and delta_abs.
+
+    ``rounds`` times: each run's AR noise model is estimated again from the
+    extended model's residual there (same low-pass and decimation), the pooled
+    model (pilot parameters per run, the extension's shared) is refitted under
+    them, and each run's delta_abs is scanned again with the shared parameters
+    held (:func:`~bayespilot.diagnose.decide.scan_threshold`), the pooled fit
+    repeated until no scan moves it.  ``params``: the extended model's
+    parameters per run at the test's fit; ``noises``: the runs' decision
+    noise models.  Returns ``(params per run, pooled -ln L under the new noise
+    models, covariance of the shared parameters, noise models)``.
+    """
+    from . import decide as D
+    from ..likelihood import Likelihood
+
+    if not (isinstance(rounds, (int, np.integer)) and rounds >= 1):
+        raise ValueError(f"rounds must be an integer >= 1, got {rounds!r}")
+    model = ext.build(base_model)
+    shared = tuple(ext.new_parameters)
+    names = tuple(n for n in model.parameter_names if n not in shared
+                  and (ext.refine_threshold or n != "delta_abs"))
+    ps, noises = [dict(q) for q in params], list(noises)
+    f, cov = math.nan, np.full((len(shared),) * 2, np.nan)
+    for _ in range(rounds):
+        for r, rec in enumerate(recordings):
+            eps = Likelihood(model, rec).residual(ps[r])
+            if np.all(np.isfinite(eps)):
+                noises[r] = D.noise_model(eps, rec.dt, skip=noises[r].skip,
+                                          omega_c=noises[r].omega_c)
+        wls = [D.Whitened(model, rec, nz) for rec, nz in zip(recordings, noises)]
+        for scans in range(5):
+            starts = [D.FitSummary(q, math.nan, (), np.zeros((0, 0))) for q in ps]
+            ps, f, cov = _pooled_refine(wls, starts, names, shared,
+                                        {n: ps[0][n] for n in shared})
+            if ext.refine_threshold or scans == 4:
+                break
+            moved = False
+            for r, wl in enumerate(wls):
+                got = D.scan_threshold(wl, D.FitSummary(ps[r], wl.neg_log_lik(ps[r]), names,
+                                                        np.zeros((0, 0))), names)
+                if got.params["delta_abs"] != ps[r]["delta_abs"]:
+                    ps[r], moved = dict(got.params), True
+            if not moved:
+                break
+    return ps, f, cov, noises
 
 
 def _refined_base(runs, recordings):
@@ -539,7 +592,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                     n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
                     skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
                     n_starts: int = 4, oversample: int = 1, n_calibrate: int = N_CALIBRATE,
-                    noise_passes: int = 1, progress: bool = False) -> PooledDiagnosisResult:
+                    noise_passes: int = 1, refit: bool = True,
+                    progress: bool = False) -> PooledDiagnosisResult:
     """Diagnose several runs of one condition together (see the module docs).
 
     Parameters
@@ -559,6 +613,14 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         costs about R times a single run's.
     noise_passes : int
         As for :func:`~bayespilot.diagnose.diagnose`, for every run.
+    refit : bool
+        Report the chosen extension's estimates from a pooled fit made after
+        the test with each run's own noise model and delta_abs
+        (:func:`pooled_final_fit`), with the test's standard errors, as
+        :func:`~bayespilot.diagnose.diagnose` does for one run; the test's fit
+        stays in ``chosen.refit`` and in ``arrays["fits"]``, and
+        :func:`~bayespilot.diagnose.shared_posterior` (under the decision
+        likelihood) starts from it.
 
     Returns
     -------
@@ -654,10 +716,28 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                  else None)
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
     bar.close()
+    final = None
+    if refit and chosen is not None and chosen.physics in fits:
+        ext = get_extension(chosen.physics)
+        ps, f, cov, own = pooled_final_fit(ext, runs[0].base_model, recs, fits[chosen.physics],
+                                           [run.noise for run in runs])
+        final = ps
+        se = np.sqrt(np.clip(np.diag(cov), 0, None))
+        # the estimates are reported, the standard errors stay the test's (as for one run)
+        chosen.refit = {"how": POOLED_FINAL_FIT, "test_params": dict(chosen.params),
+                        "own_stderr": {n: float(v) for n, v in zip(ext.new_parameters, se)},
+                        "noise_model": [nz.to_dict() for nz in own],
+                        "delta_abs": [[q.get("delta_abs") for q in fits[chosen.physics]],
+                                      [q.get("delta_abs") for q in ps]],
+                        "neg_log_lik": float(f)}
+        chosen.params = {n: float(ps[0][n]) for n in ext.new_parameters}
+        chosen.noise = own
     run_d = []
     for j, (rec, run) in enumerate(zip(recs, runs)):
         chosen_params = None
-        if chosen is not None and chosen.physics in fits:
+        if final is not None:
+            chosen_params = final[j]
+        elif chosen is not None and chosen.physics in fits:
             chosen_params = fits[chosen.physics][j]
         run_d.append({"source": rec.source,
                       "base": {"params": dict(run.base_fit.params),
@@ -670,7 +750,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                       "params": chosen_params})
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "n_calibrate": n_calibrate,
-                "noise_passes": noise_passes, "skip_seconds": skip_seconds,
+                "noise_passes": noise_passes, "refit": refit, "skip_seconds": skip_seconds,
                 "candidates": list(names), "n_runs": len(recs), "rebased": rebased,
                 "decision_likelihood": "sum over runs of the GLS likelihood (each run's own AR "
                                        "noise model and level); extension parameters shared"}
@@ -679,4 +759,5 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                                  time.perf_counter() - t0,
                                  {"noise": [run.noise for run in runs],
                                   "base_model": runs[0].base_model,
-                                  "fits": {n: [dict(q) for q in ps] for n, ps in fits.items()}})
+                                  "fits": {n: [dict(q) for q in ps] for n, ps in fits.items()},
+                                  "final_fits": final})

@@ -177,7 +177,8 @@ class SharedPosterior:
         Per parameter: ``median``, ``mean``, ``sd``, ``interval`` (the central
         90 %), ``mode`` and ``density`` (the marginal density on its grid).
     ml, stderr : dict
-        The pooled maximum-likelihood fit of the shared parameters and its
+        The pooled maximum-likelihood fit of the shared parameters under the
+        decision likelihood (the test's fit, which the grid is of) and its
         standard errors.
     edge_mass : float
         Posterior mass in the outermost grid cells (large: the grid is too narrow).
@@ -443,13 +444,17 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
                          f"the fit {f_fit:.6f}, the diagnosis's {chosen.fit.neg_log_lik:.6f})")
     bounds = [(float(model.parameter(n).lower), float(model.parameter(n).upper))
               for n in shared]
+    # the decision likelihood's fit (the test's), not the fit reported after it with each
+    # run's own noise model and delta_abs (diagnose_pooled(refit=True))
+    at = chosen.refit["test_params"] if chosen.refit else chosen.params
+    at_se = chosen.stderr  # the test's (diagnose_pooled keeps them)
     spans = []
     for n, (lo, hi) in zip(shared, bounds):
-        c, se = float(chosen.params[n]), float(chosen.stderr.get(n, math.nan))
+        c, se = float(at[n]), float(at_se.get(n, math.nan))
         if math.isfinite(se) and se > 0:
             lo, hi = max(lo, c - width * se), min(hi, c + width * se)
         spans.append([lo, hi])
-    centre = np.array([float(chosen.params[n]) for n in shared])
+    centre = np.array([float(at[n]) for n in shared])
     bar = tqdm(total=n_grid ** k, desc="shared posterior", unit="point", disable=not progress)
 
     def evaluate(grids):
@@ -568,8 +573,8 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
                     "schwarz": (float(chosen.log_bayes_factor)
                                 if math.isfinite(chosen.log_bayes_factor) else None)}}
     post = SharedPosterior(chosen.physics, shared, grids, log_density, marginals,
-                           {n: float(chosen.params[n]) for n in shared},
-                           {n: float(chosen.stderr.get(n, math.nan)) for n in shared},
+                           {n: float(at[n]) for n in shared},
+                           {n: float(at_se.get(n, math.nan)) for n in shared},
                            edge, settings, time.perf_counter() - t0, lbf)
     result.posterior = post
     return post
