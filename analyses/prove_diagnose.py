@@ -46,6 +46,8 @@ Run (from the repository root):
                                           # posterior's intervals vs the truth (and 1/2)
     python analyses/prove_diagnose.py --shared-posterior-check 40 --entry \
         motion-system-dynamics --shard 0/2  # the same for a platform (or time-varying-gains)
+    python analyses/prove_diagnose.py --final-fit-check 40 --entry motion-system-dynamics \
+        --shard 0/2                       # the reported fit's spread and s.e. against the test's
     python analyses/prove_diagnose.py --pooled-bayes-factor 12 # the pooled Laplace Bayes
                                           # factor on 12 controls, 12 effects of four runs
     python analyses/prove_diagnose.py --platform-band          # the platform's gain by band on
@@ -1000,8 +1002,8 @@ def posterior_check(n: int = 8) -> None:
             post = sample_chosen(res, rec, seed=0, max_steps=3000, min_steps=1000,
                                  check_every=500)
         d = post.draws("omega_w")
-        row = {"seed": seed, "decision": res.physics, "gls": c.params["omega_w"],
-               "se": c.stderr["omega_w"], "median": float(np.median(d)), "sd": float(d.std()),
+        row = {"seed": seed, "decision": res.physics, **_fit_columns(c, "omega_w"),
+               "median": float(np.median(d)), "sd": float(d.std()),
                "hdi_90": list(post.credible_interval("omega_w", 0.9)),
                "converged": bool(post.converged)}
         rows.append(row)
@@ -1058,8 +1060,7 @@ def shared_posterior_check(n: int = 40, runs: int = 2,
         res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2,
                               candidates=["motion-washout"])
         c = res.ranking[0]
-        row = {"set": k, "runs": runs, "decision": res.physics, "gls": c.params.get("omega_w"),
-               "se": c.stderr.get("omega_w")}
+        row = {"set": k, "runs": runs, "decision": res.physics, **_fit_columns(c, "omega_w")}
         if res.chosen is not None:
             post = shared_posterior(res, recs)
             m = post.marginals["omega_w"]
@@ -1071,17 +1072,43 @@ def shared_posterior_check(n: int = 40, runs: int = 2,
     if not got:
         print("no results yet")
         return
-    g = np.array([r["gls"] for r in got])
     med = np.array([r["median"] for r in got])
     inside = sum(r["interval"][0] < truth < r["interval"][1] for r in got)
     print(f"{len(rows)} sets of {runs} runs of {duration} s (K_n {k_n:.3f}), omega_w = {truth} "
           f"rad/s; named {len(got)}")
-    print(f"pooled GLS fit: mean {g.mean():.3f}, sd over sets {g.std(ddof=1):.3f}, mean s.e. "
-          f"{np.mean([r['se'] for r in got]):.3f}")
+    _print_fit_columns(got, "omega_w", truth)
     print(f"shared posterior: mean median {med.mean():.3f}, sd over sets {med.std(ddof=1):.3f}, "
           f"mean posterior sd {np.mean([r['sd'] for r in got]):.3f}; truth in the central "
           f"90 % interval {inside}/{len(got)} (binomial sd {math.sqrt(len(got) * 0.09):.1f}); "
           f"median time {np.median([r['seconds'] for r in got]):.1f} s")
+
+
+def _fit_columns(c, m: str) -> dict:
+    """A check's columns for parameter ``m`` of candidate ``c``: ``gls``/``se``, the test's
+    fit (the decision likelihood, which ``shared_posterior`` is of), and, when the candidate
+    was chosen and refitted after the test (its own noise model and delta_abs),
+    ``final``/``final_se``, the fit reported."""
+    out = {"gls": (c.refit["test_params"] if c.refit else c.params).get(m),
+           "se": c.stderr.get(m)}
+    if c.refit:
+        out.update(final=c.params.get(m), final_se=c.refit["own_stderr"].get(m))
+    return out
+
+
+def _print_fit_columns(cols: list[dict], m: str, truth: float) -> None:
+    """Per fit in ``cols`` (:func:`_fit_columns`: the test's, the refit with its own standard
+    errors, the reported refit's estimate with the test's): mean, spread over the sets, mean
+    standard error and how often +- 1.645 s.e. holds the truth."""
+    for key, se, what in (("gls", "se", "test's fit"), ("final", "final_se", "refit, own s.e."),
+                          ("final", "se", "reported")):
+        have = [q for q in cols if q.get(key) is not None]
+        if not have:
+            continue
+        est = np.array([q[key] for q in have])
+        ses = np.array([q[se] for q in have])
+        print(f"{m} = {truth}: pooled, {what}: mean {est.mean():.3f}, spread "
+              f"{est.std(ddof=1):.3f}, mean s.e. {ses.mean():.3f}; truth within 1.645 s.e. "
+              f"{int(np.sum(np.abs(est - truth) < 1.645 * ses))}/{len(have)}")
 
 
 #: ``--shared-posterior-check --entry``: the truth, runs, run length and first seed per entry
@@ -1125,7 +1152,7 @@ def shared_posterior_check_entry(entry: str, n: int, shard: tuple[int, int] = (0
         res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2, candidates=[entry])
         c = res.ranking[0]
         row = {"set": k, "runs": runs, "decision": res.physics,
-               "params": {m: {"gls": c.params.get(m), "se": c.stderr.get(m)} for m in truth}}
+               "params": {m: _fit_columns(c, m) for m in truth}}
         if res.chosen is not None:
             post = shared_posterior(res, recs)
             for m in truth:
@@ -1145,6 +1172,7 @@ def shared_posterior_check_entry(entry: str, n: int, shard: tuple[int, int] = (0
         inside = sum(r["params"][m]["interval"][0] < v < r["params"][m]["interval"][1]
                      for r in got)
         below = sum(v <= r["params"][m]["interval"][0] for r in got)
+        _print_fit_columns([r["params"][m] for r in got], m, v)
         print(f"{m} = {v}: pooled fit mean {np.mean([r['params'][m]['gls'] for r in got]):.3f}, "
               f"mean s.e. {np.mean([r['params'][m]['se'] for r in got]):.3f}; posterior "
               f"median mean {med.mean():.3f}, sd over sets {med.std(ddof=1):.3f}, mean "
@@ -1153,6 +1181,78 @@ def shared_posterior_check_entry(entry: str, n: int, shard: tuple[int, int] = (0
               f"{len(got) - inside - below}; binomial sd {math.sqrt(len(got) * 0.09):.1f})")
     print(f"median time {np.median([r['seconds'] for r in got]):.1f} s; grids widened in "
           f"{sum(bool(r['widened']) for r in got)}")
+
+
+#: ``--final-fit-check --entry``: the truth, run length and first seed per entry (single runs,
+#: FD, K_theta = 1, K_n = 0.063).
+FINAL_FIT_CHECK = {
+    "motion-system-dynamics": ({"omega_ms": 6.0}, 81.92, 10_000),
+    "motion-washout": ({"omega_w": 0.8}, 40.96, 100),
+    "time-varying-gains": ({"drift_v": 0.6, "drift_m": 0.3}, 81.92, 20_000),
+}
+
+
+def final_fit_check(entry: str, n: int, shard: tuple[int, int] = (0, 1)) -> None:
+    """The fit made after the test (``decide.final_fit``: its own noise model, delta_abs
+    rescanned) against the test's fit (both at the base model's), on ``n`` single closed-loop
+    runs with the entry at ``FINAL_FIT_CHECK``'s truth: per parameter the mean, spread over
+    the runs, mean standard error and Wald 90 % coverage of the truth of the test's fit, of
+    the refit with its own standard errors, and of what is reported (the refit's estimate,
+    the test's standard error).  Runs where the
+    test does not choose the entry are refitted the same way (coverage is not conditioned on
+    the decision).  Resumable, ``--shard K/N``;
+    ``analyses/results/diagnose/final_fit_check_<entry>*.jsonl``.
+    """
+    from bayespilot import presets
+    from bayespilot.diagnose import decide as D
+    from bayespilot.diagnose import diagnose, get_extension
+    from bayespilot.model import paper_model
+    from bayespilot.simulate import simulate
+
+    import numba
+
+    numba.set_num_threads(1)
+    truth, duration, seed0 = FINAL_FIT_CHECK[entry]
+    ext = get_extension(entry)
+    model = ext.build(paper_model())
+    p = dict(presets.paper_parameters("FD"), **truth)
+    path, every = _shard_files(DEFAULT_OUT, f"final_fit_check_{entry}", shard)
+    done = {r["set"] for r in _rows(every)}
+    for k in range(n):
+        if k % shard[1] != shard[0] or k in done:
+            continue
+        t0 = time.perf_counter()
+        rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063,
+                       seed=seed0 + k, duration=duration).recording
+        res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, candidates=[entry])
+        c = res.ranking[0]
+        if c.refit is None and c.fit is not None:
+            fit, own = D.final_fit(ext, res.base_model, rec, c.fit, res.arrays["noise"])
+            c.report_fit(fit, own, "refitted by the check (not chosen)")
+        row = {"set": k, "decision": res.physics, "truth": truth,
+               "test": {m: [c.refit["test_params"][m], c.stderr.get(m)]
+                        for m in truth},
+               "final": {m: [c.params[m], c.refit["own_stderr"].get(m)] for m in truth},
+               "delta_abs": c.refit["delta_abs"], "seconds": time.perf_counter() - t0}
+        _append_row(path, row)
+    rows = list({r["set"]: r for r in reversed(_rows(every))}.values())  # a set once
+    print(f"{len(rows)} runs of {duration} s with {entry} at {truth}; named "
+          f"{sum(r['decision'] == entry for r in rows)}")
+    for m, v in truth.items():
+        # the test's fit; the refit with its own standard errors; the refit's estimate with
+        # the test's standard errors (what diagnose reports)
+        for label, k_est, k_se in (("test fit:", "test", "test"), ("refit:", "final", "final"),
+                                   ("reported:", "final", "test")):
+            est = np.array([r[k_est][m][0] for r in rows])
+            se = np.array([r[k_se][m][1] for r in rows])
+            inside = int(np.sum(np.abs(est - v) < 1.645 * se))
+            print(f"  {m} = {v}, {label:<10} mean {est.mean():.3f}, spread "
+                  f"{est.std(ddof=1):.3f}, mean s.e. {se.mean():.3f} (median "
+                  f"{np.median(se):.3f}); truth within 1.645 s.e. {inside}/{len(rows)}")
+    d = np.array([r["delta_abs"] for r in rows], float)
+    print(f"  delta_abs (truth {p['delta_abs']:g}): test's fit mean {d[:, 0].mean():.4f} sd "
+          f"{d[:, 0].std(ddof=1):.4f}; reported fit mean {d[:, 1].mean():.4f} sd "
+          f"{d[:, 1].std(ddof=1):.4f}")
 
 
 def _first_cases(n: int, shard: tuple[int, int], every) -> list[dict]:
@@ -2441,6 +2541,10 @@ def main(argv=None) -> int:
     ap.add_argument("--weak", action="store_true",
                     help="with --shared-posterior-check: four 81.92-s runs, omega_w 0.3 rad/s, "
                          "F_n 0.25")
+    ap.add_argument("--final-fit-check", type=int, default=0, metavar="N",
+                    help="N single runs with --entry (motion-system-dynamics, motion-washout, "
+                         "time-varying-gains): the reported fit against the test's fit "
+                         "(resumable, --shard)")
     ap.add_argument("--pooled-bayes-factor", type=int, default=0, metavar="N",
                     help="the pooled Laplace Bayes factor (shared_posterior) on the first N "
                          "controls and N effect cases of the four-run study (resumable, "
@@ -2561,6 +2665,11 @@ def main(argv=None) -> int:
             shared_posterior_check_entry(args.entry, args.shared_posterior_check, (k, n))
         else:
             shared_posterior_check(args.shared_posterior_check, shard=(k, n), weak=args.weak)
+        return 0
+    if args.final_fit_check:
+        if args.entry not in FINAL_FIT_CHECK:
+            ap.error(f"--final-fit-check needs --entry, one of {', '.join(FINAL_FIT_CHECK)}")
+        final_fit_check(args.entry, args.final_fit_check, (k, n))
         return 0
     if args.pooled_bayes_factor:
         pooled_bayes_factor(args.pooled_bayes_factor, shard=(k, n))
