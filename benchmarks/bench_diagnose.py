@@ -84,7 +84,8 @@ def main(argv=None):
         runs += f"washout {args.washout:g} rad/s, calibration B = {args.calibrate}, "
     print(f"N = {rec.n_samples}, {runs}bootstrap B = {args.bootstrap}: decision {res.physics}")
     if args.runs > 1:
-        print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)")
+        print(f"wall time: median {np.median(ts):.1f} s, min {min(ts):.1f} s over {len(ts)} run(s)"
+              f"; the refit after the test (last run) {res.settings.get('refit_seconds', 0):.1f} s")
         if args.shared_posterior:
             if res.chosen is None:
                 print("shared_posterior: nothing chosen (simulate an effect: --washout)")

@@ -717,6 +717,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
     bar.close()
     final = None
+    t_refit = time.perf_counter()
     if refit and chosen is not None and chosen.physics in fits:
         ext = get_extension(chosen.physics)
         ps, f, cov, own = pooled_final_fit(ext, runs[0].base_model, recs, fits[chosen.physics],
@@ -732,6 +733,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                         "neg_log_lik": float(f)}
         chosen.params = {n: float(ps[0][n]) for n in ext.new_parameters}
         chosen.noise = own
+    t_refit = time.perf_counter() - t_refit
     run_d = []
     for j, (rec, run) in enumerate(zip(recs, runs)):
         chosen_params = None
@@ -750,7 +752,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                       "params": chosen_params})
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "n_calibrate": n_calibrate,
-                "noise_passes": noise_passes, "refit": refit, "skip_seconds": skip_seconds,
+                "noise_passes": noise_passes, "refit": refit, "refit_seconds": t_refit,
+                "skip_seconds": skip_seconds,
                 "candidates": list(names), "n_runs": len(recs), "rebased": rebased,
                 "decision_likelihood": "sum over runs of the GLS likelihood (each run's own AR "
                                        "noise model and level); extension parameters shared"}
