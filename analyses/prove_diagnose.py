@@ -1189,6 +1189,8 @@ FINAL_FIT_CHECK = {
     "motion-system-dynamics": ({"omega_ms": 6.0}, 81.92, 10_000),
     "motion-washout": ({"omega_w": 0.8}, 40.96, 100),
     "time-varying-gains": ({"drift_v": 0.6, "drift_m": 0.3}, 81.92, 20_000),
+    "otolith-channel": ({"K_ot": 0.04, "h_head": 1.0}, 81.92, 30_000),
+    "threshold-shape": ({"w_soft": 0.045}, 81.92, 40_000),
 }
 
 
@@ -2543,7 +2545,8 @@ def main(argv=None) -> int:
                          "F_n 0.25")
     ap.add_argument("--final-fit-check", type=int, default=0, metavar="N",
                     help="N single runs with --entry (motion-system-dynamics, motion-washout, "
-                         "time-varying-gains): the reported fit against the test's fit "
+                         "time-varying-gains, otolith-channel, threshold-shape): the reported "
+                         "fit against the test's fit "
                          "(resumable, --shard)")
     ap.add_argument("--pooled-bayes-factor", type=int, default=0, metavar="N",
                     help="the pooled Laplace Bayes factor (shared_posterior) on the first N "
