@@ -338,7 +338,8 @@ def _pooled_refine(wls, bases, names, shared, start_shared, *, max_nfev: int = 6
     return ps, f, cov[R * p:, R * p:]
 
 
-def pooled_final_fit(ext, base_model, recordings, params, noises, *, rounds: int = 3):
+def pooled_final_fit(ext: Any, base_model: Any, recordings: Sequence, params: Sequence[dict],
+                     noises: Sequence, *, rounds: int = 3) -> tuple[list, float, np.ndarray, list]:
     """The pooled counterpart of :func:`bayespilot.diagnose.decide.final_fit`: the chosen
     extension refitted to all runs with each run's own noise model and delta_abs.
 
@@ -347,10 +348,35 @@ def pooled_final_fit(ext, base_model, recordings, params, noises, *, rounds: int
     model (pilot parameters per run, the extension's shared) is refitted under
     them, and each run's delta_abs is scanned again with the shared parameters
     held (:func:`~bayespilot.diagnose.decide.scan_threshold`), the pooled fit
-    repeated until no scan moves it.  ``params``: the extended model's
-    parameters per run at the test's fit; ``noises``: the runs' decision
-    noise models.  Returns ``(params per run, pooled -ln L under the new noise
-    models, covariance of the shared parameters, noise models)``.
+    repeated until no scan moves it.
+
+    Parameters
+    ----------
+    ext : Extension
+        The chosen catalogue entry (fitted by GLS).
+    base_model : PilotModel
+        The base model it extends.
+    recordings : sequence of Recording
+        The pooled runs.
+    params : sequence of dict
+        The extended model's parameters per run at the test's fit.
+    noises : sequence of NoiseModel
+        The runs' decision noise models (their low-pass, decimation and skip
+        are kept).
+    rounds : int
+        How often the noise models are estimated again.
+
+    Returns
+    -------
+    params : list of dict
+        The extended model's parameters per run (the shared ones equal).
+    neg_log_lik : float
+        The pooled -ln L under the new noise models.
+    cov : ndarray
+        Covariance of the shared parameters under them (too sharp on repeated
+        closed-loop runs: ``diagnose_pooled`` reports the test's).
+    noises : list of NoiseModel
+        The runs' last noise models.
     """
     from . import decide as D
     from ..likelihood import Likelihood
