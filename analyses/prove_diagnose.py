@@ -1116,6 +1116,7 @@ def _print_fit_columns(cols: list[dict], m: str, truth: float) -> None:
 POSTERIOR_CHECK = {
     "motion-system-dynamics": ({"omega_ms": 6.0}, 2, 81.92, 400),
     "time-varying-gains": ({"drift_v": 0.6, "drift_m": 0.3}, 2, 40.96, 500),
+    "otolith-channel": ({"K_ot": 0.04, "h_head": 1.0}, 2, 81.92, 600),
 }
 
 
@@ -2465,7 +2466,8 @@ def main(argv=None) -> int:
     ap.add_argument("--entry", metavar="NAME",
                     help="run only this catalogue entry's cases (or none: the controls); "
                          "with --shared-posterior-check, the entry whose posterior is checked "
-                         "(motion-washout, motion-system-dynamics, time-varying-gains)")
+                         "(motion-washout, motion-system-dynamics, time-varying-gains, "
+                         "otolith-channel)")
     ap.add_argument("--shard", default="0/1", metavar="K/N",
                     help="run only the cases whose id is K modulo N (two processes: 0/2 and 1/2); "
                          "with --misses-of or --entry, whose rank in that selection is")
