@@ -352,10 +352,8 @@ def pooled_final_fit(ext: Any, base_model: Any, recordings: Sequence, params: Se
 
     Parameters
     ----------
-    ext : Extension
-        The chosen catalogue entry (fitted by GLS).
-    base_model : PilotModel
-        The base model it extends.
+    ext, base_model
+        As for :func:`~bayespilot.diagnose.decide.final_fit`.
     recordings : sequence of Recording
         The pooled runs.
     params : sequence of dict
