@@ -82,7 +82,7 @@ from ..recording import Recording
 from .catalogue import Extension
 
 __all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "CandidateResult", "fit_base_gls",
-           "scan_threshold", "final_fit", "fit_candidate", "guide_fits", "refine_threshold",
+           "scan_threshold", "own_noise", "final_fit", "fit_candidate", "guide_fits", "refine_threshold",
            "null_refit", "null_refit_from",
            "lr_p_value", "retest", "flat_tops",
            "fit_censored"]
@@ -339,6 +339,17 @@ def scan_threshold(wl: Whitened, fit: FitSummary, names: Sequence[str], *,
     return fit
 
 
+def own_noise(model: PilotModel, recording: Recording, params: Mapping[str, float],
+              noise: NoiseModel) -> NoiseModel:
+    """The noise model estimated again from ``model``'s residual at ``params`` (AR order by
+    BIC; ``noise``'s low-pass, decimation and skip), or ``noise`` itself where the model's
+    response is not finite."""
+    eps = Likelihood(model, recording).residual(params)
+    if not np.all(np.isfinite(eps)):
+        return noise
+    return noise_model(eps, recording.dt, skip=noise.skip, omega_c=noise.omega_c)
+
+
 def final_fit(ext: Extension, base_model: PilotModel, recording: Recording, fit: FitSummary,
               noise: NoiseModel, *, rounds: int = 3) -> tuple[FitSummary, NoiseModel]:
     """The fit of a chosen extension that is reported: its own noise model, delta_abs rescanned.
@@ -392,12 +403,11 @@ def final_fit(ext: Extension, base_model: PilotModel, recording: Recording, fit:
     model = ext.build(base_model)
     names = tuple(n for n in model.parameter_names
                   if ext.refine_threshold or n != "delta_abs")
-    lik = Likelihood(model, recording)
     for _ in range(rounds):
-        eps = lik.residual(fit.params)
-        if not np.all(np.isfinite(eps)):
-            break
-        noise = noise_model(eps, recording.dt, skip=noise.skip, omega_c=noise.omega_c)
+        new = own_noise(model, recording, fit.params, noise)
+        if new is noise:
+            break  # the model's response is not finite at the fit
+        noise = new
         wl = Whitened(model, recording, noise)
         fit = _gls_refine(wl, fit.params, names)
         for _ in range(0 if ext.refine_threshold else 4):
@@ -454,8 +464,9 @@ class CandidateResult:
         (``test_params``), the refit's own standard errors (``own_stderr``:
         too small on repeated closed-loop runs, so ``stderr`` stays the
         test's; ``docs/diagnose.md``, *The reported fit*) and its noise model.
-    noise : NoiseModel or None
-        The noise model of the reported fit, once :meth:`report_fit` has set it.
+    noise : NoiseModel, list of NoiseModel or None
+        The noise model of the reported fit (one per run for a pooled
+        diagnosis), once :meth:`report_fit` or :meth:`record_refit` has set it.
     """
 
     physics: str
@@ -501,14 +512,26 @@ class CandidateResult:
         the test's; the test's statistics and standard errors are kept (measured to cover
         the reported estimates where the refit's own do not), the test's estimates and the
         refit's standard errors move to ``refit``."""
-        self.refit = {"how": how, "test_params": dict(self.params),
-                      "own_stderr": dict(fit.stderr), "noise_model": noise.to_dict(),
-                      "delta_abs": [self.all_params.get("delta_abs"), fit.params.get("delta_abs")]}
-        self.params = {n: float(fit.params[n]) for n in self.params}
+        self.record_refit(fit.params, fit.stderr, noise, how,
+                          [self.all_params.get("delta_abs"), fit.params.get("delta_abs")])
         if self.model is not None:
             self.all_params = dict(self.model.as_dict(self.model.full_vector(fit.params),
                                                       full=True))
         self.fit = fit
+
+    def record_refit(self, params: Mapping[str, float], own_stderr: Mapping[str, float],
+                     noise: Any, how: str, delta_abs: list, **more: Any) -> None:
+        """The part of :meth:`report_fit` a pooled diagnosis shares: the new parameters'
+        estimates from ``params``, the test's and the refit's standard errors kept in
+        ``refit`` with ``how``, ``delta_abs`` (before, after) and ``more``; ``noise`` (a
+        NoiseModel, or one per run) stored."""
+        noises = noise if isinstance(noise, list) else None
+        self.refit = {"how": how, "test_params": dict(self.params),
+                      "own_stderr": {n: float(v) for n, v in own_stderr.items()},
+                      "noise_model": ([nz.to_dict() for nz in noises] if noises is not None
+                                      else noise.to_dict()),
+                      "delta_abs": delta_abs, **more}
+        self.params = {n: float(params[n]) for n in self.params}
         self.noise = noise
 
 

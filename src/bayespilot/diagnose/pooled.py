@@ -377,7 +377,6 @@ def pooled_final_fit(ext: Any, base_model: Any, recordings: Sequence, params: Se
         The runs' last noise models.
     """
     from . import decide as D
-    from ..likelihood import Likelihood
 
     if not (isinstance(rounds, (int, np.integer)) and rounds >= 1):
         raise ValueError(f"rounds must be an integer >= 1, got {rounds!r}")
@@ -388,11 +387,7 @@ def pooled_final_fit(ext: Any, base_model: Any, recordings: Sequence, params: Se
     ps, noises = [dict(q) for q in params], list(noises)
     f, cov = math.nan, np.full((len(shared),) * 2, np.nan)
     for _ in range(rounds):
-        for r, rec in enumerate(recordings):
-            eps = Likelihood(model, rec).residual(ps[r])
-            if np.all(np.isfinite(eps)):
-                noises[r] = D.noise_model(eps, rec.dt, skip=noises[r].skip,
-                                          omega_c=noises[r].omega_c)
+        noises = [D.own_noise(model, rec, q, nz) for rec, q, nz in zip(recordings, ps, noises)]
         wls = [D.Whitened(model, rec, nz) for rec, nz in zip(recordings, noises)]
         for scans in range(5):
             starts = [D.FitSummary(q, math.nan, (), np.zeros((0, 0))) for q in ps]
@@ -749,14 +744,9 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         final = ps
         se = np.sqrt(np.clip(np.diag(cov), 0, None))
         # the estimates are reported, the standard errors stay the test's (as for one run)
-        chosen.refit = {"how": POOLED_FINAL_FIT, "test_params": dict(chosen.params),
-                        "own_stderr": {n: float(v) for n, v in zip(ext.new_parameters, se)},
-                        "noise_model": [nz.to_dict() for nz in own],
-                        "delta_abs": [[q.get("delta_abs") for q in fits[chosen.physics]],
-                                      [q.get("delta_abs") for q in ps]],
-                        "neg_log_lik": float(f)}
-        chosen.params = {n: float(ps[0][n]) for n in ext.new_parameters}
-        chosen.noise = own
+        chosen.record_refit(ps[0], dict(zip(ext.new_parameters, se)), own, POOLED_FINAL_FIT,
+                            [[q.get("delta_abs") for q in fits[chosen.physics]],
+                             [q.get("delta_abs") for q in ps]], neg_log_lik=float(f))
     t_refit = time.perf_counter() - t_refit
     run_d = []
     for j, (rec, run) in enumerate(zip(recs, runs)):
