@@ -60,6 +60,19 @@ def test_pooled_reports_the_fit_with_each_runs_own_noise_model(washout_runs, was
     assert res.to_dict()["chosen"]["refit"]["delta_abs"][1] == [r["params"]["delta_abs"]
                                                                for r in res.runs]
     assert "each run's delta_abs" in res.summary()
+    from bayespilot.diagnose.pooled import pooled_final_fit
+    fits = res.arrays["fits"]["motion-washout"]
+    with pytest.raises(ValueError, match="one parameter set and one noise model per recording"):
+        pooled_final_fit(get_extension("motion-washout"), res.arrays["base_model"],
+                         washout_runs, fits[:1], res.arrays["noise"])
+    with pytest.raises(ValueError, match="rounds"):
+        pooled_final_fit(get_extension("motion-washout"), res.arrays["base_model"],
+                         washout_runs, fits, res.arrays["noise"], rounds=0)
+    with pytest.raises(ValueError, match="fitted by GLS"):
+        D.final_fit(get_extension("control-saturation"), res.arrays["base_model"],
+                    washout_runs[0], None, res.arrays["noise"][0])
+    with pytest.raises(TypeError, match="NoiseModel"):
+        D.own_noise(c.model, washout_runs[0], fits[0], "ar2")
 
 
 def test_pooled_rejects_bad_input(washout_runs):

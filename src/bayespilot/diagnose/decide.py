@@ -325,6 +325,8 @@ def scan_threshold(wl: Whitened, fit: FitSummary, names: Sequence[str], *,
     A grid, not Gauss-Newton: the crisp dead zone's derivative in delta_abs
     is unreliable.  A model without delta_abs returns ``fit`` unchanged.
     """
+    if not isinstance(wl, Whitened):
+        raise TypeError(f"wl must be a Whitened likelihood, got {type(wl).__name__}")
     model = wl.model
     if "delta_abs" not in model.parameter_names:
         return fit
@@ -344,6 +346,8 @@ def own_noise(model: PilotModel, recording: Recording, params: Mapping[str, floa
     """The noise model estimated again from ``model``'s residual at ``params`` (AR order by
     BIC; ``noise``'s low-pass, decimation and skip), or ``noise`` itself where the model's
     response is not finite."""
+    if not isinstance(noise, NoiseModel):
+        raise TypeError(f"noise must be a NoiseModel, got {type(noise).__name__}")
     eps = Likelihood(model, recording).residual(params)
     if not np.all(np.isfinite(eps)):
         return noise
@@ -400,6 +404,8 @@ def final_fit(ext: Extension, base_model: PilotModel, recording: Recording, fit:
     """
     if not (isinstance(rounds, (int, np.integer)) and rounds >= 1):
         raise ValueError(f"rounds must be an integer >= 1, got {rounds!r}")
+    if not isinstance(ext, Extension) or ext.likelihood != "gls":
+        raise ValueError(f"ext must be a catalogue Extension fitted by GLS, got {ext!r}")
     model = ext.build(base_model)
     names = tuple(n for n in model.parameter_names
                   if ext.refine_threshold or n != "delta_abs")

@@ -380,6 +380,12 @@ def pooled_final_fit(ext: Any, base_model: Any, recordings: Sequence, params: Se
 
     if not (isinstance(rounds, (int, np.integer)) and rounds >= 1):
         raise ValueError(f"rounds must be an integer >= 1, got {rounds!r}")
+    if not len(recordings) == len(params) == len(noises) >= 2:
+        raise ValueError(f"need one parameter set and one noise model per recording, two "
+                         f"recordings or more; got {len(recordings)} recordings, "
+                         f"{len(params)} parameter sets, {len(noises)} noise models")
+    if getattr(ext, "likelihood", None) != "gls":
+        raise ValueError(f"ext must be a catalogue Extension fitted by GLS, got {ext!r}")
     model = ext.build(base_model)
     shared = tuple(ext.new_parameters)
     names = tuple(n for n in model.parameter_names if n not in shared
