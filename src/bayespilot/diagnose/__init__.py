@@ -589,7 +589,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         test's fit, which holds both at the base model's values (on 160
         runs: a 6-rad/s platform's bandwidth spread 0.58 against 0.39 rad/s,
         delta_abs biased).  The standard errors stay the test's, which cover
-        those estimates (86-94 % for 90 % stated on three entries) where the
+        those estimates (86-95 % for 90 % stated on four entries) where the
         refit's own are up to 1.4 times too small (``docs/diagnose.md``, *The reported
         fit*).  The test's statistics are the same either way; its
         estimates stay in ``chosen.refit``.  Under a second, only when an
