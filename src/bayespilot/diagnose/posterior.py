@@ -458,20 +458,15 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
                          f"the fit {f_fit:.6f}, the diagnosis's {chosen.fit.neg_log_lik:.6f})")
     bounds = [(float(model.parameter(n).lower), float(model.parameter(n).upper))
               for n in shared]
-    # Each run's delta_abs is held (as in the test) but at the fit reported after the test
-    # (diagnose_pooled(refit=True)), not at the base model's: the base model's threshold is
-    # biased by what it misses, and the shared parameters with it (an otolith's head height:
-    # the truth in 2 of 12 pooled pairs' intervals with the test's delta_abs).  The noise
-    # models stay the test's: the reported fit's own, fitted to the extended model's
-    # residual, make the likelihood too sharp (docs/diagnose.md, "The reported fit").
+    # each run's delta_abs: see the docstring (why the reported fit's, not the test's)
     final = result.arrays.get("final_fits")
-    held = "held at the test's"
-    if (final and chosen is result.chosen and not ext.refine_threshold
-            and "delta_abs" in model.parameter_names):
-        fits = [dict(q, delta_abs=float(r["delta_abs"])) for q, r in zip(fits, final)]
-        held = "held at the reported fit's"
     if ext.refine_threshold:
         held = "refitted"
+    elif final and chosen is result.chosen and "delta_abs" in model.parameter_names:
+        fits = [dict(q, delta_abs=float(r["delta_abs"])) for q, r in zip(fits, final)]
+        held = "held at the reported fit's"
+    else:
+        held = "held at the test's"
     # the pooled fit under this likelihood centres the grid
     ps, f_ml, cov = _pooled_refine(wls, [D.FitSummary(q, math.nan, (), np.zeros((0, 0)))
                                          for q in fits], names, shared,
