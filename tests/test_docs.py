@@ -5,7 +5,8 @@
 * every fenced ```python block of ``docs/*.md`` and ``README.md`` is executed,
   the blocks of one page in order in one namespace, in a temporary working
   directory (so files the examples write land there).  A block opts out only
-  with an explicit ```python skip fence;
+  with an explicit ```{.python .skip} fence (superfences' class form: a bare
+  word after the language would make it no fence at all);
 * every ``bayespilot ...`` command in the pages' ``console``/``bash`` blocks
   and in the CLI's own help epilogs is parsed by the CLI's parser (not run),
   so the documented commands and options exist.
@@ -42,6 +43,8 @@ def python_blocks(text: str) -> tuple[list[tuple[str, int]], int]:
     run, skipped = [], 0
     for info, body, line in fenced_blocks(text):
         words = info.split()
+        if info.startswith("{"):  # ```{.python .skip}: the classes, the first the language
+            words = [w.strip("{}").lstrip(".") for w in words]
         if not words or words[0] != "python":
             continue
         if "skip" in words[1:]:
@@ -53,13 +56,13 @@ def python_blocks(text: str) -> tuple[list[tuple[str, int]], int]:
 
 def test_fence_parser_finds_python_blocks_and_skips_marked_ones():
     text = ("intro\n```python\nx = 1\n```\n\n```console\n$ bayespilot demo\n```\n"
-            "```python skip\nraise SystemExit\n```\n```python\ny = x + 1\n```\n")
+            "```{.python .skip}\nraise SystemExit\n```\n```python\ny = x + 1\n```\n")
     run, skipped = python_blocks(text)
     assert [body for body, _ in run] == ["x = 1\n", "y = x + 1\n"]
     assert [line for _, line in run] == [2, 12]
     assert skipped == 1
-    assert [info for info, _, _ in fenced_blocks(text)] == ["python", "console", "python skip",
-                                                            "python"]
+    assert [info for info, _, _ in fenced_blocks(text)] == ["python", "console",
+                                                            "{.python .skip}", "python"]
 
 
 # --- the site --------------------------------------------------------------------------------
@@ -100,6 +103,10 @@ def test_site_builds_strictly(tmp_path):
     assert ":::" not in api
     # the equations reach MathJax
     assert "arithmatex" in (site / "model" / "index.html").read_text(encoding="utf-8")
+    # every fence became a code block: one the Markdown did not take as a fence leaves its
+    # ``` as text and swallows the page after it into a code block, headings and all
+    for html in site.rglob("index.html"):
+        assert "<p>```" not in html.read_text(encoding="utf-8"), html.parent.name
 
 
 # --- the examples ----------------------------------------------------------------------------
