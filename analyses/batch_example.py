@@ -6,7 +6,7 @@ Simulates task FD, K_theta = 1, F_n = 0.25 (Table 4's K_n), four runs each of
 three subjects with the paper's Table 3 pilot: s1 and s3 on the correct model,
 s2 with a motion-cueing washout at 0.3 rad/s that the recordings do not log
 (the size at which one run is named in 7 of 8 cases in the proof study,
-docs/diagnose.md).  Writes the twelve recordings (subject in each JSON, no
+docs/diagnose-evidence.md).  Writes the twelve recordings (subject in each JSON, no
 generator truth), then runs ``bayespilot.diagnose.batch.diagnose_batch`` on
 them blind twice: each run alone, and each subject's runs pooled.  Prints
 both summary tables beside the truth and writes

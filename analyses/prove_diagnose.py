@@ -2574,7 +2574,7 @@ def main(argv=None) -> int:
     if args.pooled:
         if args.pooled < 2 or args.profile_noise:
             ap.error("--pooled R needs R >= 2 and does not combine with --profile-noise")
-        # four runs (the study of docs/diagnose.md) keep the plain names; other R their own
+        # four runs (the study of docs/diagnose-evidence.md) keep the plain names; other R their own
         tag = "_pooled" if args.pooled == 4 else f"_pooled{args.pooled}"
         OUT = ROOT / "analyses" / "results" / f"diagnose{tag}"
         FIG_SUFFIX, POOLED = tag, args.pooled

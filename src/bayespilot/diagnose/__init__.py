@@ -542,7 +542,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         100-Hz discretisation error becomes visible there and raises false
         alarms; with ``oversample=8`` it does not (0 false alarms on the
         proof study's 48 controls, 56 % of its concealed cases named against
-        51 % by default, at twice the time; ``docs/diagnose.md``).  Above
+        51 % by default, at twice the time; ``docs/diagnose-evidence.md``).  Above
         25 rad/s every extension is also started from its fit on the
         25-rad/s band (``decide.guide_fits``).
     n_starts : int
@@ -553,13 +553,13 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         residual, which whitens part of what the base model misses.  About
         30 % more time; off by default because the proof study rerun with it
         named no more (52 of 95 concealed cases against 54 of 96, no false
-        alarm either way; ``docs/diagnose.md``).
+        alarm either way; ``docs/diagnose-evidence.md``).
     oversample : int
         The base model's (and so every extension's) vestibular channel at
         this many times the recording's rate in the likelihood
         (``paper_model(oversample=...)``); 1, the default, is the paper's
         computation.  With 8 the model's discretisation error no longer
-        shows in the whole band (``docs/diagnose.md``).
+        shows in the whole band (``docs/diagnose-evidence.md``).
     n_calibrate : int
         Replicates B of the parametric bootstrap that calibrates the chosen
         candidate's test before it is accepted (:mod:`.calibrate`: the base
@@ -580,7 +580,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         AR model under-weights them; a second pass corrects that (on 400
         correct-model runs the washout's null mean went from 0.272 to 0.248,
         the platform's from 0.164 to 0.207, reference 0.25;
-        ``docs/diagnose.md``).  A calibration (``n_calibrate``) retraces the
+        ``docs/diagnose-evidence.md``).  A calibration (``n_calibrate``) retraces the
         same passes.
     refit : bool
         Report the chosen extension's estimates from a fit made after the
@@ -590,7 +590,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         runs: a 6-rad/s platform's bandwidth spread 0.58 against 0.39 rad/s,
         delta_abs biased).  The standard errors stay the test's, which cover
         those estimates (86-95 % for 90 % stated on four entries) where the
-        refit's own are up to 1.4 times too small (``docs/diagnose.md``, *The reported
+        refit's own are up to 1.4 times too small (``docs/diagnose-evidence.md``, *The reported
         fit*).  The test's statistics are the same either way; its
         estimates stay in ``chosen.refit``.  Under a second, only when an
         extension is chosen.

@@ -3,7 +3,7 @@
 The decision's p-values (:func:`bayespilot.diagnose.decide.lr_p_value`) are
 asymptotic: chi2(df), or the chi-bar-squared mixture for a boundary null.
 Measured on simulated correct-model runs they hold for most entries, but not
-for all (``docs/diagnose.md``): the washout's statistic has a heavier tail
+for all (``docs/diagnose-evidence.md``): the washout's statistic has a heavier tail
 (0.095 of 200 pooled controls below 0.05, 0.062 of 1200 single runs), and the
 drift's in a condition where K_m is weakly identified.  This module measures
 the null distribution of one candidate's statistic on the recording at hand:
@@ -33,7 +33,7 @@ hundreds of refits; the mean of B = 39 replicates fixes c to about
 below 1, so that the noise of its estimate cannot make a test more liberal
 than the asymptotic one.
 
-Measured (``docs/diagnose.md``, *Calibrating the chosen test*): it removes
+Measured (``docs/diagnose-evidence.md``, *Calibrating the chosen test*): it removes
 both false alarms of the pooled proof studies (a washout at p 6.9e-4, scale
 1.39; a drift at p 1.9e-4 over eight runs, scale 1.36), and on correct-model
 runs its scales reproduce the null studies' (washout about 1.3-1.5, platform

@@ -55,7 +55,7 @@ For boundary nulls (a bandwidth going to infinity, a corner width going to
 zero) chi2(df) is conservative; for parameters unidentified under the null
 (the otolith head height when its gain is 0) it is an approximation.  The
 false-alarm rate is measured on simulated correct-model recordings in
-``analyses/prove_diagnose.py`` (see ``docs/diagnose.md``).
+``analyses/prove_diagnose.py`` (see ``docs/diagnose-evidence.md``).
 
 ``control-saturation`` is tested differently: flat tops (exact repeats of
 the extreme value) have probability zero under every continuous-noise model,
@@ -377,7 +377,7 @@ def final_fit(ext: Extension, base_model: PilotModel, recording: Recording, fit:
     0.083 to 0.066.  But this fit's own standard errors are then too small
     (omega_w's 1.4 times); :meth:`CandidateResult.report_fit` reports its
     estimates with the test's standard errors, which cover them
-    (``docs/diagnose.md``, *The reported fit*).
+    (``docs/diagnose-evidence.md``, *The reported fit*).
 
     Parameters
     ----------
@@ -469,7 +469,7 @@ class CandidateResult:
         ``all_params``) were made (:func:`final_fit`), the test's estimates
         (``test_params``), the refit's own standard errors (``own_stderr``:
         too small on repeated closed-loop runs, so ``stderr`` stays the
-        test's; ``docs/diagnose.md``, *The reported fit*) and its noise model.
+        test's; ``docs/diagnose-evidence.md``, *The reported fit*) and its noise model.
     noise : NoiseModel, list of NoiseModel or None
         The noise model of the reported fit (one per run for a pooled
         diagnosis), once :meth:`report_fit` or :meth:`record_refit` has set it.

@@ -2,7 +2,7 @@
 
 One run of 81.92 s often cannot tell a small omission from remnant (the
 single-run proof study misses most of the smallest effects, see
-``docs/diagnose.md``).  A lab records several runs per subject and
+``docs/diagnose-evidence.md``).  A lab records several runs per subject and
 condition, and the physics the base model leaves out - the platform's
 bandwidth, the washout, an otolith response, the threshold's shape, a drift
 over the run, the stick's limit - is a property of the set-up and the

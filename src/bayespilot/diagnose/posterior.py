@@ -365,7 +365,7 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
     model, delta_abs scanned again) when that is the chosen extension's;
     the base model's, which the test holds, is biased by what the base model
     misses, and the shared parameters with it (an otolith's head height on
-    pooled pairs of runs: ``docs/diagnose.md``).  The noise models stay the
+    pooled pairs of runs: ``docs/diagnose-evidence.md``).  The noise models stay the
     test's: the reported fit's own, from the extended model's residual, make
     the likelihood sharper still than its estimates' spread.  An entry that refines
     delta_abs (``threshold-shape``) refits it at every grid point; a
