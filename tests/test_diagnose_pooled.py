@@ -71,6 +71,12 @@ def test_pooled_reports_the_fit_with_each_runs_own_noise_model(washout_runs, was
     with pytest.raises(ValueError, match="fitted by GLS"):
         D.final_fit(get_extension("control-saturation"), res.arrays["base_model"],
                     washout_runs[0], None, res.arrays["noise"][0])
+    # the pooled fit takes a catalogue Extension as final_fit does, not anything that says "gls"
+    import types
+    for ext in (get_extension("control-saturation"), types.SimpleNamespace(likelihood="gls")):
+        with pytest.raises(ValueError, match="fitted by GLS"):
+            pooled_final_fit(ext, res.arrays["base_model"], washout_runs, fits,
+                             res.arrays["noise"])
     with pytest.raises(TypeError, match="NoiseModel"):
         D.own_noise(c.model, washout_runs[0], fits[0], "ar2")
 

@@ -43,7 +43,7 @@ from .._files import write_text_atomic
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
                _calibration_lines, _calibrator, _check, _fitted_lines, _json_ready, _JSONSummary,
                _prepare, _saturation)
-from .catalogue import get_extension
+from .catalogue import Extension, get_extension
 
 __all__ = ["diagnose_pooled", "PooledDiagnosisResult", "PoolingWarning", "pooling_disagreements",
            "pooled_final_fit"]
@@ -384,7 +384,7 @@ def pooled_final_fit(ext: Any, base_model: Any, recordings: Sequence, params: Se
         raise ValueError(f"need one parameter set and one noise model per recording, two "
                          f"recordings or more; got {len(recordings)} recordings, "
                          f"{len(params)} parameter sets, {len(noises)} noise models")
-    if getattr(ext, "likelihood", None) != "gls":
+    if not isinstance(ext, Extension) or ext.likelihood != "gls":
         raise ValueError(f"ext must be a catalogue Extension fitted by GLS, got {ext!r}")
     model = ext.build(base_model)
     shared = tuple(ext.new_parameters)
