@@ -180,8 +180,9 @@ class SharedPosterior:
         90 %), ``mode`` and ``density`` (the marginal density on its grid).
     ml, stderr : dict
         The pooled maximum-likelihood fit of the shared parameters under the
-        likelihood the grid is of (the test's, each run's delta_abs held at
-        the reported fit's) and its standard errors.
+        likelihood the grid is of (the test's noise models, each run's
+        delta_abs as ``settings["delta_abs"]`` says) and its standard errors:
+        the test's own fit when that likelihood is the test's.
     edge_mass : float
         Posterior mass in the outermost grid cells (large: the grid is too narrow).
     settings : dict
@@ -469,13 +470,16 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
         held = "held at the reported fit's"
     else:
         held = "held at the test's"
-    # the pooled fit under this likelihood centres the grid
-    ps, f_ml, cov = _pooled_refine(wls, [D.FitSummary(q, math.nan, (), np.zeros((0, 0)))
-                                         for q in fits], names, shared,
-                                   {n: fits[0][n] for n in shared})
-    fits = ps
-    at = ps[0]
-    at_se = dict(zip(shared, np.sqrt(np.clip(np.diag(cov), 0, None)).tolist()))
+    # the pooled fit under this likelihood centres the grid: the test's own when the
+    # likelihood is the test's, else refitted with the reported fit's delta_abs
+    if held == "held at the reported fit's":
+        fits, f_ml, cov = _pooled_refine(
+            wls, [D.FitSummary(q, math.nan, (), np.zeros((0, 0))) for q in fits], names,
+            shared, {n: fits[0][n] for n in shared})
+        at_se = dict(zip(shared, np.sqrt(np.clip(np.diag(cov), 0, None)).tolist()))
+    else:
+        f_ml, at_se = f_fit, {n: chosen.stderr.get(n, math.nan) for n in shared}
+    at = fits[0]
     spans = []
     for n, (lo, hi) in zip(shared, bounds):
         c, se = float(at[n]), float(at_se.get(n, math.nan))
