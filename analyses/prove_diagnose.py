@@ -967,6 +967,16 @@ def locate_null(n_bootstrap: int = 39, shard: tuple[int, int] = (0, 1)) -> None:
           f"{anyp(fixed)}/{len(fixed)}")
 
 
+#: Starts of the base model's Eq. 4 fit in the checks (``--posterior-check``,
+#: ``--shared-posterior-check``, ``--final-fit-check``): diagnose's default.  These checks
+#: first ran with 2 to save time (their results kept as ``*_nstarts2*.jsonl``); with 2, about
+#: one otolith run in ten had its base fit stopped in a basin of the motion channel (K_m near
+#: 0, tau_m near its 1-s bound, delta_abs large) worse by 60-130 in GLS -ln L than the basin 4
+#: starts reach, which the extension's fit and the posterior inherited (the otolith's h_head,
+#: 4/22 covered).
+CHECK_N_STARTS = 4
+
+
 def posterior_check(n: int = 8) -> None:
     """Are the chosen extension's uncertainties honest?  ``n`` runs (FD, 40.96 s, K_theta = 1,
     K_n = 0.063) with a washout at omega_w = 0.8 rad/s, seeds 100, 101, ...: per run the
@@ -994,7 +1004,8 @@ def posterior_check(n: int = 8) -> None:
     for seed in range(100 + len(rows), 100 + n):
         rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=seed,
                        duration=40.96).recording
-        res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, candidates=["motion-washout"])
+        res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=CHECK_N_STARTS,
+                       candidates=["motion-washout"])
         c = res.ranking[0]
         res.chosen = c  # sampled whether or not the test chose it (it does, at this size)
         with warnings.catch_warnings():
@@ -1057,7 +1068,7 @@ def shared_posterior_check(n: int = 40, runs: int = 2,
         recs = [simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=k_n,
                          seed=seed0 + runs * k + j, duration=duration).recording
                 for j in range(runs)]
-        res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2,
+        res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=CHECK_N_STARTS,
                               candidates=["motion-washout"])
         c = res.ranking[0]
         row = {"set": k, "runs": runs, "decision": res.physics, **_fit_columns(c, "omega_w")}
@@ -1110,14 +1121,6 @@ def _print_fit_columns(cols: list[dict], m: str, truth: float) -> None:
               f"{est.std(ddof=1):.3f}, mean s.e. {ses.mean():.3f}; truth within 1.645 s.e. "
               f"{int(np.sum(np.abs(est - truth) < 1.645 * ses))}/{len(have)}")
 
-
-#: Starts of the base model's Eq. 4 fit in the per-entry checks (``--shared-posterior-check
-#: --entry``, ``--final-fit-check``): diagnose's default.  These checks first ran with 2 to save
-#: time (their results kept as ``*_nstarts2*.jsonl``); with 2, about one otolith run in ten
-#: had its base fit stopped in a basin of the motion channel (K_m near 0, tau_m near its 1-s
-#: bound, delta_abs large) worse by 60-130 in GLS -ln L than the basin 4 starts reach, which
-#: the extension's fit and the posterior inherited (the otolith's h_head, 4/22 covered).
-CHECK_N_STARTS = 4
 
 #: ``--shared-posterior-check --entry``: the truth, runs, run length and first seed per entry
 #: (FD, K_theta = 1, K_n = 0.063).
