@@ -33,7 +33,7 @@ hundreds of refits; the mean of B = 39 replicates fixes c to about
 below 1, so that the noise of its estimate cannot make a test more liberal
 than the asymptotic one.
 
-Measured (``docs/diagnose-evidence.md``, *Calibrating the chosen test*): it removes
+Measured (``docs/diagnose-evidence.md``, *Calibration, measured*): it removes
 both false alarms of the pooled proof studies (a washout at p 6.9e-4, scale
 1.39; a drift at p 1.9e-4 over eight runs, scale 1.36), and on correct-model
 runs its scales reproduce the null studies' (washout about 1.3-1.5, platform
