@@ -1081,8 +1081,8 @@ skips the finished ones and retries the failed. DIR/summary.csv has one row
 per key: the decision (physics, mismatch), the chosen extension's p_value,
 delta_neg_log_lik and params, the candidate with the smallest p-value, or
 the error; DIR/summary.png draws every candidate's p-value in every
-diagnosis. About 15 s per recording of
-81.92 s on one core (with --bootstrap 39), see docs/diagnose.md.
+diagnosis. About 21 s per recording of
+81.92 s on one core (with --bootstrap 39), see docs/performance.md.
 
 Examples:
   bayespilot diagnose-batch recordings/ --out diagnoses
