@@ -461,23 +461,20 @@ def shared_posterior(result: Any, recordings, *, physics: str | None = None,
                          f"the fit {f_fit:.6f}, the diagnosis's {chosen.fit.neg_log_lik:.6f})")
     bounds = [(float(model.parameter(n).lower), float(model.parameter(n).upper))
               for n in shared]
-    # each run's delta_abs: see the docstring (why the reported fit's, not the test's)
+    # Each run's delta_abs (why the reported fit's: the docstring).  The pooled fit under
+    # this likelihood centres the grid: refitted when delta_abs is the reported fit's, else
+    # the test's own (the likelihood is then the test's).
     final = result.arrays.get("final_fits")
-    if ext.refine_threshold:
-        held = "refitted"
-    elif final and chosen is result.chosen and "delta_abs" in model.parameter_names:
-        fits = [dict(q, delta_abs=float(r["delta_abs"])) for q, r in zip(fits, final)]
+    if (final and chosen is result.chosen and not ext.refine_threshold
+            and "delta_abs" in model.parameter_names):
         held = "held at the reported fit's"
-    else:
-        held = "held at the test's"
-    # the pooled fit under this likelihood centres the grid: the test's own when the
-    # likelihood is the test's, else refitted with the reported fit's delta_abs
-    if held == "held at the reported fit's":
         fits, f_ml, cov = _pooled_refine(
-            wls, [D.FitSummary(q, math.nan, (), np.zeros((0, 0))) for q in fits], names,
-            shared, {n: fits[0][n] for n in shared})
+            wls, [D.FitSummary(dict(q, delta_abs=float(r["delta_abs"])), math.nan, (),
+                               np.zeros((0, 0))) for q, r in zip(fits, final)],
+            names, shared, {n: fits[0][n] for n in shared})
         at_se = dict(zip(shared, np.sqrt(np.clip(np.diag(cov), 0, None)).tolist()))
     else:
+        held = "refitted" if ext.refine_threshold else "held at the test's"
         f_ml, at_se = f_fit, {n: chosen.stderr.get(n, math.nan) for n in shared}
     at = fits[0]
     spans = []
