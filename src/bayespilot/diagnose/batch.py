@@ -54,8 +54,8 @@ __all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
 
 #: Columns of ``summary.csv``.
 SUMMARY_FIELDS = ("key", "n_runs", "subject", "task", "motion_gain", "physics", "mismatch",
-                  "p_value", "delta_neg_log_lik", "params", "posterior", "smallest_p_candidate",
-                  "smallest_p_value", "error")
+                  "p_value", "delta_neg_log_lik", "params", "interval", "posterior",
+                  "smallest_p_candidate", "smallest_p_value", "error")
 
 @dataclass(frozen=True)
 class DiagnoseTask:
@@ -392,7 +392,8 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
     for t in tasks:
         row = {"key": t.key, "n_runs": len(t.paths), "subject": t.subject or "",
                "task": t.task, "motion_gain": t.motion_gain, "physics": "", "mismatch": "",
-               "p_value": "", "delta_neg_log_lik": "", "params": "", "posterior": "",
+               "p_value": "", "delta_neg_log_lik": "", "params": "", "interval": "",
+               "posterior": "",
                "smallest_p_candidate": "", "smallest_p_value": "", "error": ""}
         d = diagnoses.get(t.key)
         if d is not None:
@@ -402,6 +403,8 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
                 row.update(p_value=chosen.get("p_value"),
                            delta_neg_log_lik=chosen.get("delta_neg_log_lik"),
                            params=json.dumps(chosen.get("params") or {}),
+                           interval=json.dumps({n: [iv["lower"], iv["upper"]] for n, iv in
+                                                (chosen.get("interval") or {}).items()}),
                            posterior=_posterior_cell(d, chosen))
             tested = [c for c in d["ranking"] if isinstance(c.get("p_value"), (int, float))]
             if tested:  # the nearest miss when the answer is none

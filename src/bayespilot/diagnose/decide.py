@@ -79,13 +79,17 @@ from ..likelihood import Likelihood
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, fit_ar
 from ..recording import Recording
-from .catalogue import Extension
+from .catalogue import Extension, get_extension
 
 __all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "CandidateResult", "fit_base_gls",
-           "scan_threshold", "own_noise", "final_fit", "fit_candidate", "guide_fits", "refine_threshold",
+           "scan_threshold", "own_noise", "final_fit", "report_final_fit", "fit_candidate", "guide_fits", "refine_threshold",
            "null_refit", "null_refit_from",
            "lr_p_value", "retest", "flat_tops",
            "fit_censored"]
+
+#: How the chosen extension's reported fit is made (:func:`report_final_fit`).
+FINAL_FIT = ("refitted after the test: AR noise model re-estimated from the extended model's "
+             "residual, delta_abs rescanned, three times")
 
 #: Cut-off of the decision likelihood's low-pass, rad/s.
 OMEGA_C = 25.0
@@ -425,6 +429,39 @@ def final_fit(ext: Extension, base_model: PilotModel, recording: Recording, fit:
     return fit, noise
 
 
+
+def report_final_fit(chosen: "CandidateResult", base_model: PilotModel, recording: Recording,
+                     noise: NoiseModel, *, intervals: bool = True) -> None:
+    """Make ``chosen``'s reported fit: :func:`final_fit` from its test's fit, then (with
+    ``intervals``) the profile-likelihood intervals of its new parameters, which may move
+    the fit to a better point (:func:`bayespilot.diagnose.profile.profile_intervals`); the
+    test's statistics and standard errors are kept (:meth:`CandidateResult.report_fit`).
+
+    Parameters
+    ----------
+    chosen : CandidateResult
+        A catalogue entry fitted by GLS, with its test's fit.
+    base_model : PilotModel
+    recording : Recording
+    noise : NoiseModel
+        The test's noise model.
+    intervals : bool
+        Make the profile intervals (``chosen.interval``).
+    """
+    from .profile import profile_intervals
+
+    ext = get_extension(chosen.physics)
+    if chosen.fit is None:
+        raise ValueError(f"{chosen.physics} has no fit to refine")
+    fit, own = final_fit(ext, base_model, recording, chosen.fit, noise)
+    found: dict[str, Any] = {}
+    if intervals:
+        fit, found = profile_intervals(Whitened(ext.build(base_model), recording, own), fit,
+                                       ext.new_parameters, fit.refined,
+                                       scan=not ext.refine_threshold, test_stderr=chosen.stderr)
+    chosen.report_fit(fit, own, FINAL_FIT)
+    chosen.interval = found
+
 @dataclass
 class CandidateResult:
     """The test of one catalogue extension against the base model.
@@ -473,6 +510,10 @@ class CandidateResult:
     noise : NoiseModel, list of NoiseModel or None
         The noise model of the reported fit (one per run for a pooled
         diagnosis), once :meth:`report_fit` or :meth:`record_refit` has set it.
+    interval : dict
+        Profile-likelihood intervals of the new parameters
+        (:class:`~bayespilot.diagnose.profile.ProfileInterval`), for the
+        chosen extension of a single-run diagnosis; empty otherwise.
     """
 
     physics: str
@@ -494,6 +535,7 @@ class CandidateResult:
     calibration: Any = None
     refit: dict[str, Any] | None = None
     noise: Any = None
+    interval: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         def num(x):
@@ -511,7 +553,8 @@ class CandidateResult:
                 "refit": None if self.refit is None else {
                     k: ({n: num(x) for n, x in v.items()} if k in ("test_params", "own_stderr")
                         else v)
-                    for k, v in self.refit.items()}}
+                    for k, v in self.refit.items()},
+                "interval": {k: v.to_dict() for k, v in self.interval.items()}}
 
     def report_fit(self, fit: "FitSummary", noise: "NoiseModel", how: str) -> None:
         """Report the estimates of ``fit`` (of this candidate's extended model) instead of

@@ -14,9 +14,11 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
+from scipy import stats
 
 __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
-           "plot_posterior", "plot_shared_posterior", "plot_batch", "write_report"]
+           "plot_posterior", "plot_profile", "plot_shared_posterior", "plot_batch",
+           "write_report"]
 
 
 def _pyplot():
@@ -293,6 +295,32 @@ def plot_posterior(result, axes: Any = None):
     return fig
 
 
+def plot_profile(result, axes: Any = None):
+    """The profile likelihood of each of the chosen extension's new parameters
+    (``result.chosen.interval``, :mod:`bayespilot.diagnose.profile`): the scaled deviance at
+    the profile's points, the level it must stay below, the interval and the reported fit."""
+    chosen = result.chosen
+    names = list(chosen.interval)
+    fig, axes = _axes_row(len(names), axes)
+    for ax, n in zip(axes, names):
+        iv = chosen.interval[n]
+        ok = np.isfinite(iv.deviance)
+        ax.plot(iv.values[ok], iv.deviance[ok], "o-", color="C0", ms=3, lw=1,
+                label="scaled deviance (profile)")
+        q = float(stats.chi2.ppf(iv.level, 1))
+        ax.axhline(q, color="0.4", ls=":", lw=1, label=f"chi2_1 {100 * iv.level:.0f} %")
+        ax.axvspan(iv.lower, iv.upper, color="C0", alpha=0.12,
+                   label=f"{100 * iv.level:.0f} % interval {iv}")
+        ax.axvline(chosen.params[n], color="C3", ls="--", lw=1, label="reported fit")
+        ax.set_ylim(-0.05 * q, 3 * q)
+        ax.set_xlabel(n)
+        ax.set_ylabel("2 d(-ln L) x scale")
+        ax.legend(fontsize=7)
+    fig.suptitle(f"{chosen.physics}: profile likelihood of its new parameters", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
 def plot_shared_posterior(post, axes: Any = None):
     """The marginal posteriors of a pooled diagnosis's shared parameters
     (:func:`~bayespilot.diagnose.shared_posterior`), with the pooled fit and its +-1 standard
@@ -334,6 +362,9 @@ def write_report(result, directory) -> dict[str, Path]:
         "evidence": _png(plot_evidence(result), out / "evidence.png"),
         "candidates": _png(plot_candidates(result), out / "candidates.png"),
     }
+    chosen = getattr(result, "chosen", None)
+    if chosen is not None and chosen.interval:
+        paths["profile"] = _png(plot_profile(result), out / "profile.png")
     post = getattr(result, "posterior", None)
     if post is not None:
         paths["posterior"] = _png(plot_posterior(result), out / "posterior.png")
@@ -351,6 +382,9 @@ def write_report(result, directory) -> dict[str, Path]:
                         f"{html.escape(c.reason)}</td></tr>")
             continue
         ps = ", ".join(f"{k} = {v:.4g} &plusmn; {c.stderr.get(k, math.nan):.2g}"
+                       + (f" ({100 * c.interval[k].level:.0f} % profile interval "
+                          f"{html.escape(str(c.interval[k]))})"
+                          if k in c.interval else "")
                        for k, v in c.params.items())
         rows.append(f"<tr{' style=&quot;font-weight:bold&quot;' if c.justified else ''}>"
                     f"<td>{html.escape(c.physics)}</td><td>{c.delta_neg_log_lik:.2f}</td>"
@@ -392,6 +426,7 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 {img(paths['evidence'])}
 <h2>Frequency responses</h2>{img(paths['frequency_response'])}
 <h2>Residuals before and after</h2>{img(paths['residuals'])}
+{f"<h2>Profile likelihood of the new parameters</h2>{img(paths['profile'])}" if "profile" in paths else ""}
 {f"<h2>Posterior of the extended model</h2>{img(paths['posterior'])}" if post is not None else ""}
 <pre>{html.escape(result.summary())}</pre>
 </body></html>
