@@ -781,7 +781,8 @@ def example() -> None:
     print(res.summary())
     paths = res.report(ex / "report")
     FIG.mkdir(parents=True, exist_ok=True)
-    for key in ("frequency_response", "residuals", "evidence", "candidates", "posterior"):
+    for key in ("frequency_response", "residuals", "evidence", "candidates", "profile",
+                "posterior"):
         if key not in paths:
             continue
         shutil.copy(paths[key], FIG / f"diagnose_example_{key}.png")
@@ -1213,9 +1214,11 @@ def final_fit_check(entry: str, n: int, shard: tuple[int, int] = (0, 1)) -> None
     runs with the entry at ``FINAL_FIT_CHECK``'s truth: per parameter the mean, spread over
     the runs, mean standard error and Wald 90 % coverage of the truth of the test's fit, of
     the refit with its own standard errors, and of what is reported (the refit's estimate,
-    the test's standard error).  Runs where the
-    test does not choose the entry are refitted the same way (coverage is not conditioned on
-    the decision).  Resumable, ``--shard K/N``;
+    the test's standard error); and the coverage of the reported profile-likelihood interval
+    (``diagnose.profile``; rows made before it have none and are left out of that line).  Runs
+    where the test does not choose the entry are refitted the same way
+    (``decide.report_final_fit``: coverage is not conditioned on the decision).  Resumable,
+    ``--shard K/N``;
     ``analyses/results/diagnose/final_fit_check_<entry>*.jsonl``.
     """
     from bayespilot import presets
@@ -1242,12 +1245,12 @@ def final_fit_check(entry: str, n: int, shard: tuple[int, int] = (0, 1)) -> None
         res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=CHECK_N_STARTS, candidates=[entry])
         c = res.ranking[0]
         if c.refit is None and c.fit is not None:
-            fit, own = D.final_fit(ext, res.base_model, rec, c.fit, res.arrays["noise"])
-            c.report_fit(fit, own, "refitted by the check (not chosen)")
+            D.report_final_fit(c, res.base_model, rec, res.arrays["noise"])
         row = {"set": k, "decision": res.physics, "truth": truth,
                "test": {m: [c.refit["test_params"][m], c.stderr.get(m)]
                         for m in truth},
                "final": {m: [c.params[m], c.refit["own_stderr"].get(m)] for m in truth},
+               "interval": {m: [c.interval[m].lower, c.interval[m].upper] for m in truth},
                "delta_abs": c.refit["delta_abs"], "seconds": time.perf_counter() - t0}
         _append_row(path, row)
     rows = list({r["set"]: r for r in reversed(_rows(every))}.values())  # a set once
@@ -1264,6 +1267,12 @@ def final_fit_check(entry: str, n: int, shard: tuple[int, int] = (0, 1)) -> None
             print(f"  {m} = {v}, {label:<10} mean {est.mean():.3f}, spread "
                   f"{est.std(ddof=1):.3f}, mean s.e. {se.mean():.3f} (median "
                   f"{np.median(se):.3f}); truth within 1.645 s.e. {inside}/{len(rows)}")
+        with_iv = [r for r in rows if "interval" in r]
+        lo, hi = (np.array([r["interval"][m][i] for r in with_iv]) for i in (0, 1))
+        print(f"  {m} = {v}, profile-likelihood 90 % interval: truth inside "
+              f"{int(np.sum((lo <= v) & (v <= hi)))}/{len(with_iv)} (below it "
+              f"{int(np.sum(hi < v))}, above {int(np.sum(lo > v))}); median width "
+              f"{np.median(hi - lo):.3g}")
     d = np.array([r["delta_abs"] for r in rows], float)
     print(f"  delta_abs (truth {p['delta_abs']:g}): test's fit mean {d[:, 0].mean():.4f} sd "
           f"{d[:, 0].std(ddof=1):.4f}; reported fit mean {d[:, 1].mean():.4f} sd "
