@@ -605,7 +605,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         better fit than the refit's in 19, which is then reported, and its
         interval held the truth in 141 (88 %), the Wald interval in 110
         (69 %; ``docs/diagnose-evidence.md``, *The profile-likelihood
-        interval*).  0.1-12 s.
+        interval*).  0.1-8 s (the otolith's two parameters the longest).
     progress : bool
         Show a tqdm bar over the stages (base fit, located evidence, each
         candidate, the calibration's replicates).
@@ -736,7 +736,8 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "bootstrap": boot_info,
                 "n_calibrate": n_calibrate, "noise_passes": noise_passes, "refit": refit,
-                "intervals": intervals, "skip_seconds": skip_seconds, "dt": recording.dt, "noise_model": noise.to_dict(),
+                "intervals": intervals, "skip_seconds": skip_seconds, "dt": recording.dt,
+                "noise_model": noise.to_dict(),
                 "candidates": list(names), "timings": timings, "rebased": rebased,
                 "decision_likelihood": "GLS: residual low-passed, decimated and whitened by an "
                                        "AR model of the base residual"}

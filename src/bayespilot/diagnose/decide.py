@@ -81,11 +81,10 @@ from ..noise import MAX_AR_ORDER, fit_ar
 from ..recording import Recording
 from .catalogue import Extension, get_extension
 
-__all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "CandidateResult", "fit_base_gls",
-           "scan_threshold", "own_noise", "final_fit", "report_final_fit", "fit_candidate", "guide_fits", "refine_threshold",
-           "null_refit", "null_refit_from",
-           "lr_p_value", "retest", "flat_tops",
-           "fit_censored"]
+__all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "CandidateResult",
+           "fit_base_gls", "scan_threshold", "own_noise", "final_fit", "report_final_fit",
+           "fit_candidate", "guide_fits", "refine_threshold", "null_refit", "null_refit_from",
+           "lr_p_value", "retest", "flat_tops", "fit_censored"]
 
 #: How the chosen extension's reported fit is made (:func:`report_final_fit`).
 FINAL_FIT = ("refitted after the test: AR noise model re-estimated from the extended model's "
@@ -429,7 +428,6 @@ def final_fit(ext: Extension, base_model: PilotModel, recording: Recording, fit:
     return fit, noise
 
 
-
 def report_final_fit(chosen: "CandidateResult", base_model: PilotModel, recording: Recording,
                      noise: NoiseModel, *, intervals: bool = True) -> None:
     """Make ``chosen``'s reported fit: :func:`final_fit` from its test's fit, then (with
@@ -461,6 +459,7 @@ def report_final_fit(chosen: "CandidateResult", base_model: PilotModel, recordin
                                        scan=not ext.refine_threshold, test_stderr=chosen.stderr)
     chosen.report_fit(fit, own, FINAL_FIT)
     chosen.interval = found
+
 
 @dataclass
 class CandidateResult:
