@@ -279,7 +279,8 @@ def _mark_fit(ax, value: float, stderr: float, label: str) -> None:
 
 def plot_posterior(result, axes: Any = None):
     """Marginal posteriors of the chosen extension's new parameters, with the maximum-likelihood
-    fit and its +-1 standard error (from the decision likelihood) marked."""
+    fit and its +-1 standard error (from the decision likelihood) marked, and its
+    profile-likelihood interval where it was made."""
     from ..plots import plot_marginal
 
     post, chosen = result.posterior, result.chosen
@@ -289,6 +290,11 @@ def plot_posterior(result, axes: Any = None):
         plot_marginal(post, n, ax=ax)
         _mark_fit(ax, chosen.params[n], chosen.stderr.get(n, math.nan),
                   "ML fit (decision likelihood)")
+        iv = chosen.interval.get(n)
+        if iv is not None:
+            for k, end in enumerate((iv.lower, iv.upper)):
+                ax.axvline(end, color="C3", ls=":", lw=1.2,
+                           label=f"{100 * iv.level:.0f} % profile interval" if k == 0 else None)
         ax.legend(fontsize=7)
     fig.suptitle(f"{chosen.physics}: posterior of its new parameters", fontsize=9)
     fig.tight_layout()
