@@ -41,7 +41,8 @@ from scipy import stats
 
 from .decide import FitSummary, Whitened, _gls_refine, scan_threshold
 
-__all__ = ["ProfileInterval", "profile_interval", "profile_intervals", "LEVEL", "STEPS", "STOP"]
+__all__ = ["ProfileInterval", "profile_interval", "profile_intervals", "LEVEL", "STEPS", "STOP",
+           "BETTER_TOL"]
 
 #: Coverage of the reported profile intervals.
 LEVEL = 0.90
