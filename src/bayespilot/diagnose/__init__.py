@@ -191,6 +191,7 @@ class DiagnosisResult(_JSONSummary):
         """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``base``, ... ."""
         chosen = None
         if self.chosen is not None:
+            cd = self.chosen.to_dict()
             chosen = {"physics": self.chosen.physics, "params": self.chosen.params,
                       "stderr": self.chosen.stderr, "all_params": self.chosen.all_params,
                       "delta_neg_log_lik": self.chosen.delta_neg_log_lik,
@@ -198,8 +199,7 @@ class DiagnosisResult(_JSONSummary):
                       "neg_log_lik_after": self.arrays.get("after_eq4_neg_log_lik"),
                       "vaf_before": self.arrays.get("before_vaf"),
                       "vaf_after": self.arrays.get("after_vaf"),
-                      "refit": self.chosen.to_dict()["refit"],
-                      "interval": self.chosen.to_dict()["interval"],
+                      "refit": cd["refit"], "interval": cd["interval"],
                       "posterior": self._posterior_dict()}
         return _json_ready({
             "mismatch": self.mismatch, "physics": self.physics,

@@ -89,6 +89,11 @@ class ProfileInterval:
     values: np.ndarray = field(default_factory=lambda: np.zeros(0))
     deviance: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
+    @property
+    def quantile(self) -> float:
+        """The chi2_1 quantile at ``level`` the scaled deviance stays below inside."""
+        return float(stats.chi2.ppf(self.level, 1))
+
     def to_dict(self) -> dict[str, Any]:
         return {"level": self.level, "lower": float(self.lower), "upper": float(self.upper),
                 "lower_open": self.lower_open, "upper_open": self.upper_open,

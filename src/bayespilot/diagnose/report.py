@@ -14,7 +14,6 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from scipy import stats
 
 __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
            "plot_posterior", "plot_profile", "plot_shared_posterior", "plot_batch",
@@ -313,7 +312,7 @@ def plot_profile(result, axes: Any = None):
         ok = np.isfinite(iv.deviance)
         ax.plot(iv.values[ok], iv.deviance[ok], "o-", color="C0", ms=3, lw=1,
                 label="scaled deviance (profile)")
-        q = float(stats.chi2.ppf(iv.level, 1))
+        q = iv.quantile
         ax.axhline(q, color="0.4", ls=":", lw=1, label=f"chi2_1 {100 * iv.level:.0f} %")
         ax.axvspan(iv.lower, iv.upper, color="C0", alpha=0.12,
                    label=f"{100 * iv.level:.0f} % interval {iv}")
