@@ -103,14 +103,17 @@ def test_profile_finds_a_better_fit_than_the_one_it_is_given(washout):
 
 
 @pytest.mark.parametrize("kw, match", [({"level": 1.5}, "level"), ({"step": 0.0}, "step"),
-                                       ({"step": math.nan}, "step"), ({"scale": 2.0}, "scale")])
+                                       ({"step": math.nan}, "step"), ({"scale": 2.0}, "scale"),
+                                       ({"name": "omega_ms"}, "refined parameters")])
 def test_profile_interval_rejects_bad_settings(washout, kw, match):
     rec, res, c = washout
     wl = D.Whitened(c.model, rec, c.noise)
-    args = dict(scan=True, step=0.01, scale=1.0, level=0.9)
+    args = dict(name="omega_w", scan=True, step=0.01, scale=1.0, level=0.9)
     args.update(kw)
     with pytest.raises(ValueError, match=match):
-        profile_interval(wl, c.fit, "omega_w", c.fit.refined, **args)
+        profile_interval(wl, c.fit, names=c.fit.refined, **args)
+    with pytest.raises(TypeError, match="Whitened"):
+        profile_interval(None, c.fit, "omega_w", c.fit.refined, scan=True, step=0.01)
 
 
 def test_profile_without_the_tests_standard_error_is_unscaled(washout):
@@ -149,5 +152,8 @@ def test_intervals_reach_the_report_and_the_batch_summary(washout, tmp_path):
                      intervals=False)
     assert again.chosen.interval == {} and again.to_dict()["chosen"]["interval"] == {}
     assert "profile" not in again.report(tmp_path / "rep2")
+    from bayespilot.diagnose.report import plot_profile
+    with pytest.raises(ValueError, match="no profile intervals"):
+        plot_profile(again)
     # here the profile found no better fit: the same reported estimate either way
     assert again.chosen.params["omega_w"] == pytest.approx(c.params["omega_w"], rel=1e-9)

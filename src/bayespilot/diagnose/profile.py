@@ -143,6 +143,11 @@ def profile_interval(wl: Whitened, fit: FitSummary, name: str, names: Sequence[s
         profile's best point, when the profile found one (the interval is then relative to
         ``fit`` and should be made again from ``better``).
     """
+    if not isinstance(wl, Whitened):
+        raise TypeError(f"wl must be a Whitened likelihood, got {type(wl).__name__}")
+    if name not in names or name not in fit.params:
+        raise ValueError(f"{name!r} is not one of the fit's refined parameters "
+                         f"({', '.join(names)})")
     if not 0 < level < 1:
         raise ValueError(f"level must be in (0, 1), got {level!r}")
     if not (math.isfinite(step) and step > 0):

@@ -305,6 +305,9 @@ def plot_profile(result, axes: Any = None):
     (``result.chosen.interval``, :mod:`bayespilot.diagnose.profile`): the scaled deviance at
     the profile's points, the level it must stay below, the interval and the reported fit."""
     chosen = result.chosen
+    if chosen is None or not chosen.interval:
+        raise ValueError("the diagnosis has no profile intervals (no extension chosen, a pooled "
+                         "diagnosis, or diagnose(intervals=False))")
     names = list(chosen.interval)
     fig, axes = _axes_row(len(names), axes)
     for ax, n in zip(axes, names):
