@@ -330,6 +330,32 @@ def test_reported_fit_has_its_own_noise_model_and_threshold(washout_case):
     assert "delta_abs" in res.summary() and "test's fit" in res.summary()
 
 
+@pytest.mark.parametrize("seed", [1, 4])
+def test_threshold_starts_leave_a_wrong_threshold_basin(seed):
+    """A fit refined with delta_abs held at 0.001 (the true 0.0075) sits in a basin that a
+    delta_abs scan at its parameters does not leave (>= 3.6 units of -ln L above the fit made
+    from the truth, on these seeds); decide.threshold_starts reaches the truth-started fit's
+    -ln L or better, with delta_abs beside it."""
+    from bayespilot.diagnose import decide as D
+
+    model = paper_model()
+    p = presets.paper_parameters("FD")
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=seed,
+                   duration=40.96).recording
+    truth = dict(model.as_dict(model.free_vector(p)))
+    noise = D.noise_model(Likelihood(model, rec).residual(truth), rec.dt, skip=500)
+    wl = D.Whitened(model, rec, noise)
+    names = [n for n in model.parameter_names if n != "delta_abs"]
+    ref = D.scan_threshold(wl, D._gls_refine(wl, truth, names), names)
+    wrong = D._gls_refine(wl, dict(truth, delta_abs=0.001), names)
+    assert D.scan_threshold(wl, wrong, names).neg_log_lik > ref.neg_log_lik + 3.0
+    got = D.threshold_starts(wl, wrong, names)
+    assert got.neg_log_lik <= ref.neg_log_lik + 0.05
+    assert abs(got.params["delta_abs"] - ref.params["delta_abs"]) <= 1e-3 + 1e-12
+    # starts above delta_abs's upper bound are left out: none left returns the fit itself
+    assert D.threshold_starts(wl, wrong, names, starts=[0.5]) is wrong
+
+
 def test_diagnose_on_another_plant_rate_and_forcing():
     """Not the paper's task: K/(s (s + 1)) at 50 Hz with twelve forcing sines of its own. The
     located evidence sits at that task's forcing frequencies, its bootstrap simulates that plant,
