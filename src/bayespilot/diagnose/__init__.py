@@ -591,10 +591,12 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         runs: a 6-rad/s platform's bandwidth spread 0.58 against 0.39 rad/s,
         delta_abs biased).  The standard errors stay the test's, which cover
         those estimates (86-95 % for 90 % stated on four entries) where the
-        refit's own are up to 1.4 times too small (``docs/diagnose-evidence.md``, *The reported
-        fit*).  The test's statistics are the same either way; its
-        estimates stay in ``chosen.refit``.  Under a second, only when an
-        extension is chosen.
+        refit's own are up to 1.5 times too small: the closed loop and the
+        dead zone give the estimates a heavy tail (``docs/diagnose-evidence.md``,
+        *The reported fit*).  The test's statistics are the same either way;
+        its estimates stay in ``chosen.refit``.  About 5 s with the profile
+        intervals for a washout at N = 8192 (eight starts in delta_abs each
+        round), only when an extension is chosen.
     intervals : bool
         With ``refit``: 90 % profile-likelihood intervals of the chosen
         extension's new parameters (``chosen.interval``,
