@@ -604,8 +604,9 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         quadratic profile gives the reported Wald interval.  Where the
         profile is not quadratic they differ: on 160 runs with a soft
         threshold (w_soft = 0.045, near its bound 0.05) the profile found a
-        better fit than the refit's in 19, which is then reported, and its
-        interval held the truth in 141 (88 %), the Wald interval in 110
+        better fit than the refit's in 19 (counted before the refit's starts
+        in delta_abs), which is then reported, and its
+        interval held the truth in 140 (88 %), the Wald interval in 110
         (69 %; ``docs/diagnose-evidence.md``, *The profile-likelihood
         interval*).  0.1-8 s (the otolith's two parameters the longest).
     progress : bool
