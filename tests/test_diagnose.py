@@ -354,6 +354,10 @@ def test_threshold_starts_leave_a_wrong_threshold_basin(seed):
     assert abs(got.params["delta_abs"] - ref.params["delta_abs"]) <= 1e-3 + 1e-12
     # starts above delta_abs's upper bound are left out: none left returns the fit itself
     assert D.threshold_starts(wl, wrong, names, starts=[0.5]) is wrong
+    with pytest.raises(ValueError, match="finite values of delta_abs"):
+        D.threshold_starts(wl, wrong, names, starts=[0.005, float("nan")])
+    with pytest.raises(TypeError, match="Whitened"):
+        D.threshold_starts(None, wrong, names)
 
 
 def test_diagnose_on_another_plant_rate_and_forcing():

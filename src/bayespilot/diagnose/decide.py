@@ -373,6 +373,12 @@ def threshold_starts(wl: Whitened, fit: FitSummary, names: Sequence[str], *,
     reaches that fit's -ln L or a better one (``docs/diagnose-evidence.md``,
     *The reported fit*).  A model without delta_abs returns ``fit``.
     """
+    if not isinstance(wl, Whitened):
+        raise TypeError(f"wl must be a Whitened likelihood, got {type(wl).__name__}")
+    starts = tuple(starts)
+    if not all(isinstance(d, (int, float, np.integer, np.floating)) and math.isfinite(d)
+               for d in starts):
+        raise ValueError(f"starts must be finite values of delta_abs, got {starts!r}")
     model = wl.model
     if "delta_abs" not in model.parameter_names:
         return fit
