@@ -455,3 +455,15 @@ def test_profiled_ar_run_widens_the_gains(short_sim, model):
     with pytest.raises(ValueError, match="ar='fixed' only"):
         sample(rec, likelihood="coloured", ar="profiled", noise=ARNoise([0.5]),
                init=short_sim.params, **SHORT)
+
+
+def test_more_walkers_than_draws_keeps_the_axes_without_arviz_warning(short_sim):
+    """32 walkers, a handful of draws: arviz would warn that the axes look swapped; they are not."""
+    kw = dict(SHORT, n_walkers=32, max_steps=40, min_steps=0, check_every=20, init=short_sim.params)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        post = sample(short_sim.recording, seed=5, **kw)
+    assert not [w for w in caught if "More chains" in str(w.message)]
+    n_draws = post.settings["n_draws"]
+    assert 0 < n_draws < 32
+    assert post.idata.posterior["K_v"].shape == (32, n_draws)

@@ -602,7 +602,11 @@ def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
         attrs[f"true_{k}"] = float(v)
     attrs["converged"] = int(meta["converged"])
     az = _arviz()
-    idata = az.from_dict(posterior=posterior, sample_stats=stats)
+    with warnings.catch_warnings():
+        # arviz guesses the axes were swapped when there are more chains than draws; here
+        # they are not (walkers first, by construction above), so its warning would mislead
+        warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
+        idata = az.from_dict(posterior=posterior, sample_stats=stats)
     for group in (idata.posterior, idata.sample_stats):
         group.attrs.update(attrs)
     return idata, meta
