@@ -591,7 +591,7 @@ def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstr
         runs: a 6-rad/s platform's bandwidth spread 0.58 against 0.39 rad/s,
         delta_abs biased).  The standard errors stay the test's, which cover
         those estimates (86-95 % for 90 % stated on four entries) where the
-        refit's own are up to 1.5 times too small: the closed loop and the
+        refit's own are up to 1.4 times too small: the closed loop and the
         dead zone give the estimates a heavy tail (``docs/diagnose-evidence.md``,
         *The reported fit*).  The test's statistics are the same either way;
         its estimates stay in ``chosen.refit``.  About 5 s with the profile

@@ -431,7 +431,7 @@ def final_fit(ext: Extension, base_model: PilotModel, recording: Recording, fit:
     0.0079 +- 0.0015 (true 0.0075); with a washout at 0.8 rad/s, delta_abs
     from 0.0030 +- 0.0036 to 0.0076 +- 0.0016 and omega_w's spread from
     0.083 to 0.066.  But this fit's own standard errors are then too small
-    (omega_w's 1.5 times: in the closed loop the dead zone gives the
+    (omega_w's 1.4 times: in the closed loop the dead zone gives the
     estimates a heavy tail that the local curvature does not see);
     :meth:`CandidateResult.report_fit` reports its
     estimates with the test's standard errors, which cover them
