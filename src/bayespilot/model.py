@@ -314,7 +314,14 @@ class Plan:
 
 
 def semicircular_canal() -> FixedFilter:
-    """Reduced canal model, Eq. 1: K_scc (1 + T1 s) / (1 + T2 s), IPUT per rad/s^2."""
+    """Reduced canal model, Eq. 1: K_scc (1 + T1 s) / (1 + T2 s), IPUT per rad/s^2.
+
+    Returns
+    -------
+    FixedFilter
+        The canal's transfer function with the constants of ``presets``
+        (K_SCC, T_SCC1, T_SCC2).
+    """
     return FixedFilter((presets.K_SCC * presets.T_SCC1, presets.K_SCC), (presets.T_SCC2, 1.0))
 
 
@@ -664,6 +671,14 @@ def paper_model(threshold: bool = True, oversample: int = 1) -> PilotModel:
         threshold's credible intervals calibrated (``docs/posteriors.md``).
         Applied with and without threshold alike, so the two compare on
         one discretisation.
+
+    Returns
+    -------
+    PilotModel
+        Visual channel K_v (T_vl s + 1) e^(-tau_v s) on e; vestibular channel
+        -K_m e^(-tau_m s) on the canal output of theta_ddot_m through the dead
+        zone delta_abs; both through H_nm (omega_nm, zeta_nm); the paper's
+        bounds (Table 1) and Table 3's FD values as start values.
 
     Examples
     --------

@@ -76,6 +76,9 @@ def refine(likelihood: Likelihood, start: Mapping[str, float], *, hold: Sequence
         are ignored.
     max_nfev : int
         Cap on residual evaluations.
+    xtol, ftol : float
+        Tolerances on the step and on the relative change of the cost
+        (:func:`scipy.optimize.least_squares`).
     bounded : bool
         False (the paper's Step II): unconstrained Levenberg-Marquardt.  True:
         trust-region reflective within the parameter bounds (used by the fast
@@ -84,6 +87,12 @@ def refine(likelihood: Likelihood, start: Mapping[str, float], *, hold: Sequence
     Returns
     -------
     RefineResult
+        The refined parameters, -ln L before and after, and the optimiser's report.
+
+    Raises
+    ------
+    ValueError
+        If every free parameter is held.
     """
     model = likelihood.model
     start_full = dict(model.as_dict(model.free_vector(start)))
