@@ -87,6 +87,34 @@ def job_seed(stream: str, task: str, motion_gain: float, remnant_fraction: float
              realization: int) -> int:
     """The seed of ``stream`` ("remnant" or "fit") for one cell and realization (module docs).
 
+    Parameters
+    ----------
+    stream : {"remnant", "fit"}
+        Which of the job's two independent streams: the simulated remnant
+        noise (stream 0) or the fit's GA / Latin-hypercube starts (stream 1).
+    task : {"FD", "FT"}
+        The task of the cell.
+    motion_gain : float
+        K_theta of the cell; it enters as ``round(1e4 K_theta)``, so gains
+        equal to four decimals (e.g. ``1`` and ``1.0``) give the same seed.
+    remnant_fraction : float
+        F_n of the cell, entered as ``round(1e4 F_n)`` in the same way.
+    realization : int
+        Realization number.
+
+    Returns
+    -------
+    int
+        A seed in [0, 2**63): the first uint64 of the ``SeedSequence``,
+        shifted right by one bit.
+
+    Raises
+    ------
+    ValueError
+        If ``stream`` is not "remnant" or "fit".
+    KeyError
+        If ``task`` is not "FD" or "FT".
+
     Examples
     --------
     >>> job_seed("remnant", "FD", 1.0, 0.2, 7) == job_seed("remnant", "FD", 1, 0.2, 7)
@@ -362,6 +390,32 @@ def run_job(job: Job) -> dict[str, Any]:
     remnant gain and the fraction reached); ``fit`` (``FitResult.to_dict(full=False)``);
     ``step1_delta_abs`` (paper method with threshold only); ``elapsed_seconds``
     (simulation and fit); ``host``; ``versions``.
+
+    Parameters
+    ----------
+    job : Job
+        The realization to simulate (task, K_theta, F_n or the Table 4 gain,
+        duration, :attr:`Job.remnant_seed`) and how to fit it (threshold,
+        method, ``fit_kwargs``, :attr:`Job.fit_seed`).
+
+    Returns
+    -------
+    dict
+        The keys above, with plain JSON types only (numpy scalars and arrays
+        converted); the job fields include ``remnant`` too, as in
+        :meth:`Job.to_dict`.  ``F_n`` is 0 when the job has no remnant.
+
+    Raises
+    ------
+    TypeError
+        If ``job`` is not a :class:`Job`.
+
+    Notes
+    -----
+    Errors of :func:`~bayespilot.simulate.simulate` and of the fit function
+    pass through unchanged, e.g. a ValueError when the remnant fraction
+    cannot be reached or a RuntimeError when the simulated closed loop
+    diverges; :func:`run_campaign` records them in ``<key>.error.json``.
     """
     from .simulate import simulate
 
@@ -688,6 +742,32 @@ def load_results(out_dir: str | Path, jobs: Iterable[Job] | None = None) -> list
 
     Error files (``*.error.json``) and files that are not a finished fit are
     left out; a file that does not parse is left out with a warning.
+
+    Parameters
+    ----------
+    out_dir : str or Path
+        The output folder of a campaign (``out_dir`` of :func:`run_campaign`).
+    jobs : iterable of Job, optional
+        Read only the result files of these jobs (``<key>.json``); jobs
+        without a file are skipped.  The files are found by key: the settings
+        stored in them are not compared with the jobs'.  Default: every
+        ``*.json`` file in ``out_dir``.
+
+    Returns
+    -------
+    list of dict
+        The parsed result files (as :func:`run_job` returns them), those
+        holding a ``"key"`` and a ``"fit"``, sorted by ``"key"``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``out_dir`` is not an existing folder.
+
+    Warns
+    -----
+    RuntimeWarning
+        For each file that is not valid JSON (it is left out).
     """
     out = Path(out_dir)
     if not out.is_dir():
@@ -723,6 +803,14 @@ def summarise(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
     ``fit["params"]["delta_abs"]`` and ``fit["neg_log_lik"]`` (what
     :func:`run_job` returns).
 
+    Parameters
+    ----------
+    results : iterable of mapping
+        Result dicts, e.g. from :func:`load_results`; only the fields above
+        are read.  Results are grouped into cells by (task, F_n, K_theta,
+        threshold, method) with F_n and K_theta as given by the job (not the
+        fraction a realization reached).
+
     Returns
     -------
     list of dict, one per cell, sorted, with
@@ -735,7 +823,17 @@ def summarise(results: Iterable[Mapping[str, Any]]) -> list[dict[str, Any]]:
         p = paper_N50 / 100 (for n = 100 this is ``|N50 - paper_N50| > ...``;
         for p = 0 or 1 any difference flags); ``flag_mu``:
         ``|mu - paper_mu| > 2 sqrt(sigma^2/n + paper_sigma^2/100)`` (False for
-        n < 2); ``flag`` = either.
+        n < 2); ``flag`` = either.  ``true_delta_abs``: the cell's true
+        delta_abs, IPUT.  Rows are ordered by method, then fits with
+        threshold before those without, then task, F_n and K_theta; an empty
+        ``results`` gives an empty list.
+
+    Raises
+    ------
+    ValueError
+        If the results of one cell have different true delta_abs.
+    KeyError
+        If a result lacks one of the fields above.
     """
     groups: dict[tuple, list[Mapping[str, Any]]] = {}
     for r in results:
@@ -781,7 +879,28 @@ SUMMARY_COLUMNS = ("task", "F_n", "K_theta", "threshold", "method", "n", "mu", "
 
 
 def write_summary_csv(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Path:
-    """Write :func:`summarise` rows as CSV (empty fields where the paper has no cell)."""
+    """Write :func:`summarise` rows as CSV (empty fields where the paper has no cell).
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        Rows of :func:`summarise`.  The columns are :data:`SUMMARY_COLUMNS`, in
+        that order; other keys are ignored, and a missing key or a None value
+        gives an empty field.
+    path : str or Path
+        The CSV file to write (UTF-8, with a header line); an existing file
+        is overwritten, its folder must exist.
+
+    Returns
+    -------
+    Path
+        ``path``, as a Path.
+
+    Raises
+    ------
+    OSError
+        If the file cannot be written.
+    """
     path = Path(path)
     with path.open("w", newline="", encoding="utf-8") as fh:
         w = csv.DictWriter(fh, fieldnames=SUMMARY_COLUMNS, extrasaction="ignore")
@@ -792,7 +911,27 @@ def write_summary_csv(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Pa
 
 
 def summary_markdown(rows: Sequence[Mapping[str, Any]]) -> str:
-    """:func:`summarise` rows as a Markdown table, ours beside the paper's (Figs. 14/15)."""
+    """:func:`summarise` rows as a Markdown table, ours beside the paper's (Figs. 14/15).
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        Rows of :func:`summarise` (every key it gives but ``true_delta_abs``
+        and ``flag`` is read).
+
+    Returns
+    -------
+    str
+        A header, a separator line and one line per row, joined by newlines
+        (no trailing newline).  Empty cells where a value is None or NaN;
+        N50 as a count when n = 100, else as a count and its percentage;
+        the last column names the flagged statistics (``N50``, ``mu``) in bold.
+
+    Raises
+    ------
+    KeyError
+        If a row lacks one of the keys read.
+    """
     def f(x, spec):
         return "" if x is None or (isinstance(x, float) and math.isnan(x)) else format(x, spec)
 

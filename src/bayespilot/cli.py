@@ -1381,7 +1381,30 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the ``bayespilot`` command with ``argv`` (default ``sys.argv[1:]``); return the exit code."""
+    """Run the ``bayespilot`` command with ``argv`` (default ``sys.argv[1:]``); return the exit code.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The command-line arguments after the program name, e.g.
+        ``["simulate", "-o", "run1"]``; None reads ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        The exit code: what the subcommand returns on success
+        (:data:`EXIT_OK`, 0); :data:`EXIT_USAGE` (2) for bad input or usage,
+        including ``-q`` given with ``-v``; :data:`EXIT_FAILURE` (1) when the
+        computation or writing the output fails, or for an unexpected error
+        (one line on stderr; the traceback too with ``-v``); 130 on
+        KeyboardInterrupt; 0 after ``--help`` and ``--version``.
+
+    Notes
+    -----
+    Nothing is raised to the caller: every refusal or failure is one line
+    ``bayespilot: error: <message>`` on stderr and an exit code, and
+    argparse's SystemExit is turned into its exit code.
+    """
     parser = build_parser()
     verbose = 0
     try:

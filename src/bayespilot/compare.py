@@ -96,7 +96,7 @@ import types
 import warnings
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -107,6 +107,9 @@ from .noise import ARNoise
 from .sample import likelihood_options
 from .recording import Recording
 from ._blas import one_blas_thread
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .sample import Posterior
 
 #: The AR treatments the evidence supports (a profiled AR model is :func:`sample`'s only:
 #: a profile likelihood is not a density to integrate for ln Z).
@@ -162,6 +165,24 @@ def _check_pos(name: str, v) -> float:
 def jeffreys_category(log_bf: float) -> str:
     """Jeffreys' name for the strength of evidence |ln BF| (see :data:`JEFFREYS`).
 
+    Parameters
+    ----------
+    log_bf : float
+        A log Bayes factor (natural log), of either sign: only |ln BF| counts.
+
+    Returns
+    -------
+    str
+        "barely worth mentioning" (|ln BF| < ln 10^(1/2) = 1.15),
+        "substantial" (< ln 10 = 2.30), "strong" (< ln 10^(3/2) = 3.45),
+        "very strong" (< ln 100 = 4.61) or "decisive" (beyond, infinity
+        included).
+
+    Raises
+    ------
+    ValueError
+        If ``log_bf`` is not an int or float (numpy floats included) or is NaN.
+
     Examples
     --------
     >>> jeffreys_category(3.0)
@@ -185,6 +206,29 @@ def decide(log_bf: float, err: float = 0.0, *, level: float = DECISION_LEVEL,
     ``"threshold"`` if ln BF - z err > level, ``"none"`` if ln BF + z err < -level,
     else ``"inconclusive"`` (defaults: Jeffreys' "strong", BF > 10, at 2 standard
     errors).
+
+    Parameters
+    ----------
+    log_bf : float
+        ln BF of the model with threshold against the model without
+        (positive favours the threshold).
+    err : float, default 0.0
+        Standard error of ``log_bf``, >= 0 (0: take ``log_bf`` as exact).
+    level : float, default :data:`DECISION_LEVEL`
+        |ln BF| a decision needs, >= 0 (ln 10 = 2.30, Jeffreys' "strong").
+    z : float, default :data:`DECISION_Z`
+        Standard errors by which ``log_bf`` must clear ``level``, >= 0 (2).
+
+    Returns
+    -------
+    str
+        ``"threshold"``, ``"none"`` or ``"inconclusive"``.
+
+    Raises
+    ------
+    ValueError
+        If an argument is not an int or float (numpy floats included, bool
+        excluded) or is NaN, or if ``err``, ``level`` or ``z`` is negative.
 
     Examples
     --------
@@ -600,7 +644,7 @@ def savage_dickey(draws: Sequence[float] | np.ndarray, *, lower: float = 0.0, up
     return SavageDickey(None, False, reason, lb, p0, dens, float(bw), int(x.size), n_near)
 
 
-def savage_dickey_from_posterior(posterior, model: PilotModel | None = None,
+def savage_dickey_from_posterior(posterior: Posterior, model: PilotModel | None = None,
                                  min_near: int = 50) -> SavageDickey:
     """:func:`savage_dickey` for ``delta_abs`` from a :class:`~bayespilot.sample.Posterior`.
 
@@ -608,6 +652,39 @@ def savage_dickey_from_posterior(posterior, model: PilotModel | None = None,
     the bounds), the prior's lower bound on ``delta_abs`` is 0 (the model
     without threshold), and enough draws lie near 0.  An invalid case comes
     back with ``valid=False`` and the reason, not an exception.
+
+    Parameters
+    ----------
+    posterior : Posterior
+        Draws of the model with threshold (:func:`~bayespilot.sample.sample`);
+        ``delta_abs`` must be among its sampled parameters.  Whether its prior
+        was the default is read from ``posterior.settings["prior"]``.
+    model : PilotModel, optional
+        The model whose bounds on ``delta_abs`` are the prior's support
+        [lower, upper], IPUT: the model the posterior was sampled with.
+        Default :func:`~bayespilot.model.paper_model` ([0, 0.1], Table 1).
+    min_near : int, default 50
+        The estimate is valid only with at least this many draws within two
+        KDE bandwidths of 0 (see :func:`savage_dickey`).
+
+    Returns
+    -------
+    SavageDickey
+        ``log_bayes_factor`` is ln BF (threshold : none), None when not valid.
+        For a non-default prior or a prior whose lower bound is not 0 the
+        densities and the bandwidth are NaN and ``n_near`` is 0.
+
+    Raises
+    ------
+    TypeError
+        If ``posterior`` is not a :class:`~bayespilot.sample.Posterior`.
+    ValueError
+        If ``delta_abs`` was not sampled, or (from :func:`savage_dickey`) there
+        are fewer than 10 draws, a draw is not finite or lies outside the
+        bounds of ``delta_abs`` in ``model``, or ``min_near`` is not an
+        integer >= 1.
+    KeyError
+        If ``model`` has no parameter ``delta_abs``.
     """
     from .sample import Posterior
 
@@ -644,6 +721,33 @@ def information_criteria(neg_log_lik_threshold: float, neg_log_lik_none: float, 
     ``delta_aic``/``delta_bic`` are (none - threshold): positive favours the
     threshold.  ``log_bayes_factor_bic`` = delta_bic / 2 is the BIC
     (Schwarz) approximation of ln BF.
+
+    Parameters
+    ----------
+    neg_log_lik_threshold : float
+        -ln L at the maximum-likelihood fit of the model with threshold.
+    neg_log_lik_none : float
+        -ln L at the maximum-likelihood fit of the model without threshold.
+    k_threshold : int
+        Estimated parameters of the model with threshold, >= 1.
+    k_none : int
+        Estimated parameters of the model without threshold, >= 1.
+    n : int
+        Samples the likelihood uses, >= 1.
+
+    Returns
+    -------
+    dict
+        The inputs (``neg_log_lik_threshold``, ``neg_log_lik_none``,
+        ``k_threshold``, ``k_none``, ``n``; the counts as int) and
+        ``aic_threshold``, ``aic_none``, ``bic_threshold``, ``bic_none``,
+        ``delta_aic``, ``delta_bic`` and ``log_bayes_factor_bic``.
+
+    Raises
+    ------
+    ValueError
+        If a -ln L is not an int or float (numpy floats included) or is NaN,
+        or ``k_threshold``, ``k_none`` or ``n`` is not an integer >= 1.
 
     Examples
     --------
@@ -926,6 +1030,29 @@ def threshold_input_max(model: PilotModel, recording: Recording) -> float | None
     channel has a hard :class:`~bayespilot.model.DeadZone` on ``delta_abs`` or
     when that channel has stages with free parameters (its input then depends
     on them).
+
+    Parameters
+    ----------
+    model : PilotModel
+        The model; the dead zone's input is its channel's source passed
+        through the channel's fixed stages (for the paper's model, the canal
+        output i of theta_ddot_m).
+    recording : Recording
+        The run, with the likelihood's default start-up treatment
+        (``initial="periodic"``, :func:`~bayespilot.likelihood.channel_inputs`).
+
+    Returns
+    -------
+    float or None
+        max|i| over the recording, in the units of the dead zone's input
+        (IPUT for the paper's model), or None as above.
+
+    Raises
+    ------
+    ValueError
+        If the dead zone's input is computed (a dead zone on ``delta_abs``
+        after fixed stages only) and a channel of ``model`` needs the
+        ``theta`` column, which ``recording`` does not have.
     """
     i = _threshold_input(model, recording)
     return None if i is None else float(np.max(i))

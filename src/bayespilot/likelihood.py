@@ -387,13 +387,90 @@ class Likelihood:
         return out
 
 
-def model_response(model: PilotModel, recording: Recording, params, *, initial: str = "periodic") -> np.ndarray:
-    """Model output u_hat for ``recording`` at ``params`` (see :class:`Likelihood`)."""
+def model_response(model: PilotModel, recording: Recording,
+                   params: Mapping[str, float] | Sequence[float] | np.ndarray | None, *,
+                   initial: str = "periodic") -> np.ndarray:
+    """Model output u_hat for ``recording`` at ``params`` (see :class:`Likelihood`).
+
+    Parameters
+    ----------
+    model : PilotModel
+        The pilot model (e.g. :func:`~bayespilot.model.paper_model`).
+    recording : Recording
+        The run whose measured inputs (e and theta_ddot_m; theta where a
+        channel needs it) drive the model.
+    params : mapping of str to float, sequence of float, ndarray or None
+        Where to evaluate: values by name (free parameters not given take the
+        model's defaults; values given for fixed parameters are ignored), or
+        the free-parameter vector in ``model.parameter_names`` order (K_v,
+        T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs for the paper's
+        model), or None for the model's defaults.
+    initial : {"periodic", "rest"}, default "periodic"
+        How the model's start-up is treated (see :class:`Likelihood` and
+        :func:`channel_inputs`).
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+        u_hat at the recording's samples, in the units of u (rad); all NaN
+        when the parameter vector is unstable.
+
+    Raises
+    ------
+    TypeError
+        If ``model`` is not a PilotModel or ``recording`` not a Recording.
+    ValueError
+        If ``initial`` is not "periodic" or "rest", ``params`` names an
+        unknown parameter, has the wrong length or a value that is not a
+        finite number, or the model needs the ``theta`` column and the
+        recording has none.
+    """
     return Likelihood(model, recording, initial=initial).response(params)
 
 
-def neg_log_lik(model: PilotModel, recording: Recording, params, *, initial: str = "periodic") -> float:
+def neg_log_lik(model: PilotModel, recording: Recording,
+                params: Mapping[str, float] | Sequence[float] | np.ndarray | None, *,
+                initial: str = "periodic") -> float:
     """-ln L of Eq. 4 for ``recording`` at ``params`` (see :class:`Likelihood`).
+
+    Parameters
+    ----------
+    model : PilotModel
+        The pilot model (e.g. :func:`~bayespilot.model.paper_model`).
+    recording : Recording
+        The run whose measured inputs (e and theta_ddot_m; theta where a
+        channel needs it) drive the model.
+    params : mapping of str to float, sequence of float, ndarray or None
+        Where to evaluate: values by name (free parameters not given take the
+        model's defaults; values given for fixed parameters are ignored), or
+        the free-parameter vector in ``model.parameter_names`` order (K_v,
+        T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs for the paper's
+        model), or None for the model's defaults.
+    initial : {"periodic", "rest"}, default "periodic"
+        How the model's start-up is treated (see :class:`Likelihood` and
+        :func:`channel_inputs`).
+
+    Returns
+    -------
+    float
+        -ln L = N/2 ln(mean eps^2) + N/2 over the whole record (white output
+        error, s2 profiled out); +inf for an unstable parameter vector.
+
+    Raises
+    ------
+    TypeError
+        If ``model`` is not a PilotModel or ``recording`` not a Recording.
+    ValueError
+        If ``initial`` is not "periodic" or "rest", ``params`` names an
+        unknown parameter, has the wrong length or a value that is not a
+        finite number, or the model needs the ``theta`` column and the
+        recording has none.
+
+    Warns
+    -----
+    PerfectFitWarning
+        When the model reproduces u to round-off: the variance is floored
+        and the value is a finite bound.
 
     Examples
     --------
@@ -406,7 +483,23 @@ def neg_log_lik(model: PilotModel, recording: Recording, params, *, initial: str
 
 
 def vaf(u: np.ndarray, u_hat: np.ndarray) -> float:
-    """Variance accounted for, 100 (1 - var(u - u_hat) / var(u)), percent."""
+    """Variance accounted for, 100 (1 - var(u - u_hat) / var(u)), percent.
+
+    Parameters
+    ----------
+    u : array_like
+        The measured control output.
+    u_hat : array_like
+        The model output, the same shape as ``u`` (or broadcastable to it).
+
+    Returns
+    -------
+    float
+        VAF in percent: 100 for a perfect fit, lower (negative too) for
+        worse ones.  The variances are about the means (numpy's ``var``), so
+        a constant offset between ``u`` and ``u_hat`` does not lower it;
+        not finite when ``u`` is constant.
+    """
     u = np.asarray(u, float)
     u_hat = np.asarray(u_hat, float)
     return float(100.0 * (1.0 - np.var(u - u_hat) / np.var(u)))

@@ -12,12 +12,17 @@ from __future__ import annotations
 import math
 import os
 import sys
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
 from .recording import Recording
 from .simulate import Simulation
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
+
+    from .sample import Posterior
 
 __all__ = ["plot_traces", "plot_threshold_histograms"]
 
@@ -36,7 +41,7 @@ def _pyplot():
 
 
 def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | np.ndarray | None = None,
-                delta_abs: float | None = None, ax: Sequence[Any] | None = None):
+                delta_abs: float | None = None, ax: Sequence[Any] | None = None) -> Figure:
     """Plot a run's signals over time: e, u, theta_ddot_m and, if given, the canal output i.
 
     Parameters
@@ -145,7 +150,7 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
 
 def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[float] = (0.0, 0.2, 0.3),
                               method: str | None = None, bins: int = 40,
-                              upper: float = 0.1, ax: Any = None):
+                              upper: float = 0.1, ax: Any = None) -> Figure:
     """Histograms of the estimated threshold over realizations, after Figs. 14 and 15.
 
     One panel per (task, F_n, K_theta) cell present in ``results`` (rows:
@@ -280,7 +285,8 @@ def _posterior_or_raise(posterior):
     return posterior
 
 
-def plot_marginal(posterior, name: str = "delta_abs", truth: float | None = None, ax: Any = None):
+def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | None = None,
+                  ax: Any = None) -> Figure:
     """Histogram of one parameter's posterior draws with its 90 % HDI, median and (if given) truth.
 
     Parameters
@@ -333,8 +339,8 @@ def plot_marginal(posterior, name: str = "delta_abs", truth: float | None = None
     return fig
 
 
-def plot_pair(posterior, names: Sequence[str] = ("K_m", "tau_m", "delta_abs"),
-              truth: dict[str, float] | None = None, ax: Any = None):
+def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "delta_abs"),
+              truth: Mapping[str, float] | None = None, ax: Any = None) -> Figure:
     """Pairwise scatter of posterior draws (lower triangle) with marginal histograms (diagonal).
 
     Parameters
@@ -397,7 +403,8 @@ def plot_pair(posterior, names: Sequence[str] = ("K_m", "tau_m", "delta_abs"),
     return fig
 
 
-def plot_chains(posterior, names: Sequence[str] | None = None, ax: Sequence[Any] | None = None):
+def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
+                ax: Sequence[Any] | None = None) -> Figure:
     """Retained draws of every walker against the step number, one panel per parameter, and lp.
 
     The x axis is the step of the full chain (burn-in ``discard`` and the

@@ -167,6 +167,24 @@ FIG14_15 = MappingProxyType({
 def paper_parameters(task: str) -> dict[str, float]:
     """Table 3 pilot parameters for ``task`` ("FD" or "FT"), by name.
 
+    Parameters
+    ----------
+    task : {"FD", "FT"}
+        The task of the simulation study: mainly disturbance rejection (FD)
+        or mainly target following (FT).
+
+    Returns
+    -------
+    dict of str to float
+        K_v (-), T_vl (s), tau_v (s), K_m (rad/IPUT), tau_m (s), omega_nm
+        (rad/s), zeta_nm (-) and delta_abs (IPUT), a new dict on each call.
+        The remnant filter's T_n is in :data:`TABLE3_T_N`.
+
+    Raises
+    ------
+    ValueError
+        If ``task`` is not "FD" or "FT".
+
     Examples
     --------
     >>> paper_parameters("FD")["K_v"]

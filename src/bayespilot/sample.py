@@ -114,7 +114,19 @@ def _arviz():
 
 
 def pacf_names(order: int) -> tuple[str, ...]:
-    """Names of the partial autocorrelations of an AR(order) residual model."""
+    """Names of the partial autocorrelations of an AR(order) residual model.
+
+    Parameters
+    ----------
+    order : int
+        The AR order p (not checked: 0 or less gives no names).
+
+    Returns
+    -------
+    tuple of str
+        ``("pacf_1", ..., "pacf_p")``, the names the sampled partial
+        autocorrelations have in a :class:`Posterior`.
+    """
     return tuple(f"pacf_{j}" for j in range(1, order + 1))
 
 
@@ -123,6 +135,26 @@ def pacf_from_residual(eps: np.ndarray, order: int) -> np.ndarray:
 
     Uses the biased sample autocovariance, so |r_j| < 1 (the Yule-Walker AR
     model is stationary).  Plain NumPy.
+
+    Parameters
+    ----------
+    eps : array_like, shape (n,)
+        The residual (output error), finite; its mean is removed first.
+    order : int
+        Number of partial autocorrelations, 0 <= order < n.
+
+    Returns
+    -------
+    ndarray, shape (order,)
+        r_1 ... r_order (the reflection coefficients of the Durbin-Levinson
+        recursion).  All zero when ``eps`` is constant; a coefficient whose
+        recursion denominator is not positive, and those after it, are 0.
+
+    Raises
+    ------
+    ValueError
+        If ``eps`` is not a finite 1-D array, or ``order`` is not an integer
+        in [0, n - 1].
 
     Examples
     --------

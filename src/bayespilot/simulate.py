@@ -173,6 +173,34 @@ def remnant(n_samples: int, dt: float, gain: float, T_n: float, rng: np.random.G
     noise of two-sided PSD ``noise_psd``); the filter is discretised exactly
     for such held input (zero-order hold), and started in its stationary state
     by a run-in of 40 T_n.
+
+    Parameters
+    ----------
+    n_samples : int
+        Number of samples returned.
+    dt : float
+        Grid step, s.
+    gain : float
+        K_n; 0 returns zeros without drawing from ``rng``.
+    T_n : float
+        Time constant of the fourth-order filter, s (Table 3: 0.0578 s FD,
+        0.0645 s FT).
+    rng : numpy.random.Generator
+        Source of w: ``n_samples + ceil(40 T_n / dt) + 8`` standard normal
+        draws (the run-in included).
+    noise_psd : float
+        Two-sided power spectral density of w, rad^2 s (:func:`simulate`'s
+        default is 1 / sample rate).
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+        n at t = 0, dt, 2 dt, ..., in the units of u (rad).
+
+    Notes
+    -----
+    The arguments are not checked: ``T_n`` and ``dt`` must be positive and
+    ``noise_psd`` >= 0.
     """
     if gain == 0.0:
         return np.zeros(n_samples)
@@ -186,7 +214,21 @@ def remnant(n_samples: int, dt: float, gain: float, T_n: float, rng: np.random.G
 
 
 def remnant_fraction(n: np.ndarray, u: np.ndarray) -> float:
-    """F_n = var(n) / var(u), Eq. 7."""
+    """F_n = var(n) / var(u), Eq. 7.
+
+    Parameters
+    ----------
+    n : array_like
+        The remnant added to the control output, rad.
+    u : array_like
+        The control output (remnant included), rad.
+
+    Returns
+    -------
+    float
+        F_n, the ratio of the variances about the means (numpy's ``var``);
+        not finite when ``u`` is constant.
+    """
     return float(np.var(n) / np.var(u))
 
 
@@ -395,13 +437,53 @@ def _calibrate(run, target: float):
     return k, run(k)
 
 
-def calibrate_remnant_gain(remnant_fraction: float, *, task: str = "FD", motion_gain: float = 1.0,
+def calibrate_remnant_gain(remnant_fraction: float, *, task: str | TrackingTask = "FD",
+                           motion_gain: float = 1.0,
                            model: PilotModel | None = None, params: Mapping[str, float] | None = None,
                            seeds: range | list[int] = range(10), **kwargs: Any) -> tuple[float, np.ndarray]:
     """K_n that gives ``remnant_fraction`` on average over several realizations.
 
     Returns the mean K_n over ``seeds`` and the per-seed values (each seed
     calibrated on its own realization), the quantity Table 4 lists.
+
+    Parameters
+    ----------
+    remnant_fraction : float
+        F_n in [0, 1) to reach on each realization (Eq. 7); 0 gives K_n = 0.
+    task : {"FD", "FT"} or TrackingTask, default "FD"
+        The paper's task preset, or a task of your own (see :func:`simulate`).
+    motion_gain : float, default 1.0
+        K_theta, used with a preset task name.
+    model : PilotModel, optional
+        Default :func:`~bayespilot.model.paper_model`.
+    params : mapping of str to float, optional
+        Pilot parameters by name; missing ones take Table 3 values for the
+        task (FD/FT) or the model's defaults.
+    seeds : range or list of int, default range(10)
+        Remnant seeds, one realization each (``seed`` of :func:`simulate`).
+    **kwargs
+        Further keyword arguments of :func:`simulate` (``T_n``,
+        ``oversample``, ``duration``, ``noise_psd``, ``forcing_scale``).
+
+    Returns
+    -------
+    mean_gain : float
+        The mean K_n over ``seeds`` (NaN, with a numpy warning, for no seeds).
+    gains : ndarray, shape (len(seeds),)
+        K_n calibrated on each seed's realization, in the order of ``seeds``.
+
+    Raises
+    ------
+    ValueError
+        If :func:`simulate` refuses the arguments (e.g. ``remnant_fraction``
+        outside [0, 1), a task name other than "FD" or "FT", or
+        ``remnant_gain`` among ``kwargs``), or the fraction cannot be reached
+        in the closed loop.
+    TypeError
+        If ``model`` is not a PilotModel or ``task`` is neither a str nor a
+        TrackingTask.
+    RuntimeError
+        If the closed loop diverges for these parameters.
     """
     gains = np.array([simulate(model, params, task=task, motion_gain=motion_gain,
                                remnant_fraction=remnant_fraction, seed=s, **kwargs).remnant_gain

@@ -46,13 +46,17 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
 from .._files import write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
 from .._blas import one_blas_thread
+
+if TYPE_CHECKING:
+    from ..fit.result import FitResult
+    from ..recording import Recording
 
 __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension"]
 
@@ -508,8 +512,9 @@ def _calibrated_decision(results, alpha, calibrate):
 
 
 @one_blas_thread
-def diagnose(recording, *, seed: int | None = 0, alpha: float = ALPHA, n_bootstrap: int = 39,
-             candidates: Sequence[str] | None = None, base_fit=None,
+def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA,
+             n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
+             base_fit: FitResult | None = None,
              skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
              n_starts: int = 4, profile_noise: bool = False, oversample: int = 1,
              n_calibrate: int = N_CALIBRATE, noise_passes: int = 1, refit: bool = True,

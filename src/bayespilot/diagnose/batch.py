@@ -47,7 +47,13 @@ import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+if TYPE_CHECKING:
+    from ..campaign import CampaignSummary
+    from ..recording import Recording
+    from . import DiagnosisResult
+    from .pooled import PooledDiagnosisResult
 
 __all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
            "batch_summary_rows", "SUMMARY_FIELDS"]
@@ -155,7 +161,9 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
     return tasks
 
 
-def run_diagnose_task(task: DiagnoseTask, recordings: Sequence, options: Mapping[str, Any]):
+def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
+                      options: Mapping[str, Any]
+                      ) -> tuple[DiagnosisResult | PooledDiagnosisResult, float]:
     """Diagnose one task (on a worker); returns the result object and the seconds it took.
 
     ``options`` are :func:`~bayespilot.diagnose.diagnose`'s keywords and
@@ -164,6 +172,41 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence, options: Mapping
     one run, :func:`~bayespilot.diagnose.shared_posterior` pooled); a failure
     there is recorded in the result's ``settings["posterior_error"]``, the
     diagnosis kept.
+
+    Parameters
+    ----------
+    task : DiagnoseTask
+        The diagnosis to make: one recording alone, or (``task.pooled``, more
+        than one path) the runs of one condition by
+        :func:`~bayespilot.diagnose.diagnose_pooled`.
+    recordings : sequence of Recording
+        The task's recordings, in the order of ``task.paths`` (for a task of
+        one recording only the first is read).
+    options : mapping of str to object
+        Keywords of :func:`~bayespilot.diagnose.diagnose` (of
+        :func:`~bayespilot.diagnose.diagnose_pooled` for a pooled task), the
+        same for both, and ``posterior`` (bool, default False) as above; not
+        modified.  With ``posterior`` a single run's chain is seeded by
+        ``options["seed"]`` (default 0) and its warnings are silenced;
+        :func:`~bayespilot.diagnose.shared_posterior` takes its defaults.
+
+    Returns
+    -------
+    result : DiagnosisResult or PooledDiagnosisResult
+        The diagnosis (pooled for a pooled task), with ``result.posterior``
+        set when a posterior was asked for and made.
+    elapsed : float
+        Wall time of the diagnosis and its posterior, s.
+
+    Raises
+    ------
+    ValueError
+        A bad option value or a recording the diagnosis refuses, as the
+        diagnosis raises it.  A ValueError or RuntimeError of the posterior
+        is not raised but recorded (above).
+    TypeError
+        An option that is not a keyword of the diagnosis, or a recording that
+        is not a Recording.
     """
     import warnings
 
@@ -209,7 +252,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                    reports: bool = False, scheduler: str | None = None,
                    workers: int | None = None,
                    progress: bool = True, connect_timeout: float = 10.0,
-                   warm_cache: bool = True):
+                   warm_cache: bool = True) -> "CampaignSummary":
     """Diagnose many recordings as independent tasks on dask.distributed.
 
     Parameters
@@ -378,10 +421,39 @@ def _posterior_cell(d: Mapping[str, Any], chosen: Mapping[str, Any]) -> str:
 
 
 def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
-                       diagnoses: Mapping[str, dict | None] | None = None) -> list[dict]:
+                       diagnoses: Mapping[str, dict | None] | None = None
+                       ) -> list[dict[str, Any]]:
     """One row per task from its result (or error) file in ``out_dir``: ``SUMMARY_FIELDS``.
 
     ``diagnoses``: the result files' diagnoses by key, if already read.
+
+    Parameters
+    ----------
+    tasks : sequence of DiagnoseTask
+        The batch's diagnoses (:func:`plan_batch`), one row each, in this order.
+    out_dir : str or Path
+        The folder of the result files ``<key>.json`` and the error files
+        ``<key>.error.json``.
+    diagnoses : mapping of str to dict or None, optional
+        Each key's ``diagnosis`` dict (as ``DiagnosisResult.to_dict()`` or the
+        pooled one makes it; None: no result), as :func:`write_summary` has
+        read them; default: read from the result files in ``out_dir``.  A key
+        without a diagnosis is looked up in its error file.
+
+    Returns
+    -------
+    list of dict
+        One dict per task with the keys of :data:`SUMMARY_FIELDS`: ``key``,
+        ``n_runs``, ``subject`` ('' if none), ``task``, ``motion_gain``
+        (K_theta); from a diagnosis its ``physics`` and ``mismatch``, the
+        chosen candidate's ``p_value``, ``delta_neg_log_lik``, ``params``
+        and ``interval`` (JSON text: name -> value, name -> [lower, upper])
+        and ``posterior`` (JSON text: name -> [median, 90 % lower, upper], or
+        ''), and among the candidates whose p-value is a number the smallest
+        (``smallest_p_candidate``, ``smallest_p_value``: the nearest miss when
+        the answer is ``none``); without one, ``error`` (the error file's
+        ``"<error>: <message>"``, or ``"no result"``).  Fields that do not
+        apply are ''.
     """
     from .. import campaign as C
 

@@ -106,7 +106,21 @@ class Calibration:
 
 
 def reference_mean(ext: Extension) -> float:
-    """Mean of d(-ln L) under the asymptotic reference of :func:`decide.lr_p_value`."""
+    """Mean of d(-ln L) under the asymptotic reference of :func:`decide.lr_p_value`.
+
+    Parameters
+    ----------
+    ext : Extension
+        The catalogue entry whose test is calibrated (its ``df`` and
+        ``boundary_null``).
+
+    Returns
+    -------
+    float
+        0.25 for a one-parameter boundary null (0.5 chi2(0) + 0.5 chi2(1),
+        whose mean 0.5 is halved from 2 d(-ln L) to d(-ln L)), else df / 2;
+        0 for an entry without new parameters (``control-saturation``).
+    """
     if ext.boundary_null and ext.df == 1:
         return 0.25  # 0.5 chi2(0) + 0.5 chi2(1), halved
     return ext.df / 2.0

@@ -53,10 +53,15 @@ The six entries and their conventions
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping
 
 from ..model import (Channel, FixedFilter, LinearDrift, MotionSystem, Parameter, PilotModel,
                      Saturation, SecondOrderWashout, SoftDeadZone)
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from ..recording import Recording
 
 __all__ = ["Extension", "CATALOGUE", "NAMES", "G", "OTOLITH_NUM", "OTOLITH_DEN",
            "otolith_filter", "get_extension", "specific_force"]
@@ -69,15 +74,36 @@ OTOLITH_DEN = (5.33 * 0.66, 5.33 + 0.66, 1.0)
 
 
 def otolith_filter() -> FixedFilter:
-    """The fixed otolith dynamics H_oto(s) (Young & Meiry 1968, unit static gain)."""
+    """The fixed otolith dynamics H_oto(s) (Young & Meiry 1968, unit static gain).
+
+    Returns
+    -------
+    FixedFilter
+        H_oto(s) = (1 + 13.2 s) / ((1 + 5.33 s)(1 + 0.66 s)) (:data:`OTOLITH_NUM`,
+        :data:`OTOLITH_DEN`), a stage of the ``otolith-channel`` entry's two channels.
+    """
     return FixedFilter(OTOLITH_NUM, OTOLITH_DEN)
 
 
-def specific_force(recording, h_head: float):
+def specific_force(recording: Recording, h_head: float) -> np.ndarray:
     """Specific force along x at the pilot's head, f_x = g theta_m - h theta_ddot_m (m/s^2).
 
     theta_m = K_theta theta from the recording's ``theta`` column; ``h_head``
     is the head's height above the pitch rotation point (positive above), m.
+
+    Parameters
+    ----------
+    recording : Recording
+        Must have the ``theta`` column (pitch attitude, rad); K_theta
+        (``motion_gain``) and theta_ddot_m (rad/s^2) are read from it too.
+    h_head : float
+        Height of the pilot's head above the pitch rotation point, m
+        (positive above, negative below).
+
+    Returns
+    -------
+    ndarray
+        f_x at each sample of the recording, m/s^2 (g = :data:`G`).
 
     Raises
     ------
@@ -255,6 +281,16 @@ NAMES: tuple[str, ...] = tuple(e.name for e in CATALOGUE)
 
 def get_extension(name: str) -> Extension:
     """The catalogue entry called ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A catalogue name, one of :data:`NAMES` (exactly, e.g. ``"motion-washout"``).
+
+    Returns
+    -------
+    Extension
+        The entry of :data:`CATALOGUE`.
 
     Raises
     ------

@@ -70,7 +70,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 from scipy import linalg, optimize, signal, stats
@@ -146,6 +146,38 @@ def noise_model(eps: np.ndarray, dt: float, *, skip: int = 0, omega_c: float = O
     filter, no decimation).  An AR model of the reduced residual (least
     squares, order by BIC, :func:`fit_ar`, unless ``order`` is given) is the
     noise model.
+
+    Parameters
+    ----------
+    eps : ndarray
+        The residual u - u_hat of a fit, one value per sample (1-D, finite), rad.
+    dt : float
+        Sample interval of the recording, s.
+    skip : int
+        Samples at the start of the record left out of the AR estimate, and of
+        every likelihood under this noise model (``NoiseModel.skip``).
+    omega_c : float
+        Cut-off of the low-pass, rad/s (default :data:`OMEGA_C`, 25);
+        ``math.inf`` keeps the whole band.
+    max_order : int
+        Largest AR order tried (default :data:`bayespilot.noise.MAX_AR_ORDER`),
+        and at most a fifth of the reduced residual's length.
+    order : int, optional
+        Take this AR order instead of the one BIC chooses (0: no AR filter).
+
+    Returns
+    -------
+    NoiseModel
+        The low-pass taps and decimation (one tap and 1 for the whole band),
+        the AR coefficients, ``skip`` and ``omega_c``.
+
+    Raises
+    ------
+    ValueError
+        ``omega_c`` is not a positive number, or is finite and at 0.45 of the
+        sampling frequency or above; the residual is not finite, or ``order``
+        is a quarter of the reduced residual's length or more
+        (:func:`fit_ar`).
     """
     if not (isinstance(omega_c, (int, float, np.integer, np.floating)) and omega_c > 0):
         raise ValueError(f"omega_c must be a positive number of rad/s (inf: the whole band), "
@@ -316,6 +348,36 @@ def fit_base_gls(model: PilotModel, recording: Recording, start: Mapping[str, fl
 
     delta_abs is scanned (not refined by Gauss-Newton: the crisp dead zone's
     derivative is unreliable), on [0, upper] in steps of ``delta_step``.
+
+    Parameters
+    ----------
+    model : PilotModel
+        The base model (:func:`~bayespilot.model.paper_model`).
+    recording : Recording
+    start : mapping of str to float
+        Starting parameters by name (e.g. the Eq. 4 fit's; those not given
+        start at the model's defaults); delta_abs is held at its value here
+        in the first refinement.
+    noise : NoiseModel
+        The decision likelihood's noise model (:func:`noise_model`), held.
+    delta_step : float
+        Step of the delta_abs grid, IPUT.
+
+    Returns
+    -------
+    wl : Whitened
+        The GLS likelihood of ``model`` on ``recording`` under ``noise``.
+    fit : FitSummary
+        The fit: -ln L on the decision likelihood; ``refined`` the free
+        parameters except delta_abs, with their covariance.
+
+    Raises
+    ------
+    TypeError
+        ``noise`` is not a NoiseModel.
+    ValueError
+        The recording is too short to skip ``noise.skip`` samples, or
+        ``start`` names a parameter the model does not have.
     """
     wl = Whitened(model, recording, noise)
     names = tuple(n for n in model.parameter_names if n != "delta_abs")
@@ -329,6 +391,30 @@ def scan_threshold(wl: Whitened, fit: FitSummary, names: Sequence[str], *,
 
     A grid, not Gauss-Newton: the crisp dead zone's derivative in delta_abs
     is unreliable.  A model without delta_abs returns ``fit`` unchanged.
+
+    Parameters
+    ----------
+    wl : Whitened
+        The GLS likelihood to scan under; its model's bounds of delta_abs
+        bound the grid.
+    fit : FitSummary
+        A fit under ``wl``: its other parameters are held on the grid.
+    names : sequence of str
+        The parameters refined from the grid's best value (delta_abs is held
+        there unless it is one of them).
+    delta_step : float
+        Step of the grid, IPUT.
+
+    Returns
+    -------
+    FitSummary
+        The refit from the grid's best value when its -ln L is below
+        ``fit``'s, else ``fit`` itself.
+
+    Raises
+    ------
+    TypeError
+        ``wl`` is not a :class:`Whitened` likelihood.
     """
     if not isinstance(wl, Whitened):
         raise TypeError(f"wl must be a Whitened likelihood, got {type(wl).__name__}")
@@ -372,6 +458,35 @@ def threshold_starts(wl: Whitened, fit: FitSummary, names: Sequence[str], *,
     with these starts (in every round of :func:`final_fit`) each of the 8
     reaches that fit's -ln L or a better one (``docs/diagnose-evidence.md``,
     *The reported fit*).  A model without delta_abs returns ``fit``.
+
+    Parameters
+    ----------
+    wl : Whitened
+        The GLS likelihood of the fits.
+    fit : FitSummary
+        A fit under ``wl``; each start is its parameters with delta_abs
+        replaced.
+    names : sequence of str
+        The parameters refined from each start.
+    scan : bool
+        Scan delta_abs (:func:`scan_threshold`) after each refinement.
+    starts : sequence of float
+        The values of delta_abs to start from, IPUT (default
+        :data:`THRESHOLD_STARTS`: 0.0025 to 0.02 in steps of 0.0025); those
+        outside [0, delta_abs's upper bound] are skipped.
+
+    Returns
+    -------
+    FitSummary
+        The refit with the lowest -ln L when that is more than 1e-6 below
+        ``fit``'s, else ``fit`` itself.
+
+    Raises
+    ------
+    TypeError
+        ``wl`` is not a :class:`Whitened` likelihood.
+    ValueError
+        A start that is not a finite number.
     """
     if not isinstance(wl, Whitened):
         raise TypeError(f"wl must be a Whitened likelihood, got {type(wl).__name__}")
@@ -400,7 +515,31 @@ def own_noise(model: PilotModel, recording: Recording, params: Mapping[str, floa
               noise: NoiseModel) -> NoiseModel:
     """The noise model estimated again from ``model``'s residual at ``params`` (AR order by
     BIC; ``noise``'s low-pass, decimation and skip), or ``noise`` itself where the model's
-    response is not finite."""
+    response is not finite.
+
+    Parameters
+    ----------
+    model : PilotModel
+        The model whose residual is taken (e.g. the extended one).
+    recording : Recording
+        The recording (the low-pass is designed again from ``noise.omega_c``
+        at its sample interval).
+    params : mapping of str to float
+        ``model``'s parameters at which the residual is taken.
+    noise : NoiseModel
+        The noise model to re-estimate: its ``omega_c`` and ``skip`` are kept.
+
+    Returns
+    -------
+    NoiseModel
+        The new noise model, or ``noise`` itself (the same object) where the
+        residual is not finite.
+
+    Raises
+    ------
+    TypeError
+        ``noise`` is not a NoiseModel.
+    """
     if not isinstance(noise, NoiseModel):
         raise TypeError(f"noise must be a NoiseModel, got {type(noise).__name__}")
     eps = Likelihood(model, recording).residual(params)
@@ -644,6 +783,20 @@ def lr_p_value(stat: float, ext: Extension) -> float:
 
     chi2(df); for a one-parameter boundary null the chi-bar-squared mixture
     0.5 chi2(0) + 0.5 chi2(1) (Self & Liang 1987).
+
+    Parameters
+    ----------
+    stat : float
+        The likelihood-ratio statistic 2 (-ln L_base - -ln L_ext), >= 0.
+    ext : Extension
+        The extension tested: its ``df`` and ``boundary_null``.
+
+    Returns
+    -------
+    float
+        The asymptotic p-value: chi2(df)'s survival function at ``stat``,
+        halved for a one-parameter boundary null (so 0.5, not 1, at
+        ``stat = 0``); 1 for an entry without new parameters (df = 0).
     """
     p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
     return 0.5 * p if ext.boundary_null and ext.df == 1 else p
@@ -659,6 +812,44 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
     (:func:`refit_with_noise`); ``base`` must then have been profiled the same way.
     ``extra_starts``: more starting points, each a full parameter set of the
     extended model (e.g. its fit on the low-passed band, :func:`guide_fits`).
+
+    Parameters
+    ----------
+    ext : Extension
+        The catalogue entry to test, one fitted by GLS (not checked here).
+    base_model : PilotModel
+        The base model it extends.
+    recording : Recording
+    base : FitSummary
+        The base model's GLS fit: the reference -ln L of the test, and every
+        start's parameters (the new ones from each of ``ext.starts``).
+    noise : NoiseModel
+        The decision likelihood's noise model, that of ``base``.
+    profile_noise : bool
+        See above.
+    extra_starts : sequence of mapping of str to float
+        See above; ``base``'s parameters fill what a start does not give,
+        names the extended model does not have are ignored.
+
+    Returns
+    -------
+    result : CandidateResult
+        The test: d(-ln L) (>= 0), statistic, p-value (:func:`lr_p_value`),
+        delta BIC, the new parameters' estimates and every refined
+        parameter's standard error, ``fit`` and ``model`` set.  Not testable
+        (``testable`` False, why in ``reason``) when the recording lacks a
+        column the entry needs or the fit failed from every start.
+    wl : Whitened or None
+        The extended model's GLS likelihood of the fits (under the
+        re-estimated noise model with ``profile_noise``); None when the
+        recording lacks a column the entry needs.
+
+    Raises
+    ------
+    TypeError
+        ``noise`` is not a NoiseModel.
+    ValueError
+        The recording is too short to skip ``noise.skip`` samples.
     """
     missing = [c for c in ext.needs if c not in recording]
     if missing:
@@ -715,7 +906,8 @@ def low_band_base(base_model: PilotModel, recording: Recording, start: Mapping[s
 
 
 def guide_fits(names: Sequence[str], base_model: PilotModel, recording: Recording,
-               start: Mapping[str, float], skip: int, get: Any) -> dict[str, dict[str, float]]:
+               start: Mapping[str, float], skip: int, get: Callable[[str], Extension]
+               ) -> dict[str, dict[str, float]]:
     """Each extension fitted on the band low-passed at :data:`OMEGA_C`: starts for a wider band.
 
     On the whole band the likelihood is sharp in the delays (the phase of
@@ -727,6 +919,36 @@ def guide_fits(names: Sequence[str], base_model: PilotModel, recording: Recordin
     then a start for the whole-band fit.  ``get`` maps a name to its
     :class:`~bayespilot.diagnose.catalogue.Extension`; entries not fitted by
     GLS are left out.  Returns name -> the extended model's parameters.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The catalogue names to fit.
+    base_model : PilotModel
+        The base model they extend.
+    recording : Recording
+    start : mapping of str to float
+        The base model's parameters (e.g. its Eq. 4 fit): the low-band noise
+        model is estimated from the residual there and the low-band GLS base
+        fit starts there (:func:`low_band_base`).
+    skip : int
+        Samples at the start of the record left out of the likelihood.
+    get : callable
+        ``get(name) -> Extension`` (:func:`~bayespilot.diagnose.catalogue.get_extension`).
+
+    Returns
+    -------
+    dict of str to dict of str to float
+        Name -> the extended model's parameters at its low-band fit, for the
+        GLS entries with a fit (an entry not testable on the recording, or
+        whose fit failed from every start, is left out too).
+
+    Raises
+    ------
+    ValueError
+        The residual at ``start`` is not finite, or the recording is too
+        short to skip ``skip`` samples or sampled too slowly for the
+        low-pass at :data:`OMEGA_C` (:func:`noise_model`, :class:`Whitened`).
     """
     noise, base = low_band_base(base_model, recording, start, skip)
     refined = None
@@ -753,6 +975,29 @@ def refine_threshold(model: PilotModel, recording: Recording, base: FitSummary,
     against the scanned base, the continuous refinement of delta_abs alone
     improved correct-model fits by about 0.2 in -ln L per run (twice the
     chi-bar-squared null's mean in the single-run proof study's controls).
+
+    Parameters
+    ----------
+    model : PilotModel
+        The base model.
+    recording : Recording
+    base : FitSummary
+        Its GLS fit with delta_abs scanned (:func:`fit_base_gls`): the start.
+    noise : NoiseModel
+        The decision likelihood's noise model.
+
+    Returns
+    -------
+    FitSummary
+        The fit with every free parameter refined, delta_abs included, when
+        its -ln L is below ``base``'s, else ``base`` itself.
+
+    Raises
+    ------
+    TypeError
+        ``noise`` is not a NoiseModel.
+    ValueError
+        The recording is too short to skip ``noise.skip`` samples.
     """
     wl = Whitened(model, recording, noise)
     fit = _gls_refine(wl, base.params, model.parameter_names)
@@ -776,6 +1021,31 @@ def null_refit(ext: Extension, base_model: PilotModel, recording: Recording,
     extension's parameters (its new ones dropped: the extended model at
     their null values is the base model) finds that basin for the base
     model too.  Returns ``None`` when the candidate has no fit.
+
+    Parameters
+    ----------
+    ext : Extension
+        The candidate's catalogue entry.
+    base_model : PilotModel
+        The base model it extends.
+    recording : Recording
+    candidate : CandidateResult
+        The candidate's test, with its fit (``candidate.fit``).
+    noise : NoiseModel
+        The decision likelihood's noise model (the test's).
+
+    Returns
+    -------
+    FitSummary or None
+        The base model's GLS fit from the candidate's parameters
+        (:func:`null_refit_from`), not necessarily better than the base fit;
+        None when the candidate has no fit, is not testable or not fitted by
+        GLS, or the refit failed.
+
+    Raises
+    ------
+    TypeError
+        ``noise`` is not a NoiseModel.
     """
     fit = candidate.fit
     if fit is None or not candidate.testable or ext.likelihood != "gls":
@@ -785,7 +1055,34 @@ def null_refit(ext: Extension, base_model: PilotModel, recording: Recording,
 
 def null_refit_from(ext: Extension, base_model: PilotModel, recording: Recording,
                     params: Mapping[str, float], noise: NoiseModel) -> FitSummary | None:
-    """:func:`null_refit` from the extended model's parameters ``params`` (its new ones ignored)."""
+    """:func:`null_refit` from the extended model's parameters ``params`` (its new ones ignored).
+
+    Parameters
+    ----------
+    ext : Extension
+        The extension ``params`` are of: delta_abs is refined with the rest
+        if it refines it (``refine_threshold``), else held.
+    base_model : PilotModel
+        The base model it extends.
+    recording : Recording
+    params : mapping of str to float
+        The extended model's parameters by name; the base model's among them
+        are the start (any it lacks start at the model's defaults).
+    noise : NoiseModel
+        The decision likelihood's noise model.
+
+    Returns
+    -------
+    FitSummary or None
+        The base model's GLS fit from there; None when it raised ValueError
+        (e.g. a recording too short to skip ``noise.skip`` samples) or
+        LinAlgError.
+
+    Raises
+    ------
+    TypeError
+        ``noise`` is not a NoiseModel.
+    """
     start = {n: params[n] for n in base_model.parameter_names if n in params}
     names = tuple(n for n in base_model.parameter_names
                   if ext.refine_threshold or n != "delta_abs")
@@ -796,7 +1093,28 @@ def null_refit_from(ext: Extension, base_model: PilotModel, recording: Recording
 
 
 def retest(res: CandidateResult, ext: Extension, reference: float) -> CandidateResult:
-    """``res`` tested again against a better reference -ln L of the base model (in place)."""
+    """``res`` tested again against a better reference -ln L of the base model (in place).
+
+    Parameters
+    ----------
+    res : CandidateResult
+        A candidate's test, with its fit.
+    ext : Extension
+        Its catalogue entry.
+    reference : float
+        The base model's -ln L on the decision likelihood to test against
+        (e.g. its best fit found by :func:`null_refit`).
+
+    Returns
+    -------
+    CandidateResult
+        ``res`` itself.  When ``reference`` gives a smaller improvement than
+        its test's, its ``delta_neg_log_lik``, ``statistic``, ``p_value``,
+        ``delta_bic`` and ``log_bayes_factor`` are computed again (the same
+        df ln m penalty); ``justified`` is not (the decision sets it).  Left
+        as it was when ``reference`` is not better, or it has no fit, is not
+        testable or not fitted by GLS.
+    """
     if res.fit is None or not res.testable or ext.likelihood != "gls":
         return res
     d = max(0.0, reference - res.fit.neg_log_lik)
@@ -870,6 +1188,30 @@ def fit_censored(base_model: PilotModel, recording: Recording, start: Mapping[st
     (from an AR model of the residual, :func:`fit_ar`): the Tobit likelihood
     treats samples as independent, and the factor approximately accounts for
     their correlation.
+
+    Parameters
+    ----------
+    base_model : PilotModel
+        The base model (its parameters except delta_abs are fitted).
+    recording : Recording
+    start : mapping of str to float
+        The start parameters (e.g. the GLS base fit's); delta_abs is held at
+        its value here.
+    tops : mapping
+        :func:`flat_tops` of the recording's u: ``flags`` (+1 and -1 at the
+        censored samples, at the upper and lower limit), ``hi`` and ``lo``
+        (the limits, rad).
+
+    Returns
+    -------
+    fit : FitSummary
+        The pilot parameters at the fit, -ln L of the censored likelihood
+        (never above the start's), ``refined`` the parameters except
+        delta_abs with their scaled covariance.
+    neg_log_lik_start : float
+        -ln L at ``start``, sigma profiled.
+    sigma : float
+        The noise standard deviation at the fit, rad.
     """
     from ..kernels._censored import censored_neg_log_lik
 

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 import numpy as np
 from scipy import integrate, optimize
@@ -48,6 +48,9 @@ from ..forcing import Multisine
 from ..likelihood import Likelihood
 from ..model import PilotModel
 from ..recording import Recording
+
+if TYPE_CHECKING:
+    from ..simulate import TrackingTask
 
 __all__ = ["Forcing", "forcing_of", "describing_function", "statistics", "remnant_like",
            "task_of", "bootstrap", "Evidence", "EVIDENCE", "N_SEGMENTS"]
@@ -124,6 +127,23 @@ def forcing_of(recording: Recording) -> Forcing | None:
 
     Returns None when neither is available.  Only the task description is
     read, never the ``simulation`` key (what generated a simulated run).
+
+    Parameters
+    ----------
+    recording : Recording
+        Its metadata's ``forcing`` (``base_frequency``, rad/s, and the
+        ``target`` and ``disturbance`` multisines), else its ``f_t`` and
+        ``f_d`` columns, each taken as a multisine of its DFT lines above
+        1e-3 of the largest.
+
+    Returns
+    -------
+    Forcing or None
+        The target and disturbance multisines, their DFT bins in the record
+        (each None unless every frequency is a whole number of cycles of the
+        record) and the signals at the samples (the columns where the
+        recording has them, else the multisines evaluated); None when neither
+        source is available.
     """
     meta = recording.metadata.get("forcing")
     t = recording.t
@@ -408,6 +428,20 @@ def remnant_like(eps: np.ndarray, dt: float) -> tuple[float, float]:
     (bounded scalar minimisation); K_n then matches its variance, using
     var(n) = K_n^2 psd 5 / (32 T_n) for white noise of two-sided PSD
     psd = dt (the simulator's convention) through 1 / (T_n s + 1)^4.
+
+    Parameters
+    ----------
+    eps : ndarray
+        The residual (1-D; its mean is removed here), rad.
+    dt : float
+        Sample interval, s.
+
+    Returns
+    -------
+    K_n : float
+        The remnant's gain, in the units of ``eps``.
+    T_n : float
+        Its filter's time constant, s, in [0.005, 0.5].
     """
     x = np.asarray(eps, float) - np.mean(eps)
     n = x.size
@@ -422,8 +456,24 @@ def remnant_like(eps: np.ndarray, dt: float) -> tuple[float, float]:
     return K_n, T_n
 
 
-def task_of(recording: Recording, forcing: Forcing):
-    """The :class:`~bayespilot.simulate.TrackingTask` a recording describes (for replicates)."""
+def task_of(recording: Recording, forcing: Forcing) -> TrackingTask:
+    """The :class:`~bayespilot.simulate.TrackingTask` a recording describes (for replicates).
+
+    Parameters
+    ----------
+    recording : Recording
+        Its task name, controlled element, K_theta, control gain, sample rate
+        and duration are the task's.
+    forcing : Forcing
+        Its forcing functions (:func:`forcing_of`).
+
+    Returns
+    -------
+    TrackingTask
+        The task with a run-in of half the recording's duration, the
+        forcing's phases moved back by the run-in so that the simulated
+        record after it lines up with the recording's time axis.
+    """
     from ..simulate import TrackingTask
 
     run_in = 0.5 * recording.duration

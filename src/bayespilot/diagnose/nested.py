@@ -48,7 +48,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -144,7 +144,9 @@ class ExtensionBayesFactor:
 @one_blas_thread
 def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_model: PilotModel,
                         *, noise: ARNoise, discard: float | None = None,
-                        base_params=None, extended_params=None, physics: str = "extension",
+                        base_params: Mapping[str, float] | None = None,
+                        extended_params: Mapping[str, float] | None = None,
+                        physics: str = "extension",
                         nlive: int = 200, runs: int = RUNS, sample: str = SAMPLE,
                         seed: int | None = 0, progress: bool = False) -> ExtensionBayesFactor:
     """ln BF(``extended_model`` : ``base_model``) on ``recording`` by nested sampling.
@@ -178,6 +180,14 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
     Returns
     -------
     ExtensionBayesFactor
+
+    Raises
+    ------
+    TypeError
+        ``recording`` is not a Recording, a model not a PilotModel, or
+        ``noise`` not an ARNoise.
+    ValueError
+        ``runs`` is not an integer >= 1.
     """
     from ..compare import (decide, evidence, jeffreys_category, log_likelihood_at,
                            robust_evidence)

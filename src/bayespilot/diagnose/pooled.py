@@ -33,7 +33,7 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 from scipy import linalg, optimize, stats
@@ -44,6 +44,9 @@ from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibr
                _calibration_lines, _calibrator, _check, _fitted_lines, _json_ready, _JSONSummary,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
+
+if TYPE_CHECKING:
+    from ..recording import Recording
 
 __all__ = ["diagnose_pooled", "PooledDiagnosisResult", "PoolingWarning", "pooling_disagreements",
            "pooled_final_fit"]
@@ -57,7 +60,7 @@ class PoolingWarning(UserWarning):
     """Runs given to :func:`diagnose_pooled` that say they are not of one subject and condition."""
 
 
-def pooling_disagreements(recordings: Sequence) -> str | None:
+def pooling_disagreements(recordings: Sequence[Recording]) -> str | None:
     """What the runs' own metadata disagree on (subject, task, K_theta), or None.
 
     Pooling shares the extension's parameters over the runs, which assumes the
@@ -65,6 +68,19 @@ def pooling_disagreements(recordings: Sequence) -> str | None:
     conditions may still be pooled on purpose (a platform's bandwidth is the
     same for every subject), so :func:`diagnose_pooled` warns
     (:class:`PoolingWarning`) and does not refuse.
+
+    Parameters
+    ----------
+    recordings : sequence of Recording
+        The runs to pool.
+
+    Returns
+    -------
+    str or None
+        For each of subject (the metadata's ``subject``; a run without one is
+        not counted), task and K_theta on which the runs give more than one
+        value, ``"<what> <values>"`` with the values sorted and joined by
+        ``", "``, these joined by ``"; "``; None when the runs agree.
 
     Examples
     --------

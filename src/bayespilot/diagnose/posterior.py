@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 from scipy.integrate import trapezoid
@@ -39,6 +39,9 @@ from scipy.interpolate import CubicSpline
 
 from ..recording import Recording
 from .catalogue import get_extension
+
+if TYPE_CHECKING:
+    from ..sample import Posterior
 
 __all__ = ["sample_chosen", "shared_posterior", "SharedPosterior"]
 
@@ -81,7 +84,7 @@ def check_same_recording(result: Any, recording: Recording) -> None:
 
 
 def sample_chosen(result: Any, recording: Recording, *, likelihood: str = "coloured",
-                  seed: int | None = 0, progress: bool = False, **options: Any):
+                  seed: int | None = 0, progress: bool = False, **options: Any) -> "Posterior":
     """Sample the posterior of the extended model that :func:`diagnose` chose.
 
     Parameters
@@ -335,7 +338,7 @@ def _check_pooled(result: Any, recordings, physics: str | None = None) -> tuple[
     return chosen, [dict(q) for q in fits], recs
 
 
-def shared_posterior(result: Any, recordings, *, physics: str | None = None,
+def shared_posterior(result: Any, recordings: Sequence[Recording], *, physics: str | None = None,
                      n_grid: int | None = None, width: float = GRID_WIDTH,
                      progress: bool = False) -> SharedPosterior:
     """The posterior of the shared parameters of the extension a pooled diagnosis chose,

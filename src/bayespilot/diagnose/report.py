@@ -11,9 +11,16 @@ import base64
 import html
 import math
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from . import DiagnosisResult
+    from .pooled import PooledDiagnosisResult
+    from .posterior import SharedPosterior
 
 __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_candidates",
            "plot_posterior", "plot_profile", "plot_shared_posterior", "plot_batch",
@@ -39,8 +46,26 @@ def _align(phase: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return phase + 360.0 * k
 
 
-def plot_frequency_response(result, axes: Any = None):
-    """Visual and motion-channel describing functions: data, base model, extended model."""
+def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure:
+    """Visual and motion-channel describing functions: data, base model, extended model.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        A single-run diagnosis: the describing functions at the forcing
+        frequencies of the data and of the base model, and of the extended
+        model when an extension was chosen (``result.arrays``).
+    axes : array of matplotlib Axes, optional
+        Four axes, taken as 2 x 2 (rows: magnitude, phase in deg; columns:
+        visual H_v per rad of e, motion H_m per rad/s^2 of theta_ddot_m);
+        default: a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure of the axes.  Without forcing functions over whole periods
+        of the record the axes say so and show nothing else.
+    """
     plt = _pyplot()
     arr = result.arrays
     if axes is None:
@@ -79,8 +104,27 @@ def plot_frequency_response(result, axes: Any = None):
     return fig
 
 
-def plot_residuals(result, axes: Any = None):
-    """Residual before and after: spectrum, variance over the run, against |i| and |u|."""
+def plot_residuals(result: DiagnosisResult, axes: Any = None) -> Figure:
+    """Residual before and after: spectrum, variance over the run, against |i| and |u|.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        A single-run diagnosis: the base model's residual and, when an
+        extension was chosen, the extended model's (``result.arrays``), each
+        after the first ``skip_seconds``.
+    axes : array of matplotlib Axes, optional
+        Four axes, taken as 2 x 2: the residual's PSD (Welch) with the
+        forcing frequencies marked, its variance over eight segments of the
+        run, and its mean times sign conditioned on |i(t - tau_m)| (IPUT) and
+        on |u| (rad); default: a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure of the axes; a conditioned panel without its statistic is
+        hidden.
+    """
     from scipy import signal
 
     plt = _pyplot()
@@ -145,8 +189,25 @@ def plot_residuals(result, axes: Any = None):
     return fig
 
 
-def plot_evidence(result, ax: Any = None):
-    """-log10 of each located statistic's bootstrap p-value."""
+def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
+    """-log10 of each located statistic's bootstrap p-value.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        A single-run diagnosis: its located evidence (``result.where``) and
+        the bootstrap's size.
+    ax : matplotlib Axes, optional
+        Default: a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One bar per statistic with a finite value (red at -log10 p >= 1.3;
+        0 where p is not a finite positive number, as without a bootstrap),
+        p = 0.05 dashed and the smallest p the bootstrap can give,
+        1 / (B + 1), dotted.
+    """
     plt = _pyplot()
     if ax is None:
         fig, ax = plt.subplots(figsize=(8, 4.5))
@@ -177,8 +238,29 @@ def _figure_and_axes(ax: Any = None, figsize=(8, 4)):
     return ax.figure, ax
 
 
-def plot_candidates(result, ax: Any = None):
-    """Fit improvement of each candidate on the decision likelihood, with the test's threshold."""
+def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = None
+                    ) -> Figure:
+    """Fit improvement of each candidate on the decision likelihood, with the test's threshold.
+
+    Parameters
+    ----------
+    result : DiagnosisResult or PooledDiagnosisResult
+        A diagnosis, single-run or pooled: its testable candidates
+        (``result.ranking``) and the level per candidate.
+    ax : matplotlib Axes, optional
+        Default: a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One bar per testable candidate, d(-ln L) on a symlog axis (red:
+        justified), its p-value beside it, and for an entry with new
+        parameters a black mark at 0.5 times the chi2(df) quantile at the
+        level per candidate.  That mark is the threshold of a plain chi2(df)
+        test: the test of a one-parameter boundary null, whose p-value is
+        halved, passes below it (from 0.5 times the chi2(1) quantile at twice
+        the level), and a calibrated test may need more.
+    """
     from scipy import stats
 
     fig, ax = _figure_and_axes(ax)
@@ -203,7 +285,7 @@ def plot_candidates(result, ax: Any = None):
     return fig
 
 
-def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = None):
+def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = None) -> Figure:
     """Every candidate's p-value in every diagnosis of a batch, at a glance.
 
     Parameters
@@ -276,10 +358,25 @@ def _mark_fit(ax, value: float, stderr: float, label: str) -> None:
         ax.axvspan(value - stderr, value + stderr, color="C3", alpha=0.12, label="+-1 s.e.")
 
 
-def plot_posterior(result, axes: Any = None):
+def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
     """Marginal posteriors of the chosen extension's new parameters, with the maximum-likelihood
     fit and its +-1 standard error (from the decision likelihood) marked, and its
-    profile-likelihood interval where it was made."""
+    profile-likelihood interval where it was made.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        A single-run diagnosis with a chosen extension whose posterior has
+        been sampled (``result.posterior``,
+        :func:`~bayespilot.diagnose.sample_chosen`).
+    axes : sequence of matplotlib Axes, optional
+        One per new parameter of the chosen extension that the posterior
+        has, in a row; default: a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     from ..plots import plot_marginal
 
     post, chosen = result.posterior, result.chosen
@@ -300,10 +397,29 @@ def plot_posterior(result, axes: Any = None):
     return fig
 
 
-def plot_profile(result, axes: Any = None):
+def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
     """The profile likelihood of each of the chosen extension's new parameters
     (``result.chosen.interval``, :mod:`bayespilot.diagnose.profile`): the scaled deviance at
-    the profile's points, the level it must stay below, the interval and the reported fit."""
+    the profile's points, the level it must stay below, the interval and the reported fit.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        A single-run diagnosis whose chosen extension has profile intervals
+        (``diagnose(refit=True, intervals=True)``, the default).
+    axes : sequence of matplotlib Axes, optional
+        One per parameter with an interval, in a row; default: a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        No extension was chosen, or it has no profile intervals (a pooled
+        diagnosis, ``diagnose(intervals=False)``).
+    """
     chosen = result.chosen
     if chosen is None or not chosen.interval:
         raise ValueError("the diagnosis has no profile intervals (no extension chosen, a pooled "
@@ -329,10 +445,23 @@ def plot_profile(result, axes: Any = None):
     return fig
 
 
-def plot_shared_posterior(post, axes: Any = None):
+def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
     """The marginal posteriors of a pooled diagnosis's shared parameters
     (:func:`~bayespilot.diagnose.shared_posterior`), with the pooled fit and its +-1 standard
-    error and the central 90 % interval marked."""
+    error and the central 90 % interval marked.
+
+    Parameters
+    ----------
+    post : SharedPosterior
+        The posterior :func:`~bayespilot.diagnose.shared_posterior` returned
+        (also a pooled diagnosis's ``posterior``).
+    axes : sequence of matplotlib Axes, optional
+        One per shared parameter, in a row; default: a new figure.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     names = list(post.names)
     fig, axes = _axes_row(len(names), axes)
     for a, (ax, n) in enumerate(zip(axes, names)):
@@ -360,8 +489,33 @@ def _png(fig, path: Path) -> Path:
     return path
 
 
-def write_report(result, directory) -> dict[str, Path]:
-    """Write the figures, ``report.html`` and ``diagnosis.json`` to ``directory``."""
+def write_report(result: DiagnosisResult, directory: str | Path) -> dict[str, Path]:
+    """Write the figures, ``report.html`` and ``diagnosis.json`` to ``directory``.
+
+    Parameters
+    ----------
+    result : DiagnosisResult
+        A single-run diagnosis (a pooled one writes its own report,
+        :meth:`PooledDiagnosisResult.report`).
+    directory : str or Path
+        Created, with its parents, if missing; files of the same names in it
+        are replaced.
+
+    Returns
+    -------
+    dict of str to Path
+        The files by name: ``frequency_response``, ``residuals``,
+        ``evidence`` and ``candidates`` (PNG), ``profile`` (PNG, when the
+        chosen extension has profile intervals), ``posterior`` (PNG, when
+        ``result.posterior`` is set), ``json`` (``diagnosis.json``,
+        :meth:`DiagnosisResult.to_json`) and ``html`` (``report.html``, the
+        figures embedded).
+
+    Raises
+    ------
+    OSError
+        ``directory`` cannot be created or a file in it written.
+    """
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     paths = {

@@ -19,12 +19,15 @@ returns a matplotlib Figure.
 
 from __future__ import annotations
 
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from ..plots import _pyplot
 from .result import FitResult
+
+if TYPE_CHECKING:  # pragma: no cover
+    from matplotlib.figure import Figure
 
 __all__ = ["plot_step_one_thresholds", "plot_ga_convergence", "plot_step_two", "plot_step_three"]
 
@@ -49,7 +52,8 @@ def _grid(n: int, ncols: int | None = None):
 
 
 def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
-                             ncols: int | None = None, true_value: float | None = PASSIVE_THRESHOLD):
+                             ncols: int | None = None,
+                             true_value: float | None = PASSIVE_THRESHOLD) -> Figure:
     """Fig. 6: the Step I delta_abs of every repetition, ordered by -ln L.
 
     Parameters
@@ -100,15 +104,39 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
 
 def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
                         parameters: Sequence[str] = ("K_v", "K_m", "tau_m", "delta_abs"),
-                        repetitions: int = 3):
+                        repetitions: int = 3) -> Figure:
     """Fig. 7: the best-so-far individual over the GA generations.
 
     Rows are -ln L and ``parameters``; columns are the fits (conditions); each
     panel shows ``repetitions`` GA runs as separate lines.
 
+    Parameters
+    ----------
+    results : sequence of FitResult
+        Fits by :func:`~bayespilot.fit.three_step.fit_paper` (method
+        ``"paper"``, with its steps), one column each.
+    labels : sequence of str, optional
+        Column titles, one per fit (default "fit 1", "fit 2", ...).
+    parameters : sequence of str
+        Parameters drawn below -ln L, one row each, as the best-so-far
+        individual's values; each must have been estimated in Step I.
+        Default K_v, K_m, tau_m and delta_abs.
+    repetitions : int, default 3
+        GA runs drawn per fit: the first ones in repetition order (not the
+        best), or all of them if the fit has fewer.
+
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    TypeError
+        If an entry of ``results`` is not a FitResult.
+    ValueError
+        If ``results`` is empty, ``repetitions`` < 1, a fit is not by the
+        paper's three-step procedure, or a name in ``parameters`` was not
+        estimated in Step I (delta_abs in a fit without threshold).
     """
     plt = _pyplot()
     results = list(results)
@@ -149,12 +177,30 @@ def _one_row(results: Sequence[FitResult]):
     return results, fig, axes
 
 
-def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = None):
+def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = None) -> Figure:
     """Fig. 8: -ln L per repetition after Step I (grey) and Step II (black).
+
+    Parameters
+    ----------
+    results : sequence of FitResult
+        Fits by :func:`~bayespilot.fit.three_step.fit_paper` (method
+        ``"paper"``, with its steps), one panel each, in a row.  In each panel
+        the repetitions are in run order, and the Step II refinement kept
+        (the lowest -ln L) is circled.
+    labels : sequence of str, optional
+        Panel titles, one per fit (default "fit 1", "fit 2", ...).
 
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    TypeError
+        If an entry of ``results`` is not a FitResult.
+    ValueError
+        If ``results`` is empty or a fit is not by the paper's three-step
+        procedure.
     """
     results, fig, axes = _one_row(results)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):
@@ -175,16 +221,40 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
     return fig
 
 
-def plot_step_three(results: Sequence[FitResult], labels: Sequence[str] | None = None):
+def plot_step_three(results: Sequence[FitResult],
+                    labels: Sequence[str] | None = None) -> Figure:
     """Fig. 9: -ln L along delta_abs (Step II parameters fixed) with the estimates marked.
 
     The Step I estimates of each repetition are crosses on the curve, the
     Step II value (the mean of the best Step I runs) an open circle and a
     vertical line, the final minimum a filled circle and a vertical line.
 
+    Parameters
+    ----------
+    results : sequence of FitResult
+        Fits with threshold by :func:`~bayespilot.fit.three_step.fit_paper`
+        (method ``"paper"``, with its steps), one panel each, in a row.
+    labels : sequence of str, optional
+        Panel titles, one per fit (default "fit 1", "fit 2", ...).
+
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    TypeError
+        If an entry of ``results`` is not a FitResult.
+    ValueError
+        If ``results`` is empty, a fit is not by the paper's three-step
+        procedure, or a fit has no Step III scan (fitted without threshold).
+
+    Notes
+    -----
+    Only the first Step III scan of each fit is drawn: for a fit made with
+    ``iterate=True`` the filled circle is the minimum of the first pass, not
+    necessarily the fit's final delta_abs.  The crosses and the open circle
+    are placed on the curve by linear interpolation of the scanned -ln L.
     """
     results, fig, axes = _one_row(results)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):

@@ -225,7 +225,29 @@ def encode(x: np.ndarray, lower: Sequence[float], upper: Sequence[float],
 
 
 def resolution(lower: Sequence[float], upper: Sequence[float], bits: int = 20) -> np.ndarray:
-    """Grid step of each parameter, ``(upper - lower) / (2**bits - 1)``."""
+    """Grid step of each parameter, ``(upper - lower) / (2**bits - 1)``.
+
+    Parameters
+    ----------
+    lower, upper : array_like, shape (n,)
+        Finite bounds, ``lower < upper``.
+    bits : int, default 20
+        Bits per parameter, 2..52 (the paper: 20).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The step between neighbouring values :func:`decode` can give, in
+        the units of each parameter.
+
+    Raises
+    ------
+    ValueError
+        If the bounds are not 1-D of one length >= 1, not finite, or not
+        ``lower < upper``, or ``bits`` is outside 2..52.
+    TypeError
+        If ``bits`` is not an integer.
+    """
     lo, hi = _bounds(lower, upper)
     bits = _int("bits", bits, 2, MAX_BITS)
     return (hi - lo) / (2**bits - 1)
