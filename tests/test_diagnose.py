@@ -612,3 +612,29 @@ def test_bayes_factor_weighs_the_chosen_or_the_top_candidate(washout_case, contr
     with pytest.raises(ValueError, match="unknown extension"):
         bayes_factor(control_result, crec, physics="wind")
     _refuses_another_recording(bayes_factor, res, rec)
+
+
+def test_candidates_plot_marks_the_threshold_each_test_used(control_result):
+    """The black mark of each candidate sits where its own p-value reaches the level per
+    candidate (chi-bar-squared for a one-parameter boundary null, chi2(df) otherwise)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from bayespilot.diagnose import decide as D
+    from bayespilot.diagnose.report import plot_candidates
+
+    res = control_result
+    level = res.settings["level_per_candidate"]
+    fig = plot_candidates(res)
+    marks = [line.get_xdata()[0] for line in fig.axes[0].lines]
+    rows = [c for c in res.ranking if c.testable and c.df > 0]
+    assert len(marks) == len(rows) >= 4
+    kinds = set()
+    for c, x in zip(rows, marks):
+        ext = get_extension(c.physics)
+        assert D.lr_p_value(2.0 * x, ext) == pytest.approx(level, rel=1e-9)
+        kinds.add(ext.boundary_null and ext.df == 1)
+    assert kinds == {True, False}  # both kinds of test are on the plot
+    plt.close(fig)

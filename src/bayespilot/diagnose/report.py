@@ -255,13 +255,15 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     matplotlib.figure.Figure
         One bar per testable candidate, d(-ln L) on a symlog axis (red:
         justified), its p-value beside it, and for an entry with new
-        parameters a black mark at 0.5 times the chi2(df) quantile at the
-        level per candidate.  That mark is the threshold of a plain chi2(df)
-        test: the test of a one-parameter boundary null, whose p-value is
-        halved, passes below it (from 0.5 times the chi2(1) quantile at twice
-        the level), and a calibrated test may need more.
+        parameters a black mark at the d(-ln L) its test needs at the level
+        per candidate: half the chi2(df) quantile at the level, or for a
+        one-parameter boundary null (chi-bar-squared: the p-value halved)
+        half the chi2(1) quantile at twice the level; times the bootstrap's
+        scale where the test was calibrated and the scale is above 1.
     """
     from scipy import stats
+
+    from .catalogue import get_extension
 
     fig, ax = _figure_and_axes(ax)
     rows = [c for c in result.ranking if c.testable]
@@ -271,7 +273,11 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     ax.barh(range(len(rows)), d, color=["C3" if c.justified else "C0" for c in rows])
     for i, c in enumerate(rows):
         if c.df > 0:
-            crit = 0.5 * stats.chi2.isf(level, c.df)
+            # the threshold of the test that decided (decide.lr_p_value, calibrate.Calibration)
+            boundary = get_extension(c.physics).boundary_null and c.df == 1
+            crit = 0.5 * stats.chi2.isf(2.0 * level if boundary else level, c.df)
+            if c.calibration is not None:
+                crit *= max(1.0, c.calibration.scale)
             ax.plot([crit, crit], [i - 0.4, i + 0.4], "k-", lw=2)
         p = "0" if c.p_value == 0 else f"{c.p_value:.2g}"
         ax.text(max(d[i], 0) * 1.02 + 0.1, i, f"p = {p}", va="center", fontsize=8)
