@@ -282,3 +282,13 @@ def test_replicate_cli_usage_errors(tmp_path, capsys, argv, message):
     code = main(["replicate", "--out", str(tmp_path / "x"), "--method", "fast", *argv])
     err = capsys.readouterr().err
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_job_seed_refuses_an_unknown_task_or_stream():
+    from bayespilot.campaign import job_seed
+
+    assert job_seed("fit", "FT", 0.5, 0.3, 2) != job_seed("fit", "FD", 0.5, 0.3, 2)
+    with pytest.raises(ValueError, match="task must be one of FD, FT, got 'XX'"):
+        job_seed("fit", "XX", 0.5, 0.3, 2)
+    with pytest.raises(ValueError, match="stream must be"):
+        job_seed("noise", "FD", 0.5, 0.3, 2)

@@ -125,6 +125,9 @@ def test_paper_fit_small_is_reproducible_and_serialises(sim, tmp_path):
     for plot in (plot_step_two, plot_step_three):
         with pytest.raises(ValueError, match="no fits"):
             plot([])
+    for plot in (plot_step_two, plot_step_three, plot_ga_convergence):
+        with pytest.raises(ValueError, match="1 labels for 2 fits"):
+            plot([a, back], labels=["a"])
 
 
 def test_iterated_steps_two_and_three_reach_the_optimum_the_single_pass_misses():

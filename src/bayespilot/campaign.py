@@ -111,9 +111,7 @@ def job_seed(stream: str, task: str, motion_gain: float, remnant_fraction: float
     Raises
     ------
     ValueError
-        If ``stream`` is not "remnant" or "fit".
-    KeyError
-        If ``task`` is not "FD" or "FT".
+        If ``stream`` is not "remnant" or "fit", or ``task`` not "FD" or "FT".
 
     Examples
     --------
@@ -124,6 +122,8 @@ def job_seed(stream: str, task: str, motion_gain: float, remnant_fraction: float
     """
     if stream not in _STREAMS:
         raise ValueError(f"stream must be 'remnant' or 'fit', got {stream!r}")
+    if task not in _TASK_CODE:
+        raise ValueError(f"task must be one of {', '.join(_TASK_CODE)}, got {task!r}")
     entropy = [SEED_ROOT, _STREAMS[stream], _TASK_CODE[task], int(round(1e4 * motion_gain)),
                int(round(1e4 * remnant_fraction)), int(realization)]
     return int(np.random.SeedSequence(entropy).generate_state(1, np.uint64)[0] >> np.uint64(1))

@@ -134,9 +134,10 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     TypeError
         If an entry of ``results`` is not a FitResult.
     ValueError
-        If ``results`` is empty, ``repetitions`` < 1, a fit is not by the
-        paper's three-step procedure, or a name in ``parameters`` was not
-        estimated in Step I (delta_abs in a fit without threshold).
+        If ``results`` is empty, ``repetitions`` < 1, ``labels`` is not one per
+        fit, a fit is not by the paper's three-step procedure, or a name in
+        ``parameters`` was not estimated in Step I (delta_abs in a fit
+        without threshold).
     """
     plt = _pyplot()
     results = list(results)
@@ -144,6 +145,7 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
         raise ValueError("no fits to plot")
     if repetitions < 1:
         raise ValueError(f"repetitions must be >= 1, got {repetitions}")
+    _check_labels(labels, len(results))
     rows = ["-ln L", *parameters]
     fig, axes = plt.subplots(len(rows), len(results), figsize=(3.0 * len(results), 1.7 * len(rows)),
                              sharex=True, squeeze=False)
@@ -167,11 +169,18 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     return fig
 
 
-def _one_row(results: Sequence[FitResult]):
+def _check_labels(labels: Sequence[str] | None, n: int) -> None:
+    """One label per column, or none."""
+    if labels is not None and len(labels) != n:
+        raise ValueError(f"{len(labels)} labels for {n} fits")
+
+
+def _one_row(results: Sequence[FitResult], labels: Sequence[str] | None = None):
     """The fits as a list and a figure with one panel per fit in a row (Figs. 8 and 9)."""
     results = list(results)
     if not results:
         raise ValueError("no fits to plot")
+    _check_labels(labels, len(results))
     fig, axes = _pyplot().subplots(1, len(results), figsize=(3.0 * len(results), 2.8),
                                    squeeze=False)
     return results, fig, axes
@@ -199,10 +208,10 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
     TypeError
         If an entry of ``results`` is not a FitResult.
     ValueError
-        If ``results`` is empty or a fit is not by the paper's three-step
-        procedure.
+        If ``results`` is empty, ``labels`` is not one per fit, or a fit is
+        not by the paper's three-step procedure.
     """
-    results, fig, axes = _one_row(results)
+    results, fig, axes = _one_row(results, labels)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):
         steps = _paper_fit(fit, "plot_step_two")
         before = np.array([r["fun"] for r in steps["step1"]["runs"]])
@@ -246,8 +255,9 @@ def plot_step_three(results: Sequence[FitResult],
     TypeError
         If an entry of ``results`` is not a FitResult.
     ValueError
-        If ``results`` is empty, a fit is not by the paper's three-step
-        procedure, or a fit has no Step III scan (fitted without threshold).
+        If ``results`` is empty, ``labels`` is not one per fit, a fit is not
+        by the paper's three-step procedure, or a fit has no Step III scan
+        (fitted without threshold).
 
     Notes
     -----
@@ -256,7 +266,7 @@ def plot_step_three(results: Sequence[FitResult],
     necessarily the fit's final delta_abs.  The crosses and the open circle
     are placed on the curve by linear interpolation of the scanned -ln L.
     """
-    results, fig, axes = _one_row(results)
+    results, fig, axes = _one_row(results, labels)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):
         steps = _paper_fit(fit, "plot_step_three")
         if not steps.get("step3"):
