@@ -622,6 +622,17 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     -------
     DiagnosisResult
 
+    Raises
+    ------
+    TypeError
+        If ``recording`` is not a Recording.
+    ValueError
+        If ``alpha`` is not in (0, 1); ``n_bootstrap`` or ``n_calibrate`` is
+        not an integer >= 0; ``noise_passes`` or ``oversample`` is not an
+        integer in its range; ``skip_seconds`` is not in [0, half the
+        recording); a name in ``candidates`` is not in the catalogue; or
+        ``n_calibrate`` is asked for with ``profile_noise=True``.
+
     Examples
     --------
     >>> from bayespilot.simulate import simulate

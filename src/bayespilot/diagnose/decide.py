@@ -1020,7 +1020,7 @@ def null_refit(ext: Extension, base_model: PilotModel, recording: Recording,
     mostly near w_soft = 1e-5 and better by 4.5-41 in -ln L.  Starting the base model from the
     extension's parameters (its new ones dropped: the extended model at
     their null values is the base model) finds that basin for the base
-    model too.  Returns ``None`` when the candidate has no fit.
+    model too.  Returns ``None`` when there is nothing to refit from (below).
 
     Parameters
     ----------

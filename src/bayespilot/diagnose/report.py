@@ -1,7 +1,9 @@
 """Show a diagnosis: PNG figures, a self-contained HTML report and a JSON summary.
 
-Every plotting function takes a :class:`~bayespilot.diagnose.DiagnosisResult`
-and an optional list of axes, and returns the figure (it never calls
+Every plotting function takes a result (a single-run
+:class:`~bayespilot.diagnose.DiagnosisResult`; :func:`plot_candidates` also a pooled
+one, :func:`plot_shared_posterior` a ``SharedPosterior``, :func:`plot_batch` the
+diagnoses' dicts) and optional axes, and returns the figure (it never calls
 ``plt.show()``); :func:`write_report` writes them all.
 """
 
