@@ -3,6 +3,8 @@ against scipy.stats, the catalogue's physics, and decisions on simulated recordi
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy import signal, stats
@@ -638,3 +640,24 @@ def test_candidates_plot_marks_the_threshold_each_test_used(control_result):
         kinds.add(ext.boundary_null and ext.df == 1)
     assert kinds == {True, False}  # both kinds of test are on the plot
     plt.close(fig)
+
+
+def test_lr_p_value_is_the_null_tail_probability():
+    """P(T >= t): chi2(df) tail; for a one-parameter boundary null the chi-bar-squared mixture
+    0.5 chi2(0) + 0.5 chi2(1), whose point mass at 0 makes the p-value 1 there."""
+    from scipy import stats
+
+    from bayespilot.diagnose import decide as D
+
+    washout, drift = get_extension("motion-washout"), get_extension("time-varying-gains")
+    assert washout.boundary_null and washout.df == 1 and drift.df == 2
+    assert D.lr_p_value(0.0, washout) == 1.0
+    assert D.lr_p_value(1e-12, washout) == pytest.approx(0.5, abs=1e-5)
+    assert D.lr_p_value(3.0, washout) == pytest.approx(0.5 * stats.chi2.sf(3.0, 1))
+    assert D.lr_p_value(0.0, drift) == 1.0
+    assert D.lr_p_value(3.0, drift) == pytest.approx(math.exp(-1.5))
+    # a Monte Carlo of the mixture agrees at a few points
+    rng = np.random.default_rng(0)
+    t = np.where(rng.random(200_000) < 0.5, 0.0, rng.chisquare(1, 200_000))
+    for x in (0.0, 0.5, 2.7):
+        assert D.lr_p_value(x, washout) == pytest.approx(np.mean(t >= x), abs=0.005)

@@ -794,12 +794,16 @@ def lr_p_value(stat: float, ext: Extension) -> float:
     Returns
     -------
     float
-        The asymptotic p-value: chi2(df)'s survival function at ``stat``,
-        halved for a one-parameter boundary null (so 0.5, not 1, at
-        ``stat = 0``); 1 for an entry without new parameters (df = 0).
+        The asymptotic p-value, P(T >= ``stat``) under the null: chi2(df)'s
+        survival function at ``stat``; for a one-parameter boundary null
+        half of chi2(1)'s for ``stat > 0`` and 1 at ``stat = 0`` (the
+        mixture's point mass at 0 counts); 1 for an entry without new
+        parameters (df = 0).
     """
     p = float(stats.chi2.sf(stat, ext.df)) if ext.df > 0 else 1.0
-    return 0.5 * p if ext.boundary_null and ext.df == 1 else p
+    if ext.boundary_null and ext.df == 1 and stat > 0:
+        return 0.5 * p
+    return p
 
 
 def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
