@@ -65,6 +65,28 @@ def test_describing_function_needs_whole_periods():
         describing_function(rec.u, rec.e, rec.theta_ddot_m, fo)
 
 
+@pytest.mark.parametrize("duration, whole", [(40.96, False), (60.0, False), (81.92, True)])
+def test_forcing_from_the_columns_knows_whole_periods_as_the_sidecar_does(duration, whole):
+    """Without the sidecar's ``forcing`` the multisines are read from f_t and f_d, whose DFT
+    lines are bins by construction: a record cut mid-period must not pass as periodic (its
+    smeared columns share hundreds of lines), and a whole one gives the sidecar's bins."""
+    from bayespilot.recording import Recording
+
+    rec = simulate(task="FT", motion_gain=1.0, remnant_gain=0.063, seed=1,
+                   duration=duration).recording
+    meta = {k: v for k, v in rec.metadata.items() if k != "forcing"}
+    cols = forcing_of(Recording(dict(rec.signals), rec.sample_rate_hz, rec.motion_gain,
+                                rec.task, meta, rec.source))
+    side = forcing_of(rec)
+    assert side.periodic is whole and cols.periodic is whole
+    if whole:
+        np.testing.assert_array_equal(cols.k_target, side.k_target)
+        np.testing.assert_array_equal(cols.k_disturbance, side.k_disturbance)
+    else:
+        with pytest.raises(ValueError, match="whole periods"):
+            describing_function(rec.u, rec.e, rec.theta_ddot_m, cols)
+
+
 def test_censored_likelihood_matches_scipy():
     rng = make_rng(3)
     n = 400

@@ -122,6 +122,18 @@ def _multisine_from_signal(x: np.ndarray, dt: float) -> Multisine:
     return Multisine(w0, k, amp, phase)
 
 
+def _wraps_smoothly(x: np.ndarray) -> bool:
+    """True if ``x`` continues smoothly from its last sample to its first, as a record of whole
+    periods does: the second differences across the wrap are no larger than 3 times the
+    largest inside the record (a record cut mid-period jumps there)."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 4:
+        return False
+    inside = np.max(np.abs(np.diff(x, 2)))
+    wrap = max(abs(x[1] - 2 * x[0] + x[-1]), abs(x[0] - 2 * x[-1] + x[-2]))
+    return bool(wrap <= 3.0 * inside + 1e-12 * np.max(np.abs(x)))
+
+
 def forcing_of(recording: Recording) -> Forcing | None:
     """The recording's forcing functions: from its sidecar (``forcing``) or its f_t/f_d columns.
 
@@ -134,7 +146,12 @@ def forcing_of(recording: Recording) -> Forcing | None:
         Its metadata's ``forcing`` (``base_frequency``, rad/s, and the
         ``target`` and ``disturbance`` multisines), else its ``f_t`` and
         ``f_d`` columns, each taken as a multisine of its DFT lines above
-        1e-3 of the largest.
+        1e-3 of the largest.  From the columns, the bins are kept only when
+        both columns wrap smoothly from their end to their start (whole
+        periods) and the two sets of lines are disjoint (separate
+        frequencies, as the two-input estimate needs): a record cut
+        mid-period smears each column over hundreds of lines that the two
+        share.
 
     Returns
     -------
@@ -161,6 +178,12 @@ def forcing_of(recording: Recording) -> Forcing | None:
     for f in (ft, fd):
         k = f.frequencies * T / (2 * np.pi)
         kk.append(np.rint(k).astype(int) if np.all(np.abs(k - np.rint(k)) < 1e-3) else None)
+    if not isinstance(meta, Mapping) and (
+            not (_wraps_smoothly(recording["f_t"]) and _wraps_smoothly(recording["f_d"]))
+            or np.intersect1d(ft.n, fd.n).size):
+        # lines read from the columns are DFT bins by construction; the test above cannot
+        # tell a record of whole periods from a smeared one
+        kk = [None, None]
     f_t = recording["f_t"] if "f_t" in recording else ft(t)
     f_d = recording["f_d"] if "f_d" in recording else fd(t)
     return Forcing(ft, fd, kk[0], kk[1], np.asarray(f_t), np.asarray(f_d))
