@@ -234,6 +234,12 @@ def test_diagnose_rejects_bad_input():
         diagnose(rec, alpha=0.0)
     with pytest.raises(ValueError, match="unknown extension"):
         diagnose(rec, candidates=["gravity"])
+    with pytest.raises(ValueError, match="the string 'motion-washout'"):
+        diagnose(rec, candidates="motion-washout")
+    with pytest.raises(ValueError, match="names an entry twice"):
+        diagnose(rec, candidates=["motion-washout", "motion-washout"])
+    with pytest.raises(ValueError, match="candidates is empty"):
+        diagnose(rec, candidates=[])
 
 
 @pytest.fixture(scope="module")

@@ -52,6 +52,9 @@ def control_run():
 def test_calibration_of_a_washout_on_a_control(control_run):
     rec, run = control_run
     ext = get_extension("motion-washout")
+    for runs, recs in (([run], [rec, rec]), ([run, run], [rec]), ([], [])):
+        with pytest.raises(ValueError, match="one recording per run"):
+            calibrate_candidate(ext, runs, recs, 1.0, n_replicates=1)
     d = 1.3  # an observed improvement to calibrate (the test's input, not this run's)
     cal = calibrate_candidate(ext, [run], [rec], d, n_replicates=4, seed=5, n_starts=2)
     assert isinstance(cal, Calibration) and cal.replicates == 4

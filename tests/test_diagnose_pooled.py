@@ -88,6 +88,8 @@ def test_pooled_rejects_bad_input(washout_runs):
         diagnose_pooled([washout_runs[0], washout_runs[1].u])
     with pytest.raises(ValueError, match="unknown extension"):
         diagnose_pooled(washout_runs, candidates=["gravity"])
+    with pytest.raises(ValueError, match="names an entry twice"):
+        diagnose_pooled(washout_runs, candidates=["motion-washout"] * 2)
     with pytest.raises(ValueError, match="noise_passes"):
         diagnose_pooled(washout_runs, noise_passes=0)
 

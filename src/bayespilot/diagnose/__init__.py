@@ -300,9 +300,17 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1
             or not 1 <= oversample <= MAX_OVERSAMPLE:
         raise ValueError(f"oversample must be an integer in [1, {MAX_OVERSAMPLE}], "
                          f"got {oversample!r}")
+    if isinstance(candidates, str):
+        raise ValueError(f"candidates must be a list of catalogue names, got the string "
+                         f"{candidates!r} (write [{candidates!r}])")
     names = NAMES if candidates is None else tuple(candidates)
     for n in names:
         get_extension(n)
+    if len(set(names)) != len(names):
+        # each name is one test of the Bonferroni split: a repeat would lower the level
+        raise ValueError(f"candidates names an entry twice: {list(names)}")
+    if not names:
+        raise ValueError("candidates is empty: name at least one catalogue entry (None: all)")
     return names
 
 
@@ -630,7 +638,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         If ``alpha`` is not in (0, 1); ``n_bootstrap`` or ``n_calibrate`` is
         not an integer >= 0; ``noise_passes`` or ``oversample`` is not an
         integer in its range; ``skip_seconds`` is not in [0, half the
-        recording); a name in ``candidates`` is not in the catalogue; or
+        recording); ``candidates`` is a string, empty, repeats a name or names
+        one that is not in the catalogue; or
         ``n_calibrate`` is asked for with ``profile_noise=True``.
 
     Examples

@@ -241,6 +241,13 @@ def calibrate_candidate(ext: Extension, runs: Sequence[Any], recordings: Sequenc
     Calibration or None
         None when a run has no forcing to simulate (the asymptotic test stands)
         or no replicate succeeded.
+
+    Raises
+    ------
+    ValueError
+        If ``ext`` is not tested by the GLS likelihood, ``n_replicates`` is not
+        a positive integer, or ``runs`` and ``recordings`` are not one each,
+        at least one.
     """
     from . import decide as D
 
@@ -248,6 +255,10 @@ def calibrate_candidate(ext: Extension, runs: Sequence[Any], recordings: Sequenc
         raise ValueError(f"{ext.name} is not tested by the GLS likelihood")
     if not isinstance(n_replicates, (int, np.integer)) or n_replicates < 1:
         raise ValueError(f"n_replicates must be a positive integer, got {n_replicates!r}")
+    runs, recordings = list(runs), list(recordings)
+    if not runs or len(runs) != len(recordings):
+        raise ValueError(f"need one recording per run, at least one: got {len(runs)} runs and "
+                         f"{len(recordings)} recordings")
     gens = [_generator(run, rec) for run, rec in zip(runs, recordings)]
     if any(g is None for g in gens):
         return None
