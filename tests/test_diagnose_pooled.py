@@ -406,3 +406,34 @@ def test_shared_posterior_of_two_shared_parameters():
         assert m["interval"][0] < p[n] < m["interval"][1]
     with pytest.raises(ValueError, match="n_grid"):
         shared_posterior(res, recs, n_grid=3)
+
+
+def test_pooled_refine_reports_the_covariance_of_the_point_it_returns(washout_runs,
+                                                                     washout_result,
+                                                                     monkeypatch):
+    """When the optimiser's solution is worse than the start, the start is returned, and so is
+    the covariance at the start (not the rejected solution's)."""
+    from types import SimpleNamespace
+
+    from bayespilot.diagnose import pooled as P
+
+    c = washout_result.chosen
+    wls = [D.Whitened(c.model, rec, nz) for rec, nz in zip(washout_runs, c.noise)]
+    qs = [r["params"] for r in washout_result.runs]
+    names = tuple(n for n in c.model.parameter_names if n not in ("omega_w", "delta_abs"))
+    bases = [D.FitSummary(q, math.nan, (), np.zeros((0, 0))) for q in qs]
+    ps, f, cov = P._pooled_refine(wls, bases, names, ("omega_w",), {"omega_w": qs[0]["omega_w"]})
+    assert cov[0, 0] > 0
+
+    real = P.optimize.least_squares
+
+    def worse(fun, x0, **kw):  # a "solution" far off, with a Jacobian that says nothing
+        sol = real(fun, x0, **kw)
+        bad = np.clip(x0 * 1.3, kw["bounds"][0], kw["bounds"][1])
+        return SimpleNamespace(x=bad, jac=np.zeros_like(sol.jac))
+
+    monkeypatch.setattr(P.optimize, "least_squares", worse)
+    ps2, f2, cov2 = P._pooled_refine(wls, bases, names, ("omega_w",),
+                                     {"omega_w": qs[0]["omega_w"]})
+    assert f2 == pytest.approx(sum(wl.neg_log_lik(q) for wl, q in zip(wls, qs)), abs=1e-6)
+    assert cov2[0, 0] > 0 and cov2[0, 0] == pytest.approx(cov[0, 0], rel=0.05)

@@ -348,6 +348,14 @@ def _pooled_refine(wls, bases, names, shared, start_shared, *, max_nfev: int = 6
     f = total(ps)
     if not math.isfinite(f) or f > f_start:
         ps, f = params_of(x_start), f_start
+        # the covariance of the point reported (each run scaled by its noise level there),
+        # not of the solution thrown away
+        scale0 = []
+        for r, q in enumerate(ps):
+            w = run_resid(r, q)
+            scale0.append(1.0 / math.sqrt(max(float(np.mean(w * w)), 1e-300)) if w is not None
+                          else 1.0)
+        J = jac(x_start, scale=scale0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cov = linalg.pinvh(J.T @ J) if J is not None else np.full((R * p + k,) * 2, np.nan)
