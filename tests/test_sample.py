@@ -467,3 +467,29 @@ def test_more_walkers_than_draws_keeps_the_axes_without_arviz_warning(short_sim)
     n_draws = post.settings["n_draws"]
     assert 0 < n_draws < 32
     assert post.idata.posterior["K_v"].shape == (32, n_draws)
+
+
+def test_backend_of_another_support_or_not_hdf5_is_refused(short_sim, tmp_path):
+    """A chain is resumed only by the same run: a same-named model whose bounds differ samples
+    another posterior; a file that is not HDF5 is named in a clear error."""
+    import dataclasses
+
+    from bayespilot.model import paper_model
+
+    model = paper_model()
+    narrow = dataclasses.replace(model, parameters=tuple(
+        dataclasses.replace(p, upper=0.02) if p.name == "delta_abs" else p
+        for p in model.parameters))
+    assert narrow.name == model.name
+    kw = dict(SHORT, n_walkers=16, max_steps=20, min_steps=0, check_every=20,
+              init=short_sim.params, seed=3)
+    h5 = tmp_path / "chain.h5"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        sample(short_sim.recording, model, backend=h5, **kw)
+        with pytest.raises(ValueError, match="differs in: support"):
+            sample(short_sim.recording, narrow, backend=h5, **dict(kw, max_steps=40))
+        junk = tmp_path / "junk.h5"
+        junk.write_text("not a chain")
+        with pytest.raises(ValueError, match="junk.h5 is not an HDF5 file"):
+            sample(short_sim.recording, model, backend=junk, **kw)

@@ -544,11 +544,18 @@ def _read_backend_tau(backend, ndim, default):
     return v if (v is not None and v.shape == (ndim,)) else default
 
 
+#: Fingerprint keys added after chains were first written (such a chain lacks them).
+_FINGERPRINT_ADDED = ("support",)
+
+
 def _open_backend(path, fingerprint: dict, n_walkers: int, ndim: int):
     """An emcee HDFBackend at ``path``; (backend, resuming).  Raises if it holds another run."""
     import h5py
     from emcee.backends import HDFBackend
 
+    if Path(path).exists() and not (Path(path).is_file() and h5py.is_hdf5(str(path))):
+        raise ValueError(f"backend {path} is not an HDF5 file; give another path (.h5) or "
+                         "delete the file")
     backend = HDFBackend(str(path), name=_BACKEND_GROUP)
     if not backend.initialized:
         return backend, False
@@ -560,7 +567,9 @@ def _open_backend(path, fingerprint: dict, n_walkers: int, ndim: int):
         raise ValueError(f"backend {path} holds an emcee chain not written by bayespilot.sample; "
                          "give another path or delete the file")
     stored = json.loads(stored)
-    diff = sorted(k for k in set(stored) | set(fingerprint) if stored.get(k) != fingerprint.get(k))
+    # a chain written before a key was added to the fingerprint is not refused for lacking it
+    diff = sorted(k for k in set(stored) | set(fingerprint) if stored.get(k) != fingerprint.get(k)
+                  and not (k in _FINGERPRINT_ADDED and k not in stored))
     if backend.shape != (n_walkers, ndim):
         diff.append(f"shape {tuple(backend.shape)} != {(n_walkers, ndim)}")
     if diff:
@@ -594,6 +603,9 @@ def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str
     h.update(repr((recording.sample_rate_hz, recording.motion_gain)).encode())
     return {"recording_sha256": h.hexdigest(), "model": model.name,
             "parameter_names": list(names), "fixed": {k: float(v) for k, v in model.fixed.items()},
+            # the prior's support: the model's bounds (a same-named model with other bounds is
+            # another run) and a mapping prior's truncation
+            "support": [[float(a), float(b)] for a, b in zip(prior.lo, prior.hi)],
             "likelihood": likelihood, "ar_order": order, "prior": prior.description,
             "n_walkers": n_walkers, "discard_seconds": lik.discard,
             "noise": None if lik.noise is None else lik.noise.to_dict(),
