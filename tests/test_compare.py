@@ -135,6 +135,11 @@ def test_robust_evidence_replaces_lost_runs_and_drops_late_ones():
     assert not ok and len(record) == 4 and ev.log_z == -903.0
     with pytest.raises(ValueError, match="n_runs"):
         robust_evidence(lambda a: script[a], 0, reference_max_log_lik=100.0)
+    # a run whose error is 0 (degenerate) weighs most instead of dividing by zero
+    script = [_ev(10.0, 0.0, 101.0, 1), _ev(11.0, 1.0, 101.0, 2)]
+    ev, record, ok = robust_evidence(lambda a: script[a], 2, reference_max_log_lik=100.0)
+    assert ok and ev.log_z == pytest.approx(10.0, abs=1e-9)
+    assert ev.log_z_err == pytest.approx(math.sqrt(0.5) / math.sqrt(2))  # the runs' spread
 
 
 def test_log_likelihood_at_is_eq4_in_closed_form():
@@ -189,6 +194,10 @@ def test_savage_dickey_bad_input():
         savage_dickey([0.5] * 20, lower=1.0, upper=0.0)
     with pytest.raises(ValueError, match="at least 10"):
         savage_dickey([0.5, 0.2], lower=0.0, upper=1.0)
+    # a stuck chain: every draw the same; no density, an invalid result that says why
+    for v in (0.0, 0.3):
+        sd = savage_dickey([v] * 40, lower=0.0, upper=1.0)
+        assert not sd.valid and sd.log_bayes_factor is None and "all" in sd.reason
 
 
 def _fake_posterior(delta_draws, prior="uniform on the model bounds; uniform(-0.99, 0.99) on pacf_j",
@@ -242,6 +251,10 @@ def test_jeffreys_and_decide():
         decide(float("nan"), 1.0)
     with pytest.raises(ValueError):
         decide(1.0, -1.0)
+    # numpy integers are numbers; a bool is not
+    assert decide(np.int64(8), 1) == "threshold" and jeffreys_category(np.int64(3)) == "strong"
+    with pytest.raises(ValueError, match="log_bf must be a number"):
+        jeffreys_category(True)
 
 
 def test_information_criteria_by_hand():

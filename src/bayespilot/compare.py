@@ -46,7 +46,10 @@ recording, three ways:
 
 3. **Information criteria** from the maximum-likelihood fits:
    AIC = 2k + 2(-ln L), BIC = k ln n + 2(-ln L), with k counting the output
-   error variance (and the AR coefficients).  ``delta_aic`` and
+   error variance (and the AR coefficients where they are estimated; a fixed
+   noise model's are not counted) and -ln L as Eq. 4 writes it (no 2 pi
+   constant): only the differences between the models are meaningful, and
+   neither choice changes them.  ``delta_aic`` and
    ``delta_bic`` are (none - threshold): positive favours the threshold.
 
 Decisions (:func:`decide`) use Jeffreys' scale on ln BF (Jeffreys 1961,
@@ -190,7 +193,8 @@ def jeffreys_category(log_bf: float) -> str:
     >>> jeffreys_category(-0.5)
     'barely worth mentioning'
     """
-    if not isinstance(log_bf, (int, float, np.floating)) or math.isnan(log_bf):
+    if isinstance(log_bf, bool) or not isinstance(log_bf, (int, float, np.integer, np.floating)) \
+            or math.isnan(log_bf):
         raise ValueError(f"log_bf must be a number, got {log_bf!r}")
     a = abs(float(log_bf))
     for upper, name in JEFFREYS:
@@ -236,7 +240,8 @@ def decide(log_bf: float, err: float = 0.0, *, level: float = DECISION_LEVEL,
     ('threshold', 'none', 'inconclusive')
     """
     for name, v in (("log_bf", log_bf), ("err", err), ("level", level), ("z", z)):
-        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or math.isnan(v):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or math.isnan(v):
             raise ValueError(f"{name} must be a number, got {v!r}")
     if err < 0 or level < 0 or z < 0:
         raise ValueError("err, level and z must be >= 0")
@@ -622,6 +627,11 @@ def savage_dickey(draws: Sequence[float] | np.ndarray, *, lower: float = 0.0, up
     p0 = 1.0 / (upper - lower) if prior_density is None else _check_pos("prior_density",
                                                                         prior_density)
     min_near = _check_int("min_near", min_near, 1)
+    if np.ptp(x) == 0:
+        # no spread, no density to estimate (arviz's KDE returns no bandwidth for it)
+        return SavageDickey(None, False, f"the {x.size} draws are all {x[0]:g} (a stuck chain?): "
+                            "no posterior density to estimate", None, p0, math.nan, math.nan,
+                            int(x.size), int(np.sum(x == lower)))
     az = _arviz()
     grid_len = int(min(2**16, max(512, 2 ** math.ceil(math.log2(
         16 * (upper - lower) / max(np.std(x), 1e-12 * (upper - lower)))))))
@@ -757,7 +767,8 @@ def information_criteria(neg_log_lik_threshold: float, neg_log_lik_none: float, 
     """
     for name, v in (("neg_log_lik_threshold", neg_log_lik_threshold),
                     ("neg_log_lik_none", neg_log_lik_none)):
-        if isinstance(v, bool) or not isinstance(v, (int, float, np.floating)) or math.isnan(v):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or math.isnan(v):
             raise ValueError(f"{name} must be a number, got {v!r}")
     k1 = _check_int("k_threshold", k_threshold, 1)
     k0 = _check_int("k_none", k_none, 1)
@@ -865,7 +876,9 @@ def robust_evidence(run: Callable[[int], Evidence], n_runs: int,
                                          "(found the main mode late)")
         else:
             good.append(ev)
-    w = np.array([1.0 / e.log_z_err**2 for e in good])
+    # inverse-variance weights; an error reported as 0 (a degenerate run) is floored, so that
+    # it weighs most instead of dividing by zero
+    w = np.array([1.0 / max(e.log_z_err, 1e-9) ** 2 for e in good])
     z = np.array([e.log_z for e in good])
     log_z = float(w @ z / w.sum())
     err = float(math.sqrt(1.0 / w.sum()))
