@@ -1311,9 +1311,11 @@ class PooledComparison:
     mean_log_bayes_factor : float
     t_statistic, t_pvalue : float
         One-sample t-test of the per-recording ln BF against 0 (= paired
-        t-test of ln Z with against without threshold); NaN for n < 2.
+        t-test of ln Z with against without threshold); NaN for n < 2 or when
+        every ln BF is the same (no spread to test against).
     wilcoxon_statistic, wilcoxon_pvalue : float
-        Wilcoxon signed-rank test of the same; NaN for n < 2.
+        Wilcoxon signed-rank test of the same; NaN for n < 2 or when every
+        ln BF is 0.
     label : str
     decision_note : str
         Why a guard changed the decision ("" if none did).
