@@ -55,3 +55,29 @@ def test_public_function_has_numpydoc_and_hints(func):
     missing = [n for n, p in sig.parameters.items() if p.annotation is inspect.Parameter.empty]
     assert not missing, f"no type hints for {missing}"
     assert sig.return_annotation is not inspect.Signature.empty, "no return annotation"
+
+
+def _modules_with_examples():
+    import doctest
+
+    finder = doctest.DocTestFinder()
+    out = []
+    for info in pkgutil.walk_packages(bayespilot.__path__, "bayespilot."):
+        mod = importlib.import_module(info.name)
+        if any(not ex.options.get(doctest.SKIP) for t in finder.find(mod) for ex in t.examples):
+            out.append(pytest.param(mod, id=info.name))
+    return out
+
+
+@pytest.mark.parametrize("module", _modules_with_examples())
+def test_docstring_examples_run(module):
+    """Every Examples section runs and prints what it shows."""
+    import doctest
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # e.g. the examples' deliberately short records
+        result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE,
+                                 report=False)
+    assert result.attempted > 0
+    assert result.failed == 0

@@ -50,3 +50,15 @@ def test_from_residual_round_trip_and_errors():
         fit_ar(x[:40], order=20)
     with pytest.raises(ValueError, match="more than 3 samples"):
         ARNoise([0.1, 0.1, 0.1]).whiten(np.ones(3))
+    # orders are integers, at least one is tried; coefficients are a 1-D sequence; a stored
+    # order agrees with its coefficients
+    with pytest.raises(ValueError, match="max_order must be >= 1"):
+        fit_ar(x, max_order=0)
+    for bad in (2.7, "3", True):
+        with pytest.raises(ValueError, match="order must be an integer"):
+            fit_ar(x, order=bad)
+    assert fit_ar(x, order=np.int64(1)).shape == (1,)
+    with pytest.raises(ValueError, match="1-D"):
+        ARNoise([[0.5, 0.1], [0.2, 0.3]])
+    with pytest.raises(ValueError, match="order 2 with 1 coefficients"):
+        ARNoise.from_dict({"kind": "ar", "order": 2, "a": [0.5]})

@@ -67,7 +67,8 @@ def fit_ar(x: np.ndarray, *, max_order: int = MAX_AR_ORDER, order: int | None = 
     Raises
     ------
     ValueError
-        A series that is not finite and 1-D, or an order of a quarter of its
+        A series that is not finite and 1-D; ``order`` or ``max_order`` not an
+        integer, ``max_order`` < 1; or an order of a quarter of the series'
         length or more.
 
     Examples
@@ -76,12 +77,17 @@ def fit_ar(x: np.ndarray, *, max_order: int = MAX_AR_ORDER, order: int | None = 
     >>> w = rng.standard_normal(20000)
     >>> x = np.zeros_like(w)
     >>> for k in range(2, w.size): x[k] = 1.2 * x[k - 1] - 0.5 * x[k - 2] + w[k]
-    >>> np.round(fit_ar(x, order=2), 2)
+    >>> np.round(fit_ar(x, order=2), 1)
     array([ 1.2, -0.5])
     """
     x = np.asarray(x, dtype=float)
     if x.ndim != 1 or not np.all(np.isfinite(x)):
         raise ValueError("x must be a finite 1-D array")
+    for name, v in (("max_order", max_order), ("order", order)):
+        if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))):
+            raise ValueError(f"{name} must be an integer, got {v!r}")
+    if order is None and max_order < 1:
+        raise ValueError(f"max_order must be >= 1, got {max_order}")
     x = x - x.mean()
     n = x.size
     orders = [int(order)] if order is not None else list(range(1, int(max_order) + 1))
@@ -128,7 +134,10 @@ class ARNoise:
     a: np.ndarray
 
     def __post_init__(self) -> None:
-        a = np.array(self.a, dtype=float).reshape(-1)
+        a = np.array(self.a, dtype=float)
+        if a.ndim > 1:
+            raise ValueError(f"AR coefficients must be a 1-D sequence, got shape {a.shape}")
+        a = a.reshape(-1)
         if not np.all(np.isfinite(a)):
             raise ValueError("AR coefficients must be finite")
         a.setflags(write=False)
@@ -160,7 +169,11 @@ class ARNoise:
     def from_dict(cls, d: Mapping[str, Any]) -> "ARNoise":
         if not isinstance(d, Mapping) or d.get("kind") != "ar" or "a" not in d:
             raise ValueError(f"not an AR noise model: {d!r}")
-        return cls(d["a"])
+        noise = cls(d["a"])
+        if "order" in d and d["order"] != noise.order:
+            raise ValueError(f"AR noise model of order {d['order']!r} with {noise.order} "
+                             f"coefficients: {d!r}")
+        return noise
 
     def __repr__(self) -> str:
         return f"ARNoise(order={self.order})"
