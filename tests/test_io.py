@@ -8,6 +8,7 @@ import json
 import os
 import re
 import shutil
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -330,10 +331,10 @@ def test_write_accepts_numpy_metadata(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs, signals, pattern", [
-    ({"notes": float("nan")}, {}, r"r\.json: metadata metadata\.notes is nan, which JSON cannot hold"),
+    ({"lab_value": float("nan")}, {},
+     r"r\.json: metadata metadata\.lab_value is nan, which JSON cannot hold"),
     ({"task": "FT"}, {}, r"r\.json: metadata reuses required key\(s\) task"),
     ({"obj": object()}, {}, r"r\.json: metadata metadata\.obj of type object cannot be written"),
-    ({"run": "three"}, {}, r"r\.json: run must be an integer, got 'three'"),
     ({}, {" x": np.zeros(50)}, r"r\.csv: column name ' x' cannot be written"),
 ])
 def test_write_refuses_what_the_reader_would_refuse(tmp_path, kwargs, signals, pattern):
@@ -341,6 +342,127 @@ def test_write_refuses_what_the_reader_would_refuse(tmp_path, kwargs, signals, p
     with pytest.raises(RecordingError, match=pattern):
         write_recording(rec, tmp_path / "r")
     assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------------------
+# a Recording built in Python is held to what a file is
+# ---------------------------------------------------------------------------
+def _signals(n: int = 50, rate: float = 100.0) -> dict[str, np.ndarray]:
+    t = np.arange(n) / rate
+    return {"t": t, "e": np.sin(t), "u": np.cos(t), "theta_ddot_m": 0 * t}
+
+
+def test_recording_refuses_complex_signal():
+    sig = _signals()
+    sig["e"] = sig["e"] + 1j * sig["u"]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(RecordingError, match=r"^run7: column 'e' is complex; only real values"):
+            Recording(sig, 100.0, 1.0, "FD", source="run7")
+    assert caught == []                                 # refused, not cast with a ComplexWarning
+
+
+@pytest.mark.parametrize("meta, pattern", [
+    ({"controlled_element_gain": float("nan")}, r"controlled_element_gain must be a finite number, got nan"),
+    ({"control_gain": "abc"}, r"control_gain must be a finite number, got 'abc'"),
+    ({"control_gain": np.float32(np.inf)}, r"control_gain must be a finite number, got inf"),
+    ({"controlled_element": {"num": [1.0], "den": [0, 0]}}, r"controlled_element\.den is all zeros"),
+    ({"controlled_element": {"num": [], "den": [1, 0, 0]}}, r"controlled_element\.num is empty"),
+    ({"controlled_element": {"num": [4.0], "den": [1, 0, 0]}, "controlled_element_gain": 4.0},
+     r"give either controlled_element or controlled_element_gain, not both"),
+    ({"run": "three"}, r"run must be an integer, got 'three'"),
+    ({"notes": float("nan")}, r"notes must be a string, got nan"),
+    ({"forcing": {"base_frequency": 0.1, "target": {"n": [1], "amplitude": [1, 2], "phase": [0]},
+                  "disturbance": {"n": [1], "amplitude": [1], "phase": [0]}}},
+     r"forcing\.target arrays have unequal lengths \(n: 1, amplitude: 2, phase: 1\)"),
+    (None, r"metadata must be a mapping of key to value, got NoneType"),
+])
+def test_recording_refuses_out_of_range_metadata(meta, pattern):
+    with pytest.raises(RecordingError, match=r"^lab/run1: " + pattern):
+        Recording(_signals(), 100.0, 1.0, "FD", meta, source="lab/run1")
+
+
+def test_recording_metadata_check_is_the_readers(tmp_path):
+    """The same metadata is refused with the same message in memory and in a file."""
+    meta = {"controlled_element": {"num": [1.0], "den": [0.0, 0.0]}}
+    with pytest.raises(RecordingError) as in_memory:
+        Recording(_signals(), 100.0, 1.0, "FD", meta)
+    stem = _pair(tmp_path, GOOD_CSV, {"format": FORMAT, "sample_rate_hz": 10, "motion_gain": 0,
+                                      "task": "other", **meta})
+    with pytest.raises(RecordingError) as on_disk:
+        read_recording(stem)
+    assert str(on_disk.value) == f"{stem}.json: {in_memory.value}"
+
+
+def test_recording_accepts_numpy_and_tuple_metadata():
+    meta = {"control_gain": np.float32(0.69), "run": np.int64(3), "subject": np.str_("S1"),
+            "controlled_element": {"num": (4.0,), "den": np.array([1.0, 1.0, 0.0])},
+            "forcing": {"base_frequency": np.float64(0.0767),
+                        "target": {"n": np.array([6.0, 13.0]), "amplitude": (0.5, 0.3),
+                                   "phase": np.zeros(2, np.float32)},
+                        "disturbance": {"n": [5], "amplitude": [0.4], "phase": [-0.7]}},
+            "lab": object()}
+    rec = Recording(_signals(), 100.0, 1.0, "FD", meta)
+    assert rec.metadata["lab"] is meta["lab"]           # kept as given, unknown keys unchecked
+    assert rec.control_gain == pytest.approx(0.69)
+    num, den = rec.controlled_element
+    assert num.tolist() == [4.0] and den.tolist() == [1.0, 1.0, 0.0]
+
+
+# t saved in single precision, as MATLAB often saves it: an 81.92-s run at 100 Hz
+_N32 = 8192
+
+
+def _t32() -> np.ndarray:
+    return (np.arange(_N32) / 100.0).astype(np.float32)
+
+
+def _with_t(t: np.ndarray) -> dict[str, np.ndarray]:
+    x = np.sin(np.arange(t.size) / 50.0)
+    return {"t": t, "e": x, "u": 0.5 * x, "theta_ddot_m": x}
+
+
+def test_float32_t_accepted():
+    t = _t32()
+    assert np.max(np.abs(np.diff(t.astype(float)) - 0.01)) > 1e-4 * 0.01  # beyond the old rule
+    rec = Recording(_with_t(t), 100.0, 1.0, "FD")
+    assert abs(rec.dt - 0.01) < 1e-9
+    assert abs(np.mean(np.diff(rec.t)) - 0.01) < 1e-9
+    assert np.array_equal(rec.t, t.astype(np.float64))
+
+
+def test_float32_t_accepted_from_mat(tmp_path):
+    t = _t32()
+    scipy.io.savemat(tmp_path / "f32.mat", {**_with_t(t), "sample_rate_hz": 100.0,
+                                            "motion_gain": 1.0, "task": "FD"})
+    rec = read_mat(tmp_path / "f32.mat")
+    assert rec.n_samples == _N32 and abs(rec.dt - 0.01) < 1e-9
+
+
+def _dropped(t):
+    return np.delete(t, 4000)
+
+
+def _one_shifted(t):
+    t = t.astype(np.float64)
+    t[4000] += 0.01 * 0.01                              # 1 % of dt, one sample
+    return t
+
+
+def _jittered(t):
+    return t.astype(np.float64) + np.r_[0.0, np.random.default_rng(3).uniform(-1e-4, 1e-4, t.size - 1)]
+
+
+def _repeated(t):
+    t = t.copy()
+    t[4000] = t[3999]
+    return t
+
+
+@pytest.mark.parametrize("spoil", [_dropped, _one_shifted, _jittered, _repeated])
+def test_float32_t_still_refused_when_not_uniform(spoil):
+    with pytest.raises(RecordingError, match=r"t is not uniformly spaced \(step .* s at sample \d+\)"):
+        Recording(_with_t(spoil(_t32())), 100.0, 1.0, "FD")
 
 
 def test_write_refuses_mat_path(tmp_path):

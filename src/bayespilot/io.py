@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from bayespilot.recording import OPTIONAL_SIGNALS, REQUIRED_SIGNALS, TASKS, Recording, RecordingError
-from bayespilot.recording import _warn_if_questionable
+from bayespilot.recording import _check_metadata_values, _describe, _is_number, _warn_if_questionable
 
 __all__ = ["FORMAT", "read_recording", "read_mat", "write_recording"]
 
@@ -83,30 +83,9 @@ def _read_bytes(path: Path) -> bytes:
         raise _fail(path, f"cannot be read ({exc.strerror or exc})") from None
 
 
-def _is_number(x: Any) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool)
-
-
-def _describe(x: Any) -> str:
-    """A short description of a JSON value for messages."""
-    names = {dict: "an object", list: "an array", str: "a string", bool: "a boolean",
-             type(None): "null", int: "an integer", float: "a number"}
-    return names.get(type(x), type(x).__name__)
-
-
 # ---------------------------------------------------------------------------
 # metadata (the JSON sidecar, or the scalar variables of a .mat file)
 # ---------------------------------------------------------------------------
-def _check_number_list(where: Any, key: str, value: Any, *, integral: bool = False) -> None:
-    if not isinstance(value, list):
-        raise _fail(where, f"{key} must be an array of numbers, got {_describe(value)}")
-    for i, v in enumerate(value):
-        if not _is_number(v) or not math.isfinite(v):
-            raise _fail(where, f"{key}[{i}] must be a finite number, got {v!r}")
-        if integral and not float(v).is_integer():
-            raise _fail(where, f"{key}[{i}] must be an integer, got {v!r}")
-
-
 def _check_metadata(where: Any, obj: Mapping[str, Any], *, what: str = "key") -> tuple[float, float, str, dict]:
     """Check the keys of a recording's metadata; return (rate, K_theta, task, rest).
 
@@ -129,65 +108,13 @@ def _check_metadata(where: Any, obj: Mapping[str, Any], *, what: str = "key") ->
     if not isinstance(task, str) or task not in TASKS:
         raise _fail(where, f"task must be one of {', '.join(repr(t) for t in TASKS)}, got {task!r}")
 
-    for key in ("controlled_element_gain", "control_gain"):
-        if key in obj:
-            v = obj[key]
-            if not _is_number(v) or not math.isfinite(v):
-                raise _fail(where, f"{key} must be a finite number, got {v!r}")
-    if "controlled_element" in obj:
-        if "controlled_element_gain" in obj:
-            raise _fail(where, "give either controlled_element or controlled_element_gain, not both")
-        ce = obj["controlled_element"]
-        if not isinstance(ce, Mapping):
-            raise _fail(where, f"controlled_element must be an object with arrays num and den, "
-                               f"got {_describe(ce)}")
-        for part in ("num", "den"):
-            if part not in ce:
-                raise _fail(where, f"controlled_element has no {part!r} array")
-            _check_number_list(where, f"controlled_element.{part}", ce[part])
-            if not ce[part]:
-                raise _fail(where, f"controlled_element.{part} is empty")
-        if not any(ce["den"]):
-            raise _fail(where, "controlled_element.den is all zeros")
-    for key in ("subject", "notes"):
-        if key in obj and not isinstance(obj[key], str):
-            raise _fail(where, f"{key} must be a string, got {obj[key]!r}")
-    if "run" in obj:
-        v = obj["run"]
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise _fail(where, f"run must be an integer, got {v!r}")
-    if "forcing" in obj:
-        _check_forcing(where, obj["forcing"])
+    try:  # the optional keys: the same checks as for a Recording built in Python
+        _check_metadata_values(obj)
+    except RecordingError as exc:
+        raise _fail(where, str(exc)) from None
 
     rest = {k: v for k, v in obj.items() if k not in REQUIRED_KEYS}
     return float(rate), float(kth), task, rest
-
-
-def _check_forcing(where: Any, forcing: Any) -> None:
-    if not isinstance(forcing, Mapping):
-        raise _fail(where, f"forcing must be an object with base_frequency, target and "
-                           f"disturbance, got {_describe(forcing)}")
-    if "base_frequency" not in forcing:
-        raise _fail(where, "forcing has no base_frequency")
-    w0 = forcing["base_frequency"]
-    if not _is_number(w0) or not math.isfinite(w0) or w0 <= 0:
-        raise _fail(where, f"forcing.base_frequency must be a positive finite number (rad/s), got {w0!r}")
-    for name in ("target", "disturbance"):
-        if name not in forcing:
-            raise _fail(where, f"forcing has no {name!r} object")
-        part = forcing[name]
-        if not isinstance(part, Mapping):
-            raise _fail(where, f"forcing.{name} must be an object with arrays n, amplitude and "
-                               f"phase, got {_describe(part)}")
-        for arr in ("n", "amplitude", "phase"):
-            if arr not in part:
-                raise _fail(where, f"forcing.{name} has no {arr!r} array")
-            _check_number_list(where, f"forcing.{name}.{arr}", part[arr], integral=(arr == "n"))
-        lengths = {arr: len(part[arr]) for arr in ("n", "amplitude", "phase")}
-        if len(set(lengths.values())) != 1:
-            raise _fail(where, f"forcing.{name} arrays have unequal lengths "
-                               f"(n: {lengths['n']}, amplitude: {lengths['amplitude']}, "
-                               f"phase: {lengths['phase']})")
 
 
 def _build(signals: dict[str, np.ndarray], rate: float, kth: float, task: str,

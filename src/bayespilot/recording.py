@@ -87,6 +87,124 @@ def _warn_if_questionable(recording: "Recording", stacklevel: int = 2) -> None:
         warnings.warn(where + reason, QuestionableRecordingWarning, stacklevel=stacklevel + 1)
 
 
+# ---------------------------------------------------------------------------
+# metadata values (shared with bayespilot.io, which checks JSON sidecars and
+# .mat files with the same function)
+# ---------------------------------------------------------------------------
+def _is_number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+def _describe(x: Any) -> str:
+    """A short description of a JSON value for messages."""
+    names = {dict: "an object", list: "an array", str: "a string", bool: "a boolean",
+             type(None): "null", int: "an integer", float: "a number"}
+    return names.get(type(x), type(x).__name__)
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy scalars and arrays and tuples made plain Python (for checking)."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _check_number_list(key: str, value: Any, *, integral: bool = False) -> None:
+    if not isinstance(value, list):
+        raise RecordingError(f"{key} must be an array of numbers, got {_describe(value)}")
+    for i, v in enumerate(value):
+        if not _is_number(v) or not math.isfinite(v):
+            raise RecordingError(f"{key}[{i}] must be a finite number, got {v!r}")
+        if integral and not float(v).is_integer():
+            raise RecordingError(f"{key}[{i}] must be an integer, got {v!r}")
+
+
+def _check_forcing(forcing: Any) -> None:
+    if not isinstance(forcing, Mapping):
+        raise RecordingError(f"forcing must be an object with base_frequency, target and "
+                             f"disturbance, got {_describe(forcing)}")
+    if "base_frequency" not in forcing:
+        raise RecordingError("forcing has no base_frequency")
+    w0 = forcing["base_frequency"]
+    if not _is_number(w0) or not math.isfinite(w0) or w0 <= 0:
+        raise RecordingError(f"forcing.base_frequency must be a positive finite number (rad/s), "
+                             f"got {w0!r}")
+    for name in ("target", "disturbance"):
+        if name not in forcing:
+            raise RecordingError(f"forcing has no {name!r} object")
+        part = forcing[name]
+        if not isinstance(part, Mapping):
+            raise RecordingError(f"forcing.{name} must be an object with arrays n, amplitude and "
+                                 f"phase, got {_describe(part)}")
+        for arr in ("n", "amplitude", "phase"):
+            if arr not in part:
+                raise RecordingError(f"forcing.{name} has no {arr!r} array")
+            _check_number_list(f"forcing.{name}.{arr}", part[arr], integral=(arr == "n"))
+        lengths = {arr: len(part[arr]) for arr in ("n", "amplitude", "phase")}
+        if len(set(lengths.values())) != 1:
+            raise RecordingError(f"forcing.{name} arrays have unequal lengths "
+                                 f"(n: {lengths['n']}, amplitude: {lengths['amplitude']}, "
+                                 f"phase: {lengths['phase']})")
+
+
+def _check_metadata_values(meta: Mapping[str, Any]) -> None:
+    """Check the optional metadata keys whose values the recording format fixes.
+
+    ``controlled_element_gain`` and ``control_gain`` (finite numbers),
+    ``controlled_element`` (``num`` and ``den``: non-empty arrays of finite
+    numbers, ``den`` not all zeros; not together with
+    ``controlled_element_gain``), ``subject`` and ``notes`` (strings),
+    ``run`` (an integer) and ``forcing``.  Other keys are not looked at.
+    numpy scalars and arrays and tuples count as the numbers and arrays they
+    hold.  Used for a Recording built in Python and, by
+    :mod:`bayespilot.io`, for files, so both are held to the same rules.
+
+    Raises
+    ------
+    RecordingError
+        Naming the key and the problem (no file or source prefix).
+    """
+    obj = {k: _plain(meta[k]) for k in ("controlled_element_gain", "control_gain",
+                                        "controlled_element", "subject", "notes", "run",
+                                        "forcing") if k in meta}
+    for key in ("controlled_element_gain", "control_gain"):
+        if key in obj:
+            v = obj[key]
+            if not _is_number(v) or not math.isfinite(v):
+                raise RecordingError(f"{key} must be a finite number, got {v!r}")
+    if "controlled_element" in obj:
+        if "controlled_element_gain" in obj:
+            raise RecordingError("give either controlled_element or controlled_element_gain, "
+                                 "not both")
+        ce = obj["controlled_element"]
+        if not isinstance(ce, Mapping):
+            raise RecordingError(f"controlled_element must be an object with arrays num and den, "
+                                 f"got {_describe(ce)}")
+        for part in ("num", "den"):
+            if part not in ce:
+                raise RecordingError(f"controlled_element has no {part!r} array")
+            _check_number_list(f"controlled_element.{part}", ce[part])
+            if not ce[part]:
+                raise RecordingError(f"controlled_element.{part} is empty")
+        if not any(ce["den"]):
+            raise RecordingError("controlled_element.den is all zeros")
+    for key in ("subject", "notes"):
+        if key in obj and not isinstance(obj[key], str):
+            raise RecordingError(f"{key} must be a string, got {obj[key]!r}")
+    if "run" in obj:
+        v = obj["run"]
+        if not isinstance(v, int) or isinstance(v, bool):
+            raise RecordingError(f"run must be an integer, got {v!r}")
+    if "forcing" in obj:
+        _check_forcing(obj["forcing"])
+
+
 @dataclass(frozen=True, eq=False)
 class Recording:
     """One tracking run: equally spaced samples of the signals and what the run was.
@@ -113,9 +231,26 @@ class Recording:
     Raises
     ------
     RecordingError
-        If a required signal is missing, a signal is not finite or of another
-        length, ``t`` is not uniform or disagrees with ``sample_rate_hz``, or a
-        metadata value is out of range.
+        If a required signal is missing, a signal is complex, not numeric, not
+        finite or of another length, ``t`` does not start at 0, is not uniform
+        or disagrees with ``sample_rate_hz``, or a metadata value is out of
+        range (the checks :func:`~bayespilot.io.read_recording` makes of a
+        JSON sidecar: ``controlled_element_gain`` and ``control_gain`` finite
+        numbers, ``controlled_element`` with non-empty numeric ``num`` and
+        ``den``, ``den`` not all zeros, and not together with
+        ``controlled_element_gain``; ``subject``/``notes`` strings, ``run`` an
+        integer, a well-formed ``forcing``; numpy values count as the numbers
+        and arrays they hold; other keys are not checked).
+
+    Notes
+    -----
+    ``t`` is uniform when every sample lies within a tolerance of the grid
+    ``t[0] + k * step`` (``step`` the mean step), the tolerance being the
+    larger of ``1e-4 * dt`` and 4 single-precision (float32) ulps at
+    ``max|t|``, but at most ``dt / 4``: a ``t`` saved as float32 (as MATLAB
+    often saves it) is accepted, while a dropped or repeated sample, or
+    jitter of a percent of ``dt`` in an 81.92-s, 100-Hz run, is refused.  The
+    mean step must then agree with ``1 / sample_rate_hz`` to ``1e-4 * dt``.
     """
 
     signals: Mapping[str, np.ndarray]
@@ -140,7 +275,13 @@ class Recording:
         length = None
         for name, values in self.signals.items():
             try:
-                arr = np.asarray(values, dtype=np.float64)
+                arr = np.asarray(values)
+            except (TypeError, ValueError):
+                fail(f"column {name!r} is not numeric")
+            if np.iscomplexobj(arr):
+                fail(f"column {name!r} is complex; only real values can be used")
+            try:
+                arr = np.asarray(arr, dtype=np.float64)
             except (TypeError, ValueError):
                 fail(f"column {name!r} is not numeric")
             if arr.ndim != 1:
@@ -175,21 +316,30 @@ class Recording:
         t = clean["t"]
         dt = 1.0 / rate
         steps = np.diff(t)
+        step = steps.mean()
         if abs(t[0]) > 1e-6 * dt + 1e-12:
             fail(f"t must start at 0, starts at {float(t[0])!r}")
-        # Uniform within a tolerance that allows for text round-off of t.
-        tol = 1e-6 * dt + 1e-9 * max(abs(t[-1]), 1.0)
-        if np.any(np.abs(steps - steps.mean()) > max(tol, 1e-4 * dt)):
-            k = int(np.argmax(np.abs(steps - steps.mean())))
+        # Uniform: every t_k within tol of the grid t_0 + k * step, where tol is
+        # the larger of 1e-4 * dt and 4 float32 ulps at max|t| (t saved in single
+        # precision, as MATLAB often does, is uniform to that), but at most dt / 4,
+        # so that a dropped or repeated sample (>= dt / 2 off the grid) is refused.
+        tol = min(max(1e-4 * dt, 4.0 * float(np.spacing(np.float32(np.max(np.abs(t)))))),
+                  0.25 * dt)
+        if np.any(np.abs(t - (t[0] + np.arange(t.size) * step)) > tol):
+            k = int(np.argmax(np.abs(steps - step)))
             fail(f"t is not uniformly spaced (step {float(steps[k])!r} s at sample {k + 1})")
-        if abs(steps.mean() - dt) > 1e-4 * dt:
+        if abs(step - dt) > 1e-4 * dt:
             fail(
-                f"t has a step of {steps.mean():.6g} s, which disagrees with "
+                f"t has a step of {step:.6g} s, which disagrees with "
                 f"sample_rate_hz = {rate:g} (step {dt:.6g} s)"
             )
+        if not isinstance(self.metadata, Mapping):
+            fail(f"metadata must be a mapping of key to value, got {type(self.metadata).__name__}")
         meta = dict(self.metadata)
-        if "controlled_element" in meta and "controlled_element_gain" in meta:
-            fail("give either controlled_element or controlled_element_gain, not both")
+        try:
+            _check_metadata_values(meta)
+        except RecordingError as exc:
+            fail(str(exc))
         object.__setattr__(self, "signals", clean)
         object.__setattr__(self, "sample_rate_hz", rate)
         object.__setattr__(self, "motion_gain", kth)
