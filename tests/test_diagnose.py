@@ -689,3 +689,22 @@ def test_lr_p_value_is_the_null_tail_probability():
     t = np.where(rng.random(200_000) < 0.5, 0.0, rng.chisquare(1, 200_000))
     for x in (0.0, 0.5, 2.7):
         assert D.lr_p_value(x, washout) == pytest.approx(np.mean(t >= x), abs=0.005)
+
+
+def test_quantised_u_without_a_bootstrap_is_not_called_saturated():
+    """A u exported with few decimals repeats its peak values by chance.  The bootstrap tests
+    that; without one the flat tops are no finding (they used to count as impossible under
+    continuous noise: p = 0 and control-saturation named on a correct-model run)."""
+    from bayespilot.diagnose.decide import flat_tops
+    from bayespilot.recording import Recording
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=1,
+                   duration=40.96).recording
+    sig = {k: np.asarray(v).copy() for k, v in rec.signals.items()}
+    sig["u"] = np.round(sig["u"] / 2e-3) * 2e-3
+    rq = Recording(sig, rec.sample_rate_hz, rec.motion_gain, rec.task, dict(rec.metadata), "q")
+    assert flat_tops(rq.u)["n_samples"] > 0  # the rounding made flat tops
+    res = diagnose(rq, seed=0, n_bootstrap=0, n_starts=2, candidates=["control-saturation"])
+    sat = res.ranking[0]
+    assert sat.physics == "control-saturation" and sat.p_value == 1.0
+    assert "quantised" in sat.reason and res.physics == "none"

@@ -777,13 +777,16 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
 def _saturation(recording, base_model, base, where, boot_info):
     """Test and fit ``control-saturation``: flat tops and the censored likelihood."""
     from . import decide as D
+    from . import locate as L
 
     ext = get_extension("control-saturation")
     tops = D.flat_tops(recording.u)
     if tops["n_samples"] == 0:
         return D.CandidateResult(ext.name, True, "no flat tops in u (no samples at a limit)",
                                  df=0, p_value=1.0)
-    q = boot_info.get("quantum", 0.0)
+    # the bootstrap records the quantum; without a bootstrap (or without forcing functions to
+    # simulate) it is read here, or a quantised u's repeated peaks would count as impossible
+    q = boot_info["quantum"] if "quantum" in boot_info else L._quantum(recording.u)
     if not q:
         # exact repeats of the extreme value: probability 0 under continuous noise
         p = 0.0
@@ -791,9 +794,15 @@ def _saturation(recording, base_model, base, where, boot_info):
                f"have probability 0 under a continuous-noise model; censored likelihood fit")
     else:
         e = where.get("amplitude.flat_tops")
-        p = e.p_value if e is not None and math.isfinite(e.p_value) else 1.0
-        how = (f"{tops['n_samples']} samples in flat tops; u is quantised ({q:.3g}), p from "
-               f"the quantised bootstrap; censored likelihood fit")
+        if e is not None and math.isfinite(e.p_value):
+            p = e.p_value
+            how = (f"{tops['n_samples']} samples in flat tops; u is quantised ({q:.3g}), p from "
+                   f"the quantised bootstrap; censored likelihood fit")
+        else:
+            p = 1.0
+            how = (f"{tops['n_samples']} samples in flat tops, but u is quantised ({q:.3g}) and "
+                   f"no bootstrap tested how often its peaks repeat by chance: not a finding "
+                   f"(diagnose with n_bootstrap > 0); censored likelihood fit")
     fit, f_start, sigma = D.fit_censored(base_model, recording, base.params, tops)
     d = max(0.0, f_start - fit.neg_log_lik)
     model = ext.build(base_model).fix(u_max=max(abs(tops["hi"]), abs(tops["lo"])))
