@@ -90,6 +90,14 @@ def test_pooled_rejects_bad_input(washout_runs):
         diagnose_pooled(washout_runs, candidates=["gravity"])
     with pytest.raises(ValueError, match="names an entry twice"):
         diagnose_pooled(washout_runs, candidates=["motion-washout"] * 2)
+    # the same run twice, even under another name, would count its evidence twice
+    from bayespilot.recording import Recording
+
+    r0 = washout_runs[0]
+    alias = Recording(dict(r0.signals), r0.sample_rate_hz, r0.motion_gain, r0.task,
+                      dict(r0.metadata), "elsewhere.csv")
+    with pytest.raises(ValueError, match="runs 1 and 3 .* are the same recording"):
+        diagnose_pooled([r0, washout_runs[1], alias])
     with pytest.raises(ValueError, match="noise_passes"):
         diagnose_pooled(washout_runs, noise_passes=0)
 

@@ -263,6 +263,26 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
     return fig
 
 
+def _refuse_repeats(recs: Sequence[Recording]) -> None:
+    """Refuse a run given twice: pooling it would count its evidence twice (a path and the same
+    file's .csv, or a copy, are the same run; what is compared is the signals)."""
+    import hashlib
+
+    seen: dict[str, int] = {}
+    for j, rec in enumerate(recs):
+        h = hashlib.sha256()
+        for name in sorted(rec.signals):
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(rec.signals[name], dtype=float).tobytes())
+        key = h.hexdigest()
+        if key in seen:
+            i = seen[key]
+            raise ValueError(f"runs {i + 1} and {j + 1} ({recs[i].source or 'run ' + str(i + 1)}, "
+                             f"{rec.source or 'run ' + str(j + 1)}) are the same recording: "
+                             "pooling it twice would count its evidence twice")
+        seen[key] = j
+
+
 def _pooled_refine(wls, bases, names, shared, start_shared, *, max_nfev: int = 60):
     """Least squares on the stacked whitened residuals: ``names`` per run, ``shared`` common.
 
@@ -678,7 +698,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     Raises
     ------
     ValueError
-        Fewer than two recordings, or a bad setting (named).
+        Fewer than two recordings, one recording given twice (the same
+        signals, under whatever path), or a bad setting (named).
 
     Warns
     -----
@@ -696,6 +717,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     for rec in recs:
         names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample,
                        n_calibrate, noise_passes)
+    _refuse_repeats(recs)
     mixed = pooling_disagreements(recs)
     if mixed:
         warnings.warn(f"the runs are not of one subject and condition ({mixed}); pooling "
