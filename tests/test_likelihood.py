@@ -484,3 +484,21 @@ def test_noise_model_is_validated(fd_sim, model):
     short = fd_sim.recording.n_samples // 4
     with pytest.raises(ValueError, match="noise model needs"):
         Likelihood(model, fd_sim.recording, noise=ARNoise(np.zeros(short)))
+
+
+def test_likelihood_of_a_recording_with_float32_time():
+    """t stored in single precision (uniform only to its precision) gives the same -ln L as the
+    float64 t: the model runs on the uniform grid (scipy's impulse response refused the
+    float32 steps)."""
+    from bayespilot.model import paper_model
+    from bayespilot.recording import Recording
+    from bayespilot.simulate import simulate
+
+    sim = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=4, duration=81.92)
+    rec = sim.recording
+    sig = dict(rec.signals, t=rec.t.astype(np.float32))
+    rec32 = Recording(sig, rec.sample_rate_hz, rec.motion_gain, rec.task, dict(rec.metadata))
+    assert not np.array_equal(np.diff(rec32.t), np.diff(rec.t))
+    a = Likelihood(paper_model(), rec).neg_log_lik(sim.params)
+    b = Likelihood(paper_model(), rec32).neg_log_lik(sim.params)
+    assert b == pytest.approx(a, abs=1e-6)

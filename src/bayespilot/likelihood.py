@@ -119,7 +119,9 @@ def channel_inputs(model: PilotModel, recording: Recording, initial: str = "peri
             if initial == "rest":
                 x = signal.lfilter(b, a, x)
             elif ch.source == "theta_ddot_m" and rate0 is not None:
-                x = signal.lfilter(b, a, x) + rate0 * _impulse_tail(num, den, recording.t)
+                # the uniform grid (t may be stored in float32, uniform only to its precision)
+                grid = np.arange(n) * recording.dt
+                x = signal.lfilter(b, a, x) + rate0 * _impulse_tail(num, den, grid)
             else:
                 x = signal.lfilter(b, a, np.tile(x, 3))[-n:]
         X[c] = x
