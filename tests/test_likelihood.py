@@ -502,3 +502,27 @@ def test_likelihood_of_a_recording_with_float32_time():
     a = Likelihood(paper_model(), rec).neg_log_lik(sim.params)
     b = Likelihood(paper_model(), rec32).neg_log_lik(sim.params)
     assert b == pytest.approx(a, abs=1e-6)
+
+
+def test_a_stage_at_its_identity_limit_is_the_identity():
+    """A first-order lag at T = 0 is a gain of 1 and a first-order washout at omega = 0 is
+    s / s = 1: the likelihood equals the model's without the stage (the discretisation gave
+    them a pole on the unit circle, so -ln L was inf), and the lag is continuous there."""
+    from bayespilot.model import FirstOrderLag, Parameter, Washout, paper_model
+    from bayespilot.presets import paper_parameters
+    from bayespilot.simulate import simulate
+
+    truth = paper_parameters("FD")
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=2,
+                   duration=8.0).recording
+    base = Likelihood(paper_model(), rec).neg_log_lik(truth)
+    lag = paper_model().add_stage("visual", FirstOrderLag(), [Parameter("T_lag", 0.0, 1.0, 0.0)])
+    lik = Likelihood(lag, rec)
+    assert lik.neg_log_lik(dict(truth, T_lag=0.0)) == pytest.approx(base, abs=1e-8)
+    assert lik.neg_log_lik(dict(truth, T_lag=1e-9)) == pytest.approx(base, abs=1e-5)
+    assert lik.batch(np.array([lag.free_vector(dict(truth, T_lag=0.0))]))[0] == pytest.approx(
+        base, abs=1e-8)
+    wash = paper_model().add_stage("vestibular", Washout(),
+                                   [Parameter("omega_w", 0.0, 1.0, 0.0)])
+    assert Likelihood(wash, rec).neg_log_lik(dict(truth, omega_w=0.0)) == pytest.approx(
+        base, abs=1e-8)

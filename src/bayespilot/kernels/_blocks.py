@@ -65,6 +65,15 @@ def tustin(b0, b1, b2, a0, a1, a2, dt):
     y[k] = B0 x[k] + B1 x[k-1] + B2 x[k-2] - A1 y[k-1] - A2 y[k-2].
     """
     c = 2.0 / dt
+    # a factor s common to numerator and denominator (a washout at omega_w = 0: s / s) cancels;
+    # kept, it would put a pole on the unit circle
+    while a0 == 0.0 and b0 == 0.0 and (a1 != 0.0 or a2 != 0.0):
+        b0, b1, b2 = b1, b2, 0.0
+        a0, a1, a2 = a1, a2, 0.0
+    if a2 == 0.0 and b2 == 0.0 and a1 == 0.0 and b1 == 0.0:
+        # Zero order (a first-order stage at its limit, e.g. a lag with T = 0): a gain.  The
+        # first-order formulas below would give a pole at z = -1.
+        return b0 / a0, 0.0, 0.0, 0.0, 0.0
     if a2 == 0.0 and b2 == 0.0:
         # First order: keep it first order.  The biquad formulas below would
         # add a cancelled pole/zero pair at z = -1, which a warm start excites.
