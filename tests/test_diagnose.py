@@ -236,6 +236,11 @@ def test_diagnose_rejects_bad_input():
         diagnose(rec, candidates=["gravity"])
     with pytest.raises(ValueError, match="the string 'motion-washout'"):
         diagnose(rec, candidates="motion-washout")
+    short = simulate(task="FD", seed=0, duration=8.0).recording
+    with pytest.raises(ValueError, match="is 8 s long: too short .* needs more than 10 s"):
+        diagnose(short)
+    with pytest.raises(ValueError, match="skip_seconds must be a number >= 0"):
+        diagnose(rec, skip_seconds=-1.0)
     with pytest.raises(ValueError, match="names an entry twice"):
         diagnose(rec, candidates=["motion-washout", "motion-washout"])
     with pytest.raises(ValueError, match="candidates is empty"):

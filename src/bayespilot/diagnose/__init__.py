@@ -293,9 +293,13 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1
             or not 1 <= noise_passes <= MAX_NOISE_PASSES:
         raise ValueError(f"noise_passes must be an integer in [1, {MAX_NOISE_PASSES}], "
                          f"got {noise_passes!r}")
-    if not (isinstance(skip_seconds, (int, float)) and 0 <= skip_seconds < recording.duration / 2):
-        raise ValueError(f"skip_seconds must be in [0, {recording.duration / 2:g}) s, "
-                         f"got {skip_seconds!r}")
+    if not (isinstance(skip_seconds, (int, float)) and 0 <= skip_seconds):
+        raise ValueError(f"skip_seconds must be a number >= 0 s, got {skip_seconds!r}")
+    if not skip_seconds < recording.duration / 2:
+        raise ValueError(f"the recording{' ' + recording.source if recording.source else ''} is "
+                         f"{recording.duration:g} s long: too short to leave out the first "
+                         f"{skip_seconds:g} s (skip_seconds) and keep more than as much; it "
+                         f"needs more than {2 * skip_seconds:g} s")
     if isinstance(oversample, bool) or not isinstance(oversample, (int, np.integer)) \
             or not 1 <= oversample <= MAX_OVERSAMPLE:
         raise ValueError(f"oversample must be an integer in [1, {MAX_OVERSAMPLE}], "
