@@ -713,3 +713,17 @@ def test_quantised_u_without_a_bootstrap_is_not_called_saturated():
     sat = res.ranking[0]
     assert sat.physics == "control-saturation" and sat.p_value == 1.0
     assert "quantised" in sat.reason and res.physics == "none"
+
+
+def test_after_a_rebase_the_plotted_base_residual_is_the_tested_base_fits():
+    """When an extension's fit leads to a better base fit (rebased), the tests are against it,
+    and so is the base residual the report plots (it was the first base fit's)."""
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=3,
+                   duration=40.96).recording
+    res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2)
+    assert res.settings["rebased"] and res.settings["rebased"][0]["refitted"]
+    eps = Likelihood(paper_model(), rec).residual(res.base["gls_params"])
+    np.testing.assert_allclose(res.arrays["residual"], eps, atol=1e-12)
+    assert "p-values are the first base fit's" in res.summary()

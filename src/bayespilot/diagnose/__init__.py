@@ -224,7 +224,9 @@ class DiagnosisResult(_JSONSummary):
                  f"{self.settings['n_tested']} candidates",
                  *([f"base model refitted from an extension's fit: -ln L (GLS) better by "
                     f"{sum(r['gain'] for r in self.settings['rebased']):.2f}; every test is "
-                    f"against that fit"] if self.settings.get("rebased") else []),
+                    f"against that fit and the plots' base residual is its; the located "
+                    f"evidence's p-values are the first base fit's"]
+                  if self.settings.get("rebased") else []),
                  "", f"{'candidate':<24} {'d(-lnL)':>9} {'p':>9} {'dBIC':>9} {'sig':>5}  params"]
         for c in self.ranking:
             if not c.testable:
@@ -736,6 +738,12 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
 
     # -- model and show: residual after the chosen extension
     arrays = dict(st.get("arrays", {}))
+    if rebased and st.get("arrays"):
+        # the plots' base residual and describing functions at the base fit the tests are
+        # against (the located p-values stay those of the first base fit, where their
+        # bootstrap was made: settings["rebased"] says so)
+        arrays.update(L.statistics(recording, base_model, base.params, forcing, skip=skip,
+                                   with_arrays=True).get("arrays", {}))
     sl = slice(skip, None)
     y_before = L.steady_response(base_model, recording, base.params)
     arrays["before_vaf"] = vaf(recording.u[sl], y_before[sl])
