@@ -526,3 +526,18 @@ def test_a_stage_at_its_identity_limit_is_the_identity():
                                    [Parameter("omega_w", 0.0, 1.0, 0.0)])
     assert Likelihood(wash, rec).neg_log_lik(dict(truth, omega_w=0.0)) == pytest.approx(
         base, abs=1e-8)
+
+
+def test_batch_refuses_complex_parameter_vectors():
+    from bayespilot.model import paper_model
+    from bayespilot.presets import paper_parameters
+    from bayespilot.simulate import simulate
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=2,
+                   duration=8.0).recording
+    model = paper_model()
+    lik = Likelihood(model, rec)
+    row = model.free_vector(paper_parameters("FD"))
+    assert np.isfinite(lik.batch(np.array([row]))[0])
+    with pytest.raises(ValueError, match="complex"):
+        lik.batch(np.array([row + 1e-3j]))

@@ -364,6 +364,8 @@ class Likelihood:
         times faster per row than the fused scalar kernel with AVX-512, twice
         with AVX2; equal to it to round-off).
         """
+        if np.iscomplexobj(free):
+            raise ValueError("free must be real parameter vectors, got complex values")
         free = np.ascontiguousarray(free, dtype=float)
         if free.ndim != 2 or free.shape[1] != self.model.n_free:
             raise ValueError(f"free must have shape (M, {self.model.n_free}) "
