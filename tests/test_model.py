@@ -14,7 +14,8 @@ import pytest
 import naive
 from bayespilot import presets
 from bayespilot.likelihood import Likelihood
-from bayespilot.model import Channel, DeadZone, Parameter, Washout, paper_model
+from bayespilot.model import (Channel, DeadZone, FixedFilter, LinearDrift, Parameter, Saturation,
+                              SoftDeadZone, Washout, paper_model)
 from bayespilot.simulate import simulate
 
 FD = dict(presets.TABLE3["FD"])
@@ -155,6 +156,118 @@ def test_simulator_runs_with_washout_and_likelihood_explains_it():
 def test_unknown_channel():
     with pytest.raises(KeyError, match="otolith.*visual, vestibular"):
         paper_model().add_stage("otolith", Washout("omega_w"), [OMEGA_W])
+
+
+@pytest.mark.parametrize("build", [
+    lambda m: m.add_stage("vestibuler", Washout("omega_w"), [OMEGA_W]),
+    lambda m: m.with_nonlinearity("otolith", None),
+    lambda m: m.with_modulation("otolith", None),
+    lambda m: m.with_oversampling(8, ["otolith"]),
+    lambda m: m.with_oversampling(8, "otolith"),
+])
+def test_unknown_channel_is_a_value_error_naming_the_channels(build):
+    """A ValueError (still a KeyError, as before) whose message is not wrapped in quotes."""
+    with pytest.raises(ValueError) as err:
+        build(paper_model())
+    msg = str(err.value)
+    assert msg.startswith("no channel '") and msg.endswith("channels: visual, vestibular"), msg
+    assert isinstance(err.value, KeyError)
+
+
+def test_with_oversampling_takes_one_channel_name_as_a_string():
+    m = paper_model().with_oversampling(8, "visual")
+    assert [c.oversample for c in m.channels] == [8, 1]
+    assert m.name == paper_model().with_oversampling(8, ["visual"]).name
+    assert m.name.endswith("8x visual")
+
+
+@pytest.mark.parametrize("build, message", [
+    # the kind codes overlap between families: a Washout (stage 2) would run as a soft dead zone
+    (lambda m: m.with_nonlinearity("vestibular", Washout("omega_w"), [OMEGA_W]),
+     "nonlinearity must be a Nonlinearity.*got Washout"),
+    (lambda m: m.with_modulation("visual", DeadZone("d3"), [Parameter("d3", 0.0, 1.0, 0.5)]),
+     "modulation must be a Modulation.*got DeadZone"),
+    (lambda m: m.add_stage("vestibular", DeadZone("d2"), [Parameter("d2", 0.0, 1.0, 0.5)]),
+     "stage must be a Stage.*got DeadZone"),
+    (lambda m: m.with_output(LinearDrift("g"), [Parameter("g", -1.0, 1.0, 0.0)]),
+     "output block must be a Nonlinearity.*got LinearDrift"),
+    (lambda m: m.add_channel(Channel("c", "e", delay="tau_v", stages=(Saturation("u_max"),)),
+                             [Parameter("u_max", 0.1, 1.0, 0.5)]),
+     "channel 'c': a stage must be a Stage"),
+    (lambda m: m.add_channel(Channel("c", "e", delay="tau_v", nonlinearity=Washout("omega_w")),
+                             [OMEGA_W]),
+     "channel 'c': the nonlinearity must be a Nonlinearity"),
+])
+def test_block_of_the_wrong_family_is_refused(build, message):
+    with pytest.raises(TypeError, match=message):
+        build(paper_model())
+
+
+def test_blocks_of_the_right_family_and_none_are_accepted():
+    m = paper_model()
+    m = m.with_nonlinearity("vestibular", SoftDeadZone("delta_abs", "w_soft"),
+                            [Parameter("w_soft", 1e-5, 0.05, 0.002)])
+    m = m.with_modulation("visual", LinearDrift("g_v"), [Parameter("g_v", -1.0, 1.0, 0.0)])
+    m = m.with_output(Saturation("u_max"), [Parameter("u_max", 1e-6, 10.0, 1.0)])
+    m = m.add_stage("vestibular", Washout("omega_w"), [OMEGA_W])
+    assert m.n_free == 12
+    m = m.with_nonlinearity("vestibular", None).with_modulation("visual", None).with_output(None)
+    assert m.channels[1].nonlinearity is None and m.channels[0].modulation is None
+    assert m.output is None
+
+
+def test_improper_fixed_filter_with_leading_zeros_is_refused():
+    """(s + 2) / (0 s + 1) is improper: the simulator dropped its s term, the likelihood put a
+    pole at z = -1.  Leading zeros are removed before the order check."""
+    with pytest.raises(ValueError, match="proper transfer function"):
+        FixedFilter((1.0, 2.0), (0.0, 1.0))
+    with pytest.raises(ValueError, match="proper transfer function"):
+        FixedFilter((1.0, 0.0, 0.0), (0.0, 1.0, 1.0))
+    with pytest.raises(ValueError, match="denominator must not be zero"):
+        FixedFilter((1.0,), (0.0, 0.0))
+    with pytest.raises(ValueError, match="proper transfer function"):
+        FixedFilter((1.0,), (0.0, 1.0, 1.0, 1.0, 1.0))
+    # leading zeros are harmless once stripped (the kernels' coefficients are unchanged)
+    f = FixedFilter((0.0, 0.0, 3.0), (0.0, 2.0, 1.0))
+    assert (f.num, f.den) == ((3.0,), (2.0, 1.0))
+    np.testing.assert_array_equal(f.constants(), FixedFilter((3.0,), (2.0, 1.0)).constants())
+    assert FixedFilter((0.0,), (0.0, 1.0)).num == (0.0,)  # a zero numerator keeps one coefficient
+    assert FixedFilter((0.0, 1.0, 2.0), (0.0, 0.0, 1.0, 1.0)).den == (1.0, 1.0)
+
+
+def test_complex_values_are_refused_not_truncated():
+    m = paper_model()
+    v = m.free_vector(FD)
+    with pytest.raises(ValueError, match="real"):
+        m.full_vector(v + 1j)
+    with pytest.raises(ValueError, match="real"):
+        m.full_vector(list(v[:-1]) + [np.complex128(0.01 + 1j)])
+    with pytest.raises(ValueError, match="K_v must be a real number"):
+        m.full_vector({"K_v": np.complex128(1 + 2j)})
+    with pytest.raises(ValueError, match="delta_abs must be a real number"):
+        m.fix(delta_abs=np.complex128(0.01 + 1j))
+    with pytest.raises(ValueError, match="real number"):
+        FixedFilter((np.complex128(1 + 1j),), (1.0, 1.0))
+    # real numpy scalars still work
+    assert m.full_vector({"K_v": np.float32(1.5)})[0] == 1.5
+    assert m.fix(delta_abs=np.float64(0.01)).fixed == {"delta_abs": 0.01}
+
+
+def test_a_parameter_declared_again_must_be_declared_alike():
+    """A new declaration of an existing name was silently dropped, even with other bounds."""
+    with pytest.raises(ValueError, match="K_v is already declared with bounds \\[0, 10\\]"):
+        paper_model().add_stage("vestibular", Washout("K_v"), [Parameter("K_v", 0.0, 100.0, 50.0)])
+    with pytest.raises(ValueError, match="omega_w is already declared"):
+        washout_model().add_stage("visual", Washout("omega_w"), [Parameter("omega_w", 0.01, 10.0, 0.7)])
+    with pytest.raises(ValueError, match="unit"):
+        washout_model().add_stage("visual", Washout("omega_w"), [Parameter("omega_w", 0.01, 10.0, 0.5, "Hz")])
+    # declared alike (e.g. the otolith entry's two channels share K_ot): one parameter
+    m = washout_model().add_stage("visual", Washout("omega_w"), [OMEGA_W])
+    assert m.parameter_names.count("omega_w") == 1 and m.n_free == 9
+    shared = [Parameter("K_x", -5.0, 5.0, 0.0, "-")]
+    m = (paper_model().add_channel(Channel("x1", "e", delay="tau_v", gain=("K_x",)), shared)
+         .add_channel(Channel("x2", "theta", delay="tau_v", gain=("K_x",)), shared))
+    assert m.parameter("K_x") == shared[0] and m.n_free == 9
 
 
 def test_undeclared_parameter():

@@ -59,3 +59,38 @@ def test_multisine_derivatives_match_finite_differences():
     h = 1e-5
     np.testing.assert_allclose(f(t, 1), (f(t + h) - f(t - h)) / (2 * h), rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(f(t, 2), (f(t + h, 1) - f(t - h, 1)) / (2 * h), rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("args, message", [
+    ((1.0, [1], np.array([1 + 1j]), [0.0]), "amplitude must be real"),
+    ((1.0, [1], [1.0], np.array([0.5j])), "phase must be real"),
+    ((np.complex128(1 + 1j), [1], [1.0], [0.0]), "base_frequency must be real"),
+    ((1.0, np.array([2 + 0j]), [1.0], [0.0]), "n must be real"),
+    ((1.0, [1.5], [1.0], [0.0]), "n must hold integers >= 1"),
+    ((1.0, [0], [1.0], [0.0]), "n must hold integers >= 1"),
+    ((1.0, [2, -3], [1.0, 1.0], [0.0, 0.0]), "n must hold integers >= 1.*-3"),
+    ((1.0, [True], [1.0], [0.0]), "n must hold integers >= 1"),
+])
+def test_multisine_refuses_complex_values_and_non_integer_multiples(args, message):
+    """Complex values were truncated (a ComplexWarning only); n = 1.5 was kept in the signal but
+    saved as 1 by to_dict, so the recorded forcing disagreed with the saved one."""
+    with pytest.raises(ValueError, match=message):
+        Multisine(*args)
+
+
+def test_multisine_integer_valued_n_is_stored_as_int_and_round_trips():
+    f = Multisine(0.5, np.array([3.0, 7.0]), [1.0, 0.5], [0.2, 0.1])
+    assert f.n.dtype.kind == "i" and f.n.tolist() == [3, 7]
+    g = Multisine.from_dict(0.5, f.to_dict())
+    t = np.linspace(0, 10, 101)
+    np.testing.assert_array_equal(f(t), g(t))
+    assert f.to_dict()["n"] == [3, 7]
+
+
+def test_paper_forcing_refuses_a_complex_scale():
+    with pytest.raises(ValueError, match="scale must be a real number"):
+        presets.paper_forcing("FD", np.complex128(0.2 + 1j))
+    with pytest.raises(ValueError, match="scale must be a real number"):
+        presets.paper_forcing("FD", 0.2 + 0j)
+    np.testing.assert_allclose(presets.paper_forcing("FD", np.float64(0.2))[0].amplitude,
+                               presets.paper_forcing("FD", 0.2)[0].amplitude)

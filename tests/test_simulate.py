@@ -152,3 +152,41 @@ def test_improper_plant_is_refused():
     ft, fd = presets.paper_forcing("FD")
     with pytest.raises(ValueError, match="relative degree"):
         TrackingTask(ft, fd, controlled_element=([1.0, 0.0], [1.0, 1.0]))
+
+
+@pytest.mark.parametrize("name, value, bounds", [
+    ("tau_m", -0.05, "[0, 1]"), ("tau_v", -0.02, "[0, 1]"), ("delta_abs", -0.01, "[0, 0.1]"),
+    ("K_m", 20.0, "[0, 10]"), ("omega_nm", 4.0, "[5, 30]"),
+])
+def test_parameters_outside_the_bounds_are_refused(name, value, bounds):
+    """A negative delay or threshold was simulated by extrapolation while the likelihood reads
+    future samples: the two disagreed.  Table 1's bounds now hold in simulate."""
+    with pytest.raises(ValueError, match=f"{name} = .* outside its bounds \\{bounds[:-1]}\\]"):
+        simulate(task="FD", params={name: value}, duration=2.0)
+
+
+def test_fixed_parameter_outside_the_bounds_is_refused_and_bounds_are_inclusive():
+    with pytest.raises(ValueError, match="delta_abs = -0.01 is outside"):
+        simulate(paper_model(threshold=False), {"delta_abs": -0.01}, task="FD", duration=2.0)
+    with pytest.raises(ValueError, match="real"):
+        simulate(paper_model(threshold=False), {"delta_abs": np.complex128(0.01 + 1j)}, task="FD",
+                 duration=2.0)
+    sim = simulate(params={"tau_m": 0.0, "tau_v": 0.0, "delta_abs": 0.1}, task="FD", duration=2.0)
+    assert sim.params["delta_abs"] == 0.1 and sim.params["tau_m"] == 0.0
+
+
+@pytest.mark.parametrize("run_in", [0.0104, 0.0015, 2.00049])
+def test_run_in_off_the_integration_grid(run_in):
+    """The loop records from the step nearest run_in: the remnant and the metadata's forcing
+    phases must start there too (they used run_in itself)."""
+    p = dict(presets.TABLE3["FD"], K_v=0.0, K_m=0.0)  # no pilot: u is the remnant
+    task = TrackingTask.paper("FD", 1.0, duration=4.0, run_in=run_in)
+    sim = simulate(params=p, task=task, remnant_gain=0.1, seed=2)
+    rec = sim.recording
+    assert np.max(np.abs(rec.u - sim.remnant)) < 1e-10 * np.std(sim.remnant)
+    meta = rec.metadata["forcing"]
+    for name in ("target", "disturbance"):
+        f = Multisine.from_dict(meta["base_frequency"], meta[name])
+        col = rec["f_t" if name == "target" else "f_d"]
+        assert np.max(np.abs(f(rec.t) - col)) < 1e-10 * np.std(col)
+    assert sim.settings["run_in"] == pytest.approx(run_in, abs=1e-3 / 2 + 1e-12)

@@ -13,6 +13,14 @@ import numpy as np
 __all__ = ["Multisine"]
 
 
+def _is_complex(x: Any) -> bool:
+    """True if ``x`` (a number or array_like) holds complex values."""
+    arr = np.asarray(x)
+    if arr.dtype == object:
+        return any(np.iscomplexobj(v) for v in arr.flat)
+    return arr.dtype.kind == "c"
+
+
 @dataclass(frozen=True, eq=False)
 class Multisine:
     """A sum of sinusoids at integer multiples of a base frequency.
@@ -22,11 +30,19 @@ class Multisine:
     base_frequency : float
         omega_0 = 2 pi / T0, rad/s.
     n : array_like of int
-        Integer multiples n(i) of the base frequency.
+        Integer multiples n(i) >= 1 of the base frequency (integer-valued
+        floats such as 3.0 are accepted and stored as int).
     amplitude : array_like of float
         A(i), rad.
     phase : array_like of float
         phi(i), rad.
+
+    Raises
+    ------
+    ValueError
+        If a value is complex, ``n``, ``amplitude`` and ``phase`` are not 1-D
+        of equal length or not finite, an ``n`` is not an integer >= 1, or
+        ``base_frequency`` is not a positive number.
 
     Examples
     --------
@@ -41,6 +57,11 @@ class Multisine:
     phase: np.ndarray
 
     def __post_init__(self) -> None:
+        for name in ("base_frequency", "n", "amplitude", "phase"):
+            if _is_complex(getattr(self, name)):
+                raise ValueError(f"{name} must be real, got complex values: {getattr(self, name)!r}")
+        if np.asarray(self.n).dtype.kind == "b":
+            raise ValueError(f"n must hold integers >= 1, got booleans {self.n!r}")
         n = np.atleast_1d(np.asarray(self.n, dtype=float))
         a = np.atleast_1d(np.asarray(self.amplitude, dtype=float))
         p = np.atleast_1d(np.asarray(self.phase, dtype=float))
@@ -51,12 +72,20 @@ class Multisine:
             )
         if not (np.all(np.isfinite(n)) and np.all(np.isfinite(a)) and np.all(np.isfinite(p))):
             raise ValueError("n, amplitude and phase must be finite")
-        if not np.isfinite(self.base_frequency) or self.base_frequency <= 0:
+        bad = n[(n != np.round(n)) | (n < 1)]
+        if bad.size:
+            raise ValueError(f"n must hold integers >= 1 (multiples of the base frequency), "
+                             f"got {bad.tolist()}")
+        try:
+            w0 = float(self.base_frequency)
+        except (TypeError, ValueError):
+            raise ValueError(f"base_frequency must be a positive number, got {self.base_frequency!r}") from None
+        if not np.isfinite(w0) or w0 <= 0:
             raise ValueError(f"base_frequency must be positive, got {self.base_frequency!r}")
-        object.__setattr__(self, "n", n)
+        object.__setattr__(self, "n", n.astype(np.int64))
         object.__setattr__(self, "amplitude", a)
         object.__setattr__(self, "phase", p)
-        object.__setattr__(self, "base_frequency", float(self.base_frequency))
+        object.__setattr__(self, "base_frequency", w0)
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -77,7 +106,7 @@ class Multisine:
 
     def to_dict(self) -> dict[str, Any]:
         """The ``n``, ``amplitude``, ``phase`` lists of the recording format."""
-        return {"n": self.n.astype(int).tolist(), "amplitude": self.amplitude.tolist(),
+        return {"n": self.n.tolist(), "amplitude": self.amplitude.tolist(),
                 "phase": self.phase.tolist()}
 
     @classmethod

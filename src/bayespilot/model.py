@@ -22,7 +22,9 @@ registered.  :meth:`PilotModel.plan` compiles any such model into the plain
 arrays that the numba simulator and likelihood interpret, so an extension
 needs no change to the simulator, the likelihood or the fitters.  A new kind
 of linear block or nonlinearity is one new code in ``kernels/_blocks.py``
-plus a small class here.
+plus a small class here, a subclass of :class:`Stage`, :class:`Nonlinearity`
+or :class:`Modulation` (the kind codes of the three families overlap, so each
+slot of a channel takes only its own family).
 
 Sign convention
 ---------------
@@ -47,9 +49,10 @@ from .kernels import _blocks as B
 from .kernels import _response as R
 
 __all__ = [
-    "MAX_OVERSAMPLE", "Parameter", "FixedFilter", "Washout", "SecondOrderWashout", "MotionSystem",
-    "FirstOrderLag", "DeadZone", "SoftDeadZone", "Saturation", "LinearDrift", "Channel",
-    "PilotModel", "Plan", "paper_model", "SOURCES", "semicircular_canal",
+    "MAX_OVERSAMPLE", "Parameter", "Stage", "Nonlinearity", "Modulation", "FixedFilter", "Washout",
+    "SecondOrderWashout", "MotionSystem", "FirstOrderLag", "DeadZone", "SoftDeadZone", "Saturation",
+    "LinearDrift", "Channel",
+    "PilotModel", "Plan", "paper_model", "SOURCES", "semicircular_canal", "UnknownChannelError",
 ]
 
 #: Source signals a channel may take, and what they are.
@@ -63,6 +66,20 @@ SOURCE_CODES = {"e": 0, "theta_ddot_m": 1, "theta_m": 2, "theta": 3}
 MAX_STAGES = 4
 #: Largest oversampling factor of a channel (:attr:`Channel.oversample`).
 MAX_OVERSAMPLE = 64
+
+
+class UnknownChannelError(ValueError, KeyError):
+    """A channel name the model does not have (a ValueError; also a KeyError, as before)."""
+
+    def __str__(self) -> str:  # KeyError would show the message in quotes
+        return str(self.args[0]) if self.args else ""
+
+
+def _real(value, what: str) -> float:
+    """``float(value)``, refusing complex numbers (which float() would truncate)."""
+    if np.iscomplexobj(value):
+        raise ValueError(f"{what} must be a real number, got {value!r}")
+    return float(value)
 
 
 @dataclass(frozen=True)
@@ -91,15 +108,65 @@ class Parameter:
             raise ValueError(f"{self.name}: default {self.default} outside [{self.lower}, {self.upper}]")
 
 
+# --- block families ---------------------------------------------------------------
+class Stage:
+    """Base class of the linear blocks of a channel (:attr:`Channel.stages`).
+
+    A subclass is a frozen dataclass with a class attribute ``kind`` (a
+    ``STAGE_*`` code of ``kernels/_blocks.py``) and a ``parameters`` tuple of
+    at most two parameter names.
+    """
+
+    __slots__ = ()
+
+
+class Nonlinearity:
+    """Base class of the static nonlinearities (a channel's, or the model output's).
+
+    ``kind`` is an ``NL_*`` code of ``kernels/_blocks.py``; ``parameters``
+    names at most two parameters.
+    """
+
+    __slots__ = ()
+
+
+class Modulation:
+    """Base class of the gain modulations of a channel (:attr:`Channel.modulation`).
+
+    ``kind`` is a ``MOD_*`` code of ``kernels/_blocks.py``; ``parameters``
+    names one parameter.
+    """
+
+    __slots__ = ()
+
+
+def _check_block(block, family: type, where: str, optional: bool = True) -> None:
+    """Raise TypeError unless ``block`` belongs to ``family`` (or is None, if optional)."""
+    if (optional and block is None) or isinstance(block, family):
+        return
+    members = ", ".join(c.__name__ for c in family.__subclasses__())
+    alt = " or None" if optional else ""
+    raise TypeError(f"{where} must be a {family.__name__} ({members}){alt}, "
+                    f"got {type(block).__name__}")
+
+
 # --- linear stages ---------------------------------------------------------------
 @dataclass(frozen=True)
-class FixedFilter:
+class FixedFilter(Stage):
     """A fixed (parameter-free) proper transfer function of order <= 2.
 
     Parameters
     ----------
     num, den : sequence of float
         Coefficients in powers of s, highest first (as in ``scipy.signal``).
+        Leading zeros are removed (at least one coefficient is kept).
+
+    Raises
+    ------
+    ValueError
+        If a coefficient is complex, ``den`` is all zero, or after removing
+        leading zeros the denominator has order > 2 or the numerator a
+        higher order than the denominator (an improper filter).
     """
 
     num: tuple[float, ...]
@@ -108,10 +175,13 @@ class FixedFilter:
     parameters: tuple[str, ...] = field(default=(), init=False)
 
     def __post_init__(self) -> None:
-        num = tuple(float(x) for x in self.num)
-        den = tuple(float(x) for x in self.den)
-        if len(den) > 3 or len(num) > len(den) or not any(den):
-            raise ValueError("FixedFilter needs a proper transfer function of order <= 2")
+        num = _strip_leading_zeros(tuple(_real(x, "FixedFilter coefficient") for x in self.num))
+        den = _strip_leading_zeros(tuple(_real(x, "FixedFilter coefficient") for x in self.den))
+        if not any(den):
+            raise ValueError(f"FixedFilter: the denominator must not be zero, got {self.den!r}")
+        if not num or len(den) > 3 or len(num) > len(den):
+            raise ValueError("FixedFilter needs a proper transfer function of order <= 2 "
+                             f"(leading zeros removed: num={list(num)}, den={list(den)})")
         object.__setattr__(self, "num", num)
         object.__setattr__(self, "den", den)
 
@@ -123,8 +193,16 @@ class FixedFilter:
         return np.concatenate([b, a])
 
 
+def _strip_leading_zeros(coef: tuple[float, ...]) -> tuple[float, ...]:
+    """``coef`` without its leading zeros, keeping at least one coefficient."""
+    k = 0
+    while k < len(coef) - 1 and coef[k] == 0.0:
+        k += 1
+    return coef[k:]
+
+
 @dataclass(frozen=True)
-class Washout:
+class Washout(Stage):
     """First-order washout (high-pass) s / (s + omega), omega a parameter (rad/s)."""
 
     omega: str = "omega_w"
@@ -136,7 +214,7 @@ class Washout:
 
 
 @dataclass(frozen=True)
-class SecondOrderWashout:
+class SecondOrderWashout(Stage):
     """Second-order washout s^2 / (s^2 + 2 zeta omega s + omega^2)."""
 
     omega: str = "omega_w"
@@ -149,7 +227,7 @@ class SecondOrderWashout:
 
 
 @dataclass(frozen=True)
-class MotionSystem:
+class MotionSystem(Stage):
     """Second-order motion-platform dynamics omega^2 / (s^2 + 2 zeta omega s + omega^2)."""
 
     omega: str = "omega_ms"
@@ -162,7 +240,7 @@ class MotionSystem:
 
 
 @dataclass(frozen=True)
-class FirstOrderLag:
+class FirstOrderLag(Stage):
     """First-order lag 1 / (T s + 1), T a parameter (s)."""
 
     T: str = "T_lag"
@@ -175,7 +253,7 @@ class FirstOrderLag:
 
 # --- nonlinearities --------------------------------------------------------------
 @dataclass(frozen=True)
-class DeadZone:
+class DeadZone(Nonlinearity):
     """Dead zone of half-width ``delta``: sign(x) max(|x| - delta, 0) (Fig. 3)."""
 
     delta: str = "delta_abs"
@@ -187,7 +265,7 @@ class DeadZone:
 
 
 @dataclass(frozen=True)
-class SoftDeadZone:
+class SoftDeadZone(Nonlinearity):
     """A dead zone with rounded corners of width ``width`` (tends to DeadZone as width -> 0)."""
 
     delta: str = "delta_abs"
@@ -200,7 +278,7 @@ class SoftDeadZone:
 
 
 @dataclass(frozen=True)
-class Saturation:
+class Saturation(Nonlinearity):
     """Clipping at +- ``limit``."""
 
     limit: str = "u_max"
@@ -211,8 +289,9 @@ class Saturation:
         return (self.limit,)
 
 
+# --- gain modulation -------------------------------------------------------------
 @dataclass(frozen=True)
-class LinearDrift:
+class LinearDrift(Modulation):
     """Channel gain times 1 + rate (t/T - 1/2): a gain that drifts linearly over the run."""
 
     rate: str = "drift"
@@ -237,16 +316,18 @@ class Channel:
         Name of the time-delay parameter (s).
     gain : tuple of str
         Names of parameters whose product is the channel gain (empty: 1).
-    stages : tuple
+    stages : tuple of Stage
         Linear blocks applied to the source, in order (FixedFilter, Washout, ...).
-    nonlinearity : DeadZone, SoftDeadZone, Saturation or None
+    nonlinearity : Nonlinearity or None
+        DeadZone, SoftDeadZone, Saturation (a :class:`Nonlinearity`) or None.
     lead : str or None
         Name of the lead time constant T in (1 + T s), or None.
     sign : {+1, -1}
         How the channel enters the sum.
     gain_const : float
         A constant factor on the gain.
-    modulation : LinearDrift or None
+    modulation : Modulation or None
+        LinearDrift (a :class:`Modulation`) or None.
     oversample : int, default 1
         Run the channel's path after its parametric stages (nonlinearity,
         delay, its share of H_nm) at this many times the recording's rate in
@@ -255,6 +336,16 @@ class Channel:
         error at its corners (``docs/posteriors.md``) at about that many
         times the channel's cost.  The simulator ignores it (it always runs
         finer than it records).
+
+    Raises
+    ------
+    ValueError
+        On an unknown source, a sign other than +-1, more than two gain
+        parameters or :data:`MAX_STAGES` stages, or a bad ``oversample``.
+    TypeError
+        If a stage is not a :class:`Stage`, the nonlinearity not a
+        :class:`Nonlinearity` or the modulation not a :class:`Modulation`
+        (the kernels would read the kind code of another family).
     """
 
     name: str
@@ -279,6 +370,10 @@ class Channel:
             raise ValueError(f"channel {self.name!r}: at most two gain parameters")
         if len(self.stages) > MAX_STAGES:
             raise ValueError(f"channel {self.name!r}: at most {MAX_STAGES} stages")
+        for st in self.stages:
+            _check_block(st, Stage, f"channel {self.name!r}: a stage", optional=False)
+        _check_block(self.nonlinearity, Nonlinearity, f"channel {self.name!r}: the nonlinearity")
+        _check_block(self.modulation, Modulation, f"channel {self.name!r}: the modulation")
         if isinstance(self.oversample, bool) or not isinstance(self.oversample, (int, np.integer)) \
                 or not 1 <= self.oversample <= MAX_OVERSAMPLE:
             raise ValueError(f"channel {self.name!r}: oversample must be an integer in "
@@ -351,12 +446,21 @@ class PilotModel:
         Every parameter the channels refer to (order = full-vector order).
     omega_nm, zeta_nm : str
         Names of the neuromuscular frequency and damping parameters.
-    output : Saturation or None
+    output : Nonlinearity or None
         A nonlinearity on the model output (e.g. control saturation).
     fixed : mapping of str to float
         Parameters held at a value (not estimated), e.g. ``{"delta_abs": 0}``.
     name : str
         A label for reports.
+
+    Raises
+    ------
+    ValueError
+        On duplicate parameter or channel names, a parameter used but not
+        declared, or a fixed value of an unknown parameter, or one that is
+        complex or not finite.
+    TypeError
+        If ``output`` is not a :class:`Nonlinearity` (or None).
     """
 
     channels: tuple[Channel, ...]
@@ -371,6 +475,7 @@ class PilotModel:
         object.__setattr__(self, "channels", tuple(self.channels))
         object.__setattr__(self, "parameters", tuple(self.parameters))
         object.__setattr__(self, "fixed", dict(self.fixed))
+        _check_block(self.output, Nonlinearity, "the output block")
         known = [p.name for p in self.parameters]
         if len(set(known)) != len(known):
             raise ValueError("duplicate parameter names")
@@ -387,7 +492,7 @@ class PilotModel:
         for k, v in self.fixed.items():
             if k not in known:
                 raise ValueError(f"cannot fix unknown parameter {k!r}; known: {', '.join(known)}")
-            if not math.isfinite(float(v)):
+            if not math.isfinite(_real(v, f"fixed value of {k}")):
                 raise ValueError(f"fixed value of {k} must be finite")
 
     # -- parameter bookkeeping -----------------------------------------------
@@ -433,7 +538,8 @@ class PilotModel:
         Raises
         ------
         ValueError
-            On unknown or misspelled names, a wrong length, or non-finite values.
+            On unknown or misspelled names, a wrong length, or complex or
+            non-finite values.
         """
         full = np.array([p.default for p in self.parameters], dtype=float)
         names = self.all_names
@@ -449,6 +555,8 @@ class PilotModel:
             for k, v in values.items():
                 if k in self.fixed:
                     continue
+                if np.iscomplexobj(v):
+                    raise ValueError(f"parameter {k} must be a real number, got {v!r}")
                 try:
                     x = float(v)
                 except (TypeError, ValueError):
@@ -457,6 +565,10 @@ class PilotModel:
                     raise ValueError(f"parameter {k} must be finite, got {v!r}")
                 full[names.index(k)] = x
             return full
+        raw = np.asarray(values)
+        if raw.dtype.kind == "c" or (raw.dtype == object
+                                     and any(np.iscomplexobj(x) for x in raw.flat)):
+            raise ValueError("parameter values must be real numbers, got complex values")
         arr = np.asarray(values, dtype=float)
         if arr.shape != (self.n_free,):
             raise ValueError(f"expected {self.n_free} free parameter values "
@@ -480,19 +592,30 @@ class PilotModel:
 
     # -- building new models ----------------------------------------------------
     def _with_params(self, new: Iterable[Parameter]) -> tuple[Parameter, ...]:
+        """The parameters plus ``new``; a name declared again must be declared alike."""
         params = list(self.parameters)
-        have = {p.name for p in params}
+        have = {p.name: p for p in params}
         for p in new:
-            if p.name not in have:
+            old = have.get(p.name)
+            if old is None:
                 params.append(p)
-                have.add(p.name)
+                have[p.name] = p
+            elif ((old.lower, old.upper, old.default, old.unit)
+                  != (p.lower, p.upper, p.default, p.unit)):
+                raise ValueError(
+                    f"parameter {p.name} is already declared with bounds "
+                    f"[{old.lower:g}, {old.upper:g}], "
+                    f"default {old.default:g}, unit {old.unit!r}; the new declaration has "
+                    f"[{p.lower:g}, {p.upper:g}], default {p.default:g}, unit {p.unit!r} "
+                    "(use another name, or declare it alike to share it)")
         return tuple(params)
 
     def _channel(self, name: str) -> int:
         for i, c in enumerate(self.channels):
             if c.name == name:
                 return i
-        raise KeyError(f"no channel {name!r}; channels: {', '.join(c.name for c in self.channels)}")
+        raise UnknownChannelError(f"no channel {name!r} in this model; channels: "
+                                  f"{', '.join(c.name for c in self.channels)}")
 
     def _replace_channel(self, name: str, channel: Channel, params: Iterable[Parameter], label: str) -> "PilotModel":
         chans = list(self.channels)
@@ -501,55 +624,106 @@ class PilotModel:
                        name=f"{self.name} + {label}")
 
     def fix(self, **values: float) -> "PilotModel":
-        """A model with some parameters held fixed, e.g. ``fix(delta_abs=0.0)``."""
+        """A model with some parameters held fixed, e.g. ``fix(delta_abs=0.0)``.
+
+        Raises
+        ------
+        ValueError
+            On an unknown parameter, or a value that is complex or not finite.
+        """
         fixed = dict(self.fixed)
-        fixed.update({k: float(v) for k, v in values.items()})
+        fixed.update({k: _real(v, f"fixed value of {k}") for k, v in values.items()})
         return replace(self, fixed=fixed)
 
     def free(self, *names: str) -> "PilotModel":
         """A model in which the named fixed parameters are estimated again."""
         return replace(self, fixed={k: v for k, v in self.fixed.items() if k not in names})
 
-    def add_stage(self, channel: str, stage, parameters: Iterable[Parameter] = ()) -> "PilotModel":
-        """Append a linear stage (e.g. :class:`Washout`) to a channel, before its nonlinearity."""
+    def add_stage(self, channel: str, stage: Stage, parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Append a linear stage (e.g. :class:`Washout`) to a channel, before its nonlinearity.
+
+        Raises
+        ------
+        ValueError
+            On an unknown channel, an undeclared parameter, or a parameter
+            declared again with other bounds, default or unit.
+        TypeError
+            If ``stage`` is not a :class:`Stage`.
+        """
+        _check_block(stage, Stage, "add_stage: the stage", optional=False)
         c = self.channels[self._channel(channel)]
         return self._replace_channel(channel, replace(c, stages=c.stages + (stage,)), parameters,
                                      f"{type(stage).__name__} on {channel}")
 
-    def with_nonlinearity(self, channel: str, nonlinearity, parameters: Iterable[Parameter] = ()) -> "PilotModel":
-        """Replace a channel's nonlinearity (e.g. a :class:`SoftDeadZone` threshold)."""
+    def with_nonlinearity(self, channel: str, nonlinearity: Nonlinearity | None,
+                          parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Replace a channel's nonlinearity (e.g. a :class:`SoftDeadZone` threshold; None: none).
+
+        Raises
+        ------
+        ValueError
+            On an unknown channel, an undeclared parameter, or a parameter
+            declared again with other bounds, default or unit.
+        TypeError
+            If ``nonlinearity`` is neither a :class:`Nonlinearity` nor None.
+        """
+        _check_block(nonlinearity, Nonlinearity, "with_nonlinearity: the nonlinearity")
         c = self.channels[self._channel(channel)]
         return self._replace_channel(channel, replace(c, nonlinearity=nonlinearity), parameters,
                                      f"{type(nonlinearity).__name__} on {channel}")
 
-    def with_modulation(self, channel: str, modulation, parameters: Iterable[Parameter] = ()) -> "PilotModel":
-        """Modulate a channel's gain over the run (e.g. :class:`LinearDrift`)."""
+    def with_modulation(self, channel: str, modulation: Modulation | None,
+                        parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Modulate a channel's gain over the run (e.g. :class:`LinearDrift`; None: constant).
+
+        Raises
+        ------
+        ValueError
+            On an unknown channel, an undeclared parameter, or a parameter
+            declared again with other bounds, default or unit.
+        TypeError
+            If ``modulation`` is neither a :class:`Modulation` nor None.
+        """
+        _check_block(modulation, Modulation, "with_modulation: the modulation")
         c = self.channels[self._channel(channel)]
         return self._replace_channel(channel, replace(c, modulation=modulation), parameters,
                                      f"{type(modulation).__name__} on {channel}")
 
     def add_channel(self, channel: Channel, parameters: Iterable[Parameter] = ()) -> "PilotModel":
-        """Add a parallel channel (e.g. an otolith channel)."""
+        """Add a parallel channel (e.g. an otolith channel).
+
+        Raises
+        ------
+        ValueError
+            On a duplicate channel name, an undeclared parameter, or a
+            parameter declared again with other bounds, default or unit.
+        """
         return replace(self, channels=self.channels + (channel,),
                        parameters=self._with_params(parameters),
                        name=f"{self.name} + {channel.name} channel")
 
-    def with_oversampling(self, factor: int, channels: Sequence[str] | None = None) -> "PilotModel":
+    def with_oversampling(self, factor: int, channels: str | Sequence[str] | None = None) -> "PilotModel":
         """A model whose likelihood runs some channels at ``factor`` times the recording's rate.
 
         Parameters
         ----------
         factor : int
             Oversampling factor M, 1 to :data:`MAX_OVERSAMPLE` (1: the paper's computation).
-        channels : sequence of str, optional
-            The channels to oversample; default: every channel with a
-            nonlinearity (the dead-zone threshold), where a sampled signal
-            errs most (a linear channel gains little).
+        channels : str or sequence of str, optional
+            The channel, or channels, to oversample; default: every channel
+            with a nonlinearity (the dead-zone threshold), where a sampled
+            signal errs most (a linear channel gains little).
 
         Returns
         -------
         PilotModel
             The same parameters and structure; see :attr:`Channel.oversample`.
+
+        Raises
+        ------
+        ValueError
+            On an unknown channel, a bad ``factor``, or (``channels`` not
+            given) a model without a nonlinearity.
 
         Examples
         --------
@@ -560,6 +734,10 @@ class PilotModel:
             channels = [c.name for c in self.channels if c.nonlinearity is not None]
             if not channels:
                 raise ValueError("no channel has a nonlinearity; name the channels to oversample")
+        elif isinstance(channels, str):
+            channels = [channels]
+        else:
+            channels = list(channels)
         chans = list(self.channels)
         for name in channels:
             i = self._channel(name)
@@ -567,8 +745,18 @@ class PilotModel:
         model = replace(self, channels=tuple(chans))
         return model if factor == 1 else replace(model, name=f"{self.name}, {factor}x {', '.join(channels)}")
 
-    def with_output(self, output, parameters: Iterable[Parameter] = ()) -> "PilotModel":
-        """Put a nonlinearity (e.g. :class:`Saturation`) on the model output."""
+    def with_output(self, output: Nonlinearity | None, parameters: Iterable[Parameter] = ()) -> "PilotModel":
+        """Put a nonlinearity (e.g. :class:`Saturation`) on the model output (None: none).
+
+        Raises
+        ------
+        ValueError
+            On an undeclared parameter, or a parameter declared again with
+            other bounds, default or unit.
+        TypeError
+            If ``output`` is neither a :class:`Nonlinearity` nor None.
+        """
+        _check_block(output, Nonlinearity, "with_output: the output block")
         return replace(self, output=output, parameters=self._with_params(parameters),
                        name=f"{self.name} + output {type(output).__name__}")
 

@@ -211,6 +211,13 @@ def paper_forcing(task: str, scale: str | float = "paper_simulation") -> tuple[M
     -------
     target, disturbance : Multisine
         f_t (rad) and f_d (rad, as inserted before the controlled element).
+
+    Raises
+    ------
+    ValueError
+        If ``task`` is not "FD" or "FT", or ``scale`` is neither a key of
+        :data:`FORCING_SCALE` nor a finite real number >= 0 (a complex
+        number is refused, not truncated).
     """
     if task not in TASK_SCALING:
         raise ValueError(f"task must be 'FD' or 'FT', got {task!r}")
@@ -219,6 +226,8 @@ def paper_forcing(task: str, scale: str | float = "paper_simulation") -> tuple[M
             raise ValueError(f"scale must be one of {sorted(FORCING_SCALE)} or a number, got {scale!r}")
         factor = FORCING_SCALE[scale]
     else:
+        if np.iscomplexobj(scale):
+            raise ValueError(f"scale must be a real number, got {scale!r}")
         factor = float(scale)
         if not np.isfinite(factor) or factor < 0:
             raise ValueError(f"scale must be a finite number >= 0, got {scale!r}")

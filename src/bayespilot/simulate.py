@@ -278,9 +278,11 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
         Default :func:`~bayespilot.model.paper_model`.
     params : mapping, optional
         Pilot parameters by name; missing ones take Table 3 values for the
-        task (FD/FT) or the model's defaults.
+        task (FD/FT) or the model's defaults.  Every value must lie within
+        the parameter's bounds (Table 1 for the paper's model).
     task : {"FD", "FT"} or TrackingTask
-        The paper's task preset, or a task of your own.
+        The paper's task preset, or a task of your own.  The recording
+        starts at the integration step nearest to its ``run_in``.
     motion_gain : float
         K_theta, used with a preset task name.
     remnant_fraction : float, optional
@@ -305,6 +307,22 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     Returns
     -------
     Simulation
+
+    Raises
+    ------
+    ValueError
+        On a bad argument (task name, ``remnant_fraction`` outside [0, 1),
+        both remnant settings, ``oversample`` < 2, a non-positive
+        ``duration``, ``T_n`` or ``noise_psd``), an unknown, complex or
+        non-finite parameter, a parameter value (a fixed one included)
+        outside the model's bounds (e.g. a negative delay or threshold: the
+        likelihood would read future samples where the simulator
+        extrapolates), or a remnant fraction the loop cannot reach.
+    TypeError
+        If ``model`` is not a PilotModel or ``task`` neither a str nor a
+        TrackingTask.
+    RuntimeError
+        If the closed loop diverges for these parameters.
 
     Examples
     --------
@@ -343,9 +361,18 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     if params is not None:
         values.update(params)
     theta = model.full_vector({k: v for k, v in values.items()})
-    for k, v in model.fixed.items():
+    for k in model.fixed:
         if params is not None and k in params:
-            theta[model.all_names.index(k)] = float(params[k])
+            v = params[k]
+            if np.iscomplexobj(v):
+                raise ValueError(f"parameter {k} must be a real number, got {v!r}")
+            if not math.isfinite(float(v)):
+                raise ValueError(f"parameter {k} must be finite, got {v!r}")
+            theta[model.all_names.index(k)] = float(v)
+    for p, x in zip(model.parameters, theta):
+        if not p.lower <= x <= p.upper:
+            raise ValueError(f"parameter {p.name} = {x:g} is outside its bounds "
+                             f"[{p.lower:g}, {p.upper:g}]")
     if T_n is None:
         T_n = presets.TABLE3_T_N.get(tt.task, 0.06)
     if not (math.isfinite(T_n) and T_n > 0):
@@ -356,7 +383,12 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
 
     rng = np.random.default_rng(seed)
     h = 1.0 / (tt.sample_rate_hz * oversample)
-    n_fine_len = int(round(tt.run_in / h)) + tt.n_samples * oversample + 2
+    k_start = int(round(tt.run_in / h))
+    if not math.isclose(k_start * h, tt.run_in, rel_tol=1e-12, abs_tol=1e-12):
+        # The loop records from its step k_start: start the remnant and the
+        # metadata's phase shift there too.
+        tt = replace(tt, run_in=k_start * h)
+    n_fine_len = k_start + tt.n_samples * oversample + 2
     unit = remnant(n_fine_len, h, 1.0, T_n, rng, psd)  # remnant for K_n = 1
 
     def run(kn):
