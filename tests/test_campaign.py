@@ -292,3 +292,74 @@ def test_job_seed_refuses_an_unknown_task_or_stream():
         job_seed("fit", "XX", 0.5, 0.3, 2)
     with pytest.raises(ValueError, match="stream must be"):
         job_seed("noise", "FD", 0.5, 0.3, 2)
+
+
+def test_job_takes_only_a_bool_for_iterate():
+    """A fit option whose default is a bool (iterate) must be one: "False" is refused here,
+    before any fit runs, not taken for its truth value."""
+    assert Job("FD", 1.0, 0.2, 0, fit_kwargs={"iterate": False}).fit_kwargs == {"iterate": False}
+    for bad in ("False", "true", 1, None):
+        with pytest.raises(ValueError, match="iterate must be True or False"):
+            Job("FD", 1.0, 0.2, 0, fit_kwargs={"iterate": bad})
+        with pytest.raises(ValueError, match="iterate must be True or False"):
+            paper_study(1, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.2,),
+                        iterate=bad)
+
+
+@pytest.fixture
+def stopped_campaign(monkeypatch):
+    """run_campaign replaced: it keeps the jobs it is given and stops (CampaignError), so a
+    'replicate' command runs no fit; returns the list of jobs seen."""
+    import bayespilot.campaign as campaign
+
+    seen = []
+
+    def stop(jobs, *args, **kwargs):
+        seen.extend(jobs)
+        raise CampaignError("stopped by the test")
+
+    monkeypatch.setattr(campaign, "run_campaign", stop)
+    return seen
+
+
+@pytest.mark.parametrize("value, expected", [("False", False), ("false", False),
+                                             ("True", True), ("true", True), ("TRUE", True)])
+def test_replicate_cli_fit_option_booleans(tmp_path, capsys, stopped_campaign, value, expected):
+    """--fit-option iterate=False reaches the jobs as False (it was the string 'False', which
+    ran the iterated fit); the campaign is stopped before any fit runs."""
+    seen = stopped_campaign
+    code = main(["replicate", "--realizations", "1", "--tasks", "FD", "--motion-gains", "1",
+                 "--remnant-fractions", "0.2", "--fits", "threshold", "--out",
+                 str(tmp_path / "x"), "--fit-option", f"iterate={value}", "-q"])
+    assert code == 1 and "stopped by the test" in capsys.readouterr().err
+    assert [j.fit_kwargs for j in seen] == [{"iterate": expected}]
+    assert seen[0].fit_kwargs["iterate"] is expected
+
+
+@pytest.mark.parametrize("option, flag", [("duration=10", "--duration"),
+                                          ("remnant=table4", "--remnant"),
+                                          ("threshold=false", "--fits"),
+                                          ("method=fast", "--method"),
+                                          ("tasks=FD", "--tasks"),
+                                          ("motion_gains=1", "--motion-gains"),
+                                          ("remnant_fractions=0.2", "--remnant-fractions"),
+                                          ("realizations=2", "--realizations")])
+def test_replicate_cli_refuses_a_fit_option_that_an_option_sets(tmp_path, capsys,
+                                                                stopped_campaign, option, flag):
+    """paper_study's own keywords are not fit options: a usage error naming the option that sets
+    them (it was exit 1, 'unexpected TypeError ... please report it')."""
+    code = main(["replicate", "--out", str(tmp_path / "x"), "--fit-option", option])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert len(err.strip().splitlines()) == 1 and "unexpected" not in err
+    assert stopped_campaign == []
+    name = option.split("=")[0]
+    assert f"argument --fit-option: '{name}' is not a fit option: give {flag} instead" in err
+    assert not (tmp_path / "x").exists()
+
+
+def test_replicate_cli_refuses_a_non_bool_iterate(tmp_path, capsys, stopped_campaign):
+    code = main(["replicate", "--out", str(tmp_path / "x"), "--fit-option", "iterate=yes"])
+    err = capsys.readouterr().err
+    assert code == 2 and "--fit-option: option iterate must be True or False, got 'yes'" in err
+    assert stopped_campaign == []

@@ -353,3 +353,72 @@ def test_readme_python_example_runs(tmp_path, monkeypatch):
     assert blocks, "README.md has no python example"
     namespace: dict = {}
     exec(compile(blocks[0], str(README), "exec"), namespace)  # noqa: S102 - our own README
+
+
+# --- records too short, demo --quick (review 4) -----------------------------------------------
+def _first_samples(run: Path, n: int, out: Path) -> Path:
+    """The first ``n`` samples of a recording, written as a recording of their own."""
+    from bayespilot.io import write_recording
+
+    rec = read_recording(run)
+    signals = {k: np.asarray(v)[:n] for k, v in rec.signals.items()}
+    write_recording(Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, {}), out)
+    return out
+
+
+def test_loglik_on_a_record_shorter_than_the_delays_says_so(ft_run, ft_params, tmp_path,
+                                                             capsys):
+    """-ln L is +inf when a channel's delay is not shorter than the record by more than 4
+    samples: the command says the record is too short and how long it must be (exit 2), not
+    that the model is unstable at parameters that are stable."""
+    truth = presets.paper_parameters("FT")
+    name = max(("tau_v", "tau_m"), key=lambda k: truth[k])
+    dt = read_recording(ft_run).dt
+    need = next(n for n in range(1, 1000) if truth[name] / dt < n - 4)  # delay + 4 samples
+    recs = {n: _first_samples(ft_run, n, tmp_path / f"n{n}") for n in (3, need - 1, need)}
+    # the library: +inf below the length, finite from it on
+    assert neg_log_lik(paper_model(), read_recording(recs[need - 1]), truth) == np.inf
+    assert np.isfinite(neg_log_lik(paper_model(), read_recording(recs[need]), truth))
+    for n in (3, need - 1):
+        code, out, err = _run(capsys, "loglik", recs[n], "--params", ft_params)
+        assert code == 2 and out == ""
+        (line,) = [ln for ln in err.splitlines() if ln.startswith("bayespilot: error:")]
+        assert "unstable" not in err
+        assert f"{recs[n]}: the record is too short for the pilot model: {n} sample(s)" in line
+        assert f"{name} = {truth[name]:g} s needs at least {need}" in line
+    code, out, err = _run(capsys, "loglik", recs[need], "--params", ft_params)
+    assert code == 0, err
+    assert _loglik_value(out) == neg_log_lik(paper_model(), read_recording(recs[need]), truth)
+
+
+@pytest.mark.parametrize("extra, named", [
+    (["--task", "FT"], "drop --task or --quick"),
+    (["--nlive", "5", "--likelihood", "eq4"], "drop --nlive, --likelihood or --quick"),
+    (["--motion-gains", "0.5", "--duration", "10", "--max-steps", "10"],
+     "drop --motion-gains, --duration, --max-steps or --quick"),
+])
+def test_demo_quick_refuses_the_full_demos_options(extra, named, tmp_path, capsys):
+    """--quick is a fixed check (docs/cli.md): the full demo's options with it are a usage
+    error naming them, not silently ignored."""
+    code, out, err = _run(capsys, "demo", "--quick", "--out", tmp_path / "d", *extra)
+    assert code == 2 and out == ""
+    assert err.startswith("bayespilot: error: argument --quick:") and named in err
+    assert not (tmp_path / "d").exists()
+
+
+def test_demo_passes_only_the_options_given(tmp_path, capsys, monkeypatch):
+    """Without --quick the options reach run_example; those not given take its defaults."""
+    import bayespilot.example as example
+
+    calls = []
+
+    def fake(out, **kwargs):
+        calls.append(kwargs)
+        return Path(out) / "report.md"
+
+    monkeypatch.setattr(example, "run_example", fake)
+    assert _run(capsys, "demo", "--out", tmp_path / "d", "-q")[0] == 0
+    assert _run(capsys, "demo", "--out", tmp_path / "d", "--task", "FT", "--nlive", "20",
+                "--motion-gains", "1", "-q")[0] == 0
+    strip = [{k: v for k, v in c.items() if k not in ("progress", "say")} for c in calls]
+    assert strip == [{"seed": 0}, {"seed": 0, "task": "FT", "nlive": 20, "motion_gains": (1.0,)}]

@@ -236,3 +236,22 @@ def test_diagnose_bayes_factor_option(rec_stem, tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(dg, "bayes_factor", refuse)
     code, stdout, err = _run(capsys, "diagnose", rec_stem, "--bootstrap", "0", "--bayes-factor")
     assert code == 0 and "warning: no Bayes factor: no candidate" in err
+
+
+def test_report_bolds_the_justified_row(tmp_path):
+    """report.html writes a justified candidate's row as <tr style="font-weight:bold"> (valid
+    CSS; it was escaped to style=&quot;...&quot;, which no browser reads as a style)."""
+    from bayespilot import presets
+    from bayespilot.diagnose import diagnose, get_extension
+    from bayespilot.model import paper_model
+
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=22,
+                   duration=40.96).recording
+    res = diagnose(rec, seed=0, n_bootstrap=0, candidates=["motion-washout"])
+    assert res.physics == "motion-washout"
+    assert [c.physics for c in res.ranking if c.justified] == ["motion-washout"]
+    html = (res.report(tmp_path)["html"]).read_text(encoding="utf-8")
+    assert '<tr style="font-weight:bold"><td>motion-washout</td>' in html
+    assert html.count('style="font-weight:bold"') == 1 and "&quot;" not in html

@@ -234,3 +234,64 @@ def test_task_posterior_pooled_and_a_failure_kept(tmp_path, monkeypatch):
     assert res1.settings["posterior_error"] == "RuntimeError: the chain diverged"
     with pytest.raises(ValueError, match="posterior"):
         diagnose_batch(["x"], tmp_path / "o", posterior="yes")
+
+
+@pytest.fixture(scope="module")
+def done_without_reports(tmp_path_factory):
+    """A folder of one recording, and a batch of it run by the CLI without --reports."""
+    folder = tmp_path_factory.mktemp("done")
+    stem = _write(folder, "s7-run1", subject="s7", seed=7)
+    out = tmp_path_factory.mktemp("done-out") / "out"
+    code = main(["diagnose-batch", str(folder), "--out", str(out), "--bootstrap", "0",
+                 "--workers", "1", "-q"])
+    assert code == 0
+    assert (out / "s7-run1.json").is_file() and not (out / "s7-run1").exists()
+    return folder, stem, out
+
+
+def test_cli_reports_on_a_finished_batch_says_none_were_written(done_without_reports, capsys):
+    """--reports on a folder whose diagnoses finished without: nothing is redone, no report can
+    be made from <key>.json, and the command says so (it said '... with its report in
+    <key>/')."""
+    folder, stem, out = done_without_reports
+    capsys.readouterr()
+    before = (out / "s7-run1.json").stat().st_mtime_ns
+    code = main(["diagnose-batch", str(folder), "--out", str(out), "--bootstrap", "0",
+                 "--workers", "1", "--reports"])
+    stdout, err = capsys.readouterr()
+    assert code == 0, err
+    assert "1 diagnoses: 0 run, 1 already done" in stdout
+    assert (out / "s7-run1.json").stat().st_mtime_ns == before and not (out / "s7-run1").exists()
+    (warning,) = [ln for ln in err.splitlines() if "report" in ln]
+    assert warning.startswith("bayespilot: warning: 1 diagnosis finished before, without a "
+                              "report, is not redone and gets no report")
+    assert "(s7-run1)" in warning and "delete its <key>.json and run again" in warning
+    wrote = stdout.splitlines()[-1]
+    assert wrote.startswith("wrote ") and "except for the diagnoses finished before" in wrote
+    assert not wrote.endswith("with its report in <key>/")
+
+
+def test_resume_compares_resolved_recordings_and_defaults(done_without_reports, tmp_path):
+    """The same recording as its .csv or .json path (the CLI stored the stem), and a Python
+    call leaving alpha, n_calibrate (and seed) at their defaults where the CLI stored them:
+    the finished diagnosis is taken, not refused as 'from other recordings or settings'."""
+    folder, stem, out = done_without_reports
+    stored = json.loads((out / "s7-run1.json").read_text())
+    assert stored["recordings"] == [stem] and stored["settings"]["alpha"] == 0.01
+    before = (out / "s7-run1.json").stat().st_mtime_ns
+    for path in (f"{stem}.csv", f"{stem}.json", os.path.relpath(stem)):
+        with pytest.warns(Warning):  # the 20-s record: questionable, said
+            s = diagnose_batch([path], out, n_bootstrap=0, alpha=None, progress=False,
+                               warm_cache=False)
+        assert (s.total, s.completed, s.skipped) == (1, 0, 1)
+    assert (out / "s7-run1.json").stat().st_mtime_ns == before
+    # reports=True on it: named by a warning, nothing written
+    with pytest.warns(UserWarning, match=r"1 diagnosis finished before.*\(s7-run1\)"):
+        diagnose_batch([f"{stem}.csv"], out, n_bootstrap=0, reports=True, progress=False)
+    assert not (out / "s7-run1").exists()
+    # other settings or another recording are still refused
+    with pytest.raises(CampaignError, match="other recordings or settings"):
+        diagnose_batch([stem], out, n_bootstrap=0, alpha=0.05, progress=False)
+    other = _write(tmp_path, "s7-run1", subject="s7", seed=8)  # the same key, another file
+    with pytest.raises(CampaignError, match="other recordings or settings"):
+        diagnose_batch([other], out, n_bootstrap=0, progress=False)

@@ -214,3 +214,29 @@ def test_cli_fit_prediction_error(sim, tmp_path, capsys):
     assert json.loads(out.read_text())["settings"]["noise"]["kind"] == "ar"
     assert main(["fit", str(tmp_path / "run"), "--noise", "ar"]) == 2  # not with --method paper
     assert "--method fast" in capsys.readouterr().err
+
+
+def test_paper_fit_takes_only_a_bool_for_iterate(sim):
+    """iterate="False" (what --fit-option iterate=False used to pass) is refused, not taken
+    for its truth value (True: the iterated procedure)."""
+    small = dict(seed=0, repetitions=1, n_best=1, population=4, generations=1)
+    for bad in ("False", "true", 0, 1, None):
+        with pytest.raises(ValueError, match="iterate must be True or False"):
+            fit_paper(sim.recording, iterate=bad, **small)
+    f = fit_paper(sim.recording, iterate=np.bool_(False), **small)
+    assert f.settings["iterate"] is False and f.steps["iterations"] == []
+    assert f.steps["iterations_converged"] is None and len(f.steps["step3"]) == 1
+
+
+def test_cli_fit_prediction_error_needs_four_seconds(sim, tmp_path, capsys):
+    """--noise ar leaves 2 s out, at most half the record: a shorter record is a usage error
+    naming it and the length needed (it was 'unexpected ValueError ... please report it')."""
+    short = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.15, seed=21, duration=3.0)
+    write_recording(short.recording, tmp_path / "short")
+    code = main(["fit", str(tmp_path / "short"), "--method", "fast", "--noise", "ar", "-q"])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    (line,) = [ln for ln in err.splitlines() if ln.startswith("bayespilot: error:")]
+    assert line.startswith(f"bayespilot: error: {tmp_path / 'short'}: --noise ar")
+    assert "at least 4 s" in line and "3 s long" in line
+    assert "unexpected" not in err and "report it" not in err

@@ -143,6 +143,13 @@ def _fit_option_names(method: str) -> tuple[str, ...]:
                  if p.kind == p.KEYWORD_ONLY and n not in ("threshold", "seed", "progress"))
 
 
+def _bool_option_names(method: str) -> tuple[str, ...]:
+    """The fit options whose default is a bool (e.g. ``iterate``): they take True or False only."""
+    sig = inspect.signature(_fit_function(method))
+    return tuple(n for n in _fit_option_names(method)
+                 if isinstance(sig.parameters[n].default, bool))
+
+
 def _json_roundtrip(obj: Any) -> Any:
     return json.loads(json.dumps(obj))
 
@@ -167,7 +174,9 @@ class Job:
         :func:`~bayespilot.fit.fast.fit_fast`.
     fit_kwargs : dict
         Further keyword arguments of the fit function (e.g. ``repetitions``),
-        JSON-serialisable.
+        JSON-serialisable.  An option whose default is a bool (``iterate``
+        of the paper method) must be True or False: a string such as
+        ``"False"`` is refused, not taken for its truth value.
     duration : float or None
         Measurement time of the simulated run, s (None: the paper's 81.92 s).
     remnant : {"fraction", "table4"}
@@ -236,6 +245,10 @@ class Job:
         if unknown:
             raise ValueError(f"unknown option(s) {', '.join(map(repr, unknown))} for the "
                              f"{self.method} method; valid are {', '.join(allowed)}")
+        for name in _bool_option_names(self.method):
+            v = self.fit_kwargs.get(name, False)
+            if not isinstance(v, bool):
+                raise ValueError(f"option {name} must be True or False, got {v!r}")
         try:
             kw = _json_roundtrip(dict(self.fit_kwargs))
         except (TypeError, ValueError) as exc:

@@ -235,6 +235,24 @@ def _questionable_said():
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
+@contextlib.contextmanager
+def _warnings_of(category, handle):
+    """Within: each warning of ``category`` goes to ``handle(message)`` as it is raised,
+    instead of Python's display; other warnings are shown as before."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("always", category)
+        shown = warnings.showwarning
+
+        def show(message, cat, filename, lineno, file=None, line=None):
+            if issubclass(cat, category):
+                handle(message)
+            else:
+                shown(message, cat, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        yield
+
+
 def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: str, motion_gain: float,
                         seed: int, remnant_fraction: float | None = None,
                         remnant_gain: float | None = None, duration: float | None = None):
@@ -275,8 +293,37 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
     return sim, csv_path, json_path
 
 
+def _too_short_for_delays(model, recording, params: Mapping[str, float]) -> str | None:
+    """Why ``recording`` is too short for ``model`` at ``params``, or None.
+
+    The likelihood needs each channel's time delay to be shorter than the
+    record by more than 4 samples (at the channel's rate: the recording's,
+    times its ``oversample``); otherwise -ln L is +inf, as for an unstable model.
+    """
+    values = model.as_dict(model.full_vector(params), full=True)
+    dt = recording.dt
+    for ch in model.channels:
+        tau = abs(values[ch.delay])
+        m = ch.oversample
+        steps = tau / (dt / m)  # the delay in samples at the channel's rate, as the kernel has it
+        if not steps < recording.n_samples * m - 4:
+            need = recording.n_samples + 1
+            while not steps < need * m - 4:
+                need += 1
+            return (f"{recording.source or 'this recording'}: the record is too short for the "
+                    f"pilot model: {recording.n_samples} sample(s) ({recording.duration:g} s), "
+                    f"and the {ch.name} channel's delay {ch.delay} = {tau:g} s needs at least "
+                    f"{need} ({need * dt:g} s at {recording.sample_rate_hz:g} Hz)")
+    return None
+
+
 def _likelihood(model, recording, params: Mapping[str, float], initial: str = "periodic"):
-    """(-ln L, VAF %) of ``model`` on ``recording``; a non-finite -ln L is a failure."""
+    """(-ln L, VAF %) of ``model`` on ``recording``.
+
+    A non-finite -ln L is a usage error (exit 2) when the record is shorter
+    than a channel's delay needs (:func:`_too_short_for_delays`), else a
+    failure (exit 1): the model is unstable at ``params``.
+    """
     from .likelihood import Likelihood, PerfectFitWarning
 
     lik = Likelihood(model, recording, initial=initial)
@@ -286,6 +333,9 @@ def _likelihood(model, recording, params: Mapping[str, float], initial: str = "p
     for w in caught:
         print(f"{PROG}: warning: {w.message}", file=sys.stderr)
     if not math.isfinite(value):
+        short = _too_short_for_delays(model, recording, params)
+        if short is not None:
+            raise UsageError(short)
         raise CommandFailed(f"the pilot model is unstable at these parameters on "
                             f"{recording.source or 'this recording'} (-ln L = {value})")
     return value, lik.vaf(params)
@@ -329,6 +379,11 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: Seconds at the start that ``fit --noise ar`` leaves out (the start-up error, docs/fitting.md);
+#: the likelihood takes at most half the record, so such a fit needs twice this.
+_AR_DISCARD = 2.0
+
+
 def _cmd_fit(args: argparse.Namespace) -> int:
     from .fit.fast import fit_fast
     from .fit.three_step import fit_paper
@@ -340,6 +395,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from .model import paper_model
 
     rec = _read(args.recording)
+    if args.noise == "ar" and rec.duration < 2 * _AR_DISCARD:
+        raise UsageError(f"{args.recording}: --noise ar leaves the first {_AR_DISCARD:g} s out "
+                         f"and needs a record of at least {2 * _AR_DISCARD:g} s; this one is "
+                         f"{rec.duration:g} s long")
     threshold = not args.no_threshold
     model = paper_model(oversample=args.oversample)
     if args.method == "paper":
@@ -351,7 +410,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         _say(args, f"fitting {rec.source} with the fast estimator"
                    + (" (prediction error: AR noise model)" if args.noise == "ar" else "") + " ...")
         fit = fit_fast(rec, model, threshold=threshold, seed=args.seed,
-                       **({"noise": "ar", "discard": 2.0} if args.noise == "ar" else {}))
+                       **({"noise": "ar", "discard": _AR_DISCARD} if args.noise == "ar" else {}))
     if not math.isfinite(fit.neg_log_lik):
         raise CommandFailed("the fit did not reach a finite -ln L")
     print(fit.summary())
@@ -364,15 +423,23 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+#: The options of the full demo (dest -> flag); --quick runs a fixed check and refuses them.
+_DEMO_ONLY = {"task": "--task", "motion_gains": "--motion-gains", "duration": "--duration",
+              "max_steps": "--max-steps", "nlive": "--nlive", "likelihood": "--likelihood"}
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
+    # the full demo's options default to None here, so that one given with --quick is seen
+    given = {k: getattr(args, k) for k in _DEMO_ONLY if getattr(args, k) is not None}
+    if args.quick and given:
+        raise UsageError("argument --quick: the quick check is fixed (one 81.92-s run of task FD, "
+                         "K_theta = 1, F_n = 0.2) and takes only --out and --seed; "
+                         f"drop {', '.join(_DEMO_ONLY[k] for k in given)} or --quick")
     if not args.quick:
         from .example import run_example
 
         try:
-            report = run_example(args.out, seed=args.seed, motion_gains=args.motion_gains,
-                                 task=args.task, duration=args.duration,
-                                 max_steps=args.max_steps, nlive=args.nlive,
-                                 likelihood=args.likelihood,
+            report = run_example(args.out, seed=args.seed, **given,
                                  progress=_progress(args), say=lambda text: _say(args, text))
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
@@ -431,15 +498,31 @@ def _task_name(text: str) -> str:
 _count = _whole_number(1)
 
 
+#: paper_study's own keywords, and the option of 'replicate' that sets each: not fit options.
+_STUDY_SETTINGS = {"realizations": "--realizations", "tasks": "--tasks",
+                   "motion_gains": "--motion-gains", "remnant_fractions": "--remnant-fractions",
+                   "threshold": "--fits", "method": "--method", "duration": "--duration",
+                   "remnant": "--remnant"}
+
+
 def _fit_option(text: str) -> tuple[str, object]:
+    """An argparse type: ``NAME=VALUE``, the value a JSON value (true/false in any case are
+    booleans; anything that is not JSON is a string).  A name that a 'replicate' option
+    sets (threshold, duration, remnant, ...) is refused, naming that option."""
     name, sep, value = text.partition("=")
-    if not sep or not name.strip():
+    name = name.strip()
+    if not sep or not name:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    if name in _STUDY_SETTINGS:
+        raise argparse.ArgumentTypeError(
+            f"{name!r} is not a fit option: give {_STUDY_SETTINGS[name]} instead")
+    if value.strip().lower() in ("true", "false"):  # Python's True/False as well as JSON's
+        return name, value.strip().lower() == "true"
     try:
         parsed = json.loads(value)
     except ValueError:
         parsed = value
-    return name.strip(), parsed
+    return name, parsed
 
 
 _FITS = {"both": (True, False), "threshold": (True,), "none": (False,)}
@@ -777,7 +860,7 @@ def _recordings_in(args_paths: Sequence[str]) -> list[str]:
 
 def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     from .campaign import CampaignError
-    from .diagnose.batch import diagnose_batch
+    from .diagnose.batch import MissingReportWarning, diagnose_batch
 
     if args.scheduler is not None and args.workers is not None:
         raise UsageError("give --scheduler (an existing cluster) or --workers (a local one), "
@@ -787,8 +870,14 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     _say(args, f"diagnosing {len(paths)} recording(s)"
                f"{', the runs of each subject and condition pooled' if args.pool else ''} "
                f"on {where} -> {args.out}")
+    unreported = []  # MissingReportWarning: finished before, without a report
+
+    def said(message) -> None:  # --reports, and finished diagnoses it cannot give one
+        unreported.append(message)
+        print(f"{PROG}: warning: {message}", file=sys.stderr)
+
     try:
-        with _questionable_said():
+        with _questionable_said(), _warnings_of(MissingReportWarning, said):
             summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
                                      alpha=args.alpha, n_bootstrap=args.bootstrap,
                                      n_calibrate=args.calibrate,
@@ -804,8 +893,15 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     _say(args, str(summary))
     with open(Path(args.out) / "summary.csv", encoding="utf-8") as fh:
         print(fh.read(), end="")
+    if not args.reports:
+        reports = ""
+    elif unreported:
+        reports = (", with its report in <key>/ except for the diagnoses finished before "
+                   "without one (see the warning)")
+    else:
+        reports = " with its report in <key>/"
     _say(args, f"wrote {Path(args.out) / 'summary.csv'} and one <key>.json per diagnosis"
-               f"{' with its report in <key>/' if args.reports else ''}")
+               f"{reports}")
     if summary.failed:
         raise CommandFailed(f"{summary.failed} of {summary.total} diagnoses failed (messages in "
                             f"{args.out}/<key>.error.json); run the same command again to "
@@ -902,7 +998,8 @@ Exit codes:
      the given parameters, an output file could not be written, the dask
      scheduler could not be reached)
   2  bad input or usage (a missing, unreadable or invalid recording or
-     parameter file, an unknown parameter name, an out-of-range value)
+     parameter file, a recording too short for the command, an unknown
+     parameter name, an out-of-range value)
 Errors are one line on stderr: 'bayespilot: error: <message>'.
 """
 
@@ -974,7 +1071,9 @@ also compiles the numerical kernels.
 --quick instead simulates one run (FD, K_theta = 1, F_n = 0.2) to
 DIR/recording.csv + .json, prints -ln L at the paper's parameters with and
 without threshold and the VAF, and plots the traces to DIR/traces.png, in
-seconds.
+seconds. This check is fixed: it takes --out and --seed only, and --task,
+--motion-gains, --duration, --max-steps, --nlive or --likelihood with it is a
+usage error.
 
 Examples:
   bayespilot demo
@@ -1077,7 +1176,11 @@ reported with all others and nothing runs. Each diagnosis is written to
 DIR/<key>.json as it finishes (key: the recording's stem, or
 <subject>_<task>_k<K_theta> with --pool); one that fails leaves
 DIR/<key>.error.json and the others go on; running the same command again
-skips the finished ones and retries the failed. DIR/summary.csv has one row
+skips the finished ones and retries the failed (the same recordings: a stem,
+its .csv or its .json; the same settings, defaults filled in). --reports
+writes the reports of the diagnoses a run makes: one finished before
+without a report is not redone and gets none (a warning names it; delete its
+<key>.json to redo it with its report). DIR/summary.csv has one row
 per key: the decision (physics, mismatch), the chosen extension's p_value,
 delta_neg_log_lik and params, the candidate with the smallest p-value, or
 the error; DIR/summary.png draws every candidate's p-value in every
@@ -1211,7 +1314,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", choices=("white", "ar"), default="white",
                    help="'white': Eq. 4 as the paper has it (default); 'ar': a prediction-error "
                         "fit, the residual whitened by an AR model and the first 2 s left out "
-                        "(with --method fast; see docs/fitting.md)")
+                        "(with --method fast, on a record of at least 4 s; see "
+                        "docs/fitting.md)")
     p.add_argument("--iterate", action="store_true",
                    help="repeat Steps II and III until delta_abs and -ln L stop changing "
                         "(with --method paper; the paper runs them once, which stops short on "
@@ -1232,17 +1336,21 @@ def build_parser() -> argparse.ArgumentParser:
     _seed_argument(p, "seed of the remnant noise, fits and samplers, an integer >= 0 "
                    "(default 0)")
     p.add_argument("--quick", action="store_true",
-                   help="one simulated run, -ln L at the paper's parameters and a plot only")
-    p.add_argument("--task", type=_task_name, default="FD", help="FD or FT (default FD)")
-    p.add_argument("--motion-gains", type=_csv_of(_positive, "numbers > 0"), default=(0.5, 1.0),
+                   help="instead, the fixed seconds-long check: one simulated run (FD, "
+                        "K_theta = 1, F_n = 0.2), -ln L at the paper's parameters and a plot; "
+                        "takes only --out and --seed (--task, --motion-gains, --duration, "
+                        "--max-steps, --nlive and --likelihood are refused with it)")
+    # defaults None: the full demo's (run_example's) apply, and one given with --quick is seen
+    p.add_argument("--task", type=_task_name, default=None, help="FD or FT (default FD)")
+    p.add_argument("--motion-gains", type=_csv_of(_positive, "numbers > 0"), default=None,
                    metavar="K,K", help="K_theta of the runs, one run each (default 0.5,1)")
     p.add_argument("--duration", type=_positive, default=None, metavar="S",
                    help="measurement time of each run, s (default 81.92)")
-    p.add_argument("--max-steps", type=_count, default=6000, metavar="N",
+    p.add_argument("--max-steps", type=_count, default=None, metavar="N",
                    help="cap on the emcee chain length per run (default 6000)")
-    p.add_argument("--nlive", type=_count, default=150, metavar="N",
+    p.add_argument("--nlive", type=_count, default=None, metavar="N",
                    help="live points of the nested sampler (default 150)")
-    p.add_argument("--likelihood", choices=("coloured", "eq4"), default="coloured",
+    p.add_argument("--likelihood", choices=("coloured", "eq4"), default=None,
                    help="'coloured': the prediction-error likelihood (default); 'eq4': the "
                         "paper's Eq. 4, for the fits, posteriors and comparisons")
     _common(p, sub=True)
@@ -1281,8 +1389,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "shorter for a quick check)")
     p.add_argument("--fit-option", type=_fit_option, action="append", default=[],
                    metavar="NAME=VALUE",
-                   help="an option of the fit (repeatable), e.g. repetitions=5 or "
-                        "population=80 for the paper method, n_starts=4 for the fast one")
+                   help="an option of the fit (repeatable), e.g. repetitions=5, "
+                        "iterate=true or population=80 for the paper method, n_starts=4 for "
+                        "the fast one; VALUE is a JSON value (true/false, True/False: a "
+                        "boolean; iterate takes only these); what the options above set "
+                        "(threshold: --fits, duration, remnant, ...) is refused here")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_replicate)
 

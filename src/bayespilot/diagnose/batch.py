@@ -9,7 +9,11 @@ the cluster loop of :func:`bayespilot.campaign.run_campaign` (atomic result
 files, an ``<key>.error.json`` for a task that raised while the others go on,
 a progress bar) and its resume semantics: a result file that exists, parses
 and was made from the same recordings and settings is not redone; one made
-from others is an error, not a silent mix.
+from others is an error, not a silent mix.  "The same" as the files resolve
+(a recording's stem, ``.csv`` or ``.json`` path name one recording) and with
+the defaults filled in (an option left out is its default).  ``reports`` is
+not a setting: a diagnosis done before keeps what it has, and one without a
+report is named by a :class:`MissingReportWarning`.
 
 Every recording is read, and every setting checked, in this process before
 the cluster starts, so a bad file among hundreds is reported (all of them at
@@ -56,7 +60,14 @@ if TYPE_CHECKING:
     from .pooled import PooledDiagnosisResult
 
 __all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
-           "batch_summary_rows", "SUMMARY_FIELDS"]
+           "batch_summary_rows", "SUMMARY_FIELDS", "MissingReportWarning"]
+
+
+class MissingReportWarning(UserWarning):
+    """``reports=True``, and diagnoses finished before (not redone) have no report in
+    ``out_dir/<key>/``: a report needs the diagnosis's traces, which the result file does not
+    keep.  The message names them and says how to get them."""
+
 
 #: Columns of ``summary.csv``.
 SUMMARY_FIELDS = ("key", "n_runs", "subject", "task", "motion_gain", "physics", "mismatch",
@@ -245,6 +256,29 @@ def _settings(task: DiagnoseTask, options: Mapping[str, Any]) -> dict[str, Any]:
     return json.loads(json.dumps({"recordings": list(task.paths), "settings": dict(options)}))
 
 
+def _the_recording(path: Any) -> str:
+    """The file a recording path names, as :func:`~bayespilot.io.read_recording` resolves it
+    (a stem, its ``.csv`` and its ``.json`` are one recording): the absolute path of its CSV
+    (or ``.mat``) file; the path as given if it no longer resolves."""
+    from ..io import _resolve
+
+    try:
+        first = _resolve(Path(str(path)))[2]
+        return str(Path(first).resolve())
+    except Exception:  # noqa: BLE001 - a recording gone since (RecordingError), a bad path
+        return str(path)
+
+
+def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
+    """What must agree for a result file to count as done: its recordings, resolved
+    (:func:`_the_recording`), in order, and its settings with ``defaults`` filled in."""
+    recs, settings = stored.get("recordings"), stored.get("settings")
+    if not isinstance(recs, list) or not isinstance(settings, dict):
+        return None
+    return {"recordings": [_the_recording(p) for p in recs],
+            "settings": {**defaults, **settings}}
+
+
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
                    seed: int = 0, alpha: float | None = None, n_bootstrap: int | None = None,
                    n_calibrate: int | None = None, noise_passes: int = 1,
@@ -275,7 +309,13 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         result's ``diagnosis`` and in ``summary.csv`` (``posterior``: per new
         parameter the median and the 90 % interval).
     reports : bool
-        Also write each diagnosis's report (PNG figures and HTML) to ``out_dir/<key>/``.
+        Also write each diagnosis's report (PNG figures and HTML) to
+        ``out_dir/<key>/``, for the diagnoses this call makes.  Not a setting
+        of the result files: a diagnosis finished before is not redone, and
+        if it has no report (it was made without ``reports``) a
+        :class:`MissingReportWarning` names it (a report needs the traces,
+        which the result file does not keep; delete its ``<key>.json`` and
+        call again to redo it with its report).
     scheduler, workers, progress, connect_timeout, warm_cache
         As for :func:`~bayespilot.campaign.run_campaign`.
 
@@ -295,7 +335,15 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     CampaignError
         The cluster cannot be reached or started, a result cannot be written,
         or ``out_dir`` holds a result of the same key made from other
-        recordings or settings.
+        recordings or settings.  The recordings are compared as the files
+        they resolve to (``run``, ``run.csv`` and ``run.json`` are one), the
+        settings with the diagnosis's defaults filled in (``alpha=None`` and
+        ``alpha=0.01`` are one).
+
+    Warns
+    -----
+    MissingReportWarning
+        ``reports`` and finished diagnoses without a report (above).
 
     Examples
     --------
@@ -352,18 +400,38 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     except OSError as exc:
         raise C.CampaignError(f"{out}: cannot create the output folder "
                               f"({exc.strerror or exc})") from None
-    pending, skipped = [], 0
+    # what an option left out means, so that a result made with it given (the CLI gives
+    # every one) and one made without it (alpha=None) resume each other
+    implied = json.loads(json.dumps(
+        {**{k: default[k] for k in ("seed", "noise_passes", "alpha", "n_bootstrap",
+                                    "n_calibrate", "candidates")}, "posterior": False}))
+    pending, skipped, unreported = [], 0, []
     for t in tasks:
         old = C._read_json(out / f"{t.key}.json")
         if not (isinstance(old, dict) and old.get("key") == t.key and "diagnosis" in old):
             pending.append(t)
             continue
-        want = _settings(t, options)
-        if {k: old.get(k) for k in want} != want:
+        if _resume_view(old, implied) != _resume_view(_settings(t, options), implied):
             raise C.CampaignError(f"{out / (t.key + '.json')} holds a diagnosis of {t.key} "
                                   f"from other recordings or settings; use another output "
                                   f"folder or delete it")
         skipped += 1
+        if reports and not (out / t.key / "report.html").is_file():
+            unreported.append(t.key)
+    if unreported:
+        import warnings
+
+        n = len(unreported)
+        one = n == 1
+        warnings.warn(f"{n} diagnos{'is' if one else 'es'} finished before, without a "
+                      f"report, {'is' if one else 'are'} not redone and get{'s' if one else ''} "
+                      f"no report in {out}/<key>/ ({', '.join(unreported[:5])}"
+                      f"{' ...' if n > 5 else ''}): "
+                      f"a report needs the diagnosis's traces, which <key>.json does not "
+                      f"keep; delete {'its' if n == 1 else 'their'} <key>.json and run "
+                      f"again to redo {'it' if n == 1 else 'them'} with "
+                      f"{'its report' if n == 1 else 'reports'}",
+                      MissingReportWarning, stacklevel=2)
 
     by_key = {t.key: t for t in pending}
 

@@ -556,7 +556,8 @@ def write_report(result: DiagnosisResult, directory: str | Path) -> dict[str, Pa
                           f"{html.escape(str(c.interval[k]))})"
                           if k in c.interval else "")
                        for k, v in c.params.items())
-        rows.append(f"<tr{' style=&quot;font-weight:bold&quot;' if c.justified else ''}>"
+        bold = ' style="font-weight:bold"' if c.justified else ''  # a justified candidate: bold
+        rows.append(f"<tr{bold}>"
                     f"<td>{html.escape(c.physics)}</td><td>{c.delta_neg_log_lik:.2f}</td>"
                     f"<td>{c.p_value:.3g}</td><td>{c.delta_bic:.1f}</td>"
                     f"<td>{c.signature_score:.2f}</td><td>{ps}</td></tr>")

@@ -69,7 +69,9 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     scan_step : float
         Step III resolution in IPUT.
     iterate : bool
-        Repeat Steps II and III until delta_abs and -ln L no longer change
+        True or False (nothing else: a string such as ``"False"`` is refused,
+        not taken for its truth value).  True repeats Steps II and III until
+        delta_abs and -ln L no longer change
         (not the paper's procedure, which makes one pass).  Each pass moves
         delta_abs only part of the way, because the other parameters (K_m
         above all) were refined for the previous value: from a Step I
@@ -91,6 +93,15 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     -------
     FitResult
 
+    Raises
+    ------
+    TypeError
+        ``recording`` is not a Recording, or ``model`` not a PilotModel.
+    ValueError
+        ``repetitions``, ``n_best`` or ``max_iterations`` not a positive
+        integer, ``n_best > repetitions``, ``scan_step`` not positive,
+        ``iterate`` not a bool, or a setting the likelihood refuses.
+
     Examples
     --------
     >>> from bayespilot.simulate import simulate
@@ -106,6 +117,9 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     for name, v in (("repetitions", repetitions), ("n_best", n_best), ("max_iterations", max_iterations)):
         if not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    if not isinstance(iterate, (bool, np.bool_)):
+        raise ValueError(f"iterate must be True or False, got {iterate!r}")
+    iterate = bool(iterate)
     if n_best > repetitions:
         raise ValueError(f"n_best ({n_best}) cannot exceed repetitions ({repetitions})")
     if not (scan_step > 0):
