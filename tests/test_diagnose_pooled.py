@@ -445,3 +445,32 @@ def test_pooled_refine_reports_the_covariance_of_the_point_it_returns(washout_ru
                                      {"omega_w": qs[0]["omega_w"]})
     assert f2 == pytest.approx(sum(wl.neg_log_lik(q) for wl, q in zip(wls, qs)), abs=1e-6)
     assert cov2[0, 0] > 0 and cov2[0, 0] == pytest.approx(cov[0, 0], rel=0.05)
+
+
+def test_a_failed_grid_point_does_not_wreck_the_shared_posterior(washout_runs, washout_result,
+                                                                 monkeypatch):
+    """A grid point whose pooled fit fails gets its density from its neighbours: the marginal
+    stays where it was (left at zero density, the spline through it put the median outside
+    the interval it had), and the summary says how many points failed."""
+    import bayespilot.diagnose.posterior as P
+    from bayespilot.diagnose import shared_posterior
+
+    post0 = shared_posterior(washout_result, washout_runs, n_grid=11)
+    m0 = post0.marginals["omega_w"]
+    g = post0.grid[0]
+    target = g[int(np.argmin(np.abs(g - m0["mode"]))) + 1]  # beside the mode
+    real = P._laplace_term
+
+    def failing(wls, ps, names):
+        if abs(ps[0].get("omega_w", -9.0) - target) < 1e-12:
+            return -math.inf  # e.g. a singular Gauss-Newton Hessian there
+        return real(wls, ps, names)
+
+    monkeypatch.setattr(P, "_laplace_term", failing)
+    post = shared_posterior(washout_result, washout_runs, n_grid=11)
+    m = post.marginals["omega_w"]
+    assert post.settings["failed_points"] == 1 and np.allclose(post.grid[0], g)
+    assert abs(m["median"] - m0["median"]) < 0.3 * m0["sd"]
+    assert m["sd"] == pytest.approx(m0["sd"], rel=0.2)
+    assert post.log_bayes_factor == pytest.approx(post0.log_bayes_factor, abs=0.5)
+    assert any("1 of 11 grid points failed" in line for line in post.summary_lines())

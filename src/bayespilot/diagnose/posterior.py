@@ -231,6 +231,10 @@ class SharedPosterior:
         if self.edge_mass > 0.01:
             lines.append(f"  (posterior mass {self.edge_mass:.2g} at the grid's edge: the "
                          "interval may be cut)")
+        if self.settings.get("failed_points"):
+            lines.append(f"  ({self.settings['failed_points']} of {self.settings['points']} "
+                         "grid points failed to fit; their density is interpolated from the "
+                         "neighbours)")
         if math.isfinite(self.log_bayes_factor):
             from ..compare import jeffreys_category
 
@@ -244,6 +248,35 @@ class SharedPosterior:
                              "leaves the pilot parameters less determined, and that volume, "
                              "not a better fit, is what the Bayes factor counts)")
         return lines
+
+
+def _fill_line(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``y`` with its non-finite values interpolated linearly in ``x`` from the finite ones
+    (extrapolated linearly from the two nearest at an end); unchanged with fewer than two."""
+    good = np.isfinite(y)
+    if good.all() or good.sum() < 2:
+        return y
+    y = y.copy()
+    xg, yg = x[good], y[good]
+    bad = ~good
+    y[bad] = np.interp(x[bad], xg, yg)
+    for side, (i0, i1) in ((x < xg[0], (0, 1)), (x > xg[-1], (-1, -2))):
+        sel = bad & side
+        if np.any(sel):
+            slope = (yg[i1] - yg[i0]) / (xg[i1] - xg[i0])
+            y[sel] = yg[i0] + slope * (x[sel] - xg[i0])
+    return y
+
+
+def _fill_failed(logp: np.ndarray, grids: list) -> np.ndarray:
+    """Grid points where the pooled fit failed (ln p = -inf) get ln p interpolated from their
+    finite neighbours along each axis.  Left at -inf, a failed point is a zero of the density
+    that the marginal's cubic spline overshoots around (one failed point beside the mode moved
+    a median from 0.364 to 0.504) and that the Bayes factor's integral misses."""
+    out = np.array(logp, dtype=float)
+    for axis in range(out.ndim):
+        out = np.apply_along_axis(lambda y, a=axis: _fill_line(grids[a], y), axis, out)
+    return out
 
 
 def _laplace_term(wls, ps, names) -> float:
@@ -548,6 +581,8 @@ def shared_posterior(result: Any, recordings: Sequence[Recording], *, physics: s
     bar.close()
     if not np.any(np.isfinite(logp)):
         raise ValueError("the pooled fit failed at every grid point")
+    failed = int(np.sum(~np.isfinite(logp)))
+    logp = _fill_failed(logp, grids)
     dens = np.exp(logp - np.max(logp))
     # normalise on the grid (trapezoid over each axis)
     norm = dens
@@ -592,7 +627,7 @@ def shared_posterior(result: Any, recordings: Sequence[Recording], *, physics: s
                 "delta_abs": {"how": held, "runs": [q.get("delta_abs") for q in fits]},
                 "pooled_fit_neg_log_lik": float(f_ml),
                 "n_grid": n_grid, "width_stderr": width, "points": int(logp.size),
-                "failed_points": int(np.sum(~np.isfinite(logp))), "widened": widened,
+                "failed_points": failed, "widened": widened,
                 "prior": "uniform on the grid", "n_runs": len(recs),
                 "bayes_factor": {
                     "method": "Laplace over each run's pilot parameters (Gauss-Newton "
