@@ -249,6 +249,13 @@ def test_plot_threshold_histograms():
     fig = plot_threshold_histograms(res)  # F_n = 0.1 is not among the default fractions
     assert len(fig.axes) == 2 * 2 * 2
     plt.close(fig)
+    # the first panel has no fits: the legend goes to the first one that has
+    part = [r for r in res if not (r["task"] == "FD" and r["remnant_fraction"] == 0.0
+                                   and r["motion_gain"] == 0.25)]
+    fig = plot_threshold_histograms(part)
+    assert fig.axes[0].get_legend() is None
+    assert sum(a.get_legend() is not None for a in fig.axes) == 1
+    plt.close(fig)
     with pytest.raises(ValueError, match="several methods"):
         plot_threshold_histograms(res + _synthetic("FD", 0.0, 1.0, [0.01], method="fast"))
     with pytest.raises(ValueError, match="no fits"):

@@ -361,6 +361,10 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
         shared_posterior(res, washout_runs[:1])
     with pytest.raises(ValueError, match="not the recordings"):
         shared_posterior(res, washout_runs[::-1])
+    with pytest.raises(TypeError, match="got one Recording"):
+        shared_posterior(res, washout_runs[0])
+    with pytest.raises(ValueError, match="width"):
+        shared_posterior(res, washout_runs, width=True)
     # a grid too narrow (+-2 standard errors, where the density has fallen by about 2) is
     # moved out by its span on both sides: +-6, the default grid again (moved out once more
     # on its lower side, where the skewed density has not fallen enough), the same density

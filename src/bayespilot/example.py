@@ -18,7 +18,8 @@ few minutes on a laptop:
 5. write ``report.md`` with a table and the figures (traces, delta_abs
    marginals, a pair plot).
 
-Everything is seeded: the same seed gives the same report.
+Everything is seeded: the same seed gives the same numbers, figures and files
+(the report's line with the time it took aside).
 """
 
 from __future__ import annotations

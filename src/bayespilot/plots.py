@@ -269,7 +269,11 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
                 a.set_ylabel(f"{task}, $F_n$ = {fn:g}\ncount")
             if i == len(rows) - 1:
                 a.set_xlabel(r"$\delta_{abs}$ (IPUT)")
-    axes[0, 0].legend(loc="center right", fontsize="x-small")
+    # the legend on the first panel that has fits (a panel may say "no fits")
+    for a in axes.flat:
+        if a.get_legend_handles_labels()[0]:
+            a.legend(loc="center right", fontsize="x-small")
+            break
     which = sel[0]["method"]
     fig.suptitle(f"Estimated threshold over realizations ({which} method; Figs. 14/15 of "
                  f"Pool et al. 2012); red text: differs from the paper")

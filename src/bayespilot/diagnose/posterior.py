@@ -341,6 +341,9 @@ def _log_bayes_factor(result: Any, chosen: Any, recs: list, noise: list, names: 
 def _check_pooled(result: Any, recordings, physics: str | None = None) -> tuple[Any, list, list]:
     """The GLS candidate of a pooled ``result`` to weigh (``physics``, else the chosen one),
     its fit per run, and the recordings; or a clear error."""
+    if isinstance(recordings, Recording):
+        raise TypeError("recordings must be the sequence of Recordings the diagnosis pooled, "
+                        "got one Recording")
     recs = list(recordings)
     if getattr(result, "runs", None) is None:
         raise ValueError("shared_posterior takes a pooled diagnosis (diagnose_pooled); for one "
@@ -484,7 +487,8 @@ def shared_posterior(result: Any, recordings: Sequence[Recording], *, physics: s
     n_grid = (GRID_1D if k == 1 else GRID_2D) if n_grid is None else n_grid
     if isinstance(n_grid, bool) or not isinstance(n_grid, (int, np.integer)) or n_grid < 5:
         raise ValueError(f"n_grid must be an integer >= 5, got {n_grid!r}")
-    if not (isinstance(width, (int, float)) and math.isfinite(width) and width > 0):
+    if isinstance(width, bool) or not (isinstance(width, (int, float)) and math.isfinite(width)
+                                       and width > 0):
         raise ValueError(f"width must be a positive number of standard errors, got {width!r}")
     names = tuple(n for n in model.parameter_names if n not in shared
                   and (ext.refine_threshold or n != "delta_abs"))
