@@ -45,6 +45,7 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 
 from . import presets
+from .forcing import _is_complex
 from .kernels import _blocks as B
 from .kernels import _response as R
 
@@ -73,6 +74,20 @@ class UnknownChannelError(ValueError, KeyError):
 
     def __str__(self) -> str:  # KeyError would show the message in quotes
         return str(self.args[0]) if self.args else ""
+
+
+def _parameter_value(name: str, value) -> float:
+    """A parameter's value as a finite float, or a ValueError naming the parameter (complex
+    numbers refused: float() would drop their imaginary part)."""
+    if np.iscomplexobj(value):
+        raise ValueError(f"parameter {name} must be a real number, got {value!r}")
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"parameter {name} must be a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise ValueError(f"parameter {name} must be finite, got {value!r}")
+    return x
 
 
 def _real(value, what: str) -> float:
@@ -555,19 +570,9 @@ class PilotModel:
             for k, v in values.items():
                 if k in self.fixed:
                     continue
-                if np.iscomplexobj(v):
-                    raise ValueError(f"parameter {k} must be a real number, got {v!r}")
-                try:
-                    x = float(v)
-                except (TypeError, ValueError):
-                    raise ValueError(f"parameter {k} must be a number, got {v!r}") from None
-                if not math.isfinite(x):
-                    raise ValueError(f"parameter {k} must be finite, got {v!r}")
-                full[names.index(k)] = x
+                full[names.index(k)] = _parameter_value(k, v)
             return full
-        raw = np.asarray(values)
-        if raw.dtype.kind == "c" or (raw.dtype == object
-                                     and any(np.iscomplexobj(x) for x in raw.flat)):
+        if _is_complex(values):
             raise ValueError("parameter values must be real numbers, got complex values")
         arr = np.asarray(values, dtype=float)
         if arr.shape != (self.n_free,):

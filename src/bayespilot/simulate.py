@@ -26,7 +26,7 @@ from scipy import optimize, signal
 from . import presets
 from .forcing import Multisine
 from .kernels import _closed_loop as CL
-from .model import PilotModel, paper_model
+from .model import PilotModel, _parameter_value, paper_model
 from .recording import Recording
 
 __all__ = ["TrackingTask", "Simulation", "simulate", "remnant", "calibrate_remnant_gain",
@@ -363,12 +363,7 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     theta = model.full_vector({k: v for k, v in values.items()})
     for k in model.fixed:
         if params is not None and k in params:
-            v = params[k]
-            if np.iscomplexobj(v):
-                raise ValueError(f"parameter {k} must be a real number, got {v!r}")
-            if not math.isfinite(float(v)):
-                raise ValueError(f"parameter {k} must be finite, got {v!r}")
-            theta[model.all_names.index(k)] = float(v)
+            theta[model.all_names.index(k)] = _parameter_value(k, params[k])
     for p, x in zip(model.parameters, theta):
         if not p.lower <= x <= p.upper:
             raise ValueError(f"parameter {p.name} = {x:g} is outside its bounds "

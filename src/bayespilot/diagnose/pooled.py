@@ -329,13 +329,17 @@ def _pooled_refine(wls, bases, names, shared, start_shared, *, max_nfev: int = 6
     x_start = x.copy()
     f_start = total(params_of(x_start))
     J = None
-    for _pass in range(2):
-        ps = params_of(x)
-        scale = []
+    def scales(ps):
+        """Each run's 1 / (GLS noise level) at ``ps`` (1 where its response is not finite)."""
+        out = []
         for r in range(R):
             w = run_resid(r, ps[r])
-            scale.append(1.0 / math.sqrt(max(float(np.mean(w * w)), 1e-300)) if w is not None
-                         else 1.0)
+            out.append(1.0 / math.sqrt(max(float(np.mean(w * w)), 1e-300)) if w is not None
+                       else 1.0)
+        return out
+
+    for _pass in range(2):
+        scale = scales(params_of(x))
         big = [1e3 * float(np.std(wl.u)) * s + 1e-300 for wl, s in zip(wls, scale)]
 
         def resid(x, scale=scale, big=big):
@@ -370,12 +374,7 @@ def _pooled_refine(wls, bases, names, shared, start_shared, *, max_nfev: int = 6
         ps, f = params_of(x_start), f_start
         # the covariance of the point reported (each run scaled by its noise level there),
         # not of the solution thrown away
-        scale0 = []
-        for r, q in enumerate(ps):
-            w = run_resid(r, q)
-            scale0.append(1.0 / math.sqrt(max(float(np.mean(w * w)), 1e-300)) if w is not None
-                          else 1.0)
-        J = jac(x_start, scale=scale0)
+        J = jac(x_start, scale=scales(ps))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         cov = linalg.pinvh(J.T @ J) if J is not None else np.full((R * p + k,) * 2, np.nan)
