@@ -285,6 +285,14 @@ def test_resume_compares_resolved_recordings_and_defaults(done_without_reports, 
                                warm_cache=False)
         assert (s.total, s.completed, s.skipped) == (1, 0, 1)
     assert (out / "s7-run1.json").stat().st_mtime_ns == before
+    # the whole catalogue named explicitly, in its order, is candidates=None (the CLI's)
+    from bayespilot.diagnose import NAMES
+    with pytest.warns(Warning):
+        s = diagnose_batch([stem], out, n_bootstrap=0, candidates=list(NAMES), progress=False,
+                           warm_cache=False)
+    assert (s.total, s.completed, s.skipped) == (1, 0, 1)
+    with pytest.raises(CampaignError, match="other recordings or settings"):
+        diagnose_batch([stem], out, n_bootstrap=0, candidates=list(NAMES)[:-1], progress=False)
     # reports=True on it: named by a warning, nothing written
     with pytest.warns(UserWarning, match=r"1 diagnosis finished before.*\(s7-run1\)"):
         diagnose_batch([f"{stem}.csv"], out, n_bootstrap=0, reports=True, progress=False)

@@ -83,6 +83,14 @@ def test_fast_fit_recovers_threshold_and_is_never_worse_with_it(sim):
     assert lik.neg_log_lik(with_t.params) == pytest.approx(with_t.neg_log_lik, rel=1e-12)
 
 
+def test_fast_fit_profile_grid_ends_at_the_bound(sim):
+    """A profile step that does not divide delta_abs's range ends the grid at the bound (the
+    grid went on to 0.12, beyond the 0.1 bound); every profile point's fit is within it."""
+    f = fit_fast(sim.recording, seed=0, n_starts=1, profile_step=0.06)
+    assert f.steps["profile_grid"] == pytest.approx([0.0, 0.06, 0.1], abs=1e-15)
+    assert 0.0 <= f.params["delta_abs"] <= 0.1
+
+
 def test_paper_fit_small_is_reproducible_and_serialises(sim, tmp_path):
     kw = dict(seed=4, repetitions=3, n_best=2, population=40, generations=15)
     a = fit_paper(sim.recording, **kw)

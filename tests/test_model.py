@@ -289,6 +289,16 @@ def test_bad_parameter_and_channel_definitions():
         Parameter("omega_w", 0.01, 10.0, 20.0)
     with pytest.raises(ValueError, match="lower < upper"):
         Parameter("omega_w", 1.0, 0.5, 0.7)
+    # a complex, text or bool bound is a clear ValueError (a complex one was a TypeError)
+    for bad in ({"lower": 0.01 + 1j}, {"upper": "10"}, {"default": True}):
+        kw = {"lower": 0.01, "upper": 10.0, "default": 0.7, **bad}
+        (field,) = bad
+        with pytest.raises(ValueError, match=f"omega_w: {field} must be a real number"):
+            Parameter("omega_w", **kw)
+    with pytest.raises(ValueError, match="identifier"):
+        Parameter(3, 0.0, 1.0, 0.5)
+    assert Parameter("g", -1, 1, 0).lower == -1.0 and isinstance(Parameter("g", -1, 1, 0).lower,
+                                                                 float)
     with pytest.raises(ValueError, match="unknown source 'pitch'"):
         Channel("c", "pitch", delay="tau_v")
     with pytest.raises(ValueError, match="duplicate channel"):

@@ -115,8 +115,18 @@ class Parameter:
     description: str = ""
 
     def __post_init__(self) -> None:
-        if not self.name.isidentifier():
+        if not (isinstance(self.name, str) and self.name.isidentifier()):
             raise ValueError(f"parameter name must be an identifier, got {self.name!r}")
+        for field_name in ("lower", "upper", "default"):
+            value = getattr(self, field_name)
+            if isinstance(value, (bool, np.bool_, str, bytes)) or np.iscomplexobj(value):
+                raise ValueError(f"{self.name}: {field_name} must be a real number, "
+                                 f"got {value!r}")
+            try:
+                object.__setattr__(self, field_name, float(value))
+            except (TypeError, ValueError):
+                raise ValueError(f"{self.name}: {field_name} must be a real number, "
+                                 f"got {value!r}") from None
         if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < self.upper):
             raise ValueError(f"{self.name}: need finite lower < upper, got [{self.lower}, {self.upper}]")
         if not (self.lower <= self.default <= self.upper):

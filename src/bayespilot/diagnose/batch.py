@@ -271,12 +271,16 @@ def _the_recording(path: Any) -> str:
 
 def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
     """What must agree for a result file to count as done: its recordings, resolved
-    (:func:`_the_recording`), in order, and its settings with ``defaults`` filled in."""
+    (:func:`_the_recording`), in order, and its settings with ``defaults`` filled in (``candidates=None`` as the whole catalogue)."""
     recs, settings = stored.get("recordings"), stored.get("settings")
     if not isinstance(recs, list) or not isinstance(settings, dict):
         return None
-    return {"recordings": [_the_recording(p) for p in recs],
-            "settings": {**defaults, **settings}}
+    from .catalogue import NAMES
+
+    merged = {**defaults, **settings}
+    if merged.get("candidates") is None:  # None tests the whole catalogue, in its order
+        merged["candidates"] = list(NAMES)
+    return {"recordings": [_the_recording(p) for p in recs], "settings": merged}
 
 
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,

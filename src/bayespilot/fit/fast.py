@@ -138,7 +138,9 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
 
     lik = Likelihood(model, recording, initial=initial, discard=discard, noise=given)
     upper = model.parameter("delta_abs").upper
-    grid = np.arange(0.0, upper + 0.5 * profile_step, profile_step)
+    # a step that does not divide the bound ends the grid at the bound, not beyond it
+    grid = np.unique(np.minimum(np.arange(0.0, upper + 0.5 * profile_step, profile_step),
+                                upper))
     prof = []
     prev = dict(best0.params, delta_abs=0.0)
     for d in grid:
