@@ -159,6 +159,19 @@ def test_iterated_steps_two_and_three_reach_the_optimum_the_single_pass_misses()
     assert one.neg_log_lik > at_truth + 1e4  # tens of thousands of units short
     fun = [r["neg_log_lik"] for r in it.steps["iterations"]]
     assert all(b <= a + 1e-6 for a, b in zip(fun, fun[1:]))
+    # Fig. 9 of the last pass marks the final delta_abs; the first pass's (the default) does not
+    import matplotlib.pyplot as plt
+
+    from bayespilot.fit.figures import plot_step_three
+    for scan, want in ((-1, it.params["delta_abs"]), (0, it.steps["step3"][0]["best"])):
+        fig = plot_step_three([it], scan=scan)
+        (filled,) = [ln for ln in fig.axes[0].get_lines() if ln.get_label() == "Step III"]
+        assert filled.get_xdata()[0] == want
+        plt.close(fig)
+    assert it.steps["step3"][0]["best"] > 0.05
+    for bad in (len(it.steps["step3"]), True, 0.0):
+        with pytest.raises(ValueError, match="scan"):
+            plot_step_three([it], scan=bad)
     with pytest.warns(RuntimeWarning, match="raise max_iterations"):
         short = fit_paper(s.recording, iterate=True, max_iterations=3, **kw)
     assert short.steps["iterations_converged"] is False

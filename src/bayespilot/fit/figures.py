@@ -231,7 +231,7 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
 
 
 def plot_step_three(results: Sequence[FitResult],
-                    labels: Sequence[str] | None = None) -> Figure:
+                    labels: Sequence[str] | None = None, *, scan: int = 0) -> Figure:
     """Fig. 9: -ln L along delta_abs (Step II parameters fixed) with the estimates marked.
 
     The Step I estimates of each repetition are crosses on the curve, the
@@ -245,6 +245,10 @@ def plot_step_three(results: Sequence[FitResult],
         (method ``"paper"``, with its steps), one panel each, in a row.
     labels : sequence of str, optional
         Panel titles, one per fit (default "fit 1", "fit 2", ...).
+    scan : int
+        Which Step III scan of each fit to draw, as a list index: 0 (default)
+        the first, as in the paper's Fig. 9; -1 the last pass of a fit made
+        with ``iterate=True``, whose minimum is the fit's final delta_abs.
 
     Returns
     -------
@@ -256,24 +260,34 @@ def plot_step_three(results: Sequence[FitResult],
         If an entry of ``results`` is not a FitResult.
     ValueError
         If ``results`` is empty, ``labels`` is not one per fit, a fit is not
-        by the paper's three-step procedure, or a fit has no Step III scan
-        (fitted without threshold).
+        by the paper's three-step procedure, a fit has no Step III scan
+        (fitted without threshold), or ``scan`` is not an index of every
+        fit's scans.
 
     Notes
     -----
-    Only the first Step III scan of each fit is drawn: for a fit made with
-    ``iterate=True`` the filled circle is the minimum of the first pass, not
-    necessarily the fit's final delta_abs.  The crosses and the open circle
-    are placed on the curve by linear interpolation of the scanned -ln L.
+    The crosses and the open circle are placed on the drawn curve by linear
+    interpolation of its -ln L.  On a later pass's curve they mark where the
+    first pass's estimates lie; the other parameters have moved since, so
+    they need not sit at the first pass's values of -ln L.
     """
-    results, fig, axes = _one_row(results, labels)
-    for c, (ax, fit) in enumerate(zip(axes[0], results)):
+    if isinstance(scan, bool) or not isinstance(scan, (int, np.integer)):
+        raise ValueError(f"scan must be an integer index (0 the first, -1 the last), "
+                         f"got {scan!r}")
+    chosen = []
+    for fit in list(results):  # checked before a figure is made
         steps = _paper_fit(fit, "plot_step_three")
         if not steps.get("step3"):
             raise ValueError("this fit has no Step III scan (fitted without threshold?)")
-        scan = steps["step3"][0]
-        grid = np.asarray(scan["grid"], dtype=float)
-        nll = np.array([np.nan if v is None else v for v in scan["neg_log_lik"]], dtype=float)
+        if not -len(steps["step3"]) <= scan < len(steps["step3"]):
+            raise ValueError(f"scan={scan} but a fit has {len(steps['step3'])} Step III "
+                             f"scan(s)")
+        chosen.append((steps, steps["step3"][scan]))
+    results, fig, axes = _one_row(results, labels)
+    for c, (ax, (steps, one)) in enumerate(zip(axes[0], chosen)):
+        scan_c = one
+        grid = np.asarray(scan_c["grid"], dtype=float)
+        nll = np.array([np.nan if v is None else v for v in scan_c["neg_log_lik"]], dtype=float)
         ax.plot(grid, nll, "k-", lw=1)
         s1 = steps["step1"]
         i = s1["parameter_names"].index("delta_abs")
@@ -282,8 +296,8 @@ def plot_step_three(results: Sequence[FitResult],
         d2 = steps["step1_delta_abs"]
         ax.axvline(d2, color="k", lw=0.8)
         ax.plot(d2, np.interp(d2, grid, nll), "o", mfc="white", mec="k", ms=7, label="Step II")
-        ax.axvline(scan["best"], color="k", lw=0.8)
-        ax.plot(scan["best"], scan["best_neg_log_lik"], "ko", ms=6, label="Step III")
+        ax.axvline(scan_c["best"], color="k", lw=0.8)
+        ax.plot(scan_c["best"], scan_c["best_neg_log_lik"], "ko", ms=6, label="Step III")
         ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
         ax.set_xlabel(r"$\delta_{abs}$, IPUT")
         if c == 0:
