@@ -67,6 +67,9 @@ def test_plan_keys_and_groups(recordings, tmp_path):
     assert [(t.key, t.paths) for t in pooled] == [
         ("s1_FD_k1", tuple(recordings[:2])), ("s2_FD_k0.75", (recordings[2],))]
     assert pooled[0].pooled and not pooled[1].pooled
+    # given in another order, a pooled task's runs are the same, in the files' order (run j is
+    # seeded seed + j: the paths' order changed the bootstrap's draws)
+    assert plan_batch(recordings[::-1], recs[::-1], pool=True) == pooled
     # the same stem in two folders: the folder goes into the key; the same file twice: refused
     other = str(tmp_path / "elsewhere" / "s1-run1")
     keys = [t.key for t in plan_batch([recordings[0], other], recs[:1] * 2)]

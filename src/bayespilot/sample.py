@@ -69,6 +69,7 @@ from .model import PilotModel, paper_model
 from .noise import MAX_AR_ORDER, ARNoise
 from .recording import Recording
 from ._blas import one_blas_thread
+from ._seeds import resolve_seed
 
 __all__ = ["sample", "Posterior", "ConvergenceWarning", "LIKELIHOODS", "AR_MODES", "PACF_BOUND",
            "COLOURED_DISCARD", "pacf_names", "pacf_from_residual"]
@@ -209,6 +210,8 @@ class Posterior:
         Every setting of the run, and its bookkeeping (steps, discard, thin,
         acceptance, timing, the initial point).
     seed : int or None
+        The seed used (drawn from fresh entropy when ``seed=None`` was
+        given); None in results saved before it was recorded.
     """
 
     idata: Any
@@ -784,7 +787,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     seed : int, optional
         Seeds the initial fit, the initial ball and the sampler's moves: the
         same seed gives the same chain, bit for bit (on the same machine and
-        thread count).
+        thread count).  None draws one from fresh entropy; the seed used is
+        recorded in the result (``seed``) and repeats the chain.
     progress : bool
         Show emcee's tqdm progress bar.
     backend : path, optional
@@ -852,8 +856,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         raise ValueError(f"min_steps ({min_steps}) must not exceed max_steps ({max_steps})")
     tau_factor = _check_pos("tau_factor", tau_factor)
     tau_rtol = _check_pos("tau_rtol", tau_rtol)
-    if seed is not None:
-        seed = _check_int("seed", seed, 0)
+    seed = resolve_seed(seed)  # None: a fresh one, recorded (the starting fit's too)
     if init is not None and not isinstance(init, (FitResult, Mapping)):
         raise TypeError(f"init must be a FitResult or a mapping of parameters, got {type(init).__name__}")
 

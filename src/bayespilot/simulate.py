@@ -24,6 +24,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from . import presets
+from ._seeds import resolve_seed
 from .forcing import Multisine
 from .kernels import _closed_loop as CL
 from .model import PilotModel, _parameter_value, paper_model
@@ -151,7 +152,8 @@ class Simulation:
         output i) and ``"post"`` (its output, e.g. o) at the recording's samples.
     remnant_gain, remnant_fraction : float
         K_n used and the F_n = var(n) / var(u) it gave.
-    seed : int or None
+    seed : int
+        The seed used (drawn from fresh entropy when ``seed=None`` was given).
     settings : dict
     """
 
@@ -294,7 +296,8 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
         Remnant filter time constant; default Table 3 for FD/FT, else 0.06 s.
     seed : int or None
         Seed of the remnant noise (numpy Generator); the same seed gives the
-        same run, bit for bit.
+        same run, bit for bit.  None draws one from fresh entropy; the seed
+        used is recorded in the result (``seed``, the recording's notes).
     oversample : int
         Integration steps per recorded sample (>= 2).
     duration : float, optional
@@ -376,6 +379,7 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     if not (math.isfinite(psd) and psd > 0):
         raise ValueError(f"noise_psd must be positive, got {noise_psd!r}")
 
+    seed = resolve_seed(seed)  # None: a fresh one, recorded in the result and its notes
     rng = np.random.default_rng(seed)
     h = 1.0 / (tt.sample_rate_hz * oversample)
     k_start = int(round(tt.run_in / h))

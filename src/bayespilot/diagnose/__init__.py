@@ -53,6 +53,7 @@ import numpy as np
 from .._files import write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
 from .._blas import one_blas_thread
+from .._seeds import resolve_seed
 
 if TYPE_CHECKING:
     from ..fit.result import FitResult
@@ -540,7 +541,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     recording : Recording
     seed : int or None
         Seeds the base fit's starts and the bootstrap; the same seed gives the
-        same result.
+        same result.  None draws one from fresh entropy, recorded in
+        ``settings["seed"]``.
     alpha : float
         Family-wise false-alarm level of the decision, split over the
         candidates tested (Bonferroni).
@@ -663,6 +665,7 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
 
     names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample,
                    n_calibrate, noise_passes)
+    seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     if profile_noise and n_calibrate:
         raise ValueError("n_calibrate does not combine with profile_noise=True (the replicates "
                          "retrace the decision with the noise model held)")

@@ -125,7 +125,10 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
     recordings : sequence of Recording
         The recordings read from ``paths``, in the same order.
     pool : bool
-        Group the runs of one subject, task and motion gain into one pooled diagnosis.
+        Group the runs of one subject, task and motion gain into one pooled
+        diagnosis, its runs in the order of the files they resolve to (run j
+        is seeded ``seed + j``: sorted, the result does not depend on the
+        order the paths were given).
 
     Returns
     -------
@@ -163,7 +166,8 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
                     for q in ps if ps.count(q) > 1})
     if dupes:
         raise ValueError(f"the same recording twice in one condition: {', '.join(dupes)}")
-    tasks = [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(ps), s, t, k)
+    tasks = [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(sorted(ps, key=_the_recording)),
+                          s, t, k)
              for (s, t, k), ps in sorted(groups.items())]
     clash = _clashes([t.key for t in tasks])
     if clash:

@@ -53,6 +53,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from .._blas import one_blas_thread
+from .._seeds import resolve_seed
 from ..model import PilotModel
 from ..noise import ARNoise
 from ..recording import Recording
@@ -204,8 +205,7 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
         raise ValueError(f"runs must be an integer >= 1, got {runs!r}")
     discard = COLOURED_DISCARD if discard is None else float(discard)
     t0 = time.perf_counter()
-    # seed None: fresh entropy, as evidence() takes it; the seed drawn is recorded
-    s0 = int(np.random.SeedSequence().generate_state(1)[0] >> 1) if seed is None else int(seed)
+    s0 = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     opts = dict(likelihood="coloured", ar="fixed", noise=noise, discard=discard, nlive=nlive,
                 sample=sample, progress=progress)
 

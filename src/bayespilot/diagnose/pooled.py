@@ -40,6 +40,7 @@ from scipy import linalg, optimize, stats
 
 from .._blas import one_blas_thread
 from .._files import write_text_atomic
+from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
                _calibration_lines, _calibrator, _check, _fitted_lines, _json_ready, _JSONSummary,
                _prepare, _saturation)
@@ -670,7 +671,10 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         Two or more runs of the same task and condition (one subject).  Each
         keeps its own pilot parameters; the extension's parameters are shared.
     seed : int or None
-        Seeds each run's base fit and bootstrap (run j uses ``seed + j``).
+        Seeds each run's base fit and bootstrap (run j uses ``seed + j``, so
+        the runs' order is part of the seed: the same runs in another order
+        draw other bootstrap replicates).  None draws one from fresh
+        entropy, recorded in ``settings["seed"]``.
     alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample, progress
         As for :func:`~bayespilot.diagnose.diagnose`.  With ``omega_c`` above
         25 rad/s every extension is also started from its pooled fit on the
@@ -717,6 +721,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample,
                        n_calibrate, noise_passes)
     _refuse_repeats(recs)
+    seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     mixed = pooling_disagreements(recs)
     if mixed:
         warnings.warn(f"the runs are not of one subject and condition ({mixed}); pooling "
@@ -725,7 +730,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     t0 = time.perf_counter()
     bar = tqdm(total=2 * len(recs) + len(names), desc="diagnose (pooled)", unit="stage",
                disable=not progress)
-    runs = [_prepare(rec, seed=None if seed is None else seed + j, n_bootstrap=n_bootstrap,
+    runs = [_prepare(rec, seed=seed + j, n_bootstrap=n_bootstrap,
                      base_fit=None, skip_seconds=skip_seconds, omega_c=omega_c,
                      n_starts=n_starts, profile_noise=False, bar=bar, oversample=oversample,
                      noise_passes=noise_passes)

@@ -43,6 +43,7 @@ from .result import FitResult
 from .scan import scan_parameter
 from .three_step import _model_for
 from .._blas import one_blas_thread
+from .._seeds import resolve_seed
 
 __all__ = ["fit_fast"]
 
@@ -61,7 +62,9 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     model : PilotModel, optional
     threshold : bool
     seed : int, optional
-        Seeds the Latin-hypercube starts.
+        Seeds the Latin-hypercube starts; the same seed gives the same fit.
+        None draws one from fresh entropy; the seed used is
+        recorded in the result (``seed``) and repeats the run.
     n_starts : int
         Starting points of the threshold-free fit.
     profile_step : float
@@ -105,6 +108,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                                     or not 0 <= noise_order <= MAX_AR_ORDER):
         raise ValueError(f"noise_order must be an integer in [0, {MAX_AR_ORDER}], "
                          f"got {noise_order!r}")
+    seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     has_delta = "delta_abs" in model.parameter_names

@@ -29,6 +29,8 @@ class FitResult:
         Variance accounted for, percent.
     method : {"paper", "fast"}
     seed : int or None
+        The seed used (drawn from fresh entropy when ``seed=None`` was
+        given); None in results saved before it was recorded.
     threshold : bool
         Whether delta_abs was estimated.
     settings : dict

@@ -29,6 +29,7 @@ from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
 from .._blas import one_blas_thread
+from .._seeds import resolve_seed
 
 __all__ = ["fit_paper"]
 
@@ -62,6 +63,8 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         False fits the model without threshold (delta_abs = 0).
     seed : int, optional
         Seeds the genetic algorithm; the same seed gives the same fit.
+        None draws one from fresh entropy; the seed used is
+        recorded in the result (``seed``) and repeats the run.
     repetitions, n_best : int
         Step I: GA runs per data set, and how many of the best give delta_abs.
     population, generations, p_crossover, p_mutation, bits
@@ -124,6 +127,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         raise ValueError(f"n_best ({n_best}) cannot exceed repetitions ({repetitions})")
     if not (scan_step > 0):
         raise ValueError(f"scan_step must be positive, got {scan_step!r}")
+    seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     lik = Likelihood(model, recording, initial=initial, discard=discard)

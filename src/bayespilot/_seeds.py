@@ -1,0 +1,50 @@
+"""The seed a stochastic function runs with.
+
+Every stochastic entry point (``simulate``, ``fit_fast``, ``fit_paper``,
+``sample``, ``diagnose``, ``diagnose_pooled``) takes ``seed``: an integer >= 0
+gives the same result bit for bit, and ``None`` draws a seed from fresh
+operating-system entropy.  Either way the function runs with, and its result
+records, an integer that repeats the run when given back as ``seed``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["resolve_seed"]
+
+
+def resolve_seed(seed: int | None, name: str = "seed") -> int:
+    """The integer seed to run with: ``seed`` itself, or a fresh one for None.
+
+    Parameters
+    ----------
+    seed : int or None
+        An integer >= 0, or None for a seed drawn from fresh entropy (31 bits,
+        so that it reads back from JSON as the same number everywhere).
+    name : str
+        The argument's name in the error message.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        If ``seed`` is not None and not an integer >= 0 (a bool, a float or
+        a numpy Generator is refused: a Generator would be consumed, and a
+        second call with it would not repeat the first).
+
+    Examples
+    --------
+    >>> resolve_seed(7)
+    7
+    >>> 0 <= resolve_seed(None) < 2**31
+    True
+    """
+    if seed is None:
+        return int(np.random.SeedSequence().generate_state(1)[0] >> 1)
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"{name} must be an integer >= 0 or None, got {seed!r}")
+    return int(seed)
