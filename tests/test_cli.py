@@ -422,3 +422,22 @@ def test_demo_passes_only_the_options_given(tmp_path, capsys, monkeypatch):
                 "--motion-gains", "1", "-q")[0] == 0
     strip = [{k: v for k, v in c.items() if k not in ("progress", "say")} for c in calls]
     assert strip == [{"seed": 0}, {"seed": 0, "task": "FT", "nlive": 20, "motion_gains": (1.0,)}]
+
+
+def test_demo_warnings_are_one_line_each(tmp_path, capsys, monkeypatch):
+    """A sampler's warning during the demo is one 'bayespilot: warning:' line (docs/cli.md),
+    said once however often it is raised; it was Python's two-line display with a path."""
+    import warnings
+
+    import bayespilot.example as example
+    from bayespilot.sample import ConvergenceWarning
+
+    def fake(out, **kwargs):
+        for _ in range(2):
+            warnings.warn("the chain reached max_steps = 10", ConvergenceWarning)
+        return Path(out) / "report.md"
+
+    monkeypatch.setattr(example, "run_example", fake)
+    code, out, err = _run(capsys, "demo", "--out", tmp_path / "d", "-q")
+    assert code == 0
+    assert err.splitlines() == ["bayespilot: warning: the chain reached max_steps = 10"]

@@ -438,9 +438,17 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     if not args.quick:
         from .example import run_example
 
+        seen: set[str] = set()
+
+        def warn(message) -> None:  # one line each, as they come (the demo runs for minutes)
+            if str(message) not in seen:
+                seen.add(str(message))
+                print(f"{PROG}: warning: {message}", file=sys.stderr)
+
         try:
-            report = run_example(args.out, seed=args.seed, **given,
-                                 progress=_progress(args), say=lambda text: _say(args, text))
+            with _warnings_of(RuntimeWarning, warn):
+                report = run_example(args.out, seed=args.seed, **given,
+                                     progress=_progress(args), say=lambda text: _say(args, text))
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
                                 f"({exc.strerror or exc})") from None
@@ -1092,7 +1100,7 @@ parallel on dask.distributed: a local cluster (--workers, default one per
 core) or an existing one (--scheduler tcp://host:8786). Seeds follow from the
 task, K_theta, F_n and realization number, so a rerun gives the same fits.
 
-Each fit is written to DIR/<key>.json (e.g. FD_k1_fn0.2_r007_thr_paper.json)
+Each fit is written to DIR/<key>.json (e.g. FD_k1_fn0.2_r007_thr_paper_kn4.json)
 as soon as it finishes. Running the same command again skips the fits already
 in DIR, so an interrupted campaign resumes where it stopped; a fit that failed
 is in DIR/<key>.error.json and is retried. At the end the command writes
@@ -1117,12 +1125,12 @@ the draws, the sample statistics lp and acceptance, and the settings as
 attributes; for a simulated recording also the true values). Prints mean,
 median, 90% HDI, R-hat, ESS and the autocorrelation time of each parameter.
 'eq4' treats the output error as white (the paper's Eq. 4). 'coloured'
-models it as an AR process: by default (--ar fixed) of an order chosen by BIC,
-estimated once from a prediction-error fit and held while the pilot
-parameters are sampled, with the first 2 s left out; with --ar sampled its
-partial autocorrelations pacf_1..pacf_P are sampled too; with --ar profiled
-it is re-fitted by least squares at every parameter vector, which widens the
-gains' intervals by what the noise model shares with them in closed loop. In
+models it as an AR process of an order chosen by BIC, with the first 2 s
+left out: by default (--ar profiled) re-fitted by least squares at every
+parameter vector, which widens the gains' intervals by what the noise model
+shares with them in closed loop; with --ar fixed estimated once from a
+prediction-error fit and held while the pilot parameters are sampled; with
+--ar sampled its partial autocorrelations pacf_1..pacf_P are sampled too. In
 closed-loop tracking the output error is the coloured remnant: see
 docs/posteriors.md for how the likelihoods' intervals are calibrated.
 
