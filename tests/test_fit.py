@@ -227,6 +227,18 @@ def test_fast_prediction_error_fit(sim):
         fit_fast(sim.recording, noise="ar", noise_order=-1)
 
 
+def test_prediction_error_fit_leaves_the_start_out_by_default():
+    """noise="ar" without discard leaves 2 s out (COLOURED_DISCARD), as sample and the CLI do:
+    from 0 s the whitened start-up transient drew this full FD run's fit to T_vl 0.007 and
+    tau_v 0.030 (truth 0.409, 0.279); the white fit still leaves nothing out."""
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1).recording
+    f = fit_fast(rec, seed=0, n_starts=4, profile_step=0.01, noise="ar")
+    assert f.settings["discard"] == 2.0
+    assert f.params["T_vl"] == pytest.approx(0.409, rel=0.1)
+    assert f.params["tau_v"] == pytest.approx(0.279, rel=0.1)
+    assert fit_fast(rec, seed=0, n_starts=1, threshold=False).settings["discard"] == 0.0
+
+
 def test_cli_fit_prediction_error(sim, tmp_path, capsys):
     write_recording(sim.recording, tmp_path / "run")
     out = tmp_path / "pem.json"
