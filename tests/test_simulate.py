@@ -135,6 +135,23 @@ def test_other_plant_and_sample_rate():
     assert np.sqrt(np.mean((uh[250:] - rec.u[250:]) ** 2)) / np.std(rec.u) < 0.02
 
 
+def test_a_remnant_gain_means_the_same_remnant_at_any_rate():
+    """The default noise PSD is a physical density (0.01 rad^2 s, unit-variance samples at
+    100 Hz), so K_n = 0.104 (Table 4) gives the remnant's variance the filter
+    K_n^2 / (T_n s + 1)^4 passes: K_n^2 PSD 5 / (32 T_n) for any rate (it was 1/rate, and at
+    1000 Hz the remnant's variance was a tenth)."""
+    ft = Multisine(0.1, [3, 7, 15], [0.05, 0.03, 0.01], [0.0, 1.0, 2.0])
+    fd = Multisine(0.1, [5, 11], [0.02, 0.03], [0.5, 1.5])
+    T_n, kn = 0.0578, 0.104
+    want = kn**2 * 0.01 * 5 / (32 * T_n)  # PSD / (2 pi) * integral of 1/(1 + T^2 w^2)^4 dw
+    for rate in (50.0, 100.0, 1000.0):
+        task = TrackingTask(ft, fd, motion_gain=1.0, sample_rate_hz=rate, duration=200.0,
+                            run_in=20.0)
+        sim = simulate(params=presets.TABLE3["FD"], task=task, seed=3, remnant_gain=kn, T_n=T_n)
+        assert sim.settings["noise_psd"] == 0.01
+        assert np.var(sim.remnant) == pytest.approx(want, rel=0.15), rate
+
+
 @pytest.mark.parametrize("kwargs, message", [
     ({"task": "XX"}, "task must be"),
     ({"remnant_fraction": 1.2}, "remnant_fraction"),

@@ -9,9 +9,12 @@ returns a :class:`Simulation` holding the Recording and the hidden truth.
 
 Remnant white-noise convention: w is white noise whose two-sided power
 spectral density is ``noise_psd`` (rad^2 s).  The default,
-``1 / sample_rate_hz``, is the same as unit-variance samples at the recording
-rate (MATLAB's ``randn`` at 100 Hz), which is the convention that reproduces
-the remnant gains of Table 4 (see ``docs/faithfulness.md``).
+:data:`NOISE_PSD` = 0.01, is the same as unit-variance samples at 100 Hz
+(MATLAB's ``randn`` at the paper's rate), the convention that reproduces the
+remnant gains of Table 4 (see ``docs/faithfulness.md``).  It is a physical
+density, so a remnant gain K_n means the same remnant at any recording rate
+(the default was ``1 / sample_rate_hz`` before, which made K_n's remnant
+shrink as 1/sqrt(rate) at other rates).
 """
 
 from __future__ import annotations
@@ -31,7 +34,11 @@ from .model import PilotModel, _parameter_value, paper_model
 from .recording import Recording
 
 __all__ = ["TrackingTask", "Simulation", "simulate", "remnant", "calibrate_remnant_gain",
-           "remnant_fraction"]
+           "remnant_fraction", "NOISE_PSD"]
+
+#: Default two-sided PSD of the remnant's white noise, rad^2 s: unit-variance samples at the
+#: paper's 100 Hz (Table 4's remnant gains), the same density at any recording rate.
+NOISE_PSD = 0.01
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,7 +199,7 @@ def remnant(n_samples: int, dt: float, gain: float, T_n: float, rng: np.random.G
         draws (the run-in included).
     noise_psd : float
         Two-sided power spectral density of w, rad^2 s (:func:`simulate`'s
-        default is 1 / sample rate).
+        default is :data:`NOISE_PSD`, 0.01).
 
     Returns
     -------
@@ -303,7 +310,9 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     duration : float, optional
         Measurement time (default the task's, 81.92 s).
     noise_psd : float, optional
-        Two-sided PSD of the remnant's white noise; default 1/sample rate.
+        Two-sided PSD of the remnant's white noise, rad^2 s; default
+        :data:`NOISE_PSD` (0.01: unit-variance samples at 100 Hz) at every
+        recording rate.
     forcing_scale : str or float
         Amplitude scale of a preset task's forcing functions.
 
@@ -375,7 +384,7 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
         T_n = presets.TABLE3_T_N.get(tt.task, 0.06)
     if not (math.isfinite(T_n) and T_n > 0):
         raise ValueError(f"T_n must be positive, got {T_n!r}")
-    psd = 1.0 / tt.sample_rate_hz if noise_psd is None else float(noise_psd)
+    psd = NOISE_PSD if noise_psd is None else float(noise_psd)
     if not (math.isfinite(psd) and psd > 0):
         raise ValueError(f"noise_psd must be positive, got {noise_psd!r}")
 
