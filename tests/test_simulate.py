@@ -135,6 +135,16 @@ def test_other_plant_and_sample_rate():
     assert np.sqrt(np.mean((uh[250:] - rec.u[250:]) ** 2)) / np.std(rec.u) < 0.02
 
 
+def test_an_unreachable_remnant_fraction_is_said_so():
+    """Without motion feedback F_n levels off near 0.085-0.09 as K_n grows: asking for 0.1 is refused
+    as unreachable (it widened K_n to 1e6 and reported a diverged loop); 0.08 is reached."""
+    with pytest.raises(ValueError, match=r"remnant fraction 0.1 cannot be reached .*F_n stays "
+                                         r"at 0.0[89]"):
+        simulate(task="FD", motion_gain=0.0, remnant_fraction=0.1, seed=2, duration=40.96)
+    sim = simulate(task="FD", motion_gain=0.0, remnant_fraction=0.08, seed=2, duration=40.96)
+    assert sim.remnant_fraction == pytest.approx(0.08, abs=1e-6)
+
+
 def test_a_remnant_gain_means_the_same_remnant_at_any_rate():
     """The default noise PSD is a physical density (0.01 rad^2 s, unit-variance samples at
     100 Hz), so K_n = 0.104 (Table 4) gives the remnant's variance the filter

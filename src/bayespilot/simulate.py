@@ -465,9 +465,16 @@ def _calibrate(run, target: float):
     for _ in range(40):
         if f_hi >= 0.0:
             break
+        try:
+            f_next, _ = frac(hi * 1.5)
+        except RuntimeError:  # a remnant so large that the loop's states pass the kernel's limit
+            break
+        if f_next - f_hi < 1e-6:
+            # F_n levels off below the target: where the remnant dominates u, var(n)/var(u)
+            # tends to a limit of the closed loop (e.g. about 0.09 without motion feedback)
+            break
         lo, f_lo = hi, f_hi
-        hi *= 1.5
-        f_hi, _ = frac(hi)
+        hi, f_hi = hi * 1.5, f_next
     if f_hi < 0.0 or f_lo > 0.0:
         raise ValueError(f"remnant fraction {target} cannot be reached in this closed loop "
                          f"(F_n stays at {f_hi + target:.3f} or below up to K_n = {hi:.3g})")
