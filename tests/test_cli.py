@@ -441,3 +441,19 @@ def test_demo_warnings_are_one_line_each(tmp_path, capsys, monkeypatch):
     code, out, err = _run(capsys, "demo", "--out", tmp_path / "d", "-q")
     assert code == 0
     assert err.splitlines() == ["bayespilot: warning: the chain reached max_steps = 10"]
+
+
+def test_fit_of_a_run_without_motion_says_so_once(tmp_path, capsys):
+    """A recording without motion: the motion channel's parameters are named in one
+    'bayespilot: warning:' line (the fit builds two likelihoods; Python showed two warnings)."""
+    from bayespilot.io import write_recording
+    from bayespilot.simulate import simulate
+
+    rec = simulate(task="FD", motion_gain=0.0, remnant_fraction=0.05, seed=2,
+                   duration=30.0).recording
+    write_recording(rec, tmp_path / "still")
+    code, out, err = _run(capsys, "fit", tmp_path / "still", "--method", "fast")
+    assert code == 0 and "-ln L" in out
+    (line,) = [ln for ln in err.splitlines() if "warning" in ln]
+    assert line.startswith("bayespilot: warning: the vestibular channel's input "
+                           "(theta_ddot_m) is zero throughout the record")

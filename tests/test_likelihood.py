@@ -541,3 +541,26 @@ def test_batch_refuses_complex_parameter_vectors():
     assert np.isfinite(lik.batch(np.array([row]))[0])
     with pytest.raises(ValueError, match="complex"):
         lik.batch(np.array([row + 1e-3j]))
+
+
+def test_a_channel_without_input_is_said_to_leave_its_parameters_unidentified():
+    """A run without motion (K_theta = 0): theta_ddot_m is zero, and the motion channel's own
+    free parameters are named (a fit returned K_m 1.13, delta_abs 0.07 without a word);
+    the shared neuromuscular ones are not; fixed, or with motion, nothing is said."""
+    from bayespilot.likelihood import SilentChannelWarning
+    from bayespilot.simulate import simulate
+
+    still = simulate(task="FD", motion_gain=0.0, remnant_fraction=0.05, seed=2,
+                     duration=10.0).recording
+    with pytest.warns(SilentChannelWarning) as got:
+        Likelihood(paper_model(), still)
+    (w,) = got
+    assert "vestibular channel's input (theta_ddot_m) is zero" in str(w.message)
+    assert "its parameters (tau_m, K_m, delta_abs) are not identified" in str(w.message)
+    assert "omega_nm" not in str(w.message)
+    moving = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.05, seed=2,
+                      duration=10.0).recording
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SilentChannelWarning)
+        Likelihood(paper_model(), moving)
+        Likelihood(paper_model().fix(K_m=0.0, tau_m=0.2, delta_abs=0.0), still)

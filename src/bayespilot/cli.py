@@ -1531,7 +1531,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         verbose = args.verbose
         if args.quiet and args.verbose:
             raise UsageError("give -q/--quiet or -v/--verbose, not both")
-        return args.handler(args)
+        from .likelihood import SilentChannelWarning
+
+        said: set[str] = set()
+
+        def say(message) -> None:
+            if str(message) not in said:
+                said.add(str(message))
+                print(f"{PROG}: warning: {message}", file=sys.stderr)
+
+        with _warnings_of(SilentChannelWarning, say):
+            return args.handler(args)
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_USAGE)
     except UsageError as exc:

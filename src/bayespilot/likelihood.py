@@ -30,13 +30,36 @@ from .model import FixedFilter, PilotModel
 from .noise import ARNoise
 from .recording import Recording
 
-__all__ = ["Likelihood", "PerfectFitWarning", "channel_inputs", "neg_log_lik", "model_response", "vaf"]
+__all__ = ["Likelihood", "PerfectFitWarning", "SilentChannelWarning", "channel_inputs",
+           "neg_log_lik", "model_response", "vaf"]
 
 INITIAL_CONDITIONS = ("periodic", "rest")
 
 
 class PerfectFitWarning(RuntimeWarning):
     """The model reproduces u to round-off, so s2 was floored and -ln L is a bound."""
+
+
+class SilentChannelWarning(RuntimeWarning):
+    """A channel's input is zero throughout the record, so its free parameters (e.g. the
+    motion channel's K_m, tau_m, delta_abs on a run without motion) are not identified."""
+
+
+def _warn_silent_channels(model: PilotModel, X: np.ndarray) -> None:
+    """One warning per channel whose input row of ``X`` is all zero and that has free
+    parameters of its own (shared ones, such as the neuromuscular ones, are identified by the
+    other channels)."""
+    free = set(model.parameter_names)
+    for c, ch in enumerate(model.channels):
+        if np.any(X[c] != 0.0):
+            continue
+        others = {q for k, o in enumerate(model.channels) if k != c for q in o.parameter_names}
+        own = [q for q in dict.fromkeys(ch.parameter_names) if q not in others]
+        if any(q in free for q in own):  # (all named, so that the message is one per channel)
+            warnings.warn(f"the {ch.name} channel's input ({ch.source}) is zero throughout the "
+                          f"record, so its parameters ({', '.join(own)}) are not identified: "
+                          f"fix them (model.fix) or use a model without the channel",
+                          SilentChannelWarning, stacklevel=3)
 
 
 def _warn_perfect_fit() -> None:
@@ -188,6 +211,7 @@ class Likelihood:
         self.recording = recording
         self.initial = initial
         self.X = np.ascontiguousarray(channel_inputs(model, recording, initial))
+        _warn_silent_channels(model, self.X)
         self.u = np.ascontiguousarray(recording.u, dtype=float)
         self.dt = recording.dt
         self.n = recording.n_samples
