@@ -42,6 +42,34 @@ def _pyplot():
     return plt
 
 
+#: Length of a Welch segment of the residual spectrum, s (1024 samples at the paper's
+#: 100 Hz): the spectrum's lowest frequency, 2 pi / 10.24 = 0.61 rad/s, is the same at
+#: every sample rate (a fixed 1024 samples started it at 6.1 rad/s at 1 kHz).
+WELCH_SECONDS = 10.24
+
+
+def _sample_interval(result: DiagnosisResult, recording: Any = None) -> float:
+    """The recording's sample interval, s: the result's ``settings["dt"]``, else the
+    ``recording``'s (never an assumed rate)."""
+    dt = result.settings.get("dt") if result.settings else None
+    if dt is None and recording is not None:
+        dt = recording.dt
+    if dt is None or not (math.isfinite(dt) and dt > 0):
+        raise ValueError("the result's settings have no sample interval ('dt'): pass the "
+                         "recording it was diagnosed on (recording=...)")
+    return float(dt)
+
+
+def _residual_psd(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Welch PSD of a residual in segments of :data:`WELCH_SECONDS` (at most the record),
+    without the zero frequency: omega (rad/s) and the PSD."""
+    from scipy import signal
+
+    nperseg = max(1, min(int(round(WELCH_SECONDS * fs)), x.size))
+    f, P = signal.welch(x, fs=fs, nperseg=nperseg)
+    return 2 * np.pi * f[1:], P[1:]
+
+
 def _align(phase: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """Shift an unwrapped phase (deg) by whole turns to lie closest to ``ref``."""
     k = np.round(np.nanmedian(ref - phase) / 360.0)
@@ -106,7 +134,8 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
     return fig
 
 
-def plot_residuals(result: DiagnosisResult, axes: Any = None) -> Figure:
+def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any = None
+                   ) -> Figure:
     """Residual before and after: spectrum, variance over the run, against |i| and |u|.
 
     Parameters
@@ -119,16 +148,26 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None) -> Figure:
         Four axes, taken as 2 x 2: the residual's PSD (Welch) with the
         forcing frequencies marked, its variance over eight segments of the
         run, and its mean times sign conditioned on |i(t - tau_m)| (IPUT) and
-        on |u| (rad); default: a new figure.
+        on |u| (rad); default: a new figure.  The PSD is averaged over
+        segments of :data:`WELCH_SECONDS` (10.24 s, at most the record), so
+        its lowest frequency, 2 pi / 10.24 rad/s, is the same at every
+        sample rate.
+    recording : Recording, optional
+        The recording diagnosed: its sample interval is used when the
+        result's ``settings`` have none (``diagnose`` always records it).
 
     Returns
     -------
     matplotlib.figure.Figure
         The figure of the axes; a conditioned panel without its statistic is
         hidden.
-    """
-    from scipy import signal
 
+    Raises
+    ------
+    ValueError
+        Neither ``result.settings["dt"]`` nor ``recording`` gives the
+        sample interval.
+    """
     plt = _pyplot()
     arr = result.arrays
     if axes is None:
@@ -136,7 +175,7 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None) -> Figure:
     else:
         fig = np.ravel(axes)[0].figure
     axes = np.asarray(axes).reshape(2, 2)
-    fs = 1.0 / result.settings.get("dt", 0.01)
+    fs = 1.0 / _sample_interval(result, recording)
     skip = int(round(result.settings["skip_seconds"] * fs))
     before = arr["residual"][skip:]
     after = arr.get("after_residual")
@@ -145,8 +184,8 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None) -> Figure:
     for x, lab, st in ((before, "base model", "C0-"), (after, f"with {result.physics}", "C3-")):
         if x is None:
             continue
-        f, P = signal.welch(x, fs=fs, nperseg=1024)
-        ax.loglog(2 * np.pi * f[1:], P[1:], st, lw=1, label=lab)
+        om, P = _residual_psd(np.asarray(x, float), fs)
+        ax.loglog(om, P, st, lw=1, label=lab)
     ff = arr.get("forcing_frequencies")
     if ff is not None:
         for w in ff[0]:
@@ -497,7 +536,8 @@ def _png(fig, path: Path) -> Path:
     return path
 
 
-def write_report(result: DiagnosisResult, directory: str | Path) -> dict[str, Path]:
+def write_report(result: DiagnosisResult, directory: str | Path, *, recording: Any = None
+                 ) -> dict[str, Path]:
     """Write the figures, ``report.html`` and ``diagnosis.json`` to ``directory``.
 
     Parameters
@@ -508,6 +548,9 @@ def write_report(result: DiagnosisResult, directory: str | Path) -> dict[str, Pa
     directory : str or Path
         Created, with its parents, if missing; files of the same names in it
         are replaced.
+    recording : Recording, optional
+        The recording diagnosed, for a result without its sample interval
+        (:func:`plot_residuals`).
 
     Returns
     -------
@@ -528,7 +571,7 @@ def write_report(result: DiagnosisResult, directory: str | Path) -> dict[str, Pa
     out.mkdir(parents=True, exist_ok=True)
     paths = {
         "frequency_response": _png(plot_frequency_response(result), out / "frequency_response.png"),
-        "residuals": _png(plot_residuals(result), out / "residuals.png"),
+        "residuals": _png(plot_residuals(result, recording=recording), out / "residuals.png"),
         "evidence": _png(plot_evidence(result), out / "evidence.png"),
         "candidates": _png(plot_candidates(result), out / "candidates.png"),
     }
