@@ -147,10 +147,13 @@ def test_otolith_channel_is_the_specific_force_through_the_otolith():
     assert err < 0.01
 
 
-def test_remnant_like_recovers_eq6():
-    # as the simulator makes it: on a 1 kHz grid, sampled at 100 Hz
-    n = remnant(600000, 0.001, 0.1, 0.06, make_rng(5), 0.01)[::10]
-    K_n, T_n = remnant_like(n, 0.01)
+@pytest.mark.parametrize("rate", [100.0, 500.0])
+def test_remnant_like_recovers_eq6(rate):
+    """As the simulator makes it (10 integration steps a sample, the default noise PSD 0.01),
+    at the paper's rate and another (K_n was off by sqrt(rate / 100) away from 100 Hz)."""
+    dt = 1.0 / rate
+    n = remnant(int(6000 * rate), dt / 10, 0.1, 0.06, make_rng(5), 0.01)[::10]
+    K_n, T_n = remnant_like(n, dt)
     assert T_n == pytest.approx(0.06, rel=0.05)
     assert K_n == pytest.approx(0.1, rel=0.05)
 

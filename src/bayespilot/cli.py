@@ -237,14 +237,17 @@ def _questionable_said():
 
 @contextlib.contextmanager
 def _warnings_of(category, handle):
-    """Within: each warning of ``category`` goes to ``handle(message)`` as it is raised,
-    instead of Python's display; other warnings are shown as before."""
+    """Within: each warning of ``category`` (a class or a tuple of them) goes to
+    ``handle(message)`` as it is raised, instead of Python's display; other warnings are shown
+    as before."""
+    categories = category if isinstance(category, tuple) else (category,)
     with warnings.catch_warnings():
-        warnings.simplefilter("always", category)
+        for one in categories:
+            warnings.simplefilter("always", one)
         shown = warnings.showwarning
 
         def show(message, cat, filename, lineno, file=None, line=None):
-            if issubclass(cat, category):
+            if issubclass(cat, categories):
                 handle(message)
             else:
                 shown(message, cat, filename, lineno, file, line)
@@ -1531,6 +1534,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         verbose = args.verbose
         if args.quiet and args.verbose:
             raise UsageError("give -q/--quiet or -v/--verbose, not both")
+        # (imported once a command runs: --help and --version stay quick)
+        from .diagnose.locate import EvidenceWarning
         from .likelihood import SilentChannelWarning
 
         said: set[str] = set()
@@ -1540,7 +1545,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 said.add(str(message))
                 print(f"{PROG}: warning: {message}", file=sys.stderr)
 
-        with _warnings_of(SilentChannelWarning, say):
+        with _warnings_of((SilentChannelWarning, EvidenceWarning), say):
             return args.handler(args)
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_USAGE)

@@ -43,7 +43,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import sys
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
@@ -52,6 +54,7 @@ import numpy as np
 
 from .._files import write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
+from .locate import EvidenceWarning
 from .._blas import one_blas_thread
 from .._seeds import resolve_seed
 
@@ -59,7 +62,8 @@ if TYPE_CHECKING:
     from ..fit.result import FitResult
     from ..recording import Recording
 
-__all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension"]
+__all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension",
+           "EvidenceWarning"]
 
 #: Default family-wise false-alarm level of the decision.
 ALPHA = 0.01
@@ -157,7 +161,9 @@ class DiagnosisResult(_JSONSummary):
     chosen : CandidateResult or None
         The chosen extension's fit (parameters, standard errors).
     settings : dict
-        alpha, seed, bootstrap size, band, skip, remnant of the replicates.
+        alpha, seed, bootstrap size, band, skip, remnant of the replicates
+        (``bootstrap``; with ``skipped``, why, when the bootstrap asked for
+        could not be made).
     elapsed : float
         Wall time, s.
     source : str or None
@@ -257,7 +263,9 @@ class DiagnosisResult(_JSONSummary):
                                  f"{d['hdi_90'][1]:.4g}]")
         if self.bayes_factor is not None:
             lines += ["", self.bayes_factor.summary_line()]
-        lines += ["", "located evidence (bootstrap p-values):"]
+        skipped = self.settings.get("bootstrap", {}).get("skipped")
+        lines += ["", "located evidence (bootstrap p-values):" if not skipped else
+                  f"located evidence (no p-values: the bootstrap was skipped, {skipped}):"]
         for k, e in self.where.items():
             if not math.isfinite(e.value):
                 continue
@@ -345,6 +353,67 @@ def _base_gls(recording, base_model, start: Mapping[str, float], *, skip: int,
     return lik0, noise, base
 
 
+def _where(recording) -> str:
+    """The recording's source as a message prefix ("" without one)."""
+    return f"{recording.source}: " if recording.source else ""
+
+
+def _warn(recording, text: str) -> None:
+    """One :class:`EvidenceWarning` about ``recording``, attributed to the first caller
+    outside bayespilot (``diagnose``, ``diagnose_pooled`` or a batch, however nested)."""
+    package = Path(__file__).resolve().parent.parent
+    level, frame = 2, sys._getframe(1)
+    while frame is not None and Path(frame.f_code.co_filename).resolve().is_relative_to(package):
+        level, frame = level + 1, frame.f_back
+    warnings.warn(_where(recording) + text, EvidenceWarning, stacklevel=level)
+
+
+#: What a recording without forcing functions misses, and what to give (a warning's text).
+_NO_FORCING = ("no forcing functions are known (no forcing in the sidecar, no f_t and f_d "
+               "columns): the frequency evidence is missing")
+_GIVE_FORCING = ("give the forcing (base_frequency, target, disturbance) in the sidecar, or f_t "
+                 "and f_d columns")
+
+
+def _bootstrap_obstacle(recording, forcing) -> tuple[str, str] | None:
+    """Why the parametric bootstrap (and the calibration) cannot simulate this recording's
+    task, or None: ``(reason, message)``, the reason for the settings and the warning's text
+    (without the source).
+
+    No forcing functions known; a controlled element the simulator cannot run (relative
+    degree below 2, seen by building the task as :func:`~.locate.task_of` does); or a task
+    """
+    from . import locate as L
+
+    skipped = "the bootstrap of the located evidence is skipped, so the evidence has no p-values"
+    if forcing is None:
+        return ("no forcing functions known: no forcing in the sidecar, no f_t and f_d columns",
+                f"{_NO_FORCING}, and {skipped} (it simulates the task with them); "
+                f"{_GIVE_FORCING}")
+    try:
+        L.task_of(recording, forcing)
+    except ValueError as exc:
+        num, den = (np.trim_zeros(np.atleast_1d(x), "f") for x in recording.controlled_element)
+        plant = (f"num [{', '.join(f'{x:g}' for x in num)}], "
+                 f"den [{', '.join(f'{x:g}' for x in den)}]")
+        degree = den.size - max(num.size, 1)
+        if degree >= 2:  # refused for another reason: say it as the simulator does
+            return (f"the task cannot be simulated: {exc}",
+                    f"{skipped}: it simulates the task, which cannot be simulated ({exc})")
+        return (f"controlled element of relative degree {degree}: the bootstrap simulates the "
+                f"plant, which needs relative degree >= 2",
+                f"{skipped}: it simulates the plant, and the controlled element ({plant}) has "
+                f"relative degree {degree}, where the simulator needs 2 or more")
+    return None
+
+
+def _default_plant(recording) -> bool:
+    """A task ``"other"`` whose sidecar leaves the plant out: the recording format then means
+    the paper's K_c/s^2 with K_c = 4 (and K_delta_u = 0.69), which the bootstrap simulates."""
+    return recording.task == "other" and not ({"controlled_element", "controlled_element_gain"}
+                                              & set(recording.metadata))
+
+
 @dataclass
 class _Run:
     """One recording's first stages: base fit, GLS fit, noise model, located evidence."""
@@ -365,12 +434,31 @@ class _Run:
 
 def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n_starts,
              profile_noise, bar, oversample: int = 1, noise_passes: int = 1) -> _Run:
-    """Base fit (Eq. 4), the noise model and GLS base fit, and the calibrated evidence."""
+    """Base fit (Eq. 4), the noise model and GLS base fit, and the calibrated evidence.
+
+    Before the fit, one :class:`EvidenceWarning` per gap in the evidence this recording
+    will have (the forcing's notes; a bootstrap asked for that cannot be made).
+    """
     from ..fit.fast import fit_fast
     from ..model import paper_model
     from . import decide as D
     from . import locate as L
 
+    # what the recording allows, said before the (long) computation
+    forcing = L.forcing_of(recording)
+    for note in forcing.notes if forcing is not None else ():
+        _warn(recording, note)
+    obstacle = _bootstrap_obstacle(recording, forcing)
+    if obstacle is not None and n_bootstrap > 0:
+        _warn(recording, obstacle[1])
+    elif forcing is None:  # the frequency evidence is missing with or without a bootstrap
+        _warn(recording, f"{_NO_FORCING}; {_GIVE_FORCING}")
+    if obstacle is None and n_bootstrap > 0 and _default_plant(recording):
+        _warn(recording, "the recording (task 'other') gives no controlled_element or "
+                         "controlled_element_gain, which the recording format reads as the "
+                         "paper's plant, 4/s^2 (and control_gain 0.69 unless given): the "
+                         "bootstrap simulates that plant; if yours differs, give it in the "
+                         "sidecar, or the evidence's p-values are of the wrong plant")
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     bar.set_postfix_str("base fit")
@@ -383,7 +471,6 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
     skip = int(round(skip_seconds * recording.sample_rate_hz))
     lik0, noise, base = _base_gls(recording, base_model, start, skip=skip, omega_c=omega_c,
                                   noise_passes=noise_passes)
-    forcing = L.forcing_of(recording)
     if profile_noise:
         base, noise = D.refit_with_noise(base_model, recording, base, noise,
                                          tuple(n for n in base_model.parameter_names
@@ -395,7 +482,9 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
     st = L.statistics(recording, base_model, base.params, forcing, skip=skip, with_arrays=True)
     null = None
     boot_info: dict[str, Any] = {"replicates": 0}
-    if n_bootstrap > 0 and forcing is not None:
+    if n_bootstrap > 0 and obstacle is not None:
+        boot_info["skipped"] = obstacle[0]
+    elif n_bootstrap > 0:
         def refit(rep, start=base.params):
             # the GLS base fit again, from the generating parameters under the recording's
             # noise model (the Eq. 4 fit's multi-start search would cost ~1.5 s a replicate)
@@ -460,8 +549,17 @@ def _best_null(names, results, base_model, recording, noise):
 
 
 def _calibrator(runs, recordings, n_calibrate, seed, bar, n_starts=4):
-    """The calibration function of :func:`_calibrated_decision` for these runs."""
+    """The calibration function of :func:`_calibrated_decision` for these runs; None, with an
+    :class:`EvidenceWarning`, when a run's task cannot be simulated (:func:`_bootstrap_obstacle`:
+    the asymptotic test stands)."""
     from .calibrate import calibrate_candidate
+
+    for run, rec in zip(runs, recordings):
+        obstacle = _bootstrap_obstacle(rec, run.forcing)
+        if obstacle is not None:
+            _warn(rec, f"the calibration of the chosen candidate's test (n_calibrate) is "
+                       f"skipped, so the asymptotic test stands: {obstacle[0]}")
+            return None
 
     # the replicates' own seeds: a child of the seed, apart from the located evidence's
     child = None if seed is None else np.random.SeedSequence(seed).spawn(1)[0]
@@ -650,6 +748,23 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         one that is not in the catalogue; or
         ``n_calibrate`` is asked for with ``profile_noise=True``.
 
+    Warns
+    -----
+    EvidenceWarning
+        Before the base fit, once for each gap in the located evidence: no
+        forcing functions known (no frequency evidence, no bootstrap); forcing
+        lines that are not whole cycles of the record (no frequency
+        evidence); a forcing function zero throughout (no visual or motion
+        describing-function evidence); a base frequency snapped to the
+        record's DFT bins; and, with ``n_bootstrap > 0``, a task the bootstrap
+        cannot simulate, so that the evidence has no p-values (a controlled
+        element of relative degree below 2; ``settings["bootstrap"]["skipped"]``
+        then says why); and, with ``n_bootstrap > 0``, a task ``"other"``
+        that leaves its plant out, which the recording format reads as the
+        paper's 4/s^2 and the bootstrap simulates.  With
+        ``n_calibrate > 0`` the calibration is skipped for the same reasons
+        (``settings["calibration_skipped"]``).
+
     Examples
     --------
     >>> from bayespilot.simulate import simulate
@@ -730,6 +845,7 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     if n_calibrate > 0:
         calibrate = _calibrator([dataclasses.replace(run, base=base)], [recording],
                                 n_calibrate, seed, bar, n_starts)
+    uncalibrated = (_bootstrap_obstacle(recording, forcing) if n_calibrate > 0 else None)
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
     bar.close()
     timings["calibrate"] = time.perf_counter() - t3
@@ -765,7 +881,7 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         n = r.size
         arrays["after_eq4_neg_log_lik"] = float(0.5 * n * math.log(np.mean(r * r)) + 0.5 * n)
         arrays["before_eq4_neg_log_lik"] = float(0.5 * n * math.log(np.mean(r0 * r0)) + 0.5 * n)
-        if forcing is not None and forcing.periodic:
+        if forcing is not None and forcing.two_input:
             arrays["df_after"] = L.describing_function(y, recording.e, recording.theta_ddot_m,
                                                        forcing)
     arrays["forcing_frequencies"] = (forcing.target.frequencies, forcing.disturbance.frequencies) \
@@ -784,6 +900,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
                 "candidates": list(names), "timings": timings, "rebased": rebased,
                 "decision_likelihood": "GLS: residual low-passed, decimated and whitened by an "
                                        "AR model of the base residual"}
+    if uncalibrated is not None:
+        settings["calibration_skipped"] = uncalibrated[0]
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
                            where, base_d, chosen, settings, time.perf_counter() - t0,
                            recording.source, arrays, base_model=base_model)

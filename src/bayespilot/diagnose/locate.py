@@ -37,6 +37,7 @@ amplitude
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Mapping
@@ -53,7 +54,8 @@ if TYPE_CHECKING:
     from ..simulate import TrackingTask
 
 __all__ = ["Forcing", "forcing_of", "describing_function", "statistics", "remnant_like",
-           "task_of", "bootstrap", "Evidence", "EVIDENCE", "N_SEGMENTS"]
+           "task_of", "bootstrap", "Evidence", "EVIDENCE", "N_SEGMENTS", "EvidenceWarning",
+           "SNAP_TOLERANCE"]
 
 #: Evidence keys and what each measures.
 EVIDENCE = {
@@ -75,6 +77,25 @@ EVIDENCE = {
 N_SEGMENTS = 8
 #: Boundary between the low and high frequencies of the motion-channel evidence, rad/s.
 OMEGA_SPLIT = 2.0
+#: A sidecar's base frequency that puts every forcing line within this many cycles (over the
+#: record) of a whole number is snapped to the nearest that puts them on the record's DFT bins
+#: (a rounded value, as printed in a paper); a line off by more is not a bin.
+SNAP_TOLERANCE = 0.05
+
+
+class EvidenceWarning(UserWarning):
+    """The located evidence of a diagnosis is incomplete, or was read with an assumption.
+
+    Issued by :func:`bayespilot.diagnose.diagnose` (and
+    :func:`~bayespilot.diagnose.diagnose_pooled`) once per recording: the
+    bootstrap that gives the evidence its p-values was skipped (no forcing
+    functions known, a plant the simulator cannot run or the recording does
+    not state), part of the frequency evidence is missing (forcing lines that
+    are not whole cycles of the record, a forcing function that is zero
+    throughout), or a sidecar's base frequency was snapped to the record's
+    DFT bins (:data:`SNAP_TOLERANCE`).  The message says why and, where there
+    is one, what to provide.  The diagnosis goes on without what is missing.
+    """
 
 
 @dataclass(frozen=True)
@@ -89,6 +110,12 @@ class Forcing:
         Their DFT bins in the record (None if not whole periods).
     f_t, f_d : ndarray
         The signals at the recording's samples.
+    notes : tuple of str
+        What the estimators should know about them, one sentence each: a
+        base frequency snapped to the record's DFT bins, why the lines are
+        not bins (no frequency evidence), a forcing function that is zero
+        throughout (no two-input estimate).  :func:`bayespilot.diagnose.diagnose`
+        issues each as an :class:`EvidenceWarning`.
     """
 
     target: Multisine
@@ -97,6 +124,7 @@ class Forcing:
     k_disturbance: np.ndarray | None
     f_t: np.ndarray
     f_d: np.ndarray
+    notes: tuple[str, ...] = ()
 
     @property
     def frequencies(self) -> np.ndarray:
@@ -107,6 +135,18 @@ class Forcing:
     def periodic(self) -> bool:
         """True if every forcing frequency is a DFT bin of the record."""
         return self.k_target is not None and self.k_disturbance is not None
+
+    @property
+    def zero(self) -> tuple[str, ...]:
+        """The forcing functions that are zero throughout the record ("f_t", "f_d")."""
+        return tuple(name for name, x in (("f_t", self.f_t), ("f_d", self.f_d))
+                     if not np.any(x))
+
+    @property
+    def two_input(self) -> bool:
+        """True if the two-input describing-function estimate can be made: every forcing
+        frequency a DFT bin of the record and neither forcing function zero throughout."""
+        return self.periodic and not self.zero
 
 
 def _multisine_from_signal(x: np.ndarray, dt: float) -> Multisine:
@@ -160,7 +200,17 @@ def forcing_of(recording: Recording) -> Forcing | None:
         (each None unless every frequency is a whole number of cycles of the
         record) and the signals at the samples (the columns where the
         recording has them, else the multisines evaluated); None when neither
-        source is available.
+        source is available.  Its ``notes`` say why the frequencies are not
+        bins, or that a forcing function is zero throughout.
+
+    Notes
+    -----
+    A sidecar's frequency is a bin when it is within 1e-3 cycle (over the
+    record) of a whole number of cycles.  A base frequency that puts every
+    line within :data:`SNAP_TOLERANCE` (0.05) cycle of whole cycles, as a
+    rounded value does (the paper prints 0.0767 rad/s for 2 pi / 81.92 s),
+    is taken as the nearest one that puts them on bins, and a note says so:
+    a line 0.05 cycle off its bin keeps 99.6 % of its amplitude there.
     """
     meta = recording.metadata.get("forcing")
     t = recording.t
@@ -178,15 +228,68 @@ def forcing_of(recording: Recording) -> Forcing | None:
     for f in (ft, fd):
         k = f.frequencies * T / (2 * np.pi)
         kk.append(np.rint(k).astype(int) if np.all(np.abs(k - np.rint(k)) < 1e-3) else None)
-    if not isinstance(meta, Mapping) and (
-            not (_wraps_smoothly(recording["f_t"]) and _wraps_smoothly(recording["f_d"]))
-            or np.intersect1d(ft.n, fd.n).size):
-        # lines read from the columns are DFT bins by construction; the test above cannot
-        # tell a record of whole periods from a smeared one
-        kk = [None, None]
-    f_t = recording["f_t"] if "f_t" in recording else ft(t)
-    f_d = recording["f_d"] if "f_d" in recording else fd(t)
-    return Forcing(ft, fd, kk[0], kk[1], np.asarray(f_t), np.asarray(f_d))
+    notes = []
+    if isinstance(meta, Mapping):
+        if kk[0] is None or kk[1] is None:
+            ft, fd, kk, note = _snapped(ft, fd, kk, T)
+            notes.append(note)
+    else:
+        wraps = _wraps_smoothly(recording["f_t"]) and _wraps_smoothly(recording["f_d"])
+        shared = np.intersect1d(ft.n, fd.n).size
+        if not wraps or shared:
+            # lines read from the columns are DFT bins by construction; the test above cannot
+            # tell a record of whole periods from a smeared one
+            kk = [None, None]
+            why = ("do not continue smoothly from the record's end to its start (not whole "
+                   "periods)" if not wraps else f"share {shared} DFT line(s)")
+            notes.append(f"the frequency evidence (frequency.*) is missing: the f_t and f_d "
+                         f"columns {why}, and the describing functions need whole periods of "
+                         f"forcing functions at separate frequencies; give the forcing "
+                         f"(base_frequency, target, disturbance) in the sidecar, or cut the "
+                         f"record to whole periods")
+    f_t = np.asarray(recording["f_t"] if "f_t" in recording else ft(t))
+    f_d = np.asarray(recording["f_d"] if "f_d" in recording else fd(t))
+    out = Forcing(ft, fd, kk[0], kk[1], f_t, f_d)
+    if out.periodic and out.zero:
+        which = " and ".join({"f_t": "the target f_t", "f_d": "the disturbance f_d"}[z]
+                             for z in out.zero)
+        only = {("f_d",): " (target only)", ("f_t",): " (disturbance only)"}.get(out.zero, "")
+        notes.append(f"{which} {'is' if len(out.zero) == 1 else 'are'} zero throughout the "
+                     f"record{only}: the two-input describing-function estimate needs both "
+                     f"forcing functions, so frequency.visual, frequency.motion_low and "
+                     f"frequency.motion_high are missing")
+    return dataclasses.replace(out, notes=tuple(notes)) if notes else out
+
+
+def _snapped(ft: Multisine, fd: Multisine, kk: list, T: float
+             ) -> tuple[Multisine, Multisine, list, str]:
+    """A sidecar's forcing whose lines are not all DFT bins of a record of ``T`` s: snapped
+    to them when its base frequency is within :data:`SNAP_TOLERANCE` cycle of one that puts
+    them there (``kk`` the bins found, None where not); ``(ft, fd, kk, note)``."""
+    w0 = ft.base_frequency
+    n = np.concatenate([ft.n, fd.n])
+    m = w0 * T / (2 * np.pi)  # base periods in the record
+    g = int(np.gcd.reduce(n))  # the lines are bins if m is a whole multiple of 1 / g
+    j = int(np.rint(m * g))
+    off = n * abs(m - j / g)  # each line's distance from its bin at the snapped frequency
+    if j >= 1 and float(off.max()) <= SNAP_TOLERANCE:
+        ws = 2 * np.pi * j / (g * T)
+        ft, fd = (Multisine(ws, f.n, f.amplitude, f.phase) for f in (ft, fd))
+        note = (f"forcing.base_frequency {w0:.6g} rad/s puts the forcing lines up to "
+                f"{off.max():.2g} cycle off whole cycles of the {T:g}-s record (a rounded "
+                f"value?); taken as {ws:.8g} rad/s, the nearest that puts them on the record's "
+                f"DFT bins")
+        return ft, fd, [ft.n // g * j, fd.n // g * j], note
+    k = n * m
+    dist = np.abs(k - np.rint(k))
+    i = int(np.argmax(dist))
+    name = "target" if i < ft.n.size else "disturbance"
+    note = (f"the frequency evidence (frequency.*) is missing: the {name} line n = {n[i]} "
+            f"({n[i] * w0:.4g} rad/s) is {dist[i]:.2g} cycle off a whole number of cycles of "
+            f"the {T:g}-s record (forcing.base_frequency {w0:.6g} rad/s), and the describing "
+            f"functions need whole periods; give the exact base_frequency, or cut the record "
+            f"to whole periods")
+    return ft, fd, kk, note
 
 
 def describing_function(u: np.ndarray, e: np.ndarray, m: np.ndarray, forcing: Forcing
@@ -210,7 +313,7 @@ def describing_function(u: np.ndarray, e: np.ndarray, m: np.ndarray, forcing: Fo
         Control (or any signal the estimator should explain, e.g. a residual),
         error and motion, over whole periods of the forcing.
     forcing : Forcing
-        With DFT bins (``forcing.periodic``).
+        With DFT bins and neither forcing function zero (``forcing.two_input``).
 
     Returns
     -------
@@ -220,11 +323,16 @@ def describing_function(u: np.ndarray, e: np.ndarray, m: np.ndarray, forcing: Fo
     Raises
     ------
     ValueError
-        If the record does not hold whole periods of the forcing functions.
+        If the record does not hold whole periods of the forcing functions, or
+        one of them is zero throughout.
     """
     if not forcing.periodic:
         raise ValueError("the describing-function estimate needs whole periods of the forcing "
                          "functions in the record")
+    if forcing.zero:
+        raise ValueError(f"the two-input describing-function estimate needs both forcing "
+                         f"functions; {' and '.join(forcing.zero)} "
+                         f"{'is' if len(forcing.zero) == 1 else 'are'} zero throughout the record")
     U, E, M = (np.fft.rfft(np.asarray(x, float)) for x in (u, e, m))
     Ft, Fd = np.fft.rfft(forcing.f_t), np.fft.rfft(forcing.f_d)
     kt, kd = forcing.k_target, forcing.k_disturbance
@@ -317,7 +425,9 @@ def statistics(recording: Recording, model: PilotModel, params: Mapping[str, flo
     params : mapping
         Fitted parameters.
     forcing : Forcing or None
-        Frequency evidence is left out without it (or without whole periods).
+        Frequency evidence is left out without it (or without whole periods);
+        the visual and motion describing-function evidence also when one
+        forcing function is zero throughout (``forcing.two_input``).
     skip : int
         Samples at the start left out of the time and amplitude evidence (the
         likelihood's start-up transient).
@@ -351,19 +461,20 @@ def statistics(recording: Recording, model: PilotModel, params: Mapping[str, flo
     n = eps.size
     # -- frequency
     if forcing is not None and forcing.periodic:
-        y_ss = steady_response(model, recording, params)
-        df_res = describing_function(uu - y_ss, recording.e, recording.theta_ddot_m, forcing)
-        df_mod = describing_function(y_ss, recording.e, recording.theta_ddot_m, forcing)
-        w = df_res["omega"]
-        low = w < OMEGA_SPLIT
+        if forcing.two_input:  # (a forcing function zero throughout: no two-input estimate)
+            y_ss = steady_response(model, recording, params)
+            df_res = describing_function(uu - y_ss, recording.e, recording.theta_ddot_m, forcing)
+            df_mod = describing_function(y_ss, recording.e, recording.theta_ddot_m, forcing)
+            w = df_res["omega"]
+            low = w < OMEGA_SPLIT
 
-        def rel(dh, hm, sel):
-            den = float(np.mean(np.abs(hm[sel]) ** 2))
-            return float(np.mean(np.abs(dh[sel]) ** 2) / den) if den > 0 else math.nan
+            def rel(dh, hm, sel):
+                den = float(np.mean(np.abs(hm[sel]) ** 2))
+                return float(np.mean(np.abs(dh[sel]) ** 2) / den) if den > 0 else math.nan
 
-        values["frequency.visual"] = rel(df_res["H_v"], df_mod["H_v"], np.ones(w.size, bool))
-        values["frequency.motion_low"] = rel(df_res["H_m"], df_mod["H_m"], low)
-        values["frequency.motion_high"] = rel(df_res["H_m"], df_mod["H_m"], ~low)
+            values["frequency.visual"] = rel(df_res["H_v"], df_mod["H_v"], np.ones(w.size, bool))
+            values["frequency.motion_low"] = rel(df_res["H_m"], df_mod["H_m"], low)
+            values["frequency.motion_high"] = rel(df_res["H_m"], df_mod["H_m"], ~low)
         P = np.abs(np.fft.rfft(eps)) ** 2
         forced = np.zeros(P.size, bool)
         forced[forcing.k_target] = True
@@ -380,7 +491,7 @@ def statistics(recording: Recording, model: PilotModel, params: Mapping[str, flo
 
         values["frequency.power_target"] = power_ratio(forcing.k_target)
         values["frequency.power_disturbance"] = power_ratio(forcing.k_disturbance)
-        if with_arrays:
+        if with_arrays and forcing.two_input:
             arrays["df_residual"] = df_res
             arrays["df_model"] = df_mod
             arrays["df_data"] = describing_function(uu, recording.e, recording.theta_ddot_m,
@@ -450,7 +561,8 @@ def remnant_like(eps: np.ndarray, dt: float) -> tuple[float, float]:
     T_n matches the residual's autocorrelation over the first 0.6 s of lags
     (bounded scalar minimisation); K_n then matches its variance, using
     var(n) = K_n^2 psd 5 / (32 T_n) for white noise of two-sided PSD
-    psd = dt (the simulator's convention) through 1 / (T_n s + 1)^4.
+    psd = :data:`~bayespilot.simulate.NOISE_PSD` (the simulator's default, at
+    every sample rate) through 1 / (T_n s + 1)^4.
 
     Parameters
     ----------
@@ -475,7 +587,9 @@ def remnant_like(eps: np.ndarray, dt: float) -> tuple[float, float]:
     res = optimize.minimize_scalar(lambda T: float(np.sum((_remnant_acf(T, lags, dt) - acf) ** 2)),
                                    bounds=(0.005, 0.5), method="bounded", options={"xatol": 1e-4})
     T_n = float(res.x)
-    K_n = math.sqrt(c0 / (dt * 5.0 / (32.0 * T_n)))
+    from ..simulate import NOISE_PSD
+
+    K_n = math.sqrt(c0 / (NOISE_PSD * 5.0 / (32.0 * T_n)))
     return K_n, T_n
 
 

@@ -1,0 +1,222 @@
+"""diagnose on recordings from other labs: what the bootstrap and the frequency evidence need.
+
+Each case is a valid recording that the paper's never are: a plant the simulator cannot run
+(relative degree 1), a task "other" that leaves its plant out, no forcing functions, a
+rounded base frequency, a target-only or disturbance-only run.  The diagnosis goes on without
+what it cannot make, and says so once with an EvidenceWarning.  Short records (30 s), two
+bootstrap replicates and one candidate, so that each test takes seconds.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import warnings
+
+import numpy as np
+import pytest
+
+from bayespilot.diagnose import EvidenceWarning, diagnose
+from bayespilot.diagnose.locate import SNAP_TOLERANCE, describing_function, forcing_of
+from bayespilot.forcing import Multisine
+from bayespilot.io import read_recording, write_recording
+from bayespilot.presets import paper_parameters
+from bayespilot.recording import Recording
+from bayespilot.simulate import TrackingTask, simulate
+
+#: Length of the lab records, s (whole periods of their forcing).
+T = 30.0
+QUICK = dict(seed=0, n_bootstrap=2, candidates=["time-varying-gains"], intervals=False)
+
+
+def lab_task(target_on: bool = True, disturbance_on: bool = True) -> TrackingTask:
+    """A lab's task "other": its own multisines over T s, the paper's plant, stated."""
+    w0 = 2 * np.pi / T
+    nt = np.array([2, 5, 9, 15, 26, 43, 71, 117])
+    nd = np.array([3, 7, 11, 19, 31, 53, 83, 131])
+    rng = np.random.default_rng(1)
+    at = 0.02 / np.sqrt(1 + (w0 * nt / 1.5) ** 2) * target_on
+    ad = 0.01 * (1 + w0 * nd / 3) * disturbance_on
+    ft = Multisine(w0, nt, at, rng.uniform(0, 2 * np.pi, nt.size))
+    fd = Multisine(w0, nd, ad, rng.uniform(0, 2 * np.pi, nd.size))
+    return TrackingTask(ft, fd, motion_gain=1.0, duration=T, task="other")
+
+
+@pytest.fixture(scope="module")
+def lab_rec():
+    """A lab run (forcing and plant in its metadata), as simulated."""
+    return simulate(params=paper_parameters("FD"), task=lab_task(), remnant_gain=0.06,
+                    seed=3).recording
+
+
+def _as_lab_file(rec: Recording, tmp_path, metadata=None, drop=()) -> Recording:
+    """``rec`` written with other metadata (and without some columns) and read back."""
+    signals = {k: v for k, v in rec.signals.items() if k not in drop}
+    out = Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task,
+                    rec.metadata if metadata is None else metadata)
+    write_recording(out, tmp_path / "lab")
+    return read_recording(tmp_path / "lab")
+
+
+def _diagnose(rec, **kw):
+    """diagnose with every warning caught: (result, EvidenceWarning texts, other warnings)."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = diagnose(rec, **{**QUICK, **kw})
+    said = [str(w.message) for w in caught if issubclass(w.category, EvidenceWarning)]
+    others = [f"{w.category.__name__}: {w.message}" for w in caught
+              if not issubclass(w.category, EvidenceWarning)]
+    return res, said, others
+
+
+def _no_p_values(res) -> bool:
+    return all(not math.isfinite(e.p_value) for e in res.where.values())
+
+
+def test_a_lab_run_with_forcing_and_plant_is_diagnosed_without_a_warning(lab_rec):
+    res, said, others = _diagnose(lab_rec)
+    assert said == [] and others == []
+    assert res.settings["bootstrap"]["replicates"] == 2
+    assert "skipped" not in res.settings["bootstrap"]
+    assert all(math.isfinite(res.where[k].value) for k in res.where)
+    assert math.isfinite(res.where["frequency.visual"].p_value)
+
+
+def test_a_plant_of_relative_degree_one_skips_the_bootstrap_and_says_why(lab_rec, tmp_path):
+    # K/s: valid in the recording format and for the fit, but not for the simulator
+    meta = {k: v for k, v in lab_rec.metadata.items() if k != "controlled_element_gain"}
+    meta["controlled_element"] = {"num": [1.5], "den": [1.0, 0.0]}
+    rec = _as_lab_file(lab_rec, tmp_path, meta)
+    res, said, others = _diagnose(rec, n_calibrate=2)
+    assert others == []
+    boot = [s for s in said if "the bootstrap of the located evidence is skipped" in s]
+    assert len(boot) == 1, said
+    assert rec.source in boot[0]
+    assert "relative degree 1" in boot[0] and "simulates the plant" in boot[0]
+    assert "no p-values" in boot[0]
+    assert any("calibration" in s and "relative degree 1" in s for s in said)
+    skipped = res.settings["bootstrap"]["skipped"]
+    assert "relative degree 1" in skipped and ">= 2" in skipped
+    assert res.settings["bootstrap"]["replicates"] == 0
+    assert "relative degree 1" in res.settings["calibration_skipped"]
+    assert _no_p_values(res)
+    assert math.isfinite(res.where["frequency.visual"].value)  # the statistics are still made
+    assert "the bootstrap was skipped" in res.summary()
+    assert res.to_dict()["settings"]["bootstrap"]["skipped"] == skipped
+
+
+def test_a_task_other_that_leaves_its_plant_out_is_told_which_plant_is_simulated(lab_rec,
+                                                                                  tmp_path):
+    """No controlled_element, no control_gain: the recording format reads the paper's 4/s^2,
+    and the bootstrap simulates it; a lab whose plant differs is told (it was silent)."""
+    meta = {k: v for k, v in lab_rec.metadata.items()
+            if k not in ("controlled_element_gain", "controlled_element", "control_gain")}
+    rec = _as_lab_file(lab_rec, tmp_path, meta)
+    res, said, others = _diagnose(rec)
+    assert others == []
+    assert len(said) == 1, said
+    assert "which the recording format reads as the paper's plant, 4/s^2" in said[0]
+    assert "if yours differs, give it in the sidecar" in said[0]
+    assert "skipped" not in res.settings["bootstrap"]
+    assert res.settings["bootstrap"]["replicates"] == 2
+    # the paper's tasks imply the paper's plant: the bootstrap runs
+    paper = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, "FD", meta)
+    res, said, _ = _diagnose(paper)
+    assert said == [] and res.settings["bootstrap"]["replicates"] == 2
+
+
+def test_no_forcing_functions_skip_the_bootstrap_and_say_what_to_give(lab_rec, tmp_path):
+    meta = {k: v for k, v in lab_rec.metadata.items() if k != "forcing"}
+    rec = _as_lab_file(lab_rec, tmp_path, meta, drop=("f_t", "f_d"))
+    res, said, others = _diagnose(rec)
+    assert others == []
+    assert len(said) == 1, said
+    assert "no forcing functions are known" in said[0] and "no p-values" in said[0]
+    assert "f_t and f_d columns" in said[0] and "base_frequency" in said[0]
+    assert "no forcing functions" in res.settings["bootstrap"]["skipped"]
+    assert _no_p_values(res)
+    assert all(math.isnan(res.where[k].value) for k in res.where if k.startswith("frequency."))
+    # without a bootstrap asked for, only the frequency evidence is missing
+    res, said, _ = _diagnose(rec, n_bootstrap=0)
+    assert len(said) == 1 and "frequency evidence is missing" in said[0]
+    assert "bootstrap" not in said[0] and "skipped" not in res.settings["bootstrap"]
+
+
+def _with_base_frequency(rec: Recording, w0: float, drop=()) -> Recording:
+    meta = copy.deepcopy(dict(rec.metadata))
+    meta["forcing"]["base_frequency"] = w0
+    signals = {k: v for k, v in rec.signals.items() if k not in drop}
+    return Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta)
+
+
+def test_a_rounded_base_frequency_is_snapped_to_the_record_bins(lab_rec):
+    exact = lab_rec.metadata["forcing"]["base_frequency"]
+    rounded = _with_base_frequency(lab_rec, round(exact, 4))  # 0.2094: lines <= 0.025 cycle off
+    fo = forcing_of(rounded)
+    assert fo.periodic and fo.target.base_frequency == pytest.approx(exact, rel=1e-12)
+    assert np.array_equal(fo.k_target, forcing_of(lab_rec).k_target)
+    assert len(fo.notes) == 1 and "taken as" in fo.notes[0] and "0.2094" in fo.notes[0]
+    res0, said0, _ = _diagnose(lab_rec, n_bootstrap=0)
+    res, said, others = _diagnose(rounded, n_bootstrap=0)
+    assert said0 == [] and others == []
+    assert len(said) == 1 and "DFT bins" in said[0]
+    for k in res.where:
+        if k.startswith("frequency."):
+            assert math.isfinite(res.where[k].value)
+            assert res.where[k].value == pytest.approx(res0.where[k].value, rel=1e-6)
+    # without the f_t and f_d columns too (the signals made from the snapped multisines)
+    res, _, _ = _diagnose(_with_base_frequency(lab_rec, round(exact, 4), drop=("f_t", "f_d")),
+                          n_bootstrap=0)
+    assert res.where["frequency.visual"].value == pytest.approx(
+        res0.where["frequency.visual"].value, rel=1e-3)
+
+
+def test_the_paper_printed_base_frequency_is_snapped():
+    # the paper prints 0.0767 rad/s for 2 pi / 81.92 s: 0.003 cycle off at the highest line
+    rec = simulate(task="FD", remnant_gain=0.06, seed=1).recording
+    exact = rec.metadata["forcing"]["base_frequency"]
+    assert forcing_of(rec).periodic and forcing_of(rec).notes == ()
+    fo = forcing_of(_with_base_frequency(rec, 0.0767))
+    assert fo.periodic and fo.target.base_frequency == pytest.approx(exact, rel=1e-12)
+    assert np.array_equal(fo.k_disturbance, forcing_of(rec).k_disturbance)
+
+
+def test_a_base_frequency_beyond_the_tolerance_says_why_the_frequency_evidence_is_missing(
+        lab_rec):
+    rec = _with_base_frequency(lab_rec, 0.209)  # the highest line 0.27 cycle off
+    fo = forcing_of(rec)
+    assert not fo.periodic and fo.target.base_frequency == 0.209
+    res, said, others = _diagnose(rec, n_bootstrap=0)
+    assert others == [] and len(said) == 1, said
+    assert "frequency evidence" in said[0] and "is missing" in said[0]
+    assert "disturbance line n = 131" in said[0] and "0.27 cycle" in said[0]
+    assert 0.27 > SNAP_TOLERANCE
+    assert all(math.isnan(res.where[k].value) for k in res.where if k.startswith("frequency."))
+
+
+@pytest.mark.parametrize("on, zero, only", [((True, False), "f_d", "target only"),
+                                            ((False, True), "f_t", "disturbance only")])
+def test_one_forcing_function_zero_skips_the_two_input_estimate_cleanly(on, zero, only,
+                                                                        tmp_path):
+    rec = simulate(params=paper_parameters("FD"), task=lab_task(*on), remnant_gain=0.06,
+                   seed=4).recording
+    fo = forcing_of(rec)
+    assert fo.periodic and not fo.two_input and fo.zero == (zero,)
+    with pytest.raises(ValueError, match=f"{zero} is zero throughout"):
+        describing_function(rec.u, rec.e, rec.theta_ddot_m, fo)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = diagnose(rec, **QUICK)
+        res.report(tmp_path / "report")
+    said = [str(w.message) for w in caught if issubclass(w.category, EvidenceWarning)]
+    others = [f"{w.category.__name__}: {w.message}" for w in caught
+              if not issubclass(w.category, EvidenceWarning)]
+    assert others == []  # no divide-by-zero, invalid-value or All-NaN-slice warnings
+    assert len(said) == 1, said
+    assert zero in said[0] and only in said[0] and "frequency.visual" in said[0]
+    for k in ("frequency.visual", "frequency.motion_low", "frequency.motion_high"):
+        assert math.isnan(res.where[k].value)
+    for k in ("frequency.power_target", "frequency.power_disturbance"):
+        assert math.isfinite(res.where[k].value) and math.isfinite(res.where[k].p_value)
+    assert res.settings["bootstrap"]["replicates"] == 2
+    assert (tmp_path / "report" / "report.html").exists()
