@@ -98,12 +98,21 @@ def filt(num, den, x, dt, initial, warm):
 
 
 def canal(theta_ddot_m, dt, initial):
-    """Canal output i (IPUT): Tustin H_scc, tiled x3 in periodic mode."""
+    """Canal output i (IPUT): Tustin H_scc from rest; in periodic mode (a recording without
+    theta) plus the canal's response to the pitch rate at t = 0 as an impulse just before
+    the record, the rate r0 whose trapezoid-integrated acceleration r0 + int a has zero mean
+    over the record; the impulse response of H_scc's strictly proper part,
+    K (1 - T1/T2) / (T2 s + 1), is (K (1 - T1/T2) / T2) exp(-t / T2)."""
     b, a = signal.bilinear(*canal_tf(), fs=1.0 / dt)
+    x = np.asarray(theta_ddot_m, float)
+    i = signal.lfilter(b, a, x)
     if initial == "rest":
-        return signal.lfilter(b, a, theta_ddot_m)
-    n = theta_ddot_m.size
-    return signal.lfilter(b, a, np.tile(theta_ddot_m, 3))[-n:]
+        return i
+    t = np.arange(x.size) * dt
+    rate = np.r_[0.0, np.cumsum((x[1:] + x[:-1]) / 2.0)] * dt
+    r0 = -rate.mean()
+    tail = K_SCC * (1.0 - T_SCC1 / T_SCC2) / T_SCC2 * np.exp(-t / T_SCC2)
+    return i + r0 * tail
 
 
 def channel_signals(params, e, theta_ddot_m, dt, initial="rest", warm=0, extra_vestibular=(),

@@ -83,9 +83,20 @@ def _source_signal(recording: Recording, source: str) -> np.ndarray:
 
 
 def _pitch_rate_at_start(recording: Recording) -> float | None:
-    """K_theta * d(theta)/dt at t = 0 from the recorded theta (second-order one-sided difference)."""
-    if "theta" not in recording or recording.n_samples < 3:
+    """K_theta * d(theta)/dt at t = 0: from the recorded theta (second-order one-sided
+    difference); without theta, from theta_ddot_m, as the rate that gives the integrated
+    acceleration a zero mean over the record (the pitch attitude is held near zero, so its
+    rate averages (theta(T) - theta(0)) / T, a few thousandths of the rate's own scale).
+
+    Without theta the record used to be tiled as if periodic; on a 30-s FD run (not whole
+    periods) that gave K_m 0.655 where the fit with theta gave 0.698 (this estimate: 0.6975).
+    """
+    if recording.n_samples < 3:
         return None
+    if "theta" not in recording:
+        a = np.asarray(recording.theta_ddot_m, dtype=float)
+        rate = np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]))]) * recording.dt
+        return -float(np.mean(rate))
     th = recording["theta"]
     return recording.motion_gain * (-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * recording.dt)
 
@@ -118,8 +129,10 @@ def channel_inputs(model: PilotModel, recording: Recording, initial: str = "peri
         stages (the canal model, whose 5.9 s time constant would otherwise
         leave a transient over the first ~20 s) start as if the pitch rate at
         t = 0, K_theta dtheta/dt, had been built up by an impulse just before
-        the record; otherwise the record is treated as one period of a
-        periodic signal (two extra periods of warm-up).
+        the record (without a ``theta`` column, the rate whose integrated
+        ``theta_ddot_m`` has a zero mean over the record); other channels'
+        fixed stages treat the record as one period of a periodic signal
+        (two extra periods of warm-up).
 
     Returns
     -------
