@@ -105,7 +105,8 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
     axes = np.asarray(axes).reshape(2, 2)
     if "df_data" not in arr:
         for ax in axes.ravel():
-            ax.text(0.5, 0.5, "no forcing functions over whole periods:\nno describing function",
+            ax.text(0.5, 0.5, "no describing function: the forcing functions are unknown,\n"
+                    "not whole periods of the record, or one is zero throughout",
                     ha="center", va="center", transform=ax.transAxes)
         return fig
     d, mb = arr["df_data"], arr["df_model"]
