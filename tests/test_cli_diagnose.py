@@ -79,7 +79,10 @@ def test_diagnose_unwritable_json_is_a_failure(rec_stem, tmp_path, capsys):
     blocker.write_text("x")
     code, out, err = _run(capsys, "diagnose", rec_stem, "--bootstrap", "0",
                           "--json", blocker / "sub" / "d.json")
-    assert code == 1 and err.startswith("bayespilot: error:")
+    # (the 30-s record is not whole periods: a warning line says the frequency evidence is
+    # missing, before the error)
+    assert code == 1 and err.splitlines()[-1].startswith("bayespilot: error:")
+    assert "cannot write" in err.splitlines()[-1]
 
 
 def test_diagnose_several_runs_pools_them(rec_stem, tmp_path, capsys):
@@ -97,7 +100,12 @@ def test_diagnose_several_runs_pools_them(rec_stem, tmp_path, capsys):
     assert d["pooled"] is True and d["n_runs"] == 2 and d["physics"] == "none"
     assert len(d["runs"]) == 2 and len(d["ranking"]) == len(NAMES)
     assert (tmp_path / "rep" / "runs.png").stat().st_size > 0
-    assert "warning" not in err  # one subject and condition: nothing to warn about
+    # one subject and condition: no pooling warning (the 30-s records are not whole periods,
+    # which each run's one line says)
+    assert "not of one subject" not in err
+    warned = [ln for ln in err.splitlines() if "warning" in ln]
+    assert len(warned) == 2 and all("frequency evidence (frequency.*) is missing" in ln
+                                    for ln in warned)
 
 
 def test_diagnose_warns_before_pooling_runs_that_differ(rec_stem, tmp_path, capsys):
