@@ -141,3 +141,53 @@ def test_netcdf_of_another_program_is_bad_input(run_dir, tmp_path, capsys):
     xr.Dataset({"x": ("t", np.arange(3.0))}).to_netcdf(nc)
     code, out, err = _run(capsys, "plot", nc, "-o", tmp_path / "figs")
     assert code == 2 and "bayespilot: error:" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv, what", [
+    (["sample", "{d}/run", "-o", "{f}/p.nc"], "posterior"),
+    (["sample", "{d}/run", "-o", "{t}/p.nc", "--json", "{f}/s.json"], "summary"),
+    (["compare", "{d}/run", "--json", "{f}/c.json"], "comparison"),
+    (["diagnose", "{d}/run", "--json", "{f}/d.json"], "diagnosis"),
+    (["diagnose", "{d}/run", "--report", "{f}"], "report"),
+])
+def test_an_unwritable_output_is_refused_before_the_computation(run_dir, tmp_path, capsys,
+                                                                 monkeypatch, argv, what):
+    """An output path through a file: one line naming it, exit 1, before anything is computed
+    (sample wrote its file after hours of sampling and lost them; the message said 'File
+    exists')."""
+    import bayespilot.compare
+    import bayespilot.diagnose
+    import bayespilot.sample
+
+    def never(*a, **k):
+        raise AssertionError("computed before the output was checked")
+
+    for mod, name in ((bayespilot.sample, "sample"), (bayespilot.compare, "compare"),
+                      (bayespilot.diagnose, "diagnose")):
+        monkeypatch.setattr(mod, name, never)
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    code, out, err = _run(capsys, *[a.format(d=run_dir, f=blocker, t=tmp_path) for a in argv])
+    assert code == 1 and out == ""
+    line = err.splitlines()[-1]  # (after the 10-s record's warning)
+    assert line.startswith("bayespilot: error: ") and f"cannot write the {what}" in line
+    assert f"{blocker} is a file, not a folder" in line
+
+
+def test_compare_json_goes_through_the_atomic_write(run_dir, tmp_path, capsys, monkeypatch):
+    """compare --json over an old file whose write fails (a full disk): one error line and the
+    old file kept (it was written in place, and a full disk left half a file)."""
+    import bayespilot._files as files
+
+    out_json = tmp_path / "cmp.json"
+    out_json.write_text('{"old": 1}')
+
+    def full_disk(path, text):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(files, "write_text_atomic", full_disk)
+    code, out, err = _run(capsys, "compare", run_dir / "run", "--json", out_json, "--seed", "1",
+                          "--nlive", "20", "--no-savage-dickey")
+    assert code == 1 and err.splitlines()[-1] == (f"bayespilot: error: {out_json}: cannot write "
+                                                  f"(No space left on device)")
+    assert out_json.read_text() == '{"old": 1}'

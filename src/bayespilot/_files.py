@@ -4,21 +4,35 @@ from __future__ import annotations
 
 import json
 import os
+import uuid
 from pathlib import Path
 from typing import Any
+
+
+def temporary_sibling(path: str | os.PathLike) -> Path:
+    """A hidden file name beside ``path``, unique to this process and call (two writers of
+    one path never share it)."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` to ``path`` through a temporary sibling and a rename.
 
     Parent folders are created.  A reader sees the old file or the new one,
-    never a truncated one (the rename is atomic on one file system).
+    never a truncated one (the rename is atomic on one file system); when the
+    write fails (a full disk, ``path`` a folder) the old file is kept and the
+    temporary one removed, and the OSError is raised.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    tmp = temporary_sibling(path)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
     return path
 
 

@@ -119,7 +119,7 @@ def _save_figure(fig, png: Path) -> None:
     try:
         fig.savefig(png, dpi=110)
     except OSError as exc:
-        raise CommandFailed(f"{png}: cannot write the plot ({exc.strerror or exc})") from None
+        raise CommandFailed(f"{png}: cannot write the plot ({_os_reason(exc)})") from None
     finally:
         import matplotlib.pyplot as plt
 
@@ -156,7 +156,7 @@ def _read_params(path: str, model, *, require: Sequence[str] = ()) -> dict[str, 
     except UnicodeDecodeError as exc:
         raise UsageError(f"{p}: is not UTF-8 text ({exc.reason})") from None
     except OSError as exc:
-        raise UsageError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+        raise UsageError(f"{p}: cannot be read ({_os_reason(exc)})") from None
 
     def reject(name: str):
         raise ValueError(f"{name} is not a finite number")
@@ -292,7 +292,7 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
         where = exc.filename or out
         if str(where).endswith(".tmp"):  # write_recording's temporary file: name the output
             where = out
-        raise CommandFailed(f"{where}: cannot write the recording ({exc.strerror or exc})") from None
+        raise CommandFailed(f"{where}: cannot write the recording ({_os_reason(exc)})") from None
     return sim, csv_path, json_path
 
 
@@ -421,7 +421,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         try:
             fit.to_json(args.json)
         except OSError as exc:
-            raise CommandFailed(f"{args.json}: cannot write the fit ({exc.strerror or exc})") from None
+            raise CommandFailed(f"{args.json}: cannot write the fit ({_os_reason(exc)})") from None
         _say(args, f"wrote {args.json}")
     return EXIT_OK
 
@@ -454,7 +454,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                                      progress=_progress(args), say=lambda text: _say(args, text))
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
-                                f"({exc.strerror or exc})") from None
+                                f"({_os_reason(exc)})") from None
         print(f"report: {report}")
         return EXIT_OK
     from . import presets
@@ -590,7 +590,7 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
         write_summary_csv(rows, csv_path)
         md_path.write_text(header + table + "\n", encoding="utf-8")
     except OSError as exc:
-        raise CommandFailed(f"cannot write the summary in {out} ({exc.strerror or exc})") from None
+        raise CommandFailed(f"cannot write the summary in {out} ({_os_reason(exc)})") from None
     print(table)
     if any(r["threshold"] for r in results):
         from .plots import plot_threshold_histograms
@@ -636,12 +636,47 @@ def _read_posterior(path: str):
 
 
 def _write_json(path: str, obj) -> None:
+    """``obj`` as JSON at ``path``, atomically (a failed write keeps the old file)."""
+    from ._files import dumps, write_text_atomic
+
+    try:
+        write_text_atomic(path, dumps(obj))
+    except OSError as exc:
+        raise CommandFailed(f"{path}: cannot write ({_os_reason(exc)})") from None
+
+
+def _os_reason(exc: OSError) -> str:
+    """Why a file could not be written, in words: a path through a file says which one
+    (the error said 'File exists' or 'Not a directory')."""
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        return (f"{exc.filename} is a file, not a folder" if exc.filename and
+                isinstance(exc, FileExistsError) else "a part of the path is a file, not a folder")
+    return exc.strerror or str(exc)
+
+
+def _check_writable(path: str | Path, what: str) -> None:
+    """Refuse, before a long computation, an output file that could not be written (its
+    result would be lost): the folder is created and a file written beside it and removed."""
+    from ._files import temporary_sibling
+
     p = Path(path)
+    if p.is_dir():
+        raise UsageError(f"{p}: is a folder; give a file name for the {what}")
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
-        p.write_text(json.dumps(obj, indent=1, allow_nan=True))
+        probe = temporary_sibling(p)
+        probe.write_bytes(b"")
+        probe.unlink()
     except OSError as exc:
-        raise CommandFailed(f"{p}: cannot write ({exc.strerror or exc})") from None
+        raise CommandFailed(f"{p}: cannot write the {what} ({_os_reason(exc)})") from None
+
+
+def _check_folder(path: str | Path, what: str) -> None:
+    """Refuse, before a long computation, an output folder that cannot be made."""
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CommandFailed(f"{path}: cannot write the {what} ({_os_reason(exc)})") from None
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:
@@ -652,6 +687,9 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     if out.suffix != ".nc":
         raise UsageError(f"argument -o/--output: {out} must end in .nc (a netCDF file)")
     rec = _read(args.recording)
+    _check_writable(out, "posterior")  # hours of sampling are not lost to an unwritable file
+    if args.json:
+        _check_writable(args.json, "summary")
     _say(args, f"sampling the posterior of {rec.source} ({args.likelihood} likelihood, at most "
                f"{args.max_steps} steps; starts with a maximum-likelihood fit) ...")
     with warnings.catch_warnings(record=True) as caught:
@@ -668,13 +706,13 @@ def _cmd_sample(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
         except OSError as exc:  # the HDF5 backend cannot be created or opened
             raise CommandFailed(f"{args.backend}: cannot open the sampler's backend file "
-                                f"({exc.strerror or exc})") from None
+                                f"({_os_reason(exc)})") from None
     _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
+    print(post)  # (before the file: a write that fails still leaves the summary)
     try:
         post.to_netcdf(out)
     except OSError as exc:
-        raise CommandFailed(f"{out}: cannot write the posterior ({exc.strerror or exc})") from None
-    print(post)
+        raise CommandFailed(f"{out}: cannot write the posterior ({_os_reason(exc)})") from None
     _say(args, f"wrote {out}")
     if args.json:
         _write_json(args.json, post.summary())
@@ -688,6 +726,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
     posterior = _read_posterior(args.posterior) if args.posterior else None
     rec = _read(args.recording)
+    if args.json:
+        _check_writable(args.json, "comparison")
     _say(args, f"comparing the model with and without threshold on {rec.source} "
                f"({args.likelihood} likelihood, dynesty with {args.nlive} live points) ...")
     with warnings.catch_warnings(record=True) as caught:
@@ -697,7 +737,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                              likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
                              seed=args.seed, nlive=args.nlive,
                              posterior=posterior,
-                             savage_dickey_samples=not args.no_savage_dickey)
+                             savage_dickey_samples=not args.no_savage_dickey,
+                             progress=_progress(args))
         except RuntimeError as exc:
             raise CommandFailed(str(exc)) from None
     _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
@@ -716,7 +757,7 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise CommandFailed(f"{out}: cannot create the folder ({exc.strerror or exc})") from None
+        raise CommandFailed(f"{out}: cannot create the folder ({_os_reason(exc)})") from None
     truth = post.truth
     names = post.parameter_names
     main = "delta_abs" if "delta_abs" in names else names[0]
@@ -771,6 +812,11 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                                 "(several runs: the shared parameters' posterior on a grid, "
                                 "as JSON)"))
     recs = [_read(r) for r in args.recording]
+    for path, what in ((args.posterior, "posterior"), (args.json, "diagnosis")):
+        if path:  # checked before the diagnosis: its minutes are not lost to a bad path
+            _check_writable(path, what)
+    if args.report:
+        _check_folder(args.report, "report")
     try:
         if len(recs) == 1:
             rec = recs[0]
@@ -814,7 +860,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                 raise CommandFailed(str(exc)) from None
             except OSError as exc:
                 raise CommandFailed(f"{args.posterior}: cannot write the posterior "
-                                    f"({exc.strerror or exc})") from None
+                                    f"({_os_reason(exc)})") from None
             _say(args, f"wrote {args.posterior}")
         else:
             _say(args, f"sampling the posterior of the model with {res.physics} (coloured "
@@ -830,7 +876,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                 post.to_netcdf(args.posterior)
             except OSError as exc:
                 raise CommandFailed(f"{args.posterior}: cannot write the posterior "
-                                    f"({exc.strerror or exc})") from None
+                                    f"({_os_reason(exc)})") from None
             _say(args, f"wrote {args.posterior}")
     if args.bayes_factor:
         _weigh(args, res, recs[0])
@@ -839,14 +885,14 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         try:
             res.to_json(args.json)
         except OSError as exc:
-            raise CommandFailed(f"cannot write {args.json}: {exc.strerror or exc}") from None
+            raise CommandFailed(f"{args.json}: cannot write the diagnosis ({_os_reason(exc)})") from None
         _say(args, f"wrote {args.json}")
     if args.report:
         try:
             paths = res.report(args.report)
         except OSError as exc:
             raise CommandFailed(f"{args.report}: cannot write the report "
-                                f"({exc.strerror or exc})") from None
+                                f"({_os_reason(exc)})") from None
         _say(args, f"wrote {paths['html']} (with {', '.join(p.name for k, p in paths.items() if k not in ('html',))})")
     return EXIT_OK
 

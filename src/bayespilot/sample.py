@@ -270,11 +270,17 @@ class Posterior:
 
     def to_netcdf(self, path: str | os.PathLike) -> Path:
         """Write the InferenceData (with everything needed by :meth:`from_netcdf`) to ``path``."""
+        from ._files import temporary_sibling
+
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp")
-        self.idata.to_netcdf(str(tmp))
-        tmp.replace(path)
+        tmp = temporary_sibling(path)  # the old file is kept if the write fails
+        try:
+            self.idata.to_netcdf(str(tmp))
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
         return path
 
     @classmethod

@@ -1,0 +1,39 @@
+"""Atomic writes (bayespilot._files): a failed write keeps the old file and leaves no temporary
+file behind; two writers never share a temporary name."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+from bayespilot._files import temporary_sibling, write_text_atomic
+
+
+def test_a_failed_write_keeps_the_old_file_and_no_temporary(tmp_path, monkeypatch):
+    target = tmp_path / "r.json"
+    write_text_atomic(target, '{"old": 1}')
+
+    def full_disk(self, *a, **k):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", full_disk)
+    with pytest.raises(OSError, match="No space"):
+        write_text_atomic(target, '{"new": 2}')
+    monkeypatch.undo()
+    assert target.read_text() == '{"old": 1}'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]  # (a r.json.tmp was left)
+
+
+def test_a_folder_in_the_way_is_an_error_and_leaves_nothing(tmp_path):
+    (tmp_path / "out.json").mkdir()
+    with pytest.raises(OSError):
+        write_text_atomic(tmp_path / "out.json", "{}")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.json"]
+
+
+def test_temporary_names_are_unique_hidden_siblings(tmp_path):
+    a, b = temporary_sibling(tmp_path / "x.nc"), temporary_sibling(tmp_path / "x.nc")
+    assert a != b and a.parent == tmp_path and a.name.startswith(".x.nc.")
+    assert str(os.getpid()) in a.name and a.suffix == ".tmp"
