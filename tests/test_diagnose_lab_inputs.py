@@ -220,3 +220,34 @@ def test_one_forcing_function_zero_skips_the_two_input_estimate_cleanly(on, zero
         assert math.isfinite(res.where[k].value) and math.isfinite(res.where[k].p_value)
     assert res.settings["bootstrap"]["replicates"] == 2
     assert (tmp_path / "report" / "report.html").exists()
+
+
+def test_the_progress_bar_counts_every_replicate_and_ends_full(lab_rec, monkeypatch):
+    """The bar ticks once per bootstrap replicate (the bootstrap was one stage, frozen for
+    tens of seconds) and is full when it closes (the refit after it came later)."""
+    import tqdm.auto
+
+    bars = []
+
+    class Bar:
+        def __init__(self, total=None, **kw):
+            self.total, self.n, self.closed_at = total, 0, None
+            bars.append(self)
+
+        def update(self, k=1):
+            self.n += k
+
+        def set_postfix_str(self, *a, **k):
+            pass
+
+        def refresh(self):
+            pass
+
+        def close(self):
+            self.closed_at = (self.n, self.total)
+
+    monkeypatch.setattr(tqdm.auto, "tqdm", Bar)
+    res, said, others = _diagnose(lab_rec, n_bootstrap=3, progress=True)
+    (bar,) = bars
+    assert res.settings["bootstrap"]["replicates"] == 3
+    assert bar.closed_at == (bar.total, bar.total) and bar.total == 2 + 1 + 3

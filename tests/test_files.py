@@ -37,3 +37,20 @@ def test_temporary_names_are_unique_hidden_siblings(tmp_path):
     a, b = temporary_sibling(tmp_path / "x.nc"), temporary_sibling(tmp_path / "x.nc")
     assert a != b and a.parent == tmp_path and a.name.startswith(".x.nc.")
     assert str(os.getpid()) in a.name and a.suffix == ".tmp"
+
+
+def test_csv_rows_with_empty_fields_for_missing_values(tmp_path):
+    """None, NaN and infinities are empty fields (the campaign summary wrote 'nan' where its
+    docstring promised an empty field); other keys are ignored; written atomically."""
+    import csv
+    import math
+
+    from bayespilot._files import write_csv_atomic
+
+    path = write_csv_atomic(tmp_path / "s.csv", ["a", "b", "c"],
+                            [{"a": 1.5, "b": math.nan, "c": None, "x": 9},
+                             {"a": math.inf, "b": "t"}])
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    assert rows == [["a", "b", "c"], ["1.5", "", ""], ["", "t", ""]]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv"]

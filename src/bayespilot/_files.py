@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
+import math
 import os
 import uuid
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable, Mapping, Sequence
 
 
 def temporary_sibling(path: str | os.PathLike) -> Path:
@@ -34,6 +37,22 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def write_csv_atomic(path: str | os.PathLike, fieldnames: Sequence[str],
+                     rows: Iterable[Mapping[str, Any]]) -> Path:
+    """``rows`` as CSV (UTF-8, a header line) at ``path``, atomically
+    (:func:`write_text_atomic`); keys not in ``fieldnames`` are ignored, and a missing key,
+    None, NaN or an infinity gives an empty field."""
+    def cell(v: Any) -> Any:
+        return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
+
+    buf = io.StringIO(newline="")
+    w = csv.DictWriter(buf, fieldnames=list(fieldnames), extrasaction="ignore")
+    w.writeheader()
+    for r in rows:
+        w.writerow({c: cell(r.get(c)) for c in fieldnames})
+    return write_text_atomic(path, buf.getvalue())
 
 
 def dumps(obj: Any) -> str:

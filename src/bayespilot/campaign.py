@@ -46,7 +46,6 @@ the parallel GA kernel does not oversubscribe the cores.
 
 from __future__ import annotations
 
-import csv
 import inspect
 import json
 import math
@@ -898,11 +897,12 @@ def write_summary_csv(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Pa
     ----------
     rows : sequence of mapping
         Rows of :func:`summarise`.  The columns are :data:`SUMMARY_COLUMNS`, in
-        that order; other keys are ignored, and a missing key or a None value
-        gives an empty field.
+        that order; other keys are ignored, and a missing key, None, NaN or an
+        infinity gives an empty field.
     path : str or Path
         The CSV file to write (UTF-8, with a header line); an existing file
-        is overwritten, its folder must exist.
+        is replaced atomically (a failed write keeps it), its folder is
+        created if missing.
 
     Returns
     -------
@@ -914,13 +914,9 @@ def write_summary_csv(rows: Sequence[Mapping[str, Any]], path: str | Path) -> Pa
     OSError
         If the file cannot be written.
     """
-    path = Path(path)
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=SUMMARY_COLUMNS, extrasaction="ignore")
-        w.writeheader()
-        for r in rows:
-            w.writerow({c: ("" if r.get(c) is None else r.get(c)) for c in SUMMARY_COLUMNS})
-    return path
+    from ._files import write_csv_atomic
+
+    return write_csv_atomic(path, SUMMARY_COLUMNS, rows)
 
 
 def summary_markdown(rows: Sequence[Mapping[str, Any]]) -> str:

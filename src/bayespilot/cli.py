@@ -235,6 +235,14 @@ def _questionable_said():
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
+def _warning_line(message) -> None:
+    """``bayespilot: warning: <message>`` on stderr, above any progress bar on the screen
+    (printed directly, it ran into the bar's line)."""
+    from tqdm.auto import tqdm
+
+    tqdm.write(f"{PROG}: warning: {message}", file=sys.stderr)
+
+
 @contextlib.contextmanager
 def _warnings_of(category, handle):
     """Within: each warning of ``category`` (a class or a tuple of them) goes to
@@ -446,7 +454,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         def warn(message) -> None:  # one line each, as they come (the demo runs for minutes)
             if str(message) not in seen:
                 seen.add(str(message))
-                print(f"{PROG}: warning: {message}", file=sys.stderr)
+                _warning_line(message)
 
         try:
             with _warnings_of(RuntimeWarning, warn):
@@ -542,6 +550,7 @@ _FITS_SAID = {"both": "with and without threshold", "threshold": "with threshold
 
 
 def _cmd_replicate(args: argparse.Namespace) -> int:
+    from ._files import write_text_atomic
     from .campaign import (CampaignError, load_results, paper_study, run_campaign, summarise,
                            summary_markdown, write_summary_csv)
 
@@ -588,7 +597,7 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
         or list(args.remnant_fractions)
     try:
         write_summary_csv(rows, csv_path)
-        md_path.write_text(header + table + "\n", encoding="utf-8")
+        write_text_atomic(md_path, header + table + "\n")
     except OSError as exc:
         raise CommandFailed(f"cannot write the summary in {out} ({_os_reason(exc)})") from None
     print(table)
@@ -1589,7 +1598,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         def say(message) -> None:
             if str(message) not in said:
                 said.add(str(message))
-                print(f"{PROG}: warning: {message}", file=sys.stderr)
+                _warning_line(message)
 
         with _warnings_of((SilentChannelWarning, EvidenceWarning), say):
             return args.handler(args)

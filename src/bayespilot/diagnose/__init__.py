@@ -490,9 +490,11 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
             # noise model (the Eq. 4 fit's multi-start search would cost ~1.5 s a replicate)
             return D.fit_base_gls(base_model, rep, start, noise)[1].params
 
+        bar.total = (bar.total or 0) + n_bootstrap  # a tick a replicate (0.3 s each)
+        bar.refresh()
         null, boot_info = L.bootstrap(recording, base_model, base.params, forcing,
                                       st["arrays"]["residual"], n_replicates=n_bootstrap,
-                                      seed=seed, skip=skip, refit=refit)
+                                      seed=seed, skip=skip, refit=refit, progress=bar.update)
     where = L.calibrate(st["values"], null)
     timings["locate"] = time.perf_counter() - t1
     bar.update(1)
@@ -828,8 +830,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
             break
         # a better basin of the base model: every extension again from there
         rebased.append({"gain": gain, "refitted": True})
-        bar.reset(total=2 + len(names) * (len(rebased) + 1))
-        bar.update(2 + len(names) * len(rebased))
+        bar.total += len(names)  # every extension once more
+        bar.refresh()
     results = [kept[n] for n in names]
     if rebased:
         # every test against the best base fit found (threshold-shape: or its refinement)
@@ -847,12 +849,15 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
                                 n_calibrate, seed, bar, n_starts)
     uncalibrated = (_bootstrap_obstacle(recording, forcing) if n_calibrate > 0 else None)
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
-    bar.close()
     timings["calibrate"] = time.perf_counter() - t3
     t4 = time.perf_counter()
     if (refit and chosen is not None and chosen.fit is not None
             and get_extension(chosen.physics).likelihood == "gls"):
+        bar.total += 1  # the refit and profile intervals: seconds, the bar still open
+        bar.set_postfix_str(f"refit of {chosen.physics}")
         D.report_final_fit(chosen, base_model, recording, noise, intervals=intervals)
+        bar.update(1)
+    bar.close()
     timings["refit"] = time.perf_counter() - t4
 
     # -- model and show: residual after the chosen extension

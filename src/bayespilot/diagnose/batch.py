@@ -42,7 +42,6 @@ recording's ``subject``, ``task`` and ``motion_gain`` (each must give
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import platform
@@ -52,6 +51,8 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+from .._files import write_csv_atomic
 
 if TYPE_CHECKING:
     from ..campaign import CampaignSummary
@@ -574,13 +575,8 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
 
     out = Path(out_dir)
     found = _diagnoses(tasks, out)
-    path = out / "summary.csv"
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        w = csv.DictWriter(fh, fieldnames=SUMMARY_FIELDS)
-        w.writeheader()
-        for row in batch_summary_rows(tasks, out, found):
-            w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else v)
-                        for k, v in row.items()})
+    path = write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS,
+                            batch_summary_rows(tasks, out, found))
     done = [(key, d) for key, d in found.items() if d is not None]
     if done:
         fig = plot_batch(done)

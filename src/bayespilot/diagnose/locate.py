@@ -644,7 +644,8 @@ def _quantum(u: np.ndarray) -> float:
 def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, float],
               forcing: Forcing, eps: np.ndarray, *, n_replicates: int = 39, seed: int | None = 0,
               skip: int = 0,
-              refit: Callable[[Recording], Mapping[str, float]] | None = None
+              refit: Callable[[Recording], Mapping[str, float]] | None = None,
+              progress: Callable[[int], Any] | None = None
               ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """Null distribution of every statistic from the fitted model with its own remnant.
 
@@ -666,6 +667,8 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
         ``refit(replicate) -> params``: fits the model to a replicate as the
         recording was fitted; each replicate's statistics are then at its own
         fit.  None: at ``params`` (conservative, see the module notes).
+    progress : callable, optional
+        Called with 1 after each replicate (a progress bar's ``update``).
 
     Returns
     -------
@@ -682,6 +685,8 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
     seeds = np.random.SeedSequence(seed).generate_state(max(n_replicates, 1))
     out: dict[str, list[float]] = {k: [] for k in EVIDENCE}
     for b in range(n_replicates):
+        if progress is not None and b > 0:
+            progress(1)  # (the replicate before, kept or dropped)
         try:
             sim = simulate(model, params, task=task, remnant_gain=K_n, T_n=T_n,
                            seed=int(seeds[b]), oversample=10)
@@ -700,6 +705,8 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
         vals = statistics(rep, model, at, forcing, skip=skip, u=u)["values"]
         for k, v in vals.items():
             out[k].append(v)
+    if progress is not None and n_replicates > 0:
+        progress(1)
     return ({k: np.asarray(v, float) for k, v in out.items()},
             {"K_n": K_n, "T_n": T_n, "quantum": q, "replicates": len(out["time.nonstationarity"]),
              "refitted": refit is not None})

@@ -772,8 +772,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
             break
         # a better basin of the base model in some run: every extension again from there
         rebased.append({"gain": gain, "refitted": True})
-        bar.reset(total=2 * len(recs) + len(names) * (len(rebased) + 1))
-        bar.update(2 * len(recs) + len(names) * len(rebased))
+        bar.total += len(names)  # every extension once more
+        bar.refresh()
     results = [kept[n] for n in names]
     if rebased:
         # every test against the runs' best base fits found (threshold-shape: or the refined)

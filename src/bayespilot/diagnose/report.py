@@ -17,6 +17,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from .._files import write_text_atomic
+
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
@@ -646,6 +648,5 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 <pre>{html.escape(result.summary())}</pre>
 </body></html>
 """
-    paths["html"] = out / "report.html"
-    paths["html"].write_text(page, encoding="utf-8")
+    paths["html"] = write_text_atomic(out / "report.html", page)
     return paths
