@@ -27,9 +27,10 @@ def make_rng(seed: int = 0) -> np.random.Generator:
 def without_theta(rec: Recording) -> Recording:
     """The same recording without its optional ``theta`` column.
 
-    In ``initial="periodic"`` mode such a recording is treated as one period
-    of a periodic signal throughout (the canal filter runs over the record
-    tiled three times), which is what ``tests/naive.py`` implements.
+    In ``initial="periodic"`` mode the canal then starts from the pitch rate
+    estimated from theta_ddot_m (zero mean of its integral over the record)
+    and everything else treats the record as one period of a periodic signal,
+    which is what ``tests/naive.py`` implements.
     """
     signals = {k: v for k, v in rec.signals.items() if k != "theta"}
     return Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, rec.metadata,

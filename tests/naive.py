@@ -20,8 +20,10 @@ Initial conditions, as documented for :class:`bayespilot.likelihood.Likelihood`:
     every filter starts from zero state and every signal is 0 before t = 0
     (the delayed signal interpolates linearly between 0 at t = -dt and x[0]).
 ``"periodic"``
-    the record is one period of a periodic signal: the canal filter is run
-    over the record tiled three times (last copy kept); delays read across the
+    the record is one period of a periodic signal: the canal filter runs
+    from rest plus its response to the pitch rate at t = 0 (the rate whose
+    integrated acceleration has zero mean over the record; :func:`canal`,
+    the same start as the package's without a theta column); delays read across the
     start from the end of the record (``np.interp(..., period=T)``); every
     other recursion (parametric stages, H_nm) starts from zero state ``warm``
     samples before t = 0, reading the periodically extended input.

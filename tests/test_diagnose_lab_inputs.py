@@ -236,6 +236,7 @@ def test_the_progress_bar_counts_every_replicate_and_ends_full(lab_rec, monkeypa
 
         def update(self, k=1):
             self.n += k
+            assert self.n <= self.total, (self.n, self.total)  # never past the end
 
         def set_postfix_str(self, *a, **k):
             pass
@@ -251,3 +252,14 @@ def test_the_progress_bar_counts_every_replicate_and_ends_full(lab_rec, monkeypa
     (bar,) = bars
     assert res.settings["bootstrap"]["replicates"] == 3
     assert bar.closed_at == (bar.total, bar.total) and bar.total == 2 + 1 + 3
+    # a chosen extension: its refit is one more stage, inside the bar
+    from bayespilot.diagnose import get_extension
+    from bayespilot.model import paper_model
+
+    model = get_extension("motion-washout").build(paper_model())
+    washed = simulate(model, dict(paper_parameters("FD"), omega_w=0.8), task="FD",
+                      motion_gain=1.0, remnant_gain=0.063, seed=22, duration=40.96).recording
+    res, said, others = _diagnose(washed, candidates=["motion-washout"], progress=True)
+    bar = bars[-1]
+    assert res.physics == "motion-washout"
+    assert bar.closed_at == (bar.total, bar.total) and bar.total == 2 + 1 + 2 + 1

@@ -15,7 +15,9 @@ def test_a_failed_write_keeps_the_old_file_and_no_temporary(tmp_path, monkeypatc
     target = tmp_path / "r.json"
     write_text_atomic(target, '{"old": 1}')
 
-    def full_disk(self, *a, **k):
+    def full_disk(self, text, *a, **k):  # half the text written, then the disk is full
+        with open(self, "w", encoding="utf-8") as fh:
+            fh.write(text[: len(text) // 2])
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(Path, "write_text", full_disk)
@@ -24,6 +26,16 @@ def test_a_failed_write_keeps_the_old_file_and_no_temporary(tmp_path, monkeypatc
     monkeypatch.undo()
     assert target.read_text() == '{"old": 1}'
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]  # (a r.json.tmp was left)
+
+    def failing_rename(src, dst):
+        raise OSError(18, "Invalid cross-device link")
+
+    monkeypatch.setattr(os, "replace", failing_rename)
+    with pytest.raises(OSError, match="cross-device"):
+        write_text_atomic(target, '{"new": 3}')
+    monkeypatch.undo()
+    assert target.read_text() == '{"old": 1}'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
 
 
 def test_a_folder_in_the_way_is_an_error_and_leaves_nothing(tmp_path):
@@ -53,4 +65,5 @@ def test_csv_rows_with_empty_fields_for_missing_values(tmp_path):
     with open(path, newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
     assert rows == [["a", "b", "c"], ["1.5", "", ""], ["", "t", ""]]
+    assert b"\r" not in path.read_bytes() or os.linesep == "\r\n"  # one line end per row
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv"]

@@ -237,6 +237,11 @@ def test_prediction_error_fit_leaves_the_start_out_by_default():
     assert f.params["T_vl"] == pytest.approx(0.409, rel=0.1)
     assert f.params["tau_v"] == pytest.approx(0.279, rel=0.1)
     assert fit_fast(rec, seed=0, n_starts=1, threshold=False).settings["discard"] == 0.0
+    # a record shorter than 8 s: a quarter of it (2 s of 2.5 was refused as over half)
+    short = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1,
+                     duration=2.5).recording
+    f = fit_fast(short, seed=0, n_starts=1, profile_step=0.05, noise="ar", noise_order=2)
+    assert f.settings["discard"] == 0.625
 
 
 def test_cli_fit_prediction_error(sim, tmp_path, capsys):

@@ -78,3 +78,17 @@ def test_diagnose_records_the_seed_it_drew(rec):
         d["settings"].pop("timings", None)
         d.pop("elapsed_seconds", None)
     assert json.dumps(da, sort_keys=True) == json.dumps(db, sort_keys=True)
+
+
+def test_nested_evidence_and_compare_record_the_seed_they_drew(rec):
+    from bayespilot.compare import compare, nested_evidence
+
+    def ll(x):
+        return -0.5 * float(x @ x)
+
+    a = nested_evidence(ll, [-5, -5], [5, 5], nlive=30, seed=None)
+    b = nested_evidence(ll, [-5, -5], [5, 5], nlive=30, seed=a.settings["seed"])
+    assert isinstance(a.settings["seed"], int) and a.log_z == b.log_z
+    c = compare(rec, nlive=20, seed=None, savage_dickey_samples=False)
+    d = compare(rec, nlive=20, seed=c.seed, savage_dickey_samples=False)
+    assert isinstance(c.seed, int) and c.log_bayes_factor == d.log_bayes_factor

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -9,7 +10,7 @@ import math
 import os
 import uuid
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 
 def temporary_sibling(path: str | os.PathLike) -> Path:
@@ -19,24 +20,31 @@ def temporary_sibling(path: str | os.PathLike) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
 
 
-def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary sibling and a rename.
+@contextlib.contextmanager
+def replacing(path: str | os.PathLike) -> Iterator[Path]:
+    """Within: write the file at the yielded temporary path; on leaving, it replaces ``path``.
 
-    Parent folders are created.  A reader sees the old file or the new one,
-    never a truncated one (the rename is atomic on one file system); when the
-    write fails (a full disk, ``path`` a folder) the old file is kept and the
-    temporary one removed, and the OSError is raised.
+    A reader sees the old file or the new one, never a truncated one (the
+    rename is atomic on one file system).  When the block raises (a full disk,
+    ``path`` a folder, an interrupt) the old file is kept, the temporary one
+    removed, and the exception goes on.  Parent folders are created.
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = temporary_sibling(path)
     try:
-        tmp.write_text(text, encoding="utf-8")
+        yield tmp
         os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    return path
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`replacing`); returns ``path``."""
+    with replacing(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
 
 
 def write_csv_atomic(path: str | os.PathLike, fieldnames: Sequence[str],
@@ -48,7 +56,10 @@ def write_csv_atomic(path: str | os.PathLike, fieldnames: Sequence[str],
         return "" if v is None or (isinstance(v, float) and not math.isfinite(v)) else v
 
     buf = io.StringIO(newline="")
-    w = csv.DictWriter(buf, fieldnames=list(fieldnames), extrasaction="ignore")
+    # "\n" rows: write_text makes them the platform's line ends (csv's "\r\n" became
+    # "\r\r\n" on Windows)
+    w = csv.DictWriter(buf, fieldnames=list(fieldnames), extrasaction="ignore",
+                       lineterminator="\n")
     w.writeheader()
     for r in rows:
         w.writerow({c: cell(r.get(c)) for c in fieldnames})

@@ -1,7 +1,8 @@
 """The seed a stochastic function runs with.
 
 Every stochastic entry point (``simulate``, ``fit_fast``, ``fit_paper``,
-``sample``, ``diagnose``, ``diagnose_pooled``) takes ``seed``: an integer >= 0
+``sample``, ``compare``, ``nested_evidence``, ``diagnose``, ``diagnose_pooled``,
+``bayes_factor``) takes ``seed``: an integer >= 0
 gives the same result bit for bit, and ``None`` draws a seed from fresh
 operating-system entropy.  Either way the function runs with, and its result
 records, an integer that repeats the run when given back as ``seed``.

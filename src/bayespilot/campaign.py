@@ -54,7 +54,6 @@ import platform
 import sys
 import time
 import traceback
-import uuid
 import warnings
 from contextlib import ExitStack
 from dataclasses import dataclass, field
@@ -508,15 +507,11 @@ def _read_json(path: Path) -> Any:
 
 
 def _write_json_atomic(path: Path, obj: Any) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+    from ._files import dumps, write_text_atomic
+
     try:
-        tmp.write_text(json.dumps(obj, indent=1, allow_nan=True), encoding="utf-8")
-        os.replace(tmp, path)
+        write_text_atomic(path, dumps(obj))
     except OSError as exc:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
         raise CampaignError(f"{path}: cannot write the result ({exc.strerror or exc})") from None
 
 

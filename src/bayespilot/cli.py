@@ -243,6 +243,18 @@ def _warning_line(message) -> None:
     tqdm.write(f"{PROG}: warning: {message}", file=sys.stderr)
 
 
+def _warning_lines_once():
+    """A handle for :func:`_warnings_of`: each message a :func:`_warning_line`, once."""
+    said: set[str] = set()
+
+    def say(message) -> None:
+        if str(message) not in said:
+            said.add(str(message))
+            _warning_line(message)
+
+    return say
+
+
 @contextlib.contextmanager
 def _warnings_of(category, handle):
     """Within: each warning of ``category`` (a class or a tuple of them) goes to
@@ -449,15 +461,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     if not args.quick:
         from .example import run_example
 
-        seen: set[str] = set()
-
-        def warn(message) -> None:  # one line each, as they come (the demo runs for minutes)
-            if str(message) not in seen:
-                seen.add(str(message))
-                _warning_line(message)
-
-        try:
-            with _warnings_of(RuntimeWarning, warn):
+        try:  # (warnings one line each, as they come: the demo runs for minutes)
+            with _warnings_of(RuntimeWarning, _warning_lines_once()):
                 report = run_example(args.out, seed=args.seed, **given,
                                      progress=_progress(args), say=lambda text: _say(args, text))
         except OSError as exc:
@@ -1593,14 +1598,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from .diagnose.locate import EvidenceWarning
         from .likelihood import SilentChannelWarning
 
-        said: set[str] = set()
-
-        def say(message) -> None:
-            if str(message) not in said:
-                said.add(str(message))
-                _warning_line(message)
-
-        with _warnings_of((SilentChannelWarning, EvidenceWarning), say):
+        with _warnings_of((SilentChannelWarning, EvidenceWarning), _warning_lines_once()):
             return args.handler(args)
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_USAGE)

@@ -104,6 +104,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 import numpy as np
 
 from ._files import dumps, write_text_atomic
+from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
@@ -342,6 +343,7 @@ def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequen
         dynesty's sampling method and bounding scheme.
     seed : int, optional
         Seeds dynesty's ``rstate`` (a numpy Generator): same seed, same run.
+        None draws one from fresh entropy, recorded in ``settings["seed"]``.
     progress : bool
         dynesty's progress line.
 
@@ -374,8 +376,7 @@ def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequen
         raise TypeError("log_likelihood must be callable")
     nlive = _check_int("nlive", nlive, 2 * lo.size + 2)
     dlogz = _check_pos("dlogz", dlogz)
-    if seed is not None:
-        seed = _check_int("seed", seed, 0)
+    seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     width = hi - lo
     n_calls = 0
 
@@ -1154,6 +1155,8 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         see the module docs).
     seed : int, optional
         Seeds the nested-sampling runs (and the emcee run, if one is made).
+        None draws one from fresh entropy; the seed used is recorded in the
+        result (``seed``) and repeats the comparison.
     posterior : Posterior, optional
         An emcee posterior of ``model`` on this recording for the
         Savage-Dickey cross-check (for ``"coloured"`` with ``ar="fixed"``, its AR
@@ -1197,8 +1200,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     if THRESHOLD not in model.parameter_names:
         raise ValueError(f"the model has no free {THRESHOLD!r} to compare against 0 "
                          f"(free: {', '.join(model.parameter_names)})")
-    if seed is not None:
-        seed = _check_int("seed", seed, 0)
+    seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     runs = _check_int("runs", runs, 1)
     if sample_options is not None and not isinstance(sample_options, Mapping):
         raise TypeError("sample_options must be a mapping of keyword arguments of sample()")

@@ -23,6 +23,7 @@ import numba
 import numpy as np
 from scipy import signal
 
+from ._caller import warn_at_caller
 from .kernels import _coloured as C
 from .kernels import _response as R
 from .kernels import _segmented as SEG
@@ -56,10 +57,11 @@ def _warn_silent_channels(model: PilotModel, X: np.ndarray) -> None:
         others = {q for k, o in enumerate(model.channels) if k != c for q in o.parameter_names}
         own = [q for q in dict.fromkeys(ch.parameter_names) if q not in others]
         if any(q in free for q in own):  # (all named, so that the message is one per channel)
-            warnings.warn(f"the {ch.name} channel's input ({ch.source}) is zero throughout the "
-                          f"record, so its parameters ({', '.join(own)}) are not identified: "
-                          f"fix them (model.fix) or use a model without the channel",
-                          SilentChannelWarning, stacklevel=3)
+            # (at the user's call: a fit builds several likelihoods, said once for its line)
+            warn_at_caller(f"the {ch.name} channel's input ({ch.source}) is zero throughout "
+                           f"the record, so its parameters ({', '.join(own)}) are not "
+                           f"identified: fix them (model.fix) or use a model without the "
+                           f"channel", SilentChannelWarning)
 
 
 def _warn_perfect_fit() -> None:
@@ -194,6 +196,12 @@ class Likelihood:
         likelihood (:meth:`neg_log_lik`, :meth:`batch`, and through
         :meth:`fit_residual` and :meth:`fit_jacobian` the Gauss-Newton
         fitters) then works on w.
+
+    Warns
+    -----
+    SilentChannelWarning
+        A channel's input is zero throughout the record (a run without
+        motion): its own parameters are not identified by it.
 
     Examples
     --------

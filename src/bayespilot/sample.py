@@ -270,18 +270,11 @@ class Posterior:
 
     def to_netcdf(self, path: str | os.PathLike) -> Path:
         """Write the InferenceData (with everything needed by :meth:`from_netcdf`) to ``path``."""
-        from ._files import temporary_sibling
+        from ._files import replacing
 
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = temporary_sibling(path)  # the old file is kept if the write fails
-        try:
+        with replacing(path) as tmp:  # the old file is kept if the write fails
             self.idata.to_netcdf(str(tmp))
-            os.replace(tmp, path)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
-            raise
-        return path
+        return Path(path)
 
     @classmethod
     def from_netcdf(cls, path: str | os.PathLike) -> "Posterior":

@@ -43,9 +43,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import sys
 import time
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
@@ -56,6 +54,7 @@ from .._files import write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
 from .locate import EvidenceWarning
 from .._blas import one_blas_thread
+from .._caller import warn_at_caller
 from .._seeds import resolve_seed
 
 if TYPE_CHECKING:
@@ -361,18 +360,13 @@ def _where(recording) -> str:
 def _warn(recording, text: str) -> None:
     """One :class:`EvidenceWarning` about ``recording``, attributed to the first caller
     outside bayespilot (``diagnose``, ``diagnose_pooled`` or a batch, however nested)."""
-    package = Path(__file__).resolve().parent.parent
-    level, frame = 2, sys._getframe(1)
-    while frame is not None and Path(frame.f_code.co_filename).resolve().is_relative_to(package):
-        level, frame = level + 1, frame.f_back
-    warnings.warn(_where(recording) + text, EvidenceWarning, stacklevel=level)
+    warn_at_caller(_where(recording) + text, EvidenceWarning)
 
 
-#: What a recording without forcing functions misses, and what to give (a warning's text).
+#: What a recording without forcing functions misses (a warning's text; what to give:
+#: ``locate.GIVE_FORCING``).
 _NO_FORCING = ("no forcing functions are known (no forcing in the sidecar, no f_t and f_d "
                "columns): the frequency evidence is missing")
-_GIVE_FORCING = ("give the forcing (base_frequency, target, disturbance) in the sidecar, or f_t "
-                 "and f_d columns")
 
 
 def _bootstrap_obstacle(recording, forcing) -> tuple[str, str] | None:
@@ -380,8 +374,8 @@ def _bootstrap_obstacle(recording, forcing) -> tuple[str, str] | None:
     task, or None: ``(reason, message)``, the reason for the settings and the warning's text
     (without the source).
 
-    No forcing functions known; a controlled element the simulator cannot run (relative
-    degree below 2, seen by building the task as :func:`~.locate.task_of` does); or a task
+    No forcing functions known, or a controlled element the simulator cannot run (relative
+    degree below 2, seen by building the task as :func:`~.locate.task_of` does).
     """
     from . import locate as L
 
@@ -389,7 +383,7 @@ def _bootstrap_obstacle(recording, forcing) -> tuple[str, str] | None:
     if forcing is None:
         return ("no forcing functions known: no forcing in the sidecar, no f_t and f_d columns",
                 f"{_NO_FORCING}, and {skipped} (it simulates the task with them); "
-                f"{_GIVE_FORCING}")
+                f"{L.GIVE_FORCING}")
     try:
         L.task_of(recording, forcing)
     except ValueError as exc:
@@ -430,6 +424,10 @@ class _Run:
     skip: int
     timings: dict
     noise_passes: int = 1
+    #: Why the task cannot be simulated (``_bootstrap_obstacle``), or None.
+    obstacle: tuple[str, str] | None = None
+    #: The EvidenceWarnings said about this recording (kept in the result's settings).
+    notes: tuple[str, ...] = ()
 
 
 def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n_starts,
@@ -446,19 +444,20 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
 
     # what the recording allows, said before the (long) computation
     forcing = L.forcing_of(recording)
-    for note in forcing.notes if forcing is not None else ():
-        _warn(recording, note)
+    notes = list(forcing.notes) if forcing is not None else []
     obstacle = _bootstrap_obstacle(recording, forcing)
     if obstacle is not None and n_bootstrap > 0:
-        _warn(recording, obstacle[1])
+        notes.append(obstacle[1])
     elif forcing is None:  # the frequency evidence is missing with or without a bootstrap
-        _warn(recording, f"{_NO_FORCING}; {_GIVE_FORCING}")
+        notes.append(f"{_NO_FORCING}; {L.GIVE_FORCING}")
     if obstacle is None and n_bootstrap > 0 and _default_plant(recording):
-        _warn(recording, "the recording (task 'other') gives no controlled_element or "
-                         "controlled_element_gain, which the recording format reads as the "
-                         "paper's plant, 4/s^2 (and control_gain 0.69 unless given): the "
-                         "bootstrap simulates that plant; if yours differs, give it in the "
-                         "sidecar, or the evidence's p-values are of the wrong plant")
+        notes.append("the recording (task 'other') gives no controlled_element or "
+                     "controlled_element_gain, which the recording format reads as the "
+                     "paper's plant, 4/s^2 (and control_gain 0.69 unless given): the "
+                     "bootstrap simulates that plant; if yours differs, give it in the "
+                     "sidecar, or the evidence's p-values are of the wrong plant")
+    for note in notes:
+        _warn(recording, note)
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     bar.set_postfix_str("base fit")
@@ -499,7 +498,7 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
     timings["locate"] = time.perf_counter() - t1
     bar.update(1)
     return _Run(base_model, base_fit, base, noise, lik0, forcing, st, where, boot_info, skip,
-                timings, noise_passes)
+                timings, noise_passes, obstacle, tuple(notes))
 
 
 def _fit_candidates(names, recording, base_model, base, noise, where, boot_info, profile_noise,
@@ -557,10 +556,9 @@ def _calibrator(runs, recordings, n_calibrate, seed, bar, n_starts=4):
     from .calibrate import calibrate_candidate
 
     for run, rec in zip(runs, recordings):
-        obstacle = _bootstrap_obstacle(rec, run.forcing)
-        if obstacle is not None:
+        if run.obstacle is not None:
             _warn(rec, f"the calibration of the chosen candidate's test (n_calibrate) is "
-                       f"skipped, so the asymptotic test stands: {obstacle[0]}")
+                       f"skipped, so the asymptotic test stands: {run.obstacle[0]}")
             return None
 
     # the replicates' own seeds: a child of the seed, apart from the located evidence's
@@ -763,9 +761,10 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         element of relative degree below 2; ``settings["bootstrap"]["skipped"]``
         then says why); and, with ``n_bootstrap > 0``, a task ``"other"``
         that leaves its plant out, which the recording format reads as the
-        paper's 4/s^2 and the bootstrap simulates.  With
-        ``n_calibrate > 0`` the calibration is skipped for the same reasons
-        (``settings["calibration_skipped"]``).
+        paper's 4/s^2 and the bootstrap simulates.  The messages are kept in
+        ``settings["evidence_notes"]``.  With ``n_calibrate > 0`` the
+        calibration is skipped for the same reasons, said once more when it
+        would start (``settings["calibration_skipped"]``).
 
     Examples
     --------
@@ -847,7 +846,7 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     if n_calibrate > 0:
         calibrate = _calibrator([dataclasses.replace(run, base=base)], [recording],
                                 n_calibrate, seed, bar, n_starts)
-    uncalibrated = (_bootstrap_obstacle(recording, forcing) if n_calibrate > 0 else None)
+    uncalibrated = run.obstacle if n_calibrate > 0 else None
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
     timings["calibrate"] = time.perf_counter() - t3
     t4 = time.perf_counter()
@@ -907,6 +906,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
                                        "AR model of the base residual"}
     if uncalibrated is not None:
         settings["calibration_skipped"] = uncalibrated[0]
+    if run.notes:
+        settings["evidence_notes"] = list(run.notes)  # (the EvidenceWarnings, for the record)
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
                            where, base_d, chosen, settings, time.perf_counter() - t0,
                            recording.source, arrays, base_model=base_model)

@@ -250,11 +250,16 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
 
 def _warm() -> None:
     """One short diagnosis here, so that the workers load numba's cache (campaign module docs)."""
+    import warnings
+
     from ..simulate import simulate
     from . import diagnose
+    from .locate import EvidenceWarning
 
-    diagnose(simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=0,
-                      duration=20.0).recording, seed=0, n_bootstrap=1)
+    with warnings.catch_warnings():  # (about this 20-s run of ours, not the user's)
+        warnings.simplefilter("ignore", EvidenceWarning)
+        diagnose(simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=0,
+                          duration=20.0).recording, seed=0, n_bootstrap=1)
 
 
 def _settings(task: DiagnoseTask, options: Mapping[str, Any]) -> dict[str, Any]:
@@ -276,7 +281,9 @@ def _the_recording(path: Any) -> str:
 
 def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
     """What must agree for a result file to count as done: its recordings, resolved
-    (:func:`_the_recording`), in order, and its settings with ``defaults`` filled in (``candidates=None`` as the whole catalogue)."""
+    (:func:`_the_recording`) and sorted (a pooled task's runs are in the files' order, which
+    results made before that was so may not have), and its settings with ``defaults`` filled
+    in (``candidates=None`` as the whole catalogue)."""
     recs, settings = stored.get("recordings"), stored.get("settings")
     if not isinstance(recs, list) or not isinstance(settings, dict):
         return None
@@ -285,7 +292,7 @@ def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
     merged = {**defaults, **settings}
     if merged.get("candidates") is None:  # None tests the whole catalogue, in its order
         merged["candidates"] = list(NAMES)
-    return {"recordings": [_the_recording(p) for p in recs], "settings": merged}
+    return {"recordings": sorted(_the_recording(p) for p in recs), "settings": merged}
 
 
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,

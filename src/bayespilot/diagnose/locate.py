@@ -81,20 +81,27 @@ OMEGA_SPLIT = 2.0
 #: record) of a whole number is snapped to the nearest that puts them on the record's DFT bins
 #: (a rounded value, as printed in a paper); a line off by more is not a bin.
 SNAP_TOLERANCE = 0.05
+#: What to give for the frequency evidence (the end of an EvidenceWarning).
+GIVE_FORCING = ("give the forcing (base_frequency, target, disturbance) in the sidecar, or f_t "
+                "and f_d columns")
 
 
 class EvidenceWarning(UserWarning):
     """The located evidence of a diagnosis is incomplete, or was read with an assumption.
 
     Issued by :func:`bayespilot.diagnose.diagnose` (and
-    :func:`~bayespilot.diagnose.diagnose_pooled`) once per recording: the
-    bootstrap that gives the evidence its p-values was skipped (no forcing
-    functions known, a plant the simulator cannot run or the recording does
-    not state), part of the frequency evidence is missing (forcing lines that
-    are not whole cycles of the record, a forcing function that is zero
-    throughout), or a sidecar's base frequency was snapped to the record's
-    DFT bins (:data:`SNAP_TOLERANCE`).  The message says why and, where there
-    is one, what to provide.  The diagnosis goes on without what is missing.
+    :func:`~bayespilot.diagnose.diagnose_pooled`), once per gap and
+    recording, before the base fit: the bootstrap that gives the evidence its
+    p-values was skipped (no forcing functions known, a plant the simulator
+    cannot run), part of the frequency evidence is missing (forcing lines
+    that are not whole cycles of the record, a forcing function that is zero
+    throughout), a sidecar's base frequency was snapped to the record's DFT
+    bins (:data:`SNAP_TOLERANCE`), or the bootstrap simulates the recording
+    format's default plant for a task ``"other"`` that gives none; and, with
+    ``n_calibrate``, once more when the calibration is skipped for the same
+    reason as the bootstrap.  The message says why and, where there is one,
+    what to provide.  The diagnosis goes on without what is missing, and the
+    result's ``settings["evidence_notes"]`` keeps the messages.
     """
 
 
@@ -245,8 +252,7 @@ def forcing_of(recording: Recording) -> Forcing | None:
             notes.append(f"the frequency evidence (frequency.*) is missing: the f_t and f_d "
                          f"columns {why}, and the describing functions need whole periods of "
                          f"forcing functions at separate frequencies; give the forcing "
-                         f"(base_frequency, target, disturbance) in the sidecar, or cut the "
-                         f"record to whole periods")
+                         f"in the sidecar, or cut the record to whole periods")
     f_t = np.asarray(recording["f_t"] if "f_t" in recording else ft(t))
     f_d = np.asarray(recording["f_d"] if "f_d" in recording else fd(t))
     out = Forcing(ft, fd, kk[0], kk[1], f_t, f_d)
@@ -284,11 +290,14 @@ def _snapped(ft: Multisine, fd: Multisine, kk: list, T: float
     dist = np.abs(k - np.rint(k))
     i = int(np.argmax(dist))
     name = "target" if i < ft.n.size else "disturbance"
+    period = 2 * np.pi / w0
+    cure = ("give the exact base_frequency, or cut the record to whole periods"
+            if T >= period else f"the record is shorter than one period of the forcing "
+                                f"({period:.4g} s)")
     note = (f"the frequency evidence (frequency.*) is missing: the {name} line n = {n[i]} "
             f"({n[i] * w0:.4g} rad/s) is {dist[i]:.2g} cycle off a whole number of cycles of "
             f"the {T:g}-s record (forcing.base_frequency {w0:.6g} rad/s), and the describing "
-            f"functions need whole periods; give the exact base_frequency, or cut the record "
-            f"to whole periods")
+            f"functions need whole periods; {cure}")
     return ft, fd, kk, note
 
 

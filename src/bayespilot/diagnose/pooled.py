@@ -708,6 +708,10 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     -----
     PoolingWarning
         The recordings give different subjects, tasks or K_theta.
+    EvidenceWarning
+        Per run, as for :func:`~bayespilot.diagnose.diagnose` (kept in that
+        run's ``runs[j]["evidence_notes"]``); with ``n_calibrate > 0`` and a
+        run whose task cannot be simulated, the calibration is skipped.
     """
     from tqdm.auto import tqdm
 
@@ -790,10 +794,11 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     calibrate = (_calibrator(runs, recs, n_calibrate, seed, bar, n_starts) if n_calibrate > 0
                  else None)
     ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
-    bar.close()
     final = None
     t_refit = time.perf_counter()
     if refit and chosen is not None and chosen.physics in fits:
+        bar.total += 1  # the pooled refit: seconds, the bar still open
+        bar.set_postfix_str(f"refit of {chosen.physics}")
         ext = get_extension(chosen.physics)
         ps, f, cov, own = pooled_final_fit(ext, runs[0].base_model, recs, fits[chosen.physics],
                                            [run.noise for run in runs])
@@ -803,6 +808,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         chosen.record_refit(ps[0], dict(zip(ext.new_parameters, se)), own, POOLED_FINAL_FIT,
                             [[q.get("delta_abs") for q in fits[chosen.physics]],
                              [q.get("delta_abs") for q in ps]], neg_log_lik=float(f))
+        bar.update(1)
+    bar.close()
     t_refit = time.perf_counter() - t_refit
     run_d = []
     for j, (rec, run) in enumerate(zip(recs, runs)):
@@ -819,7 +826,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                                "gls_neg_log_lik": float(run.base.neg_log_lik)},
                       "where": run.where,
                       "delta_neg_log_lik": {n: s[j] for n, s in shares.items()},
-                      "params": chosen_params})
+                      "params": chosen_params,
+                      **({"evidence_notes": list(run.notes)} if run.notes else {})})
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "n_calibrate": n_calibrate,
                 "noise_passes": noise_passes, "refit": refit, "refit_seconds": t_refit,

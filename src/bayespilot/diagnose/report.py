@@ -569,6 +569,9 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
     ------
     OSError
         ``directory`` cannot be created or a file in it written.
+    ValueError
+        Neither ``result.settings["dt"]`` nor ``recording`` gives the sample
+        interval (:func:`plot_residuals`; a result of ``diagnose`` has it).
     """
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)

@@ -76,7 +76,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         Seconds at the start left out of the likelihood
         (:class:`~bayespilot.likelihood.Likelihood`).  Default: 0 for the
         white output error, :data:`~bayespilot.sample.COLOURED_DISCARD`
-        (2 s) with an AR noise model, whose whitening filter would otherwise
+        (2 s; a quarter of a record shorter than 8 s) with an AR noise model,
+        whose whitening filter would otherwise
         amplify the model's start-up transient (from 0 s, a prediction-error
         fit of an 81.92-s FD run ended at T_vl 0.007 and tau_v 0.030 against
         the truth's 0.409 and 0.279).
@@ -117,7 +118,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     if discard is None:
         from ..sample import COLOURED_DISCARD
 
-        discard = 0.0 if noise is None else COLOURED_DISCARD
+        # (at most a quarter of a short record: the likelihood keeps at least half)
+        discard = 0.0 if noise is None else min(COLOURED_DISCARD, recording.duration / 4)
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     has_delta = "delta_abs" in model.parameter_names
@@ -151,7 +153,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
 
     lik = Likelihood(model, recording, initial=initial, discard=discard, noise=given)
     upper = model.parameter("delta_abs").upper
-    # a step that does not divide the bound ends the grid at the bound, not beyond it
+    # a step that does not divide the bound: no grid point beyond the bound (the last is the
+    # bound itself when the remainder is at least half a step; the final scan reaches it)
     grid = np.unique(np.minimum(np.arange(0.0, upper + 0.5 * profile_step, profile_step),
                                 upper))
     prof = []

@@ -274,8 +274,9 @@ def plot_step_three(results: Sequence[FitResult],
     if isinstance(scan, bool) or not isinstance(scan, (int, np.integer)):
         raise ValueError(f"scan must be an integer index (0 the first, -1 the last), "
                          f"got {scan!r}")
+    results = list(results)  # (once: a generator is read once)
     chosen = []
-    for fit in list(results):  # checked before a figure is made
+    for fit in results:  # checked before a figure is made
         steps = _paper_fit(fit, "plot_step_three")
         if not steps.get("step3"):
             raise ValueError("this fit has no Step III scan (fitted without threshold?)")
