@@ -217,3 +217,23 @@ def test_run_in_off_the_integration_grid(run_in):
         col = rec["f_t" if name == "target" else "f_d"]
         assert np.max(np.abs(f(rec.t) - col)) < 1e-10 * np.std(col)
     assert sim.settings["run_in"] == pytest.approx(run_in, abs=1e-3 / 2 + 1e-12)
+
+
+def test_default_integration_is_1_khz_or_finer():
+    """10 steps a sample at the paper's 100 Hz (the paper's computation, unchanged), 20 at
+    50 Hz, 2 at 1 kHz (a fixed 10 integrated a 1-kHz task at 10 kHz)."""
+    from bayespilot.simulate import integration_steps
+
+    assert [integration_steps(r) for r in (50.0, 60.0, 100.0, 250.0, 1000.0, 5000.0)] == \
+        [20, 17, 10, 4, 2, 2]
+    a = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.1, seed=0, duration=5.0)
+    b = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.1, seed=0, duration=5.0,
+                 oversample=10)
+    assert a.settings["oversample"] == 10 and np.array_equal(a.recording.u, b.recording.u)
+    ft = Multisine(0.1, [3, 7], [0.05, 0.03], [0.0, 1.0])
+    fd = Multisine(0.1, [5, 11], [0.02, 0.03], [0.5, 1.5])
+    task = TrackingTask(ft, fd, motion_gain=1.0, sample_rate_hz=1000.0, duration=2.0,
+                        run_in=1.0)
+    assert simulate(params=presets.TABLE3["FD"], task=task, seed=0).settings["oversample"] == 2
+    with pytest.raises(ValueError, match="oversample"):
+        simulate(task="FD", motion_gain=1.0, seed=0, duration=5.0, oversample=True)

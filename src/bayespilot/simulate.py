@@ -3,7 +3,9 @@
 The task (controlled element, control gain, forcing functions, motion gain,
 sample rate, duration) is a :class:`TrackingTask`; :meth:`TrackingTask.paper`
 is the preset of Pool et al. (2012).  :func:`simulate` integrates the loop at
-``oversample`` times the recording rate after a run-in, adds remnant per Eq. 6
+``oversample`` times the recording rate (by default at 1 kHz or finer,
+:func:`integration_steps`: 10 steps a sample at the paper's 100 Hz) after a
+run-in, adds remnant per Eq. 6
 with K_n set directly or calibrated to a remnant fraction F_n (Eq. 7), and
 returns a :class:`Simulation` holding the Recording and the hidden truth.
 
@@ -34,11 +36,37 @@ from .model import PilotModel, _parameter_value, paper_model
 from .recording import Recording
 
 __all__ = ["TrackingTask", "Simulation", "simulate", "remnant", "calibrate_remnant_gain",
-           "remnant_fraction", "NOISE_PSD"]
+           "remnant_fraction", "NOISE_PSD", "integration_steps"]
 
 #: Default two-sided PSD of the remnant's white noise, rad^2 s: unit-variance samples at the
 #: paper's 100 Hz (Table 4's remnant gains), the same density at any recording rate.
 NOISE_PSD = 0.01
+
+#: The default integration rate, Hz: the paper's 10 steps a sample at 100 Hz.
+INTEGRATION_HZ = 1000.0
+
+
+def integration_steps(sample_rate_hz: float) -> int:
+    """Integration steps per recorded sample by default: the fewest (at least 2) that make
+    the step at most 1 ms (:data:`INTEGRATION_HZ`).
+
+    Parameters
+    ----------
+    sample_rate_hz : float
+        The recording's sample rate, Hz.
+
+    Returns
+    -------
+    int
+        10 at the paper's 100 Hz, 20 at 50 Hz, 2 at 1 kHz (a fixed 10 integrated a 1-kHz
+        task at 10 kHz, five times the work the same accuracy needs).
+
+    Examples
+    --------
+    >>> integration_steps(100.0), integration_steps(60.0), integration_steps(1000.0)
+    (10, 17, 2)
+    """
+    return max(2, math.ceil(INTEGRATION_HZ / sample_rate_hz - 1e-9))
 
 
 @dataclass(frozen=True, eq=False)
@@ -276,7 +304,7 @@ def _run(model: PilotModel, theta: np.ndarray, task: TrackingTask, n_fine: np.nd
 def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None = None, *,
              task: str | TrackingTask = "FD", motion_gain: float = 1.0,
              remnant_fraction: float | None = None, remnant_gain: float | None = None,
-             T_n: float | None = None, seed: int | None = 0, oversample: int = 10,
+             T_n: float | None = None, seed: int | None = 0, oversample: int | None = None,
              duration: float | None = None, noise_psd: float | None = None,
              forcing_scale: str | float = "paper_simulation") -> Simulation:
     """Simulate one run of the closed-loop tracking task.
@@ -305,8 +333,9 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
         Seed of the remnant noise (numpy Generator); the same seed gives the
         same run, bit for bit.  None draws one from fresh entropy; the seed
         used is recorded in the result (``seed``, the recording's notes).
-    oversample : int
-        Integration steps per recorded sample (>= 2).
+    oversample : int, optional
+        Integration steps per recorded sample (>= 2); default
+        :func:`integration_steps` of the task's rate (10 at 100 Hz).
     duration : float, optional
         Measurement time (default the task's, 81.92 s).
     noise_psd : float, optional
@@ -359,7 +388,10 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
         if not (isinstance(duration, (int, float)) and math.isfinite(duration) and duration > 0):
             raise ValueError(f"duration must be a positive number of seconds, got {duration!r}")
         tt = replace(tt, duration=float(duration))
-    if not isinstance(oversample, (int, np.integer)) or oversample < 2:
+    if oversample is None:
+        oversample = integration_steps(tt.sample_rate_hz)
+    if isinstance(oversample, bool) or not isinstance(oversample, (int, np.integer)) \
+            or oversample < 2:
         raise ValueError(f"oversample must be an integer >= 2, got {oversample!r}")
     if remnant_fraction is not None and remnant_gain is not None:
         raise ValueError("give remnant_fraction or remnant_gain, not both")

@@ -162,7 +162,7 @@ def _replicate(run, recording, gen, seed: int, n_starts: int):
     task, K_n, T_n = gen
     try:
         sim = simulate(run.base_model, run.base.params, task=task, remnant_gain=K_n, T_n=T_n,
-                       seed=seed, oversample=10)
+                       seed=seed)
     except RuntimeError:
         return None
     rec = sim.recording

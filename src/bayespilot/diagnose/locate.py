@@ -698,7 +698,7 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
             progress(1)  # (the replicate before, kept or dropped)
         try:
             sim = simulate(model, params, task=task, remnant_gain=K_n, T_n=T_n,
-                           seed=int(seeds[b]), oversample=10)
+                           seed=int(seeds[b]))
         except RuntimeError:
             continue
         rep = sim.recording
