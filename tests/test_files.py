@@ -66,3 +66,35 @@ def test_csv_rows_with_empty_fields_for_missing_values(tmp_path):
     assert rows == [["a", "b", "c"], ["1.5", "", ""], ["", "t", ""]]
     assert b"\r" not in path.read_bytes() or os.linesep == "\r\n"  # one line end per row
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv"]
+
+
+def test_results_are_standard_json_and_read_back_with_their_nans(tmp_path):
+    """Non-finite numbers are written as null (NaN and Infinity are not JSON: a strict
+    parser refused a comparison's Savage-Dickey densities and a short chain's r_hat), and a
+    result's float fields read back as NaN; a field that may be None keeps its None."""
+    import json
+    import math
+
+    import numpy as np
+
+    from bayespilot._files import dumps
+    from bayespilot.compare import SavageDickey
+    from bayespilot.fit.result import FitResult
+
+    def strict(text):
+        return json.loads(text, parse_constant=lambda c: (_ for _ in ()).throw(ValueError(c)))
+
+    fit = FitResult({"K_v": 1.5, "delta_abs": 0.0}, -10.0, 90.0, "fast", 3, True,
+                    {"x": np.float64(np.inf)}, {"scan": [1.0, math.nan]})
+    text = dumps(fit.to_dict())
+    d = strict(text)
+    assert d["elapsed_seconds"] is None and d["settings"]["x"] is None
+    back = FitResult.from_dict(d)
+    assert math.isnan(back.elapsed) and back.params == fit.params
+    sd = SavageDickey(None, False, "no draws near 0", None, 2.0, math.nan, math.nan, 100, 0)
+    again = strict(dumps(sd.to_dict()))
+    from bayespilot._files import nan_for_null
+    got = SavageDickey(**nan_for_null(SavageDickey, again))
+    assert got.log_bayes_factor is None and got.lower_bound is None
+    assert math.isnan(got.posterior_density) and math.isnan(got.bandwidth)
+    assert got.prior_density == 2.0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -11,6 +12,8 @@ import os
 import uuid
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping, Sequence
+
+import numpy as np
 
 
 def temporary_sibling(path: str | os.PathLike) -> Path:
@@ -66,6 +69,33 @@ def write_csv_atomic(path: str | os.PathLike, fieldnames: Sequence[str],
     return write_text_atomic(path, buf.getvalue())
 
 
+def json_ready(x: Any) -> Any:
+    """Nested dicts, lists and tuples with numpy scalars as Python numbers and non-finite
+    floats as None: what standard JSON can hold (NaN and Infinity are not JSON; many parsers
+    outside Python refuse them)."""
+    if isinstance(x, dict):
+        return {k: json_ready(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_ready(v) for v in x]
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
 def dumps(obj: Any) -> str:
-    """The JSON text of a result's ``to_dict()`` (NaN allowed, as Python's json writes it)."""
-    return json.dumps(obj, indent=1, allow_nan=True)
+    """The standard JSON text of a result's ``to_dict()``: non-finite numbers as null
+    (:func:`json_ready`; a reader's ``from_dict`` makes a float field's null NaN again,
+    :func:`nan_for_null`)."""
+    return json.dumps(json_ready(obj), indent=1, allow_nan=False)
+
+
+def nan_for_null(cls: type, d: Mapping[str, Any]) -> dict[str, Any]:
+    """``d`` with NaN for a null in each field of the dataclass ``cls`` annotated ``float``
+    (as :func:`dumps` wrote a non-finite number; a field that may be None is annotated
+    otherwise and keeps its None)."""
+    floats = {f.name for f in dataclasses.fields(cls) if f.type in (float, "float")}
+    return {k: (math.nan if v is None and k in floats else v) for k, v in d.items()}

@@ -103,7 +103,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ._files import dumps, write_text_atomic
+from ._files import dumps, nan_for_null, write_text_atomic
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
@@ -314,7 +314,7 @@ class Evidence:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Evidence":
-        d = {k: v for k, v in d.items() if k not in ("samples", "weights")}
+        d = nan_for_null(cls, {k: v for k, v in d.items() if k not in ("samples", "weights")})
         d["parameter_names"] = tuple(d["parameter_names"])
         return cls(**d)
 
@@ -979,12 +979,17 @@ class Comparison:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Comparison":
         sd = d.get("savage_dickey")
-        return cls(float(d["log_bayes_factor"]), float(d["log_bayes_factor_err"]), d["decision"],
+        def num(v):
+            return math.nan if v is None else float(v)
+
+        ic = {k: num(v) if k.startswith(("delta_", "aic", "bic")) else v
+              for k, v in d["information_criteria"].items()}
+        return cls(num(d["log_bayes_factor"]), num(d["log_bayes_factor_err"]), d["decision"],
                    Evidence.from_dict(d["evidence_threshold"]),
                    Evidence.from_dict(d["evidence_none"]),
-                   None if sd is None else SavageDickey(**sd), dict(d["information_criteria"]),
+                   None if sd is None else SavageDickey(**nan_for_null(SavageDickey, sd)), ic,
                    dict(d.get("settings", {})), d.get("seed"),
-                   float(d.get("elapsed_seconds", math.nan)), d.get("source"),
+                   num(d.get("elapsed_seconds")), d.get("source"),
                    d.get("plateau_probability"))
 
     @classmethod

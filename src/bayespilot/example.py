@@ -24,7 +24,6 @@ Everything is seeded: the same seed gives the same numbers, figures and files
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 from typing import Callable, Sequence
@@ -32,6 +31,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import presets
+from ._files import dumps, write_text_atomic
 
 __all__ = ["run_example"]
 
@@ -171,8 +171,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
         _save(fig, dirs["figures"] / f"delta_abs_{name}.png")
     _save(plot_pair(posteriors[-1], truth=truth), dirs["figures"] / "pair.png")
     pooled = pool(comparisons, label=f"{task}, K_theta {', '.join(f'{k:g}' for k in gains)}")
-    (out / "pooled_comparison.json").write_text(json.dumps(pooled.to_dict(), indent=1,
-                                                           allow_nan=True))
+    write_text_atomic(out / "pooled_comparison.json", dumps(pooled.to_dict()))
     elapsed = time.perf_counter() - t_start
     report = out / "report.md"
     report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood),

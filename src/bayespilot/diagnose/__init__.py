@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .._files import write_text_atomic
+from .._files import json_ready, write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
 from .locate import EvidenceWarning
 from .._blas import one_blas_thread
@@ -80,17 +80,7 @@ REBASE_TOL = 0.5
 #: At most this many such refits.
 MAX_REBASE = 2
 
-def _json_ready(x):
-    """Nested dicts and lists with numpy scalars as Python numbers, non-finite floats as None."""
-    if isinstance(x, dict):
-        return {k: _json_ready(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_ready(v) for v in x]
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
+_json_ready = json_ready  # (the name the diagnosis modules use)
 
 
 class _JSONSummary:

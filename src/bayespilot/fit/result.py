@@ -73,9 +73,13 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
-        return cls(dict(d["params"]), float(d["neg_log_lik"]), float(d["vaf"]), d["method"],
-                   d.get("seed"), bool(d.get("threshold", True)), d.get("settings", {}),
-                   d.get("steps", {}), float(d.get("elapsed_seconds", math.nan)), d.get("source"))
+        def num(v):  # (a non-finite number was written as null, _files.dumps)
+            return math.nan if v is None else float(v)
+
+        return cls({k: num(v) for k, v in d["params"].items()}, num(d["neg_log_lik"]),
+                   num(d["vaf"]), d["method"], d.get("seed"), bool(d.get("threshold", True)),
+                   d.get("settings", {}), d.get("steps", {}), num(d.get("elapsed_seconds")),
+                   d.get("source"))
 
     @classmethod
     def from_json(cls, path: str | Path) -> "FitResult":
