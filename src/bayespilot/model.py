@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Iterable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -632,11 +632,15 @@ class PilotModel:
         raise UnknownChannelError(f"no channel {name!r} in this model; channels: "
                                   f"{', '.join(c.name for c in self.channels)}")
 
-    def _replace_channel(self, name: str, channel: Channel, params: Iterable[Parameter], label: str) -> "PilotModel":
+    def _with_block(self, name: str, block: Any, params: Iterable[Parameter],
+                    **change: Callable[[Channel], Any]) -> "PilotModel":
+        """The model with channel ``name``'s fields replaced by ``change`` (field -> function
+        of the channel), ``params`` declared, and ``block`` named in the model's name."""
         chans = list(self.channels)
-        chans[self._channel(name)] = channel
+        i = self._channel(name)
+        chans[i] = replace(chans[i], **{k: f(chans[i]) for k, f in change.items()})
         return replace(self, channels=tuple(chans), parameters=self._with_params(params),
-                       name=f"{self.name} + {label}")
+                       name=f"{self.name} + {type(block).__name__} on {name}")
 
     def fix(self, **values: float) -> "PilotModel":
         """A model with some parameters held fixed, e.g. ``fix(delta_abs=0.0)``.
@@ -666,9 +670,7 @@ class PilotModel:
             If ``stage`` is not a :class:`Stage`.
         """
         _check_block(stage, Stage, "add_stage: the stage", optional=False)
-        c = self.channels[self._channel(channel)]
-        return self._replace_channel(channel, replace(c, stages=c.stages + (stage,)), parameters,
-                                     f"{type(stage).__name__} on {channel}")
+        return self._with_block(channel, stage, parameters, stages=lambda c: c.stages + (stage,))
 
     def with_nonlinearity(self, channel: str, nonlinearity: Nonlinearity | None,
                           parameters: Iterable[Parameter] = ()) -> "PilotModel":
@@ -683,9 +685,8 @@ class PilotModel:
             If ``nonlinearity`` is neither a :class:`Nonlinearity` nor None.
         """
         _check_block(nonlinearity, Nonlinearity, "with_nonlinearity: the nonlinearity")
-        c = self.channels[self._channel(channel)]
-        return self._replace_channel(channel, replace(c, nonlinearity=nonlinearity), parameters,
-                                     f"{type(nonlinearity).__name__} on {channel}")
+        return self._with_block(channel, nonlinearity, parameters,
+                                nonlinearity=lambda c: nonlinearity)
 
     def with_modulation(self, channel: str, modulation: Modulation | None,
                         parameters: Iterable[Parameter] = ()) -> "PilotModel":
@@ -700,9 +701,7 @@ class PilotModel:
             If ``modulation`` is neither a :class:`Modulation` nor None.
         """
         _check_block(modulation, Modulation, "with_modulation: the modulation")
-        c = self.channels[self._channel(channel)]
-        return self._replace_channel(channel, replace(c, modulation=modulation), parameters,
-                                     f"{type(modulation).__name__} on {channel}")
+        return self._with_block(channel, modulation, parameters, modulation=lambda c: modulation)
 
     def add_channel(self, channel: Channel, parameters: Iterable[Parameter] = ()) -> "PilotModel":
         """Add a parallel channel (e.g. an otolith channel).

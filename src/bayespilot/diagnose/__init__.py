@@ -80,7 +80,6 @@ REBASE_TOL = 0.5
 #: At most this many such refits.
 MAX_REBASE = 2
 
-_json_ready = json_ready  # (the name the diagnosis modules use)
 
 
 class _JSONSummary:
@@ -201,7 +200,7 @@ class DiagnosisResult(_JSONSummary):
                       "vaf_after": self.arrays.get("after_vaf"),
                       "refit": cd["refit"], "interval": cd["interval"],
                       "posterior": self._posterior_dict()}
-        return _json_ready({
+        return json_ready({
             "mismatch": self.mismatch, "physics": self.physics,
             "ranking": [c.to_dict() for c in self.ranking],
             "where": {k: e.to_dict() for k, e in self.where.items()},

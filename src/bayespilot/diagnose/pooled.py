@@ -39,10 +39,10 @@ import numpy as np
 from scipy import linalg, optimize, stats
 
 from .._blas import one_blas_thread
-from .._files import write_text_atomic
+from .._files import json_ready, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
-               _calibration_lines, _calibrator, _check, _fitted_lines, _json_ready, _JSONSummary,
+               _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -151,7 +151,7 @@ class PooledDiagnosisResult(_JSONSummary):
         runs = [dict(r, where={k: e.to_dict() for k, e in r["where"].items()})
                 for r in self.runs]
         chosen = None if self.chosen is None else self.chosen.to_dict()
-        return _json_ready({"mismatch": self.mismatch, "physics": self.physics, "pooled": True,
+        return json_ready({"mismatch": self.mismatch, "physics": self.physics, "pooled": True,
                       "n_runs": len(self.runs),
                       "ranking": [c.to_dict() for c in self.ranking],
                       "where": self.where, "runs": runs, "chosen": chosen,
