@@ -19,7 +19,8 @@ import pytest
 from scipy import special, stats
 
 from conftest import make_rng
-from bayespilot.compare import (PLATEAU_LEVEL, Comparison, Evidence, SavageDickey,
+from bayespilot.compare import (PLATEAU_LEVEL, Comparison, Evidence, PooledComparison,
+                                SavageDickey,
                                 _guarded_decision, robust_evidence, compare,
                                 decide, information_criteria, log_likelihood_at,
                                 jeffreys_category, nested_evidence, plateau_onset, pool,
@@ -316,7 +317,7 @@ def test_pool_guards():
     assert pool([rec(-3.5, None), rec(-3.5, None), rec(-1.0, None)]).decision == "none"
 
 
-def test_pool_against_scipy():
+def test_pool_against_scipy(tmp_path):
     vals = [4.0, 6.5, -1.0, 3.0, 2.5]
     errs = [0.8, 0.9, 0.7, 0.8, 0.6]
     r = pool([{"log_bayes_factor": v, "log_bayes_factor_err": e} for v, e in zip(vals, errs)],
@@ -329,7 +330,12 @@ def test_pool_against_scipy():
     assert r.decision == "threshold"
     assert r.decisions == {"threshold": 2, "none": 0, "inconclusive": 3}
     assert "FD, K_theta = 1" in r.summary()
-    json.loads(r.to_json())
+    assert PooledComparison.from_dict(json.loads(r.to_json())) == r
+    one = pool([{"log_bayes_factor": 2.0, "log_bayes_factor_err": 0.5}])  # NaN t: null in JSON
+    assert math.isnan(one.t_pvalue) and '"t_pvalue": null' in one.to_json()
+    one.to_json(tmp_path / "p.json")
+    back = PooledComparison.from_json(tmp_path / "p.json")
+    assert math.isnan(back.t_pvalue) and back.summary() == one.summary()
     with pytest.raises(ValueError, match="non-empty"):
         pool([])
 

@@ -730,3 +730,62 @@ def test_after_a_rebase_the_plotted_base_residual_is_the_tested_base_fits():
     eps = Likelihood(paper_model(), rec).residual(res.base["gls_params"])
     np.testing.assert_allclose(res.arrays["residual"], eps, atol=1e-12)
     assert "p-values are the first base fit's" in res.summary()
+
+
+def test_a_diagnosis_read_back_from_its_json_is_the_same(washout_case, control_result,
+                                                         tmp_path):
+    """from_json gives back the decision, ranking, evidence, fits, calibration, profile
+    intervals, a posterior's summary and a Bayes factor: the same to_dict and summary; what
+    a file does not keep (signals, models) is refused by name, not met as an AttributeError."""
+    import json
+
+    from bayespilot.diagnose import sample_chosen
+    from bayespilot.diagnose.calibrate import Calibration
+    from bayespilot.diagnose.nested import EvidenceSummary, ExtensionBayesFactor
+
+    rec, res = washout_case
+    for r in (res, control_result):
+        r.to_json(tmp_path / "d.json")
+        back = DiagnosisResult.from_json(tmp_path / "d.json")
+        assert back.to_dict() == json.loads(r.to_json())
+        assert back.summary() == r.summary()
+        assert [c.physics for c in back.ranking] == [c.physics for c in r.ranking]
+    # the infinite delta BIC of an entry not tested comes back infinite, not NaN or a string
+    sat = next(c for c in back.ranking if not c.testable or c.physics == "control-saturation")
+    want = next(c for c in control_result.ranking if c.physics == sat.physics)
+    assert sat.delta_bic == want.delta_bic and isinstance(sat.delta_bic, float)
+    # the chosen extension's profile interval, with its profile, and a calibration
+    back = DiagnosisResult.from_dict(res.to_dict())
+    iv, iv0 = back.chosen.interval["omega_w"], res.chosen.interval["omega_w"]
+    assert (iv.lower, iv.upper, iv.level) == (iv0.lower, iv0.upper, iv0.level)
+    np.testing.assert_array_equal(iv.deviance, iv0.deviance)
+    assert back.where.keys() == res.where.keys()
+    k = next(k for k, e in res.where.items() if math.isfinite(e.value))
+    assert back.where[k].value == res.where[k].value
+    cal = Calibration("motion-washout", 4, 0.5, 0.25, 2.0, 1e-4, 3e-3, 0.2,
+                      np.array([0.1, 0.7, 0.0, 1.2]))
+    again = Calibration.from_dict(json.loads(json.dumps(cal.to_dict())))
+    assert again.to_dict() == cal.to_dict() and again.scale == 2.0
+    bf = ExtensionBayesFactor("motion-washout", 4.0, 0.7, "very strong", "motion-washout", None,
+                              EvidenceSummary(10.0, 0.5, 20.0), EvidenceSummary(6.0, 0.4, 15.0),
+                              {"omega_w": [0.02, 5.0]}, {"runs": 3}, 12.5)
+    assert ExtensionBayesFactor.from_dict(json.loads(json.dumps(bf.to_dict()))) == bf
+    # a diagnose-batch file (settings, then the diagnosis) is read as its diagnosis
+    (tmp_path / "b.json").write_text(json.dumps({"key": "s1_FD", "seed": 0,
+                                                 "diagnosis": res.to_dict()}))
+    assert DiagnosisResult.from_json(tmp_path / "b.json").physics == "motion-washout"
+    # what a file does not keep
+    with pytest.raises(ValueError, match="read from .*d.json: a result file keeps its numbers"):
+        DiagnosisResult.from_json(tmp_path / "d.json").report(tmp_path / "rep")
+    with pytest.raises(ValueError, match="does not carry 'motion-washout'.s fitted model"):
+        sample_chosen(back, rec)
+    # not a diagnosis, a pooled one, not JSON
+    (tmp_path / "x.json").write_text('{"log_bayes_factor": 1.0}')
+    with pytest.raises(ValueError, match="x.json holds not a diagnosis result"):
+        DiagnosisResult.from_json(tmp_path / "x.json")
+    (tmp_path / "p.json").write_text(json.dumps(dict(res.to_dict(), pooled=True)))
+    with pytest.raises(ValueError, match="a pooled diagnosis: read it with PooledDiagnosisResult"):
+        DiagnosisResult.from_json(tmp_path / "p.json")
+    (tmp_path / "t.json").write_text("physics: none")
+    with pytest.raises(ValueError, match="t.json is not a JSON file"):
+        DiagnosisResult.from_json(tmp_path / "t.json")

@@ -478,3 +478,32 @@ def test_a_failed_grid_point_does_not_wreck_the_shared_posterior(washout_runs, w
     assert m["sd"] == pytest.approx(m0["sd"], rel=0.2)
     assert post.log_bayes_factor == pytest.approx(post0.log_bayes_factor, abs=0.5)
     assert any("1 of 11 grid points failed" in line for line in post.summary_lines())
+
+
+def test_a_pooled_diagnosis_read_back_from_its_json_is_the_same(washout_runs, washout_result,
+                                                                tmp_path):
+    """from_json gives back the runs, the Fisher-combined evidence, the calibrated ranking and
+    the shared posterior: the same to_dict, summary and report; the posterior step, which
+    needs the noise models a file does not keep, is refused by name."""
+    from bayespilot.diagnose import DiagnosisResult, shared_posterior
+
+    res = washout_result
+    if res.posterior is None:
+        shared_posterior(res, washout_runs, n_grid=7)
+    res.to_json(tmp_path / "d.json")
+    back = PooledDiagnosisResult.from_json(tmp_path / "d.json")
+    assert back.to_dict() == json.loads(res.to_json())
+    assert back.summary() == res.summary()
+    assert back.chosen.calibration.replicates == res.chosen.calibration.replicates
+    np.testing.assert_allclose(back.posterior.log_density, res.posterior.log_density,
+                               rtol=1e-12)
+    paths = back.report(tmp_path / "rep")
+    assert {"candidates", "runs", "posterior", "html", "json"} <= set(paths)
+    assert json.loads(paths["json"].read_text()) == json.loads(res.to_json())
+    with pytest.raises(ValueError, match="does not carry its runs' noise models"):
+        shared_posterior(back, washout_runs)
+    with pytest.raises(ValueError, match="a pooled diagnosis: read it with PooledDiagnosisResult"):
+        DiagnosisResult.from_json(tmp_path / "d.json")
+    (tmp_path / "s.json").write_text(json.dumps(dict(res.to_dict(), pooled=False)))
+    with pytest.raises(ValueError, match="a single-run diagnosis: read it with DiagnosisResult"):
+        PooledDiagnosisResult.from_json(tmp_path / "s.json")

@@ -93,6 +93,31 @@ def dumps(obj: Any) -> str:
     return json.dumps(json_ready(obj), indent=1, allow_nan=False)
 
 
+def number(v: Any) -> float:
+    """A number as a result file holds it, as a float: null is NaN, and the strings
+    ``"inf"`` and ``"-inf"`` (a diagnosis ranking's infinite delta BIC, kept apart from a
+    missing value) are infinities."""
+    return math.nan if v is None else float(v)
+
+
+def numbers(d: Mapping[str, Any] | None) -> dict[str, float]:
+    """A result file's dict of numbers (name -> :func:`number`); {} for null."""
+    return {k: number(v) for k, v in (d or {}).items()}
+
+
+def read_json(path: str | os.PathLike, what: str) -> dict[str, Any]:
+    """The JSON object in the file ``path``, or a ValueError that names the file and says it
+    is not ``what`` (a result file of another kind, or not JSON)."""
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path} is not a JSON file ({exc})") from None
+    if not isinstance(d, dict):
+        raise ValueError(f"{path} holds a JSON {type(d).__name__}, not {what}")
+    return d
+
+
 def nan_for_null(cls: type, d: Mapping[str, Any]) -> dict[str, Any]:
     """``d`` with NaN for a null in each field of the dataclass ``cls`` annotated ``float``
     (as :func:`dumps` wrote a non-finite number; a field that may be None is annotated

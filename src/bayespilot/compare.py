@@ -90,20 +90,19 @@ Wilcoxon signed-rank test).
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
 import time
 import types
 import warnings
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ._files import dumps, nan_for_null, write_text_atomic
+from ._files import dumps, nan_for_null, read_json, write_text_atomic
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
@@ -994,7 +993,8 @@ class Comparison:
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "Comparison":
-        return cls.from_dict(json.loads(Path(path).read_text()))
+        """The comparison a :meth:`to_json` file holds."""
+        return cls.from_dict(read_json(path, "a Comparison"))
 
     def summary(self) -> str:
         """A few lines for people."""
@@ -1348,6 +1348,17 @@ class PooledComparison:
         """JSON text, or written to ``path``."""
         text = dumps(self.to_dict())
         return text if path is None else write_text_atomic(path, text)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "PooledComparison":
+        """The pooled comparison a :meth:`to_dict` holds (a null number is NaN)."""
+        return cls(**nan_for_null(cls, {k: d[k] for k in (f.name for f in fields(cls))
+                                       if k in d}))
+
+    @classmethod
+    def from_json(cls, path: str | os.PathLike) -> "PooledComparison":
+        """The pooled comparison a :meth:`to_json` file holds."""
+        return cls.from_dict(read_json(path, "a PooledComparison"))
 
     def summary(self) -> str:
         counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)

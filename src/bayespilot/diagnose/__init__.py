@@ -50,7 +50,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .._files import json_ready, write_text_atomic
+from .._files import json_ready, number, numbers, read_json, write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
 from .locate import EvidenceWarning
 from .._blas import one_blas_thread
@@ -83,7 +83,7 @@ MAX_REBASE = 2
 
 
 class _JSONSummary:
-    """``to_json`` for a result that has ``to_dict``."""
+    """``to_json`` and ``from_json`` for a result that has ``to_dict`` and ``from_dict``."""
 
     def to_json(self, path: str | Path | None = None) -> str:
         """The JSON summary as text; also written to ``path`` when given."""
@@ -91,6 +91,55 @@ class _JSONSummary:
         if path is not None:
             write_text_atomic(path, text)
         return text
+
+    @classmethod
+    def from_json(cls, path: str | Path):
+        """The result a :meth:`to_json` file holds (``diagnosis.json`` of a report, the JSON
+        of ``bayespilot diagnose --json``, a batch's per-recording file).
+
+        What a result file keeps: the decision, the ranking, the located
+        evidence, the fits' numbers, the posterior's summary; not the signals,
+        fitted models and noise models a diagnosis carries in memory (see
+        :meth:`from_dict`).
+
+        Parameters
+        ----------
+        path : str or Path
+            The result file.
+
+        Returns
+        -------
+        DiagnosisResult or PooledDiagnosisResult
+            Of the class it is called on; a file of the other kind is refused.
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ValueError
+            The file is not JSON, or holds another kind of result.
+        """
+        d = read_json(path, f"a {cls.__name__}")
+        if isinstance(d.get("diagnosis"), Mapping) and "physics" not in d:
+            d = d["diagnosis"]  # a diagnose-batch file: its settings, then the diagnosis
+        return cls.from_dict(d, source_file=str(path))
+
+
+def _base_from(d: Mapping[str, Any]) -> dict[str, Any]:
+    """A base fit's dict (``base``) as a result file holds it, its nulls NaN."""
+    return {k: numbers(v) if isinstance(v, Mapping) else number(v) for k, v in d.items()}
+
+
+def _kind_check(d: Mapping[str, Any], pooled: bool, source_file: str | None) -> None:
+    """Refuse a dict that is not a diagnosis's of the kind asked for, naming what it is."""
+    where = f"{source_file} holds" if source_file else "this dict is"
+    if not {"physics", "ranking", "where"} <= set(d):
+        raise ValueError(f"{where} not a diagnosis result (no physics, ranking and where)")
+    if bool(d.get("pooled")) != pooled:
+        raise ValueError(f"{where} a {'pooled' if d.get('pooled') else 'single-run'} "
+                         f"diagnosis: read it with "
+                         f"{'PooledDiagnosisResult' if d.get('pooled') else 'DiagnosisResult'}"
+                         f".from_json")
 
 
 def _fitted_lines(chosen) -> list[str]:
@@ -180,8 +229,10 @@ class DiagnosisResult(_JSONSummary):
     base_model: Any = field(default=None, repr=False)
 
     def _posterior_dict(self) -> dict[str, Any] | None:
-        if self.posterior is None or self.chosen is None:
+        if self.chosen is None:
             return None
+        if self.posterior is None:  # a result read from a file keeps the posterior's summary
+            return self.arrays.get("posterior_summary")
         from .posterior import posterior_dict
 
         return posterior_dict(self.posterior, tuple(self.chosen.params))
@@ -264,12 +315,83 @@ class DiagnosisResult(_JSONSummary):
 
     __str__ = summary
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], *, source_file: str | None = None
+                  ) -> "DiagnosisResult":
+        """The diagnosis a :meth:`to_dict` holds, as far as a result file keeps it.
+
+        Its ``summary()``, ``to_dict()`` and numbers are the original's.
+        Not kept, so not here: the signals the report's figures are drawn
+        from, the candidates' fitted models and noise models (``fit``,
+        ``model``, ``noise`` are None), the posterior's draws (its summary
+        is kept and shown) and the base model; :meth:`report`,
+        :func:`~bayespilot.diagnose.posterior.sample_chosen` and
+        :func:`~bayespilot.diagnose.nested.bayes_factor` need the diagnosis
+        made again.
+
+        Parameters
+        ----------
+        d : mapping
+            A single-run diagnosis's :meth:`to_dict` (or its JSON, parsed).
+        source_file : str, optional
+            Where ``d`` was read from, for messages.
+
+        Returns
+        -------
+        DiagnosisResult
+
+        Raises
+        ------
+        ValueError
+            ``d`` is not a diagnosis's, or is a pooled one's
+            (:meth:`PooledDiagnosisResult.from_dict`).
+        """
+        from .decide import CandidateResult
+        from .locate import Evidence
+        from .nested import ExtensionBayesFactor
+
+        _kind_check(d, False, source_file)
+        ranking = [CandidateResult.from_dict(c) for c in d["ranking"]]
+        c = d.get("chosen")
+        chosen = None
+        arrays: dict[str, Any] = {"from_json": source_file or True}
+        if c is not None:
+            chosen = next((r for r in ranking if r.physics == c["physics"]), None)
+            if chosen is None:
+                chosen = CandidateResult.from_dict(dict(c, testable=True, justified=True))
+            for key, name in (("before_vaf", "vaf_before"), ("after_vaf", "vaf_after"),
+                              ("before_eq4_neg_log_lik", "neg_log_lik_before"),
+                              ("after_eq4_neg_log_lik", "neg_log_lik_after")):
+                if c.get(name) is not None:
+                    arrays[key] = float(c[name])
+            if c.get("posterior") is not None:
+                arrays["posterior_summary"] = c["posterior"]
+        bf = d.get("bayes_factor")
+        return cls(bool(d["mismatch"]), d["physics"], ranking,
+                   {k: Evidence.from_dict(e) for k, e in d["where"].items()},
+                   _base_from(d["base"]), chosen, dict(d.get("settings") or {}),
+                   number(d.get("elapsed_seconds", 0.0)), d.get("source"), arrays,
+                   bayes_factor=None if bf is None else ExtensionBayesFactor.from_dict(bf))
+
     def report(self, directory: str | Path) -> dict[str, Path]:
         """Write PNG figures, ``report.html`` (figures embedded) and ``diagnosis.json``.
 
         Returns the paths by name.
+
+        Raises
+        ------
+        ValueError
+            The result was read from a file (:meth:`from_json`), which keeps
+            the numbers but not the signals the figures are drawn from.
         """
         from .report import write_report
+
+        if self.arrays.get("from_json"):
+            where = self.arrays["from_json"]
+            raise ValueError(f"this diagnosis was read from "
+                             f"{'a dict' if where is True else where}: a result file keeps its "
+                             f"numbers, not the signals the report's figures are drawn from; "
+                             f"diagnose the recording again to write its report")
 
         return write_report(self, directory)
 

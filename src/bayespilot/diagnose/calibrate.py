@@ -54,6 +54,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from .._files import number
 from .catalogue import Extension
 
 __all__ = ["Calibration", "reference_mean", "calibrate_candidate"]
@@ -103,6 +104,14 @@ class Calibration:
                 "scale": self.scale, "p_nominal": self.p_nominal, "p_value": self.p_value,
                 "p_empirical": self.p_empirical,
                 "statistics": [float(x) for x in self.statistics]}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Calibration":
+        """The Calibration a :meth:`to_dict` holds."""
+        return cls(d["physics"], int(d["replicates"]),
+                   *(number(d.get(k)) for k in ("null_mean", "reference_mean", "scale",
+                                                "p_nominal", "p_value", "p_empirical")),
+                   np.array([number(x) for x in d.get("statistics", ())], dtype=float))
 
 
 def reference_mean(ext: Extension) -> float:

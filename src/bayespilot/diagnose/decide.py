@@ -75,6 +75,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 from scipy import linalg, optimize, signal, stats
 
+from .._files import number, numbers
 from ..likelihood import Likelihood
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, fit_ar
@@ -792,6 +793,32 @@ class CandidateResult:
                         else v)
                     for k, v in self.refit.items()},
                 "interval": {k: v.to_dict() for k, v in self.interval.items()}}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "CandidateResult":
+        """The CandidateResult a :meth:`to_dict` holds, as a result file keeps it: its
+        numbers, calibration and profile intervals, without the fit, the extended model and
+        the noise model objects (``fit``, ``model`` and ``noise`` are None; the reported
+        fit's noise model stays in ``refit["noise_model"]`` as a dict)."""
+        from .calibrate import Calibration
+        from .profile import ProfileInterval
+
+        refit = d.get("refit")
+        if refit is not None:
+            refit = {k: (numbers(v) if k in ("test_params", "own_stderr") else v)
+                     for k, v in refit.items()}
+        cal = d.get("calibration")
+        return cls(d["physics"], bool(d["testable"]), d.get("reason", ""),
+                   *(number(d.get(k, default)) for k, default in (
+                       ("delta_neg_log_lik", 0.0), ("statistic", 0.0))),
+                   int(d.get("df", 0)), number(d.get("p_value", 1.0)),
+                   number(d.get("delta_bic", "-inf")), number(d.get("log_bayes_factor", "-inf")),
+                   numbers(d.get("params")), numbers(d.get("stderr")),
+                   numbers(d.get("all_params")), number(d.get("signature_score", 0.0)),
+                   bool(d.get("justified", False)),
+                   calibration=None if cal is None else Calibration.from_dict(cal), refit=refit,
+                   interval={k: ProfileInterval.from_dict(k, v)
+                             for k, v in (d.get("interval") or {}).items()})
 
     def report_fit(self, fit: "FitSummary", noise: "NoiseModel", how: str) -> None:
         """Report the estimates of ``fit`` (of this candidate's extended model) instead of

@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping
 import numpy as np
 from scipy import integrate, optimize
 
+from .._files import number
 from ..forcing import Multisine
 from ..likelihood import Likelihood
 from ..model import PilotModel
@@ -745,6 +746,13 @@ class Evidence:
         return {"key": self.key, "value": num(self.value), "null_mean": num(self.null_mean),
                 "null_sd": num(self.null_sd), "z": num(self.z), "p_value": num(self.p_value),
                 "replicates": self.replicates, "description": self.description}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Evidence":
+        """The Evidence a :meth:`to_dict` holds (``z`` is computed, not read)."""
+        return cls(d["key"], number(d["value"]), number(d.get("null_mean")),
+                   number(d.get("null_sd")), number(d.get("p_value")),
+                   d.get("description", ""), int(d.get("replicates", 0)))
 
 
 def calibrate(values: Mapping[str, float], null: Mapping[str, np.ndarray] | None

@@ -53,13 +53,14 @@ from typing import Any, Mapping
 import numpy as np
 
 from .._blas import one_blas_thread
+from .._files import number
 from .._seeds import resolve_seed
 from ..model import PilotModel
 from ..noise import ARNoise
 from ..recording import Recording
 from .catalogue import get_extension
 
-__all__ = ["ExtensionBayesFactor", "bayes_factor", "nested_bayes_factor"]
+__all__ = ["ExtensionBayesFactor", "EvidenceSummary", "bayes_factor", "nested_bayes_factor"]
 
 #: dynesty's sampling method for these evidences: slice sampling spread half as far as
 #: random walks over repeated runs on the walk-through's washout run (module docs).
@@ -75,6 +76,16 @@ RUNS = 3
 #: (``python analyses/prove_diagnose.py --bayes-factor-repeat 28,70,0,14,49,7``); one scale
 #: is kept until more controls can set one per entry.
 ERR_SCALE = 2.5
+
+
+@dataclass(frozen=True)
+class EvidenceSummary:
+    """What a result file keeps of one model's evidence (:class:`bayespilot.compare.Evidence`
+    without the nested-sampling details): ln Z, its error and the largest ln L met."""
+
+    log_z: float
+    log_z_err: float
+    max_log_lik: float
 
 
 @dataclass
@@ -98,8 +109,10 @@ class ExtensionBayesFactor:
     schwarz : float or None
         The diagnosis's Schwarz approximation (delta_BIC / 2, decision
         likelihood) for comparison.
-    extended, base : Evidence
-        The combined evidences (:class:`bayespilot.compare.Evidence`).
+    extended, base : Evidence or EvidenceSummary
+        The combined evidences (:class:`bayespilot.compare.Evidence`; an
+        :class:`EvidenceSummary` of ln Z, its error and the largest ln L
+        after :meth:`from_dict`).
     prior : dict
         The new parameters' prior boxes, name -> [lower, upper].
     settings : dict
@@ -132,6 +145,22 @@ class ExtensionBayesFactor:
                 "max_log_lik_base": self.base.max_log_lik,
                 "prior": {k: list(v) for k, v in self.prior.items()},
                 "settings": self.settings, "elapsed_seconds": self.elapsed}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "ExtensionBayesFactor":
+        """The Bayes factor a :meth:`to_dict` holds; its evidences are
+        :class:`EvidenceSummary` objects (a result file keeps no draws)."""
+        def evidence(which):
+            return EvidenceSummary(number(d.get(f"log_z_{which}")),
+                                   number(d.get(f"log_z_{which}_err")),
+                                   number(d.get(f"max_log_lik_{which}")))
+
+        sch = d.get("schwarz_log_bayes_factor")
+        return cls(d["physics"], number(d["log_bayes_factor"]),
+                   number(d["log_bayes_factor_err"]), d["category"], d["favours"],
+                   None if sch is None else float(sch), evidence("extended"), evidence("base"),
+                   {k: list(v) for k, v in (d.get("prior") or {}).items()},
+                   dict(d.get("settings") or {}), number(d.get("elapsed_seconds", 0.0)))
 
     def summary_line(self) -> str:
         """One line for a diagnosis summary."""

@@ -33,16 +33,17 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 from scipy import linalg, optimize, stats
 
 from .._blas import one_blas_thread
-from .._files import json_ready, write_text_atomic
+from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
-               _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
+               _base_from, _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
+               _kind_check,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -195,6 +196,58 @@ class PooledDiagnosisResult(_JSONSummary):
         return "\n".join(lines)
 
     __str__ = summary
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], *, source_file: str | None = None
+                  ) -> "PooledDiagnosisResult":
+        """The pooled diagnosis a :meth:`to_dict` holds, as far as a result file keeps it.
+
+        Its ``summary()``, ``to_dict()``, numbers and :meth:`report` are the
+        original's.  Not kept, so not here: the runs' noise models, the base
+        model and the candidates' pooled fits (``arrays`` is empty; ``fit``,
+        ``model`` and ``noise`` of each candidate are None), which
+        :func:`~bayespilot.diagnose.shared_posterior` needs; a posterior
+        computed before is kept (:class:`SharedPosterior`).
+
+        Parameters
+        ----------
+        d : mapping
+            A pooled diagnosis's :meth:`to_dict` (or its JSON, parsed).
+        source_file : str, optional
+            Where ``d`` was read from, for messages.
+
+        Returns
+        -------
+        PooledDiagnosisResult
+
+        Raises
+        ------
+        ValueError
+            ``d`` is not a diagnosis's, or is a single run's
+            (:meth:`DiagnosisResult.from_dict`).
+        """
+        from .decide import CandidateResult
+        from .locate import Evidence
+        from .posterior import SharedPosterior
+
+        _kind_check(d, True, source_file)
+        ranking = [CandidateResult.from_dict(c) for c in d["ranking"]]
+        c = d.get("chosen")
+        chosen = None if c is None else next(
+            (r for r in ranking if r.physics == c["physics"]), None) or \
+            CandidateResult.from_dict(c)
+        runs = []
+        for r in d.get("runs", ()):
+            run = dict(r, base=_base_from(r["base"]),
+                       where={k: Evidence.from_dict(e) for k, e in r["where"].items()},
+                       delta_neg_log_lik=numbers(r.get("delta_neg_log_lik")))
+            if r.get("params") is not None:
+                run["params"] = numbers(r["params"])
+            runs.append(run)
+        post = d.get("posterior")
+        return cls(bool(d["mismatch"]), d["physics"], ranking, runs, dict(d["where"]), chosen,
+                   dict(d.get("settings") or {}), number(d.get("elapsed_seconds", 0.0)),
+                   posterior=None if post is None else SharedPosterior.from_dict(post))
 
     def report(self, directory: str | Path) -> dict[str, Path]:
         """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``

@@ -37,6 +37,7 @@ import numpy as np
 from scipy.integrate import trapezoid
 from scipy.interpolate import CubicSpline
 
+from .._files import number, numbers
 from ..recording import Recording
 from .catalogue import get_extension
 
@@ -65,7 +66,10 @@ def _gls_chosen(result: Any, nothing: str):
     if chosen is None:
         raise ValueError(f"the diagnosis chose no extension (physics = "
                          f"{getattr(result, 'physics', 'none')!r}): {nothing}")
-    if get_extension(chosen.physics).likelihood != "gls" or getattr(chosen, "model", None) is None:
+    if get_extension(chosen.physics).likelihood == "gls" and getattr(chosen, "model", None) is None:
+        raise ValueError(f"this diagnosis does not carry {chosen.physics!r}'s fitted model (read "
+                         "back from JSON?); diagnose the recording again")
+    if get_extension(chosen.physics).likelihood != "gls":
         raise ValueError(f"{chosen.physics!r} is decided by its flat tops and a censored "
                          "likelihood; its limits are read from the data, not sampled")
     return chosen
@@ -219,6 +223,20 @@ class SharedPosterior:
                 "grid": [g.tolist() for g in self.grid],
                 "density": np.exp(self.log_density).tolist(), "edge_mass": self.edge_mass,
                 "settings": self.settings, "elapsed_seconds": self.elapsed}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "SharedPosterior":
+        """The posterior a :meth:`to_dict` holds (the log density from its density)."""
+        marginals = {n: {k: ([number(x) for x in v] if isinstance(v, list) else number(v))
+                         for k, v in m.items()}
+                     for n, m in d["marginals"].items()}
+        with np.errstate(divide="ignore"):
+            log_density = np.log(np.asarray(d["density"], dtype=float))
+        return cls(d["physics"], tuple(d["names"]),
+                   [np.asarray(g, dtype=float) for g in d["grid"]], log_density, marginals,
+                   numbers(d.get("ml")), numbers(d.get("stderr")), number(d.get("edge_mass")),
+                   dict(d.get("settings") or {}), number(d.get("elapsed_seconds", 0.0)),
+                   number(d.get("log_bayes_factor")))
 
     def summary_lines(self) -> list[str]:
         """Lines for a summary: per parameter the median and central 90 % interval."""

@@ -39,6 +39,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from scipy import stats
 
+from .._files import number
 from .decide import FitSummary, Whitened, _gls_refine, scan_threshold
 
 __all__ = ["ProfileInterval", "profile_interval", "profile_intervals", "LEVEL", "STEPS", "STOP",
@@ -99,6 +100,16 @@ class ProfileInterval:
                 "lower_open": self.lower_open, "upper_open": self.upper_open,
                 "scale": float(self.scale), "values": [float(v) for v in self.values],
                 "deviance": [float(d) for d in self.deviance]}
+
+    @classmethod
+    def from_dict(cls, name: str, d: Mapping[str, Any]) -> "ProfileInterval":
+        """The interval of parameter ``name`` that a :meth:`to_dict` holds (the dict is keyed
+        by the name and does not repeat it)."""
+        return cls(name, number(d["level"]), number(d["lower"]), number(d["upper"]),
+                   bool(d.get("lower_open", False)), bool(d.get("upper_open", False)),
+                   number(d.get("scale", 1.0)),
+                   np.array([number(v) for v in d.get("values", ())], dtype=float),
+                   np.array([number(v) for v in d.get("deviance", ())], dtype=float))
 
     def __str__(self) -> str:
         lo = f"{'<=' if self.lower_open else ''}{self.lower:.4g}"
