@@ -402,11 +402,6 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-#: Seconds at the start that ``fit --noise ar`` leaves out (the start-up error, docs/fitting.md);
-#: the likelihood takes at most half the record, so such a fit needs twice this.
-_AR_DISCARD = 2.0
-
-
 def _cmd_fit(args: argparse.Namespace) -> int:
     from .fit.fast import fit_fast
     from .fit.three_step import fit_paper
@@ -418,10 +413,6 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from .model import paper_model
 
     rec = _read(args.recording)
-    if args.noise == "ar" and rec.duration < 2 * _AR_DISCARD:
-        raise UsageError(f"{args.recording}: --noise ar leaves the first {_AR_DISCARD:g} s out "
-                         f"and needs a record of at least {2 * _AR_DISCARD:g} s; this one is "
-                         f"{rec.duration:g} s long")
     threshold = not args.no_threshold
     model = paper_model(oversample=args.oversample)
     if args.method == "paper":
@@ -433,7 +424,7 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         _say(args, f"fitting {rec.source} with the fast estimator"
                    + (" (prediction error: AR noise model)" if args.noise == "ar" else "") + " ...")
         fit = fit_fast(rec, model, threshold=threshold, seed=args.seed,
-                       **({"noise": "ar", "discard": _AR_DISCARD} if args.noise == "ar" else {}))
+                       **({"noise": "ar"} if args.noise == "ar" else {}))
     if not math.isfinite(fit.neg_log_lik):
         raise CommandFailed("the fit did not reach a finite -ln L")
     print(fit.summary())
