@@ -181,7 +181,7 @@ def information_spectrum() -> None:
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(7.5, 6.5), sharex=True, layout="constrained")
     a1.semilogy(f[1:], P[1:], label="residual at the truth (F_n = 0.2)")
     a1.semilogy(f[1:], P0[1:], label="residual without remnant (discretisation)")
-    a1.set_ylabel("PSD (IPUT^2/Hz)")
+    a1.set_ylabel("PSD of the residual of u (rad$^2$/Hz)")
     a1.legend(fontsize="small")
     a1.set_title("FD, K_theta = 1: residual spectrum and where the information lies",
                  fontsize="medium")

@@ -335,6 +335,15 @@ def test_batch_shape_errors(fd_sim, model):
         lik.batch(np.zeros(8))
     with pytest.raises(ValueError, match=r"\(M, 7\)"):
         Likelihood(paper_model(threshold=False), fd_sim.recording).batch(np.zeros((2, 8)))
+    # out is written by the kernels as given: one of another size was written out of bounds
+    free = np.tile(model.free_vector(presets.paper_parameters("FD")), (5, 1))
+    for bad in (np.empty(1), np.empty(6), np.empty(5, dtype=np.float32), np.empty((5, 1)),
+                np.empty(10)[::2], [0.0] * 5):
+        with pytest.raises(ValueError, match=r"out must be a writeable C-contiguous float64 "
+                                             r"array of shape \(5,\)"):
+            lik.batch(free, out=bad)
+    out = np.empty(5)
+    assert lik.batch(free, out=out) is out and np.all(np.isfinite(out))
 
 
 def test_parameter_name_errors(fd_sim, model):

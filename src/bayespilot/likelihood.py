@@ -408,6 +408,27 @@ class Likelihood:
         :attr:`segmented` the segmented SIMD kernel computes it (about ten
         times faster per row than the fused scalar kernel with AVX-512, twice
         with AVX2; equal to it to round-off).
+
+        Parameters
+        ----------
+        free : ndarray, shape (M, n_free)
+            Free-parameter vectors in ``model.parameter_names`` order.
+        out : ndarray, shape (M,), optional
+            Where to write the values (float64, C-contiguous, writeable); a new
+            array when not given.
+
+        Returns
+        -------
+        ndarray, shape (M,)
+            ``out`` (or the new array) holding -ln L of each row.
+
+        Raises
+        ------
+        ValueError
+            ``free`` is complex or of another shape, or ``out`` is not a
+            writeable C-contiguous float64 array of shape (M,) (the kernels
+            write into it as given: any other would be written out of bounds
+            or lose precision).
         """
         if np.iscomplexobj(free):
             raise ValueError("free must be real parameter vectors, got complex values")
@@ -418,6 +439,12 @@ class Likelihood:
         m = free.shape[0]
         if out is None:
             out = np.empty(m)
+        elif not (isinstance(out, np.ndarray) and out.shape == (m,) and out.dtype == np.float64
+                  and out.flags.c_contiguous and out.flags.writeable):
+            got = (f"shape {out.shape}, dtype {out.dtype}" if isinstance(out, np.ndarray)
+                   else type(out).__name__)
+            raise ValueError(f"out must be a writeable C-contiguous float64 array of shape "
+                             f"({m},), one value per row of free; got {got}")
         floored = np.zeros(m, dtype=np.bool_)
         n_chunks = max(1, min(m, numba.get_num_threads()))
         if self._seg_args is not None:
