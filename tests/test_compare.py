@@ -430,3 +430,26 @@ def test_compare_bad_input():
         compare("run.csv")
     with pytest.raises(TypeError, match="Posterior"):
         compare(sim.recording, posterior={"delta_abs": [0.0]})
+
+
+def test_compare_refuses_what_would_fail_late_before_any_run(monkeypatch):
+    """Settings that failed only after nested sampling (a misspelt sample option, nlive enough
+    for the model without threshold only) are refused before the first run."""
+    import bayespilot.compare as C
+
+    def no_run(*a, **k):
+        raise AssertionError("a nested-sampling run started")
+
+    monkeypatch.setattr(C, "evidence", no_run)
+    rec = _sim(0.0, seed=3).recording
+    with pytest.raises(TypeError, match="sample_options: 'n_walkres' not keyword"):
+        compare(rec, sample_options={"n_walkres": 20})
+    with pytest.raises(ValueError, match="sample_options: 'init', 'seed' set by compare"):
+        compare(rec, sample_options={"seed": 1, "init": {}})
+    # 8 parameters with the threshold: 18 live points at least (the model without has 7)
+    with pytest.raises(ValueError, match="nlive must be an integer >= 18, got 16"):
+        compare(rec, nlive=16)
+    with pytest.raises(ValueError, match="sample must be one of 'auto'.*got 'bogus'"):
+        C.nested_evidence(lambda x: 0.0, [0.0], [1.0], sample="bogus")
+    with pytest.raises(ValueError, match="bound must be one of 'none'.*got 'box'"):
+        C.nested_evidence(lambda x: 0.0, [0.0], [1.0], bound="box")

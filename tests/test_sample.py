@@ -291,6 +291,13 @@ def test_bad_settings_raise(short_sim):
         sample(rec, init=short_sim.params, **dict(SHORT, n_walkers=10))
     with pytest.raises(ValueError, match="min_steps"):
         sample(rec, init=short_sim.params, **dict(SHORT, min_steps=5000))
+    # a starting point outside the bounds was moved to the bound without a word
+    with pytest.raises(ValueError, match=r"init: K_v = 100 is outside its bounds \[0, 10\]"):
+        sample(rec, init=dict(short_sim.params, K_v=100.0), **SHORT)
+    with pytest.raises(ValueError, match=r"init: delta_abs = -0.01 is outside"):
+        sample(rec, init=dict(short_sim.params, delta_abs=-0.01), likelihood="eq4", **SHORT)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        sample(rec, init=dict(short_sim.params, K_w=1.0), **SHORT)
 
 
 def test_informative_prior_is_used(short_sim):

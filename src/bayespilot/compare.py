@@ -318,6 +318,11 @@ class Evidence:
         return cls(**d)
 
 
+#: dynesty's sampling methods and bounding methods (checked before a run, with their names).
+DYNESTY_SAMPLES = ("auto", "unif", "rwalk", "slice", "rslice")
+DYNESTY_BOUNDS = ("none", "single", "multi", "balls", "cubes")
+
+
 def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequence[float],
                     upper: Sequence[float], *, names: Sequence[str] | None = None,
                     nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
@@ -375,6 +380,11 @@ def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequen
         raise TypeError("log_likelihood must be callable")
     nlive = _check_int("nlive", nlive, 2 * lo.size + 2)
     dlogz = _check_pos("dlogz", dlogz)
+    for what, value, choices in (("sample", sample, DYNESTY_SAMPLES),
+                                 ("bound", bound, DYNESTY_BOUNDS)):
+        if value not in choices:
+            raise ValueError(f"{what} must be one of {', '.join(map(repr, choices))} "
+                             f"(dynesty's), got {value!r}")
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     width = hi - lo
     n_calls = 0
@@ -1027,6 +1037,31 @@ class Comparison:
         return self.summary()
 
 
+#: sample()'s arguments that compare sets itself (the recording, the model, the likelihood
+#: of the comparison, the starting point and the seed): not taken from ``sample_options``.
+_SET_BY_COMPARE = ("recording", "model", "likelihood", "ar", "ar_order", "noise", "discard",
+                   "init", "seed")
+
+
+def _check_sample_options(options: Mapping[str, Any]) -> None:
+    """Refuse, before any nested sampling, ``sample_options`` that :func:`sample` would refuse
+    at the end (a misspelt keyword) or that :func:`compare` sets itself."""
+    import inspect
+
+    from .sample import sample as run_sample
+
+    known = set(inspect.signature(run_sample).parameters)
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise TypeError(f"sample_options: {', '.join(map(repr, unknown))} not keyword(s) of "
+                        f"sample(); it takes {', '.join(sorted(known - set(_SET_BY_COMPARE)))}")
+    taken = sorted(set(options) & set(_SET_BY_COMPARE))
+    if taken:
+        raise ValueError(f"sample_options: {', '.join(map(repr, taken))} set by compare itself "
+                         "(its own argument, or the maximum-likelihood start and a seed "
+                         "drawn from its seed)")
+
+
 def _threshold_input(model: PilotModel, recording: Recording) -> np.ndarray | None:
     """|i|, the magnitude of the input of the dead zone on ``delta_abs``, or None."""
     from .likelihood import channel_inputs
@@ -1209,6 +1244,10 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     runs = _check_int("runs", runs, 1)
     if sample_options is not None and not isinstance(sample_options, Mapping):
         raise TypeError("sample_options must be a mapping of keyword arguments of sample()")
+    _check_sample_options(sample_options or {})
+    # the threshold model's evidence needs the most live points: checked here, not after the
+    # model without threshold has had its run
+    nlive = _check_int("nlive", nlive, 2 * (model.n_free + order) + 2)
     if posterior is not None:
         from .sample import Posterior
 

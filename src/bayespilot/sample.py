@@ -810,8 +810,9 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     ------
     ValueError
         Bad settings, a prior for an unknown parameter or with no
-        probability inside that parameter's bounds, or a backend file of
-        another run.
+        probability inside that parameter's bounds, a backend file of
+        another run, or an ``init`` with a parameter the model does not have
+        or one outside its bounds.
     TypeError
         ``recording``/``model``/``init``/``prior`` of the wrong type.
 
@@ -858,6 +859,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     seed = resolve_seed(seed)  # None: a fresh one, recorded (the starting fit's too)
     if init is not None and not isinstance(init, (FitResult, Mapping)):
         raise TypeError(f"init must be a FitResult or a mapping of parameters, got {type(init).__name__}")
+    if isinstance(init, Mapping):
+        _check_init(model, init)
 
     names = model.parameter_names + pacf_names(order)
     ndim = len(names)
@@ -968,6 +971,18 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
             "settings": settings, "seed": seed}
     idata, meta = _to_idata(run.sampler, names, run.tau, meta)
     return Posterior(idata, tuple(names), tau, bool(run.converged), meta["settings"], seed)
+
+
+def _check_init(model: PilotModel, init: Mapping[str, float]) -> None:
+    """Refuse a starting point with a model parameter outside its bounds (the prior's
+    support): moved to the bound without a word, the chain would start somewhere the user
+    did not ask for.  Unknown names and non-finite values are refused by the model."""
+    given = {k: v for k, v in init.items() if not str(k).startswith("pacf_")}
+    x = model.free_vector(given)
+    for name, v, lo, hi in zip(model.parameter_names, x, *model.bounds):
+        if name in given and not lo <= v <= hi:
+            raise ValueError(f"init: {name} = {v:g} is outside its bounds [{lo:g}, {hi:g}] "
+                             "(the prior's support)")
 
 
 def _noise_at(init, model: PilotModel, recording: Recording, discard: float,
