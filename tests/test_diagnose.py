@@ -248,6 +248,8 @@ def test_diagnose_rejects_bad_input():
         diagnose(rec, candidates=["motion-washout", "motion-washout"])
     with pytest.raises(ValueError, match="candidates is empty"):
         diagnose(rec, candidates=[])
+    with pytest.raises(TypeError, match="base_fit must be a FitResult .* got dict"):
+        diagnose(rec, base_fit={"K_v": 1.0})
 
 
 @pytest.fixture(scope="module")

@@ -98,3 +98,32 @@ def test_results_are_standard_json_and_read_back_with_their_nans(tmp_path):
     assert got.log_bayes_factor is None and got.lower_bound is None
     assert math.isnan(got.posterior_density) and math.isnan(got.bandwidth)
     assert got.prior_density == 2.0
+
+
+def test_result_readers_name_a_file_of_another_kind(tmp_path):
+    """A recording's sidecar, a CSV or a missing file given to a result reader: a ValueError
+    (FileNotFoundError) that names the file, not a KeyError, a JSONDecodeError or h5py's
+    "file signature not found"."""
+    import json
+
+    from bayespilot.compare import Comparison
+    from bayespilot.fit.result import FitResult
+    from bayespilot.sample import Posterior
+
+    side = tmp_path / "run.json"
+    side.write_text(json.dumps({"format": "bayespilot-recording/1", "sample_rate_hz": 100.0}))
+    csv = tmp_path / "run.csv"
+    csv.write_text("t,u\n0,1\n")
+    with pytest.raises(ValueError, match=r"run.json: not a fit result: no params, neg_log_lik, "
+                                         r"vaf, method .*this one has format, sample_rate_hz"):
+        FitResult.from_json(side)
+    with pytest.raises(ValueError, match="run.json: not a comparison: no log_bayes_factor"):
+        Comparison.from_json(side)
+    for read in (FitResult.from_json, Comparison.from_json):
+        with pytest.raises(ValueError, match="run.csv is not a JSON file"):
+            read(csv)
+    with pytest.raises(ValueError, match="run.json: not a netCDF file written by "
+                                         "Posterior.to_netcdf"):
+        Posterior.from_netcdf(side)
+    with pytest.raises(FileNotFoundError, match="missing.nc"):
+        Posterior.from_netcdf(tmp_path / "missing.nc")

@@ -190,6 +190,31 @@ def test_fit_rejects_bad_settings(sim):
         fit_paper("not a recording")
     with pytest.raises(ValueError, match="n_starts"):
         fit_fast(sim.recording, n_starts=0)
+    with pytest.raises(ValueError, match="noise_order is the order of the AR model"):
+        fit_fast(sim.recording, noise_order=3)  # was ignored
+
+
+def test_fits_refuse_a_recording_with_nothing_to_fit(sim):
+    """Too few samples for the parameters, or a constant u: refused before fitting (they gave
+    -ln L = inf or a VAF of -inf without a word)."""
+    from bayespilot.recording import Recording
+
+    rec = sim.recording
+    short = Recording({k: v[:32] for k, v in rec.signals.items()}, rec.sample_rate_hz, 1.0)
+    for fit in (fit_fast, fit_paper):
+        with pytest.raises(ValueError, match="32 samples; a fit of 8 parameters needs more "
+                                             "than 32"):
+            fit(short, seed=0)
+    with pytest.raises(ValueError, match="7 parameters needs more than 28"):
+        fit_fast(Recording({k: v[:28] for k, v in rec.signals.items()}, rec.sample_rate_hz, 1.0),
+                 threshold=False)
+    with pytest.raises(ValueError, match=r"u is constant \(0\): there is nothing to fit"):
+        fit_fast(rec.with_signals(u=np.zeros(rec.n_samples)), seed=0)
+    cut = rec.with_signals(u=np.concatenate([rec.u[:300], np.full(rec.n_samples - 300, 0.5)]))
+    with pytest.raises(ValueError, match=r"constant \(0.5\) after the first 4 s"):
+        fit_fast(cut, seed=0, noise="ar", discard=4.0)
+    assert fit_paper(rec, seed=0, discard=None, repetitions=1, n_best=1, generations=2,
+                     population=10).settings["discard"] == 0.0
 
 
 def test_cli_fit_json(sim, tmp_path, capsys):
@@ -266,15 +291,22 @@ def test_paper_fit_takes_only_a_bool_for_iterate(sim):
     assert f.steps["iterations_converged"] is None and len(f.steps["step3"]) == 1
 
 
-def test_cli_fit_prediction_error_needs_four_seconds(sim, tmp_path, capsys):
-    """--noise ar leaves 2 s out, at most half the record: a shorter record is a usage error
-    naming it and the length needed (it was 'unexpected ValueError ... please report it')."""
+def test_cli_fit_of_a_short_record(sim, tmp_path, capsys):
+    """--noise ar leaves 2 s out, a quarter of a record under 8 s, as fit_fast does (a 3-s
+    record was refused); a record too short for any fit is a usage error naming it and the
+    samples needed (not 'unexpected ValueError ... please report it')."""
     short = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.15, seed=21, duration=3.0)
     write_recording(short.recording, tmp_path / "short")
-    code = main(["fit", str(tmp_path / "short"), "--method", "fast", "--noise", "ar", "-q"])
-    err = capsys.readouterr().err
-    assert code == 2, err
-    (line,) = [ln for ln in err.splitlines() if ln.startswith("bayespilot: error:")]
-    assert line.startswith(f"bayespilot: error: {tmp_path / 'short'}: --noise ar")
-    assert "at least 4 s" in line and "3 s long" in line
-    assert "unexpected" not in err and "report it" not in err
+    code = main(["fit", str(tmp_path / "short"), "--method", "fast", "--noise", "ar", "-q",
+                 "--json", str(tmp_path / "f.json")])
+    assert code == 0, capsys.readouterr().err
+    assert json.loads((tmp_path / "f.json").read_text())["settings"]["discard"] == 0.75
+    tiny = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.15, seed=21, duration=0.3)
+    write_recording(tiny.recording, tmp_path / "tiny")
+    for extra in (["--method", "fast", "--noise", "ar"], ["--method", "paper"]):
+        code = main(["fit", str(tmp_path / "tiny"), *extra, "-q"])
+        err = capsys.readouterr().err
+        assert code == 2, err
+        (line,) = [ln for ln in err.splitlines() if ln.startswith("bayespilot: error:")]
+        assert "a fit of 8 parameters needs more than 32" in line
+        assert "unexpected" not in err and "report it" not in err

@@ -282,6 +282,16 @@ def test_fix_unknown_parameter():
         paper_model().fix(K_x=1.0)
     with pytest.raises(KeyError, match="unknown parameter 'omega_w'"):
         paper_model().parameter("omega_w")
+    # a fixed value outside the bounds, or freeing a name the model lacks, passed silently
+    with pytest.raises(ValueError, match=r"fix: K_v = -1 is outside its bounds \[0, 10\]"):
+        paper_model().fix(K_v=-1.0)
+    with pytest.raises(ValueError, match="free: unknown parameter.s. 'bogus'; this model has K_v"):
+        paper_model().free("bogus")
+    m = paper_model().fix(delta_abs=0.0)
+    assert "delta_abs" not in m.parameter_names
+    assert "delta_abs" in m.free("delta_abs").parameter_names
+    assert m.free("K_v").parameter_names == m.parameter_names  # free already: unchanged
+    assert paper_model().fix(delta_abs=0.1).fixed == {"delta_abs": 0.1}  # the bound itself
 
 
 def test_bad_parameter_and_channel_definitions():

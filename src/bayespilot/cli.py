@@ -412,19 +412,25 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         raise UsageError("argument --iterate: it repeats Steps II and III of --method paper")
     from .model import paper_model
 
+    from .recording import RecordingError
+
     rec = _read(args.recording)
     threshold = not args.no_threshold
     model = paper_model(oversample=args.oversample)
-    if args.method == "paper":
-        _say(args, f"fitting {rec.source} with the paper's three-step procedure "
-                   f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
-        fit = fit_paper(rec, model, threshold=threshold, seed=args.seed, iterate=args.iterate,
-                        progress=_progress(args))
-    else:
-        _say(args, f"fitting {rec.source} with the fast estimator"
-                   + (" (prediction error: AR noise model)" if args.noise == "ar" else "") + " ...")
-        fit = fit_fast(rec, model, threshold=threshold, seed=args.seed,
-                       **({"noise": "ar"} if args.noise == "ar" else {}))
+    try:
+        if args.method == "paper":
+            _say(args, f"fitting {rec.source} with the paper's three-step procedure "
+                       f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
+            fit = fit_paper(rec, model, threshold=threshold, seed=args.seed,
+                            iterate=args.iterate, progress=_progress(args))
+        else:
+            _say(args, f"fitting {rec.source} with the fast estimator"
+                       + (" (prediction error: AR noise model)" if args.noise == "ar" else "")
+                       + " ...")
+            fit = fit_fast(rec, model, threshold=threshold, seed=args.seed,
+                           **({"noise": "ar"} if args.noise == "ar" else {}))
+    except RecordingError as exc:  # a record a fit cannot use (too short, u constant)
+        raise UsageError(str(exc)) from None
     if not math.isfinite(fit.neg_log_lik):
         raise CommandFailed("the fit did not reach a finite -ln L")
     print(fit.summary())

@@ -987,6 +987,19 @@ class Comparison:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Comparison":
+        """The comparison a :meth:`to_dict` holds (a null number is NaN; the evidences
+        without their draws).
+
+        Raises
+        ------
+        ValueError
+            ``d`` lacks what a comparison's dict has: another kind of file.
+        """
+        missing = [k for k in ("log_bayes_factor", "decision", "evidence_threshold",
+                               "evidence_none", "information_criteria") if k not in d]
+        if missing:
+            raise ValueError(f"not a comparison: no {', '.join(missing)} (this one has "
+                             f"{', '.join(list(d)[:6]) or 'nothing'})")
         sd = d.get("savage_dickey")
         def num(v):
             return math.nan if v is None else float(v)
@@ -1003,8 +1016,14 @@ class Comparison:
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "Comparison":
-        """The comparison a :meth:`to_json` file holds."""
-        return cls.from_dict(read_json(path, "a Comparison"))
+        """The comparison a :meth:`to_json` file holds (ValueError naming the file if it is
+        not JSON or not a comparison's)."""
+        try:
+            return cls.from_dict(read_json(path, "a Comparison"))
+        except ValueError as exc:
+            if str(exc).startswith("not a comparison"):
+                raise ValueError(f"{path}: {exc}") from None
+            raise
 
     def summary(self) -> str:
         """A few lines for people."""

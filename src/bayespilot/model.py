@@ -536,6 +536,13 @@ class PilotModel:
         return len(self.parameter_names)
 
     def parameter(self, name: str) -> Parameter:
+        """The declared :class:`Parameter` called ``name`` (free or fixed).
+
+        Raises
+        ------
+        KeyError
+            No parameter of that name (a lookup by name, as a dict's).
+        """
         for p in self.parameters:
             if p.name == name:
                 return p
@@ -648,14 +655,32 @@ class PilotModel:
         Raises
         ------
         ValueError
-            On an unknown parameter, or a value that is complex or not finite.
+            On an unknown parameter, or a value that is complex, not finite or
+            outside the parameter's bounds.
         """
         fixed = dict(self.fixed)
         fixed.update({k: _real(v, f"fixed value of {k}") for k, v in values.items()})
+        known = {p.name: p for p in self.parameters}
+        for k in values:
+            p = known.get(k)
+            if p is not None and math.isfinite(fixed[k]) and not p.lower <= fixed[k] <= p.upper:
+                raise ValueError(f"fix: {k} = {fixed[k]:g} is outside its bounds "
+                                 f"[{p.lower:g}, {p.upper:g}]")
         return replace(self, fixed=fixed)
 
     def free(self, *names: str) -> "PilotModel":
-        """A model in which the named fixed parameters are estimated again."""
+        """A model in which the named fixed parameters are estimated again (a free one named
+        stays free).
+
+        Raises
+        ------
+        ValueError
+            On a name the model does not have.
+        """
+        unknown = [n for n in names if n not in self.all_names]
+        if unknown:
+            raise ValueError(f"free: unknown parameter(s) {', '.join(map(repr, unknown))}; "
+                             f"this model has {', '.join(self.all_names)}")
         return replace(self, fixed={k: v for k, v in self.fixed.items() if k not in names})
 
     def add_stage(self, channel: str, stage: Stage, parameters: Iterable[Parameter] = ()) -> "PilotModel":

@@ -280,7 +280,13 @@ class Posterior:
     def from_netcdf(cls, path: str | os.PathLike) -> "Posterior":
         """Read a file written by :meth:`to_netcdf`."""
         az = _arviz()
-        idata = az.from_netcdf(str(path))
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"{path}: no such file")
+        try:
+            idata = az.from_netcdf(str(path))
+        except (OSError, ValueError) as exc:  # h5py: "file signature not found", ...
+            raise ValueError(f"{path}: not a netCDF file written by Posterior.to_netcdf "
+                             f"({exc})") from None
         try:
             meta = json.loads(idata.posterior.attrs[_META_ATTR])
         except KeyError:

@@ -892,6 +892,12 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
 
     names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample,
                    n_calibrate, noise_passes)
+    if base_fit is not None:
+        from ..fit.result import FitResult
+
+        if not isinstance(base_fit, FitResult):
+            raise TypeError(f"base_fit must be a FitResult (of fit_fast or fit_paper), got "
+                            f"{type(base_fit).__name__}")
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     if profile_noise and n_calibrate:
         raise ValueError("n_calibrate does not combine with profile_noise=True (the replicates "

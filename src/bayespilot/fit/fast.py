@@ -41,7 +41,7 @@ from ..recording import Recording
 from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
-from .three_step import _model_for
+from .three_step import _check_fittable, _model_for
 from .._blas import one_blas_thread
 from .._seeds import resolve_seed
 
@@ -61,6 +61,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     recording : Recording
     model : PilotModel, optional
     threshold : bool
+        False fits the model without threshold (delta_abs = 0); a ``model``
+        without ``delta_abs`` has none either way.
     seed : int, optional
         Seeds the Latin-hypercube starts; the same seed gives the same fit.
         None draws one from fresh entropy; the seed used is
@@ -93,6 +95,15 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     -------
     FitResult
 
+    Raises
+    ------
+    TypeError
+        ``recording`` is not a Recording, or ``model`` not a PilotModel.
+    ValueError
+        A bad setting (``n_starts``, the steps, ``noise``, ``noise_order``
+        without ``noise="ar"``), or a recording with no more than four samples
+        per free parameter after ``discard`` or a constant u.
+
     Examples
     --------
     >>> from bayespilot.simulate import simulate
@@ -114,6 +125,10 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                                     or not 0 <= noise_order <= MAX_AR_ORDER):
         raise ValueError(f"noise_order must be an integer in [0, {MAX_AR_ORDER}], "
                          f"got {noise_order!r}")
+    if noise_order is not None and noise != "ar":
+        raise ValueError(f"noise_order is the order of the AR model that noise='ar' estimates; "
+                         f"with noise={'None' if noise is None else 'an ARNoise'} it has none "
+                         f"(got noise_order={noise_order!r})")
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     if discard is None:
         from ..sample import COLOURED_DISCARD
@@ -122,6 +137,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         discard = 0.0 if noise is None else min(COLOURED_DISCARD, recording.duration / 4)
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
+    _check_fittable(recording, model, discard)
     has_delta = "delta_abs" in model.parameter_names
     base = model.fix(delta_abs=0.0) if has_delta else model
     given = noise if isinstance(noise, ARNoise) else None

@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .._files import dumps, write_text_atomic
+from .._files import dumps, read_json, write_text_atomic
 from .. import presets
 
 __all__ = ["FitResult"]
@@ -73,6 +72,19 @@ class FitResult:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
+        """The fit a :meth:`to_dict` holds (a null number is NaN).
+
+        Raises
+        ------
+        ValueError
+            ``d`` lacks what a fit's dict has (``params``, ``neg_log_lik``,
+            ``vaf``, ``method``): another kind of file.
+        """
+        missing = [k for k in ("params", "neg_log_lik", "vaf", "method") if k not in d]
+        if missing:
+            raise ValueError(f"not a fit result: no {', '.join(missing)} (a FitResult's JSON "
+                             f"has them; this one has {', '.join(list(d)[:6]) or 'nothing'})")
+
         def num(v):  # (a non-finite number was written as null, _files.dumps)
             return math.nan if v is None else float(v)
 
@@ -83,7 +95,21 @@ class FitResult:
 
     @classmethod
     def from_json(cls, path: str | Path) -> "FitResult":
-        return cls.from_dict(json.loads(Path(path).read_text()))
+        """The fit a :meth:`to_json` file holds.
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ValueError
+            The file is not JSON, or not a fit's (the message names it).
+        """
+        try:
+            return cls.from_dict(read_json(path, "a FitResult"))
+        except ValueError as exc:
+            if str(exc).startswith("not a fit result"):
+                raise ValueError(f"{path}: {exc}") from None
+            raise
 
     def summary(self) -> str:
         """A readable table of the estimates and the fit."""

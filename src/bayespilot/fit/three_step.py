@@ -44,13 +44,34 @@ def _model_for(model: PilotModel | None, threshold: bool) -> PilotModel:
     return model
 
 
+def _check_fittable(recording: Recording, model: PilotModel, discard: float) -> None:
+    """Refuse a recording a fit cannot say anything about (a RecordingError, a ValueError
+    the CLI reports as bad input), before fitting: fewer samples
+    after ``discard`` than four per free parameter, or a control output u that is constant
+    over them (nothing to fit; the VAF is undefined).  Fitted anyway, they gave an infinite
+    -ln L or a VAF of -inf without a word."""
+    from ..recording import RecordingError
+
+    skip = int(round(float(discard) / recording.dt)) if discard else 0
+    u = np.asarray(recording.u, dtype=float)[skip:]
+    need = 4 * model.n_free
+    if u.size <= need:
+        raise RecordingError(f"{recording.source or 'the recording'}: {u.size} samples"
+                         f"{f' after the first {discard:g} s' if skip else ''}; a fit of "
+                         f"{model.n_free} parameters needs more than {need}")
+    if not np.ptp(u) > 0:
+        raise RecordingError(f"{recording.source or 'the recording'}: the control output u is "
+                         f"constant ({u[0]:g}){f' after the first {discard:g} s' if skip else ''}"
+                         ": there is nothing to fit")
+
+
 @one_blas_thread
 def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshold: bool = True,
               seed: int | None = None, repetitions: int = 20, n_best: int = 5,
               population: int = 160, generations: int = 100, p_crossover: float = 0.7,
               p_mutation: float = 0.01, bits: int = 20, scan_step: float = 1e-4,
               iterate: bool = False, max_iterations: int = 50, initial: str = "periodic",
-              discard: float = 0.0,
+              discard: float | None = 0.0,
               progress: bool = False) -> FitResult:
     """Fit a pilot model to a recording with the paper's three-step procedure.
 
@@ -86,9 +107,10 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         At most this many passes with ``iterate``; a warning if they run out.
     initial : {"periodic", "rest"}
         Initial-condition treatment of the likelihood.
-    discard : float
+    discard : float or None
         Seconds at the start left out of Eq. 4 (see :class:`~bayespilot.likelihood.Likelihood`;
-        0, the paper's choice, by default).
+        0, the paper's choice, by default; None is 0 too, as in
+        :func:`~bayespilot.fit.fast.fit_fast` with white output error).
     progress : bool
         Show a progress bar over the GA repetitions.
 
@@ -103,7 +125,9 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     ValueError
         ``repetitions``, ``n_best`` or ``max_iterations`` not a positive
         integer, ``n_best > repetitions``, ``scan_step`` not positive,
-        ``iterate`` not a bool, or a setting the likelihood refuses.
+        ``iterate`` not a bool, a setting the likelihood refuses, or a
+        recording with no more than four samples per free parameter or a
+        constant u.
 
     Examples
     --------
@@ -130,7 +154,9 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
+    discard = 0.0 if discard is None else discard
     lik = Likelihood(model, recording, initial=initial, discard=discard)
+    _check_fittable(recording, model, discard)
     has_delta = "delta_abs" in model.parameter_names
 
     s1 = step_one(lik, repetitions=repetitions, n_best=n_best, seed=seed, progress=progress,
