@@ -440,6 +440,7 @@ def test_compare_refuses_what_would_fail_late_before_any_run(monkeypatch):
     def no_run(*a, **k):
         raise AssertionError("a nested-sampling run started")
 
+    evidence = C.evidence
     monkeypatch.setattr(C, "evidence", no_run)
     rec = _sim(0.0, seed=3).recording
     with pytest.raises(TypeError, match="sample_options: 'n_walkres' not keyword"):
@@ -449,6 +450,9 @@ def test_compare_refuses_what_would_fail_late_before_any_run(monkeypatch):
     # 8 parameters with the threshold: 18 live points at least (the model without has 7)
     with pytest.raises(ValueError, match="nlive must be an integer >= 18, got 16"):
         compare(rec, nlive=16)
+    with pytest.raises(ValueError, match="noise is the AR model of likelihood='coloured' with "
+                                         "ar='fixed' only; with likelihood='eq4'"):
+        evidence(rec, likelihood="eq4", noise="ar")
     with pytest.raises(ValueError, match="sample must be one of 'auto'.*got 'bogus'"):
         C.nested_evidence(lambda x: 0.0, [0.0], [1.0], sample="bogus")
     with pytest.raises(ValueError, match="bound must be one of 'none'.*got 'box'"):

@@ -362,6 +362,22 @@ def test_recording_refuses_complex_signal():
     assert caught == []                                 # refused, not cast with a ComplexWarning
 
 
+def test_recording_refuses_text_and_booleans_for_numbers():
+    """A rate or K_theta given as text or a bool, a column of text or booleans: refused (they
+    were read as the number they happened to convert to)."""
+    sig = _signals()
+    for rate in ("100", True):
+        with pytest.raises(RecordingError, match=f"sample_rate_hz must be a number, got {rate!r}"):
+            Recording(sig, rate, 1.0, "FD")
+    with pytest.raises(RecordingError, match="motion_gain must be a number, got True"):
+        Recording(sig, 100.0, True, "FD")
+    with pytest.raises(RecordingError, match="column 'e' holds text, not numbers"):
+        Recording(dict(sig, e=sig["e"].astype(str)), 100.0, 1.0, "FD")
+    with pytest.raises(RecordingError, match="column 'u' holds booleans, not numbers"):
+        Recording(dict(sig, u=sig["u"] > 0), 100.0, 1.0, "FD")
+    assert Recording(sig, np.float32(100.0), np.int64(1), "FD").sample_rate_hz == 100.0
+
+
 @pytest.mark.parametrize("meta, pattern", [
     ({"controlled_element_gain": float("nan")}, r"controlled_element_gain must be a finite number, got nan"),
     ({"control_gain": "abc"}, r"control_gain must be a finite number, got 'abc'"),

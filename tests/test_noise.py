@@ -46,8 +46,16 @@ def test_from_residual_round_trip_and_errors():
         ARNoise.from_dict({"kind": "white"})
     with pytest.raises(ValueError, match="finite 1-D"):
         fit_ar(np.array([1.0, np.inf, 2.0]))
-    with pytest.raises(ValueError, match="AR order"):
+    with pytest.raises(ValueError, match="an AR.20. model needs at least 84 samples, got 40$"):
         fit_ar(x[:40], order=20)
+    # (an empty series and the default orders said "AR order must be in [0, -1]")
+    with pytest.raises(ValueError, match="x is empty"):
+        fit_ar(np.zeros(0))
+    with pytest.raises(ValueError, match=r"AR.30. model needs at least 124 samples, got 10 "
+                                         r"\(give a smaller max_order\)"):
+        fit_ar(x[:10])
+    with pytest.raises(ValueError, match="AR order must be >= 0, got -1"):
+        fit_ar(x, order=-1)
     with pytest.raises(ValueError, match="more than 3 samples"):
         ARNoise([0.1, 0.1, 0.1]).whiten(np.ones(3))
     # orders are integers, at least one is tried; coefficients are a 1-D sequence; a stored

@@ -175,6 +175,25 @@ def test_bad_input_is_refused_clearly(kwargs, message):
         simulate(**kwargs)
 
 
+def test_settings_that_were_ignored_or_misread_are_refused():
+    """A motion gain or forcing scale beside a TrackingTask (which carries its own) was ignored;
+    params as a list failed with dict()'s message; calibrating over no seeds gave NaN."""
+    from bayespilot.simulate import calibrate_remnant_gain
+
+    task = TrackingTask.paper("FD", 0.5)
+    with pytest.raises(ValueError, match=r"motion_gain set\(s\) the paper's preset task; the "
+                                         r"TrackingTask given carries its own \(K_theta = 0.5\)"):
+        simulate(task=task, motion_gain=0.25, duration=2.0)
+    with pytest.raises(ValueError, match="forcing_scale set"):
+        simulate(task=task, forcing_scale=1.0, duration=2.0)
+    assert simulate(task=task, duration=2.0).recording.motion_gain == 0.5
+    assert simulate(task="FD", duration=2.0).recording.motion_gain == 1.0  # the default
+    with pytest.raises(TypeError, match="params must be a mapping .* got list"):
+        simulate(params=[1.0, 2.0, 3.0], duration=2.0)
+    with pytest.raises(ValueError, match="seeds is empty"):
+        calibrate_remnant_gain(0.2, seeds=[])
+
+
 def test_improper_plant_is_refused():
     ft, fd = presets.paper_forcing("FD")
     with pytest.raises(ValueError, match="relative degree"):

@@ -534,6 +534,9 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     model, order = likelihood_options(model, likelihood, ar, ar_order, EVIDENCE_AR_MODES)
+    if noise is not None and not (likelihood == "coloured" and ar == "fixed"):
+        raise ValueError(f"noise is the AR model of likelihood='coloured' with ar='fixed' only; "
+                         f"with likelihood={likelihood!r}, ar={ar!r} it would be ignored")
     noise = _check_noise(noise) if likelihood == "coloured" and ar == "fixed" else None
     if likelihood == "coloured" and ar == "fixed" and noise is None:
         noise = _fit_noise(recording, model, seed, ar_order, discard)
@@ -598,7 +601,8 @@ def savage_dickey(draws: Sequence[float] | np.ndarray, *, lower: float = 0.0, up
     Parameters
     ----------
     draws : array_like
-        Posterior draws of the parameter, all in [lower, upper].
+        Posterior draws of the one parameter, all in [lower, upper]; any shape
+        (e.g. chains x draws), flattened.
     lower, upper : float
         The prior's support; the nested model fixes the parameter at ``lower``.
     prior_density : float, optional

@@ -83,6 +83,8 @@ def fit_ar(x: np.ndarray, *, max_order: int = MAX_AR_ORDER, order: int | None = 
     x = np.asarray(x, dtype=float)
     if x.ndim != 1 or not np.all(np.isfinite(x)):
         raise ValueError("x must be a finite 1-D array")
+    if x.size == 0:
+        raise ValueError("x is empty: an AR model needs a series")
     for name, v in (("max_order", max_order), ("order", order)):
         if v is not None and (isinstance(v, bool) or not isinstance(v, (int, np.integer))):
             raise ValueError(f"{name} must be an integer, got {v!r}")
@@ -91,8 +93,12 @@ def fit_ar(x: np.ndarray, *, max_order: int = MAX_AR_ORDER, order: int | None = 
     x = x - x.mean()
     n = x.size
     orders = [int(order)] if order is not None else list(range(1, int(max_order) + 1))
-    if orders[-1] >= n // 4 or orders[0] < 0:
-        raise ValueError(f"AR order must be in [0, {n // 4 - 1}] for {n} samples")
+    if orders[0] < 0:
+        raise ValueError(f"AR order must be >= 0, got {orders[0]}")
+    if orders[-1] >= n // 4:  # (an order of a quarter of the series or more)
+        raise ValueError(f"an AR({orders[-1]}) model needs at least {4 * (orders[-1] + 1)} "
+                         f"samples, got {n}" + ("" if order is not None else
+                                                " (give a smaller max_order)"))
     if orders == [0]:
         return np.zeros(0)
     pmax = orders[-1]

@@ -280,6 +280,9 @@ class Recording:
                 fail(f"column {name!r} is not numeric")
             if np.iscomplexobj(arr):
                 fail(f"column {name!r} is complex; only real values can be used")
+            if arr.dtype.kind in "USb":  # text or booleans: numbers only by accident
+                fail(f"column {name!r} holds {'booleans' if arr.dtype.kind == 'b' else 'text'}"
+                     f", not numbers")
             try:
                 arr = np.asarray(arr, dtype=np.float64)
             except (TypeError, ValueError):
@@ -299,6 +302,10 @@ class Recording:
             clean[str(name)] = arr
         if length is None or length < 2:
             fail("a recording needs at least 2 samples")
+        for what in ("sample_rate_hz", "motion_gain"):
+            v = getattr(self, what)
+            if isinstance(v, (bool, np.bool_, str, bytes)):
+                fail(f"{what} must be a number, got {v!r}")
         try:
             rate = float(self.sample_rate_hz)
         except (TypeError, ValueError):

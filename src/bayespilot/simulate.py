@@ -302,11 +302,11 @@ def _run(model: PilotModel, theta: np.ndarray, task: TrackingTask, n_fine: np.nd
 
 
 def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None = None, *,
-             task: str | TrackingTask = "FD", motion_gain: float = 1.0,
+             task: str | TrackingTask = "FD", motion_gain: float | None = None,
              remnant_fraction: float | None = None, remnant_gain: float | None = None,
              T_n: float | None = None, seed: int | None = 0, oversample: int | None = None,
              duration: float | None = None, noise_psd: float | None = None,
-             forcing_scale: str | float = "paper_simulation") -> Simulation:
+             forcing_scale: str | float | None = None) -> Simulation:
     """Simulate one run of the closed-loop tracking task.
 
     Parameters
@@ -320,8 +320,9 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     task : {"FD", "FT"} or TrackingTask
         The paper's task preset, or a task of your own.  The recording
         starts at the integration step nearest to its ``run_in``.
-    motion_gain : float
-        K_theta, used with a preset task name.
+    motion_gain : float, optional
+        K_theta of a preset task name (default 1); a TrackingTask carries its
+        own, and giving one beside it is refused.
     remnant_fraction : float, optional
         F_n in [0, 1): K_n is calibrated so that var(n)/var(u) = F_n on this
         realization (Eq. 7).  0 means no remnant.
@@ -342,8 +343,10 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
         Two-sided PSD of the remnant's white noise, rad^2 s; default
         :data:`NOISE_PSD` (0.01: unit-variance samples at 100 Hz) at every
         recording rate.
-    forcing_scale : str or float
-        Amplitude scale of a preset task's forcing functions.
+    forcing_scale : str or float, optional
+        Amplitude scale of a preset task's forcing functions (default
+        ``"paper_simulation"``; see :meth:`TrackingTask.paper`); refused
+        beside a TrackingTask, as ``motion_gain`` is.
 
     Returns
     -------
@@ -376,6 +379,17 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     model = paper_model() if model is None else model
     if not isinstance(model, PilotModel):
         raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
+    if params is not None and not isinstance(params, Mapping):
+        raise TypeError(f"params must be a mapping of parameter values by name (e.g. "
+                        f"{{'K_v': 0.1}}), got {type(params).__name__}")
+    if isinstance(task, TrackingTask) and (motion_gain is not None or forcing_scale is not None):
+        given = ", ".join(n for n, v in (("motion_gain", motion_gain),
+                                         ("forcing_scale", forcing_scale)) if v is not None)
+        raise ValueError(f"{given} set(s) the paper's preset task; the TrackingTask given "
+                         f"carries its own (K_theta = {task.motion_gain:g}): build the task with "
+                         f"what you want (e.g. TrackingTask.paper(..., motion_gain=...))")
+    motion_gain = 1.0 if motion_gain is None else motion_gain
+    forcing_scale = "paper_simulation" if forcing_scale is None else forcing_scale
     if isinstance(task, str):
         if task not in ("FD", "FT"):
             raise ValueError(f"task must be 'FD', 'FT' or a TrackingTask, got {task!r}")
@@ -517,7 +531,7 @@ def _calibrate(run, target: float):
 
 
 def calibrate_remnant_gain(remnant_fraction: float, *, task: str | TrackingTask = "FD",
-                           motion_gain: float = 1.0,
+                           motion_gain: float | None = None,
                            model: PilotModel | None = None, params: Mapping[str, float] | None = None,
                            seeds: range | list[int] = range(10), **kwargs: Any) -> tuple[float, np.ndarray]:
     """K_n that gives ``remnant_fraction`` on average over several realizations.
@@ -531,8 +545,8 @@ def calibrate_remnant_gain(remnant_fraction: float, *, task: str | TrackingTask 
         F_n in [0, 1) to reach on each realization (Eq. 7); 0 gives K_n = 0.
     task : {"FD", "FT"} or TrackingTask, default "FD"
         The paper's task preset, or a task of your own (see :func:`simulate`).
-    motion_gain : float, default 1.0
-        K_theta, used with a preset task name.
+    motion_gain : float, optional
+        K_theta of a preset task name (default 1; see :func:`simulate`).
     model : PilotModel, optional
         Default :func:`~bayespilot.model.paper_model`.
     params : mapping of str to float, optional
@@ -547,7 +561,7 @@ def calibrate_remnant_gain(remnant_fraction: float, *, task: str | TrackingTask 
     Returns
     -------
     mean_gain : float
-        The mean K_n over ``seeds`` (NaN, with a numpy warning, for no seeds).
+        The mean K_n over ``seeds``.
     gains : ndarray, shape (len(seeds),)
         K_n calibrated on each seed's realization, in the order of ``seeds``.
 
@@ -556,14 +570,17 @@ def calibrate_remnant_gain(remnant_fraction: float, *, task: str | TrackingTask 
     ValueError
         If :func:`simulate` refuses the arguments (e.g. ``remnant_fraction``
         outside [0, 1), a task name other than "FD" or "FT", or
-        ``remnant_gain`` among ``kwargs``), or the fraction cannot be reached
-        in the closed loop.
+        ``remnant_gain`` among ``kwargs``), the fraction cannot be reached
+        in the closed loop, or ``seeds`` is empty.
     TypeError
         If ``model`` is not a PilotModel or ``task`` is neither a str nor a
         TrackingTask.
     RuntimeError
         If the closed loop diverges for these parameters.
     """
+    seeds = list(seeds)
+    if not seeds:
+        raise ValueError("seeds is empty: give at least one remnant seed to average over")
     gains = np.array([simulate(model, params, task=task, motion_gain=motion_gain,
                                remnant_fraction=remnant_fraction, seed=s, **kwargs).remnant_gain
                       for s in seeds])
