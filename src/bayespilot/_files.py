@@ -118,6 +118,21 @@ def read_json(path: str | os.PathLike, what: str) -> dict[str, Any]:
     return d
 
 
+class WrongKind(ValueError):
+    """A ``from_dict`` refusing a dict of another kind of result; :func:`read_result` names
+    the file in front of the message."""
+
+
+def read_result(path: str | os.PathLike, from_dict: Any, what: str) -> Any:
+    """``from_dict`` of the JSON object in the file ``path`` (``what``: the kind of result, for
+    messages); a dict of another kind is a ValueError that names the file."""
+    d = read_json(path, what)
+    try:
+        return from_dict(d)
+    except WrongKind as exc:
+        raise ValueError(f"{path}: {exc}") from None
+
+
 def nan_for_null(cls: type, d: Mapping[str, Any]) -> dict[str, Any]:
     """``d`` with NaN for a null in each field of the dataclass ``cls`` annotated ``float``
     (as :func:`dumps` wrote a non-finite number; a field that may be None is annotated

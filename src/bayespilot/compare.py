@@ -102,7 +102,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ._files import dumps, nan_for_null, read_json, write_text_atomic
+from ._files import WrongKind, dumps, nan_for_null, read_json, read_result, write_text_atomic
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
@@ -1002,7 +1002,7 @@ class Comparison:
         missing = [k for k in ("log_bayes_factor", "decision", "evidence_threshold",
                                "evidence_none", "information_criteria") if k not in d]
         if missing:
-            raise ValueError(f"not a comparison: no {', '.join(missing)} (this one has "
+            raise WrongKind(f"not a comparison: no {', '.join(missing)} (this one has "
                              f"{', '.join(list(d)[:6]) or 'nothing'})")
         sd = d.get("savage_dickey")
         def num(v):
@@ -1022,12 +1022,7 @@ class Comparison:
     def from_json(cls, path: str | os.PathLike) -> "Comparison":
         """The comparison a :meth:`to_json` file holds (ValueError naming the file if it is
         not JSON or not a comparison's)."""
-        try:
-            return cls.from_dict(read_json(path, "a Comparison"))
-        except ValueError as exc:
-            if str(exc).startswith("not a comparison"):
-                raise ValueError(f"{path}: {exc}") from None
-            raise
+        return read_result(path, cls.from_dict, "a Comparison")
 
     def summary(self) -> str:
         """A few lines for people."""

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .._files import dumps, read_json, write_text_atomic
+from .._files import WrongKind, dumps, read_result, write_text_atomic
 from .. import presets
 
 __all__ = ["FitResult"]
@@ -82,7 +82,7 @@ class FitResult:
         """
         missing = [k for k in ("params", "neg_log_lik", "vaf", "method") if k not in d]
         if missing:
-            raise ValueError(f"not a fit result: no {', '.join(missing)} (a FitResult's JSON "
+            raise WrongKind(f"not a fit result: no {', '.join(missing)} (a FitResult's JSON "
                              f"has them; this one has {', '.join(list(d)[:6]) or 'nothing'})")
 
         def num(v):  # (a non-finite number was written as null, _files.dumps)
@@ -104,12 +104,7 @@ class FitResult:
         ValueError
             The file is not JSON, or not a fit's (the message names it).
         """
-        try:
-            return cls.from_dict(read_json(path, "a FitResult"))
-        except ValueError as exc:
-            if str(exc).startswith("not a fit result"):
-                raise ValueError(f"{path}: {exc}") from None
-            raise
+        return read_result(path, cls.from_dict, "a FitResult")
 
     def summary(self) -> str:
         """A readable table of the estimates and the fit."""
