@@ -193,6 +193,17 @@ class Job:
         ``FD_k1_fn0.2_r007_thr_paper`` (``_kn4`` appended for Table 4 gains,
         ``_T20`` for a 20-s run).
     remnant_seed, fit_seed : int
+        The seeds of the simulated remnant and of the fit (:func:`job_seed`).
+
+    Raises
+    ------
+    ValueError
+        If a field is out of its range or of the wrong kind (a task other
+        than "FD"/"FT", K_theta < 0, F_n outside [0, 1), a negative or
+        non-integer realization, ``threshold`` not a bool, an unknown method,
+        an option the method does not take or that is not JSON-serialisable,
+        a duration that is not a positive number), or ``remnant="table4"``
+        for a cell Table 4 does not list.
 
     Examples
     --------
@@ -281,6 +292,7 @@ class Job:
 
     @property
     def key(self) -> str:
+        """Stable name of the job and of its result file, e.g. ``FD_k1_fn0.2_r007_thr_paper``."""
         k = (f"{self.task}_k{self.motion_gain:g}_fn{self.remnant_fraction:g}_r{self.realization:03d}"
              f"_{'thr' if self.threshold else 'nothr'}_{self.method}")
         if self.remnant == "table4":
@@ -289,11 +301,15 @@ class Job:
 
     @property
     def remnant_seed(self) -> int:
+        """Seed of the simulated remnant, the same for every job of the cell and realization
+        (with and without threshold, either method: :func:`job_seed` ``("remnant", ...)``)."""
         return job_seed("remnant", self.task, self.motion_gain, self.remnant_fraction,
                         self.realization)
 
     @property
     def fit_seed(self) -> int:
+        """Seed of the fit's GA or Latin-hypercube starts (:func:`job_seed` ``("fit", ...)``),
+        independent of :attr:`remnant_seed`."""
         return job_seed("fit", self.task, self.motion_gain, self.remnant_fraction, self.realization)
 
     def to_dict(self) -> dict[str, Any]:
@@ -306,6 +322,25 @@ class Job:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Job":
+        """The job a :meth:`to_dict` holds.
+
+        Parameters
+        ----------
+        d : mapping
+            ``task``, ``motion_gain``, ``remnant_fraction`` and ``realization``;
+            the other fields optional (their defaults when absent).
+
+        Returns
+        -------
+        Job
+
+        Raises
+        ------
+        KeyError
+            If a required field is missing.
+        ValueError
+            If a field is invalid (see :class:`Job`).
+        """
         return cls(d["task"], d["motion_gain"], d["remnant_fraction"], d["realization"],
                    d.get("threshold", True), d.get("method", "paper"), d.get("fit_kwargs", {}),
                    d.get("duration"), d.get("remnant", "fraction"))
@@ -470,6 +505,7 @@ class CampaignSummary:
     errors : dict
         key -> one-line message of each failure.
     out_dir : Path
+        The folder of the result files.
     elapsed : float
         Wall time of the call, s.
     what : str
@@ -487,6 +523,7 @@ class CampaignSummary:
 
     @property
     def ok(self) -> bool:
+        """True if no job failed."""
         return self.failed == 0
 
     def __str__(self) -> str:

@@ -270,6 +270,7 @@ class Evidence:
     mean : dict
         Posterior mean of each parameter (importance-weighted samples).
     parameter_names : tuple of str
+        The sampled parameters, in vector order.
     n_calls, n_iter : int
         Likelihood evaluations and nested-sampling iterations.
     elapsed : float
@@ -298,13 +299,34 @@ class Evidence:
     weights: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def probability(self, name: str, lower: float) -> float | None:
-        """Posterior probability that parameter ``name`` is >= ``lower`` (None without samples)."""
+        """Posterior probability that parameter ``name`` is >= ``lower`` (None without samples).
+
+        Parameters
+        ----------
+        name : str
+            A parameter of :attr:`parameter_names`.
+        lower : float
+            The level, in the parameter's unit.
+
+        Returns
+        -------
+        float or None
+            The importance-weighted fraction of the nested-sampling draws at
+            or above ``lower``; None when the draws are not kept (after
+            :meth:`from_dict`).
+
+        Raises
+        ------
+        ValueError
+            If ``name`` is not a parameter of the run (with draws kept).
+        """
         if self.samples is None or self.weights is None:
             return None
         col = self.parameter_names.index(name)
         return float(np.sum(self.weights[self.samples[:, col] >= lower]))
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of every attribute except ``samples`` and ``weights``."""
         d = {k: v for k, v in self.__dict__.items() if k not in ("samples", "weights")}
         d["best"], d["mean"] = dict(self.best), dict(self.mean)
         d["settings"] = dict(self.settings)
@@ -313,6 +335,24 @@ class Evidence:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Evidence":
+        """The evidence a :meth:`to_dict` holds (a null number is NaN; no draws).
+
+        Parameters
+        ----------
+        d : mapping
+            A :meth:`to_dict`, as read from JSON; ``samples`` and ``weights``
+            are ignored if present.
+
+        Returns
+        -------
+        Evidence
+            With ``samples`` and ``weights`` None.
+
+        Raises
+        ------
+        TypeError
+            If ``d`` lacks a field or has one an Evidence does not.
+        """
         d = nan_for_null(cls, {k: v for k, v in d.items() if k not in ("samples", "weights")})
         d["parameter_names"] = tuple(d["parameter_names"])
         return cls(**d)
@@ -587,6 +627,7 @@ class SavageDickey:
     n_near: int
 
     def to_dict(self) -> dict[str, Any]:
+        """Every attribute by name (:func:`dataclasses.asdict`)."""
         return asdict(self)
 
 
@@ -922,14 +963,22 @@ class Comparison:
     log_bayes_factor, log_bayes_factor_err : float
         ln Z(threshold) - ln Z(none) and its standard error.
     decision : {"threshold", "none", "inconclusive"}
+        :func:`decide` on the ln BF, with the plateau guard below.
     evidence_threshold, evidence_none : Evidence
+        The nested-sampling runs of the models with and without threshold.
     savage_dickey : SavageDickey or None
+        The check from the threshold model's posterior draws; None if not
+        computed.
     information_criteria : dict
         From :func:`information_criteria`, plus the ML parameters.
     settings : dict
+        Every setting of the comparison.
     seed : int or None
+        The seed used.
     elapsed : float
+        Wall time, s.
     source : str or None
+        The recording compared on.
     plateau_probability : float or None
         Posterior probability, under the model with threshold, that
         ``delta_abs`` is at or above the plateau onset (:func:`plateau_onset`),
@@ -985,7 +1034,22 @@ class Comparison:
         }
 
     def to_json(self, path: str | os.PathLike | None = None) -> str | Path:
-        """The :meth:`to_dict` as JSON text, or written to ``path`` (parents created)."""
+        """The :meth:`to_dict` as JSON text, or written to ``path`` (parents created).
+
+        Non-finite numbers are written as null (NaN again after
+        :meth:`from_json`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike, optional
+            The file to write; an existing one is replaced only once the new
+            one is written.  None: return the text.
+
+        Returns
+        -------
+        str or Path
+            The JSON text, or ``path`` when given.
+        """
         text = dumps(self.to_dict())
         return text if path is None else write_text_atomic(path, text)
 
@@ -993,6 +1057,15 @@ class Comparison:
     def from_dict(cls, d: Mapping[str, Any]) -> "Comparison":
         """The comparison a :meth:`to_dict` holds (a null number is NaN; the evidences
         without their draws).
+
+        Parameters
+        ----------
+        d : mapping
+            A :meth:`to_dict`, as read from JSON.
+
+        Returns
+        -------
+        Comparison
 
         Raises
         ------
@@ -1020,8 +1093,24 @@ class Comparison:
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "Comparison":
-        """The comparison a :meth:`to_json` file holds (ValueError naming the file if it is
-        not JSON or not a comparison's)."""
+        """The comparison a :meth:`to_json` file holds.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The JSON file.
+
+        Returns
+        -------
+        Comparison
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ValueError
+            The file is not JSON, or not a comparison's (the message names it).
+        """
         return read_result(path, cls.from_dict, "a Comparison")
 
     def summary(self) -> str:
@@ -1362,6 +1451,7 @@ class PooledComparison:
     Attributes
     ----------
     n : int
+        Number of recordings pooled.
     log_bayes_factor, log_bayes_factor_err : float
         Sum of the per-recording ln BF, errors in quadrature.
     decision : str
@@ -1373,6 +1463,7 @@ class PooledComparison:
     decisions : dict
         Count of per-recording decisions.
     mean_log_bayes_factor : float
+        Mean of the per-recording ln BF.
     t_statistic, t_pvalue : float
         One-sample t-test of the per-recording ln BF against 0 (= paired
         t-test of ln Z with against without threshold); NaN for n < 2 or when
@@ -1381,6 +1472,7 @@ class PooledComparison:
         Wilcoxon signed-rank test of the same; NaN for n < 2 or when every
         ln BF is 0.
     label : str
+        The condition's name, e.g. ``"FD, K_theta = 1"``.
     decision_note : str
         Why a guard changed the decision ("" if none did).
     """
@@ -1399,25 +1491,78 @@ class PooledComparison:
     decision_note: str = ""
 
     def to_dict(self) -> dict[str, Any]:
+        """Every attribute by name (:func:`dataclasses.asdict`)."""
         return asdict(self)
 
     def to_json(self, path: str | os.PathLike | None = None) -> str | Path:
-        """JSON text, or written to ``path``."""
+        """The :meth:`to_dict` as JSON text, or written to ``path`` (parents created).
+
+        Non-finite numbers (a NaN p-value) are written as null (NaN again
+        after :meth:`from_json`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike, optional
+            The file to write; an existing one is replaced only once the new
+            one is written.  None: return the text.
+
+        Returns
+        -------
+        str or Path
+            The JSON text, or ``path`` when given.
+        """
         text = dumps(self.to_dict())
         return text if path is None else write_text_atomic(path, text)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "PooledComparison":
-        """The pooled comparison a :meth:`to_dict` holds (a null number is NaN)."""
+        """The pooled comparison a :meth:`to_dict` holds (a null number is NaN).
+
+        Parameters
+        ----------
+        d : mapping
+            A :meth:`to_dict`, as read from JSON; keys that are not
+            attributes are ignored.
+
+        Returns
+        -------
+        PooledComparison
+
+        Raises
+        ------
+        TypeError
+            If ``d`` lacks an attribute without a default.
+        """
         return cls(**nan_for_null(cls, {k: d[k] for k in (f.name for f in fields(cls))
                                        if k in d}))
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "PooledComparison":
-        """The pooled comparison a :meth:`to_json` file holds."""
+        """The pooled comparison a :meth:`to_json` file holds.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The JSON file.
+
+        Returns
+        -------
+        PooledComparison
+
+        Raises
+        ------
+        FileNotFoundError
+            No file at ``path``.
+        ValueError
+            The file is not JSON, or holds no JSON object (the message names it).
+        TypeError
+            The object lacks an attribute of a pooled comparison (see
+            :meth:`from_dict`).
+        """
         return cls.from_dict(read_json(path, "a PooledComparison"))
 
     def summary(self) -> str:
+        """One line for people: the sum ln BF and decision, the per-recording counts, the tests."""
         counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)
         return (f"{self.label + ': ' if self.label else ''}{self.n} recordings, sum ln BF = "
                 f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} -> "

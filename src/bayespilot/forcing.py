@@ -93,11 +93,34 @@ class Multisine:
         return self.base_frequency * self.n
 
     def scaled(self, factor: float) -> "Multisine":
-        """The same signal with every amplitude multiplied by ``factor``."""
+        """The same signal with every amplitude multiplied by ``factor``.
+
+        Parameters
+        ----------
+        factor : float
+            The scale on the amplitudes (dimensionless).
+
+        Returns
+        -------
+        Multisine
+        """
         return Multisine(self.base_frequency, self.n, self.amplitude * factor, self.phase)
 
     def __call__(self, t: np.ndarray, derivative: int = 0) -> np.ndarray:
-        """Evaluate f, or its ``derivative``-th time derivative, at times ``t``."""
+        """Evaluate f, or its ``derivative``-th time derivative, at times ``t``.
+
+        Parameters
+        ----------
+        t : ndarray
+            Times, s.
+        derivative : int, default 0
+            Order k of the time derivative (0: f itself).
+
+        Returns
+        -------
+        ndarray
+            d^k f / dt^k at ``t`` (same shape), in the amplitudes' unit per s^k.
+        """
         t = np.asarray(t, dtype=float)
         w = self.frequencies
         arg = np.multiply.outer(t, w) + self.phase
@@ -111,10 +134,40 @@ class Multisine:
 
     @classmethod
     def from_dict(cls, base_frequency: float, d: Mapping[str, Any]) -> "Multisine":
-        """Build from a ``forcing.target`` or ``forcing.disturbance`` object."""
+        """Build from a ``forcing.target`` or ``forcing.disturbance`` object.
+
+        Parameters
+        ----------
+        base_frequency : float
+            omega_0, rad/s (the recording format's ``forcing.base_frequency``).
+        d : mapping
+            ``n``, ``amplitude`` and ``phase`` lists (:meth:`to_dict`).
+
+        Returns
+        -------
+        Multisine
+
+        Raises
+        ------
+        KeyError
+            If ``n``, ``amplitude`` or ``phase`` is missing.
+        ValueError
+            If the lists are invalid (see :class:`Multisine`).
+        """
         return cls(base_frequency, d["n"], d["amplitude"], d["phase"])
 
     @classmethod
     def zero(cls, base_frequency: float = 1.0) -> "Multisine":
-        """A signal that is 0 everywhere."""
+        """A signal that is 0 everywhere.
+
+        Parameters
+        ----------
+        base_frequency : float, default 1.0
+            omega_0, rad/s.
+
+        Returns
+        -------
+        Multisine
+            One line (n = 1) of amplitude 0.
+        """
         return cls(base_frequency, [1.0], [0.0], [0.0])

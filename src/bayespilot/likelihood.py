@@ -301,15 +301,42 @@ class Likelihood:
 
     # -- single evaluations ----------------------------------------------------
     def response(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
-        """Model output u_hat at ``params`` (by name, or the free vector in order)."""
+        """Model output u_hat at ``params`` (by name, or the free vector in order).
+
+        Parameters
+        ----------
+        params : mapping of str to float, sequence of float or ndarray
+            Values by name (free parameters not given take the model's
+            defaults) or the free-parameter vector in ``model.parameter_names``
+            order.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            u_hat over the whole record, in the units of u (rad); all NaN when
+            the parameter vector is unstable.
+        """
         theta = self._theta(params)
         y, ok = R.response(theta, self.X, *self._args(), self.dt, self.periodic, self.warm)
         if not ok:
             y[:] = np.nan
         return y
 
-    def residual(self, params) -> np.ndarray:
-        """Output error eps = u - u_hat over the whole record (Eq. 4 uses ``eps[self.used]``)."""
+    def residual(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+        """Output error eps = u - u_hat over the whole record (Eq. 4 uses ``eps[self.used]``).
+
+        Parameters
+        ----------
+        params : mapping of str to float, sequence of float or ndarray
+            Values by name (free parameters not given take the model's
+            defaults) or the free-parameter vector in ``model.parameter_names``
+            order.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            eps, rad; all NaN when the parameter vector is unstable.
+        """
         return self.u - self.response(params)
 
     @property
@@ -317,25 +344,79 @@ class Likelihood:
         """N of Eq. 4: the samples kept, less the p a noise model conditions on."""
         return self.n - self.skip - self._a.size
 
-    def fit_residual(self, params) -> np.ndarray:
+    def fit_residual(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
         """The residual whose sum of squares -ln L is increasing in: eps over the samples
-        kept, whitened by the noise model if there is one (length :attr:`n_terms`)."""
+        kept, whitened by the noise model if there is one (length :attr:`n_terms`).
+
+        Parameters
+        ----------
+        params : mapping of str to float, sequence of float or ndarray
+            Values by name (free parameters not given take the model's
+            defaults) or the free-parameter vector in ``model.parameter_names``
+            order.
+
+        Returns
+        -------
+        ndarray, shape (n_terms,)
+            eps[``used``] (white noise) or w = A(q) eps[``used``] without its
+            first p samples (AR(p) noise model), rad.
+        """
         eps = self.residual(params)[self.used]
         return eps if self.noise is None else self.noise.whiten(eps)
 
-    def fit_jacobian(self, params, names: Sequence[str] | None = None) -> np.ndarray:
+    def fit_jacobian(self, params: Mapping[str, float] | Sequence[float] | np.ndarray,
+                     names: Sequence[str] | None = None) -> np.ndarray:
         """d :meth:`fit_residual` / d parameter, shape (:attr:`n_terms`, len(names)), exact
-        (the model's sensitivities, passed through the same whitening filter)."""
+        (the model's sensitivities, passed through the same whitening filter).
+
+        Parameters
+        ----------
+        params : mapping of str to float, sequence of float or ndarray
+            Values by name (free parameters not given take the model's
+            defaults) or the free-parameter vector in ``model.parameter_names``
+            order.
+        names : sequence of str, optional
+            Parameters to differentiate by (default: the free parameters, in
+            ``model.parameter_names`` order).
+
+        Returns
+        -------
+        ndarray, shape (n_terms, len(names))
+            -d u_hat / d parameter over the samples kept, whitened like
+            :meth:`fit_residual`; NaN where the parameter vector is unstable.
+
+        Raises
+        ------
+        ValueError
+            If ``names`` holds a parameter the model does not have.
+        """
         J = -self.jacobian(params, names)[1][self.used]
         return J if self.noise is None else self.noise.whiten(J)
 
-    def neg_log_lik(self, params) -> float:
+    def neg_log_lik(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> float:
         """-ln L (Eq. 4, s2 profiled); +inf for an unstable parameter vector.
 
-        Warns with :class:`PerfectFitWarning` when the residual is at round-off
-        level: the variance is then floored and the value is a finite bound.
         Computed by the same routine as :meth:`batch` (one row), so the two
         agree to the bit.
+
+        Parameters
+        ----------
+        params : mapping of str to float, sequence of float or ndarray
+            Values by name (free parameters not given take the model's
+            defaults) or the free-parameter vector in ``model.parameter_names``
+            order.
+
+        Returns
+        -------
+        float
+            N/2 ln(mean w^2) + N/2 over the :attr:`n_terms` terms (w = eps
+            without a noise model), or +inf.
+
+        Warns
+        -----
+        PerfectFitWarning
+            The residual is at round-off level: the variance is then floored
+            and the value is a finite bound.
         """
         theta = self._theta(params)
         if self._seg_args is not None:
@@ -361,19 +442,36 @@ class Likelihood:
             _warn_perfect_fit()
         return float(val)
 
-    def vaf(self, params) -> float:
-        """Variance accounted for, 1 - var(eps)/var(u), in percent, over the samples Eq. 4 uses."""
+    def vaf(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> float:
+        """Variance accounted for, 1 - var(eps)/var(u), in percent, over the samples Eq. 4 uses.
+
+        Parameters
+        ----------
+        params : mapping of str to float, sequence of float or ndarray
+            Values by name (free parameters not given take the model's
+            defaults) or the free-parameter vector in ``model.parameter_names``
+            order.
+
+        Returns
+        -------
+        float
+            VAF, %; NaN when the parameter vector is unstable.
+        """
         return vaf(self.u[self.used], self.response(params)[self.used])
 
-    def jacobian(self, params, names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def jacobian(self, params: Mapping[str, float] | Sequence[float] | np.ndarray,
+                 names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Model output and its exact derivatives with respect to parameters.
 
         Parameters
         ----------
-        params : mapping or free vector
-            Where to evaluate.
+        params : mapping of str to float, sequence of float or ndarray
+            Values by name (free parameters not given take the model's
+            defaults) or the free-parameter vector in ``model.parameter_names``
+            order.
         names : sequence of str, optional
-            Parameters to differentiate by (default: the free parameters).
+            Parameters to differentiate by (default: the free parameters, in
+            ``model.parameter_names`` order).
 
         Returns
         -------

@@ -101,6 +101,27 @@ def _real(value, what: str) -> float:
 class Parameter:
     """A named model parameter with bounds (the prior support) and a default.
 
+    Attributes
+    ----------
+    name : str
+        The parameter's name, a Python identifier (e.g. ``"K_v"``).
+    lower, upper : float
+        Bounds, lower < upper, both finite, in the parameter's unit: the
+        fitters' search box and the support of the uniform prior.
+    default : float
+        Start value and value when not estimated, in [lower, upper].
+    unit : str, default "-"
+        The unit, e.g. ``"s"``, ``"rad/s"`` (``"-"``: dimensionless).
+    description : str, default ""
+        A short description for reports.
+
+    Raises
+    ------
+    ValueError
+        If ``name`` is not an identifier, a bound or the default is not a
+        real number (a bool, text or complex), the bounds are not finite
+        with lower < upper, or the default lies outside them.
+
     Examples
     --------
     >>> Parameter("K_v", 0.0, 10.0, 1.0).lower
@@ -140,6 +161,13 @@ class Stage:
     A subclass is a frozen dataclass with a class attribute ``kind`` (a
     ``STAGE_*`` code of ``kernels/_blocks.py``) and a ``parameters`` tuple of
     at most two parameter names.
+
+    Attributes
+    ----------
+    kind : int
+        The block's ``STAGE_*`` code (a class attribute).
+    parameters : tuple of str
+        Names of the block's parameters, in the kernel's order (p0, p1).
     """
 
     __slots__ = ()
@@ -150,6 +178,13 @@ class Nonlinearity:
 
     ``kind`` is an ``NL_*`` code of ``kernels/_blocks.py``; ``parameters``
     names at most two parameters.
+
+    Attributes
+    ----------
+    kind : int
+        The block's ``NL_*`` code (a class attribute).
+    parameters : tuple of str
+        Names of the block's parameters, in the kernel's order (p0, p1).
     """
 
     __slots__ = ()
@@ -160,6 +195,13 @@ class Modulation:
 
     ``kind`` is a ``MOD_*`` code of ``kernels/_blocks.py``; ``parameters``
     names one parameter.
+
+    Attributes
+    ----------
+    kind : int
+        The block's ``MOD_*`` code (a class attribute).
+    parameters : tuple of str
+        Name of the block's parameter (p0).
     """
 
     __slots__ = ()
@@ -211,6 +253,14 @@ class FixedFilter(Stage):
         object.__setattr__(self, "den", den)
 
     def constants(self) -> np.ndarray:
+        """The filter as the kernels' six constants.
+
+        Returns
+        -------
+        ndarray, shape (6,)
+            (b0, b1, b2, a0, a1, a2): numerator then denominator coefficients
+            in ascending powers of s, zero-padded to order 2.
+        """
         b = np.zeros(3)
         a = np.zeros(3)
         b[: len(self.num)] = self.num[::-1]
@@ -228,19 +278,34 @@ def _strip_leading_zeros(coef: tuple[float, ...]) -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class Washout(Stage):
-    """First-order washout (high-pass) s / (s + omega), omega a parameter (rad/s)."""
+    """First-order washout (high-pass) s / (s + omega), omega a parameter (rad/s).
+
+    Attributes
+    ----------
+    omega : str, default "omega_w"
+        Name of the break-frequency parameter, rad/s.
+    """
 
     omega: str = "omega_w"
     kind = B.STAGE_HIGHPASS1
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(omega,)``."""
         return (self.omega,)
 
 
 @dataclass(frozen=True)
 class SecondOrderWashout(Stage):
-    """Second-order washout s^2 / (s^2 + 2 zeta omega s + omega^2)."""
+    """Second-order washout s^2 / (s^2 + 2 zeta omega s + omega^2).
+
+    Attributes
+    ----------
+    omega : str, default "omega_w"
+        Name of the break-frequency parameter, rad/s.
+    zeta : str, default "zeta_w"
+        Name of the damping-ratio parameter (dimensionless).
+    """
 
     omega: str = "omega_w"
     zeta: str = "zeta_w"
@@ -248,12 +313,21 @@ class SecondOrderWashout(Stage):
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(omega, zeta)``."""
         return (self.omega, self.zeta)
 
 
 @dataclass(frozen=True)
 class MotionSystem(Stage):
-    """Second-order motion-platform dynamics omega^2 / (s^2 + 2 zeta omega s + omega^2)."""
+    """Second-order motion-platform dynamics omega^2 / (s^2 + 2 zeta omega s + omega^2).
+
+    Attributes
+    ----------
+    omega : str, default "omega_ms"
+        Name of the bandwidth (natural-frequency) parameter, rad/s.
+    zeta : str, default "zeta_ms"
+        Name of the damping-ratio parameter (dimensionless).
+    """
 
     omega: str = "omega_ms"
     zeta: str = "zeta_ms"
@@ -261,37 +335,66 @@ class MotionSystem(Stage):
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(omega, zeta)``."""
         return (self.omega, self.zeta)
 
 
 @dataclass(frozen=True)
 class FirstOrderLag(Stage):
-    """First-order lag 1 / (T s + 1), T a parameter (s)."""
+    """First-order lag 1 / (T s + 1), T a parameter (s).
+
+    Attributes
+    ----------
+    T : str, default "T_lag"
+        Name of the time-constant parameter, s.
+    """
 
     T: str = "T_lag"
     kind = B.STAGE_LOWPASS1
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(T,)``."""
         return (self.T,)
 
 
 # --- nonlinearities --------------------------------------------------------------
 @dataclass(frozen=True)
 class DeadZone(Nonlinearity):
-    """Dead zone of half-width ``delta``: sign(x) max(|x| - delta, 0) (Fig. 3)."""
+    """Dead zone of half-width ``delta``: sign(x) max(|x| - delta, 0) (Fig. 3).
+
+    Attributes
+    ----------
+    delta : str, default "delta_abs"
+        Name of the half-width (threshold) parameter, in the units of the
+        block's input (IPUT, the canal output, for the paper's ``delta_abs``).
+    """
 
     delta: str = "delta_abs"
     kind = B.NL_DEADZONE
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(delta,)``."""
         return (self.delta,)
 
 
 @dataclass(frozen=True)
 class SoftDeadZone(Nonlinearity):
-    """A dead zone with rounded corners of width ``width`` (tends to DeadZone as width -> 0)."""
+    """A dead zone with rounded corners of width ``width`` (tends to DeadZone as width -> 0).
+
+    The output is w (softplus((|x| - delta) / w) - softplus(-delta / w)) sign(x),
+    w = ``width``: 0 at 0, odd, smooth everywhere.
+
+    Attributes
+    ----------
+    delta : str, default "delta_abs"
+        Name of the half-width (threshold) parameter, in the units of the
+        block's input.
+    width : str, default "w_soft"
+        Name of the corner-width parameter, in the units of the block's input
+        (floored at 1e-12).
+    """
 
     delta: str = "delta_abs"
     width: str = "w_soft"
@@ -299,31 +402,51 @@ class SoftDeadZone(Nonlinearity):
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(delta, width)``."""
         return (self.delta, self.width)
 
 
 @dataclass(frozen=True)
 class Saturation(Nonlinearity):
-    """Clipping at +- ``limit``."""
+    """Clipping at +- ``limit``.
+
+    Attributes
+    ----------
+    limit : str, default "u_max"
+        Name of the clipping-level parameter, in the units of the block's
+        input (rad for a saturation on the model output u).
+    """
 
     limit: str = "u_max"
     kind = B.NL_SATURATION
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(limit,)``."""
         return (self.limit,)
 
 
 # --- gain modulation -------------------------------------------------------------
 @dataclass(frozen=True)
 class LinearDrift(Modulation):
-    """Channel gain times 1 + rate (t/T - 1/2): a gain that drifts linearly over the run."""
+    """Channel gain times 1 + rate (t/T - 1/2): a gain that drifts linearly over the run.
+
+    t is the time from the start of the record and T its duration, so the gain
+    is the channel's own at mid-run.
+
+    Attributes
+    ----------
+    rate : str, default "drift"
+        Name of the drift parameter: the relative change of the gain over the
+        whole run (dimensionless).
+    """
 
     rate: str = "drift"
     kind = B.MOD_LINEAR
 
     @property
     def parameters(self) -> tuple[str, ...]:
+        """The parameter names, ``(rate,)``."""
         return (self.rate,)
 
 
@@ -409,6 +532,7 @@ class Channel:
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
+        """Names of the parameters the channel uses: delay, gains, lead, then its blocks'."""
         names = [self.delay, *self.gain]
         if self.lead:
             names.append(self.lead)
@@ -422,7 +546,31 @@ class Channel:
 
 @dataclass(frozen=True, eq=False)
 class Plan:
-    """A model compiled to the arrays the numba kernels interpret (see kernels/_response.py)."""
+    """A model compiled to the arrays the numba kernels interpret (see kernels/_response.py).
+
+    Made by :attr:`PilotModel.plan`; parameters are referred to by their
+    index in the full vector (-1: none).
+
+    Attributes
+    ----------
+    names : tuple of str
+        Every parameter name, in full-vector order.
+    ch_int : ndarray of int64, shape (n_channels, CH_NFIELDS)
+        Per channel: nonlinearity kind and parameter indices, delay, gain and
+        lead indices, modulation kind and parameter index, number of stages,
+        source code and oversampling factor (the ``CH_*`` columns).
+    ch_float : ndarray, shape (n_channels, CHF_NFIELDS)
+        Per channel: the constant gain factor and the sign.
+    st_int : ndarray of int64, shape (n_channels, MAX_STAGES, 3)
+        Per stage: kind code and the indices of its two parameters.
+    st_const : ndarray, shape (n_channels, MAX_STAGES, 6)
+        Per fixed stage: :meth:`FixedFilter.constants` (zero otherwise).
+    out_int : ndarray of int64, shape (OUT_NFIELDS,)
+        Indices of omega_nm and zeta_nm, then the output nonlinearity's kind
+        and parameter indices.
+    sources : tuple of str
+        Each channel's source signal (a key of :data:`SOURCES`).
+    """
 
     names: tuple[str, ...]
     ch_int: np.ndarray
@@ -533,10 +681,20 @@ class PilotModel:
 
     @property
     def n_free(self) -> int:
+        """Number of free (estimated) parameters."""
         return len(self.parameter_names)
 
     def parameter(self, name: str) -> Parameter:
         """The declared :class:`Parameter` called ``name`` (free or fixed).
+
+        Parameters
+        ----------
+        name : str
+            The parameter's name, e.g. ``"delta_abs"``.
+
+        Returns
+        -------
+        Parameter
 
         Raises
         ------
@@ -556,6 +714,7 @@ class PilotModel:
 
     @property
     def defaults(self) -> dict[str, float]:
+        """Every parameter's default value by name (fixed ones too), in its unit."""
         return {p.name: p.default for p in self.parameters}
 
     @cached_property
@@ -566,6 +725,20 @@ class PilotModel:
 
     def full_vector(self, values: Mapping[str, float] | Sequence[float] | np.ndarray | None = None) -> np.ndarray:
         """Full parameter vector from free values (by name or in order), defaults and fixed values.
+
+        Parameters
+        ----------
+        values : mapping of str to float, sequence of float, ndarray or None, optional
+            Values by name (free parameters not given take their defaults;
+            values given for fixed parameters are ignored), or the
+            free-parameter vector in :attr:`parameter_names` order, or None
+            (the defaults).
+
+        Returns
+        -------
+        ndarray, shape (len(all_names),)
+            Every parameter's value in :attr:`all_names` order, fixed ones at
+            their fixed values.
 
         Raises
         ------
@@ -601,11 +774,46 @@ class PilotModel:
         return full
 
     def free_vector(self, values: Mapping[str, float] | None = None) -> np.ndarray:
-        """Free-parameter vector from values by name (defaults for the rest)."""
+        """Free-parameter vector from values by name (defaults for the rest).
+
+        Parameters
+        ----------
+        values : mapping of str to float or None, optional
+            Values by name; free parameters not given take their defaults,
+            values of fixed parameters are ignored.  None: the defaults.
+
+        Returns
+        -------
+        ndarray, shape (n_free,)
+            The free parameters' values in :attr:`parameter_names` order.
+
+        Raises
+        ------
+        ValueError
+            As :meth:`full_vector`.
+        """
         return self.full_vector(values)[self.free_index]
 
     def as_dict(self, vector: np.ndarray | Sequence[float], *, full: bool = False) -> dict[str, float]:
-        """Name -> value from a free (default) or full vector."""
+        """Name -> value from a free (default) or full vector.
+
+        Parameters
+        ----------
+        vector : ndarray or sequence of float
+            Values in :attr:`parameter_names` order, or in :attr:`all_names`
+            order with ``full=True``.
+        full : bool, default False
+            ``vector`` is the full vector (every parameter, fixed ones too).
+
+        Returns
+        -------
+        dict of str to float
+
+        Raises
+        ------
+        ValueError
+            If ``vector`` is not of the length the names have.
+        """
         vec = np.asarray(vector, dtype=float)
         names = self.all_names if full else self.parameter_names
         if vec.shape != (len(names),):
@@ -652,6 +860,17 @@ class PilotModel:
     def fix(self, **values: float) -> "PilotModel":
         """A model with some parameters held fixed, e.g. ``fix(delta_abs=0.0)``.
 
+        Parameters
+        ----------
+        **values : float
+            Parameter name -> the value to hold it at, in its unit (added to
+            the already fixed ones; a name fixed before takes the new value).
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.
+
         Raises
         ------
         ValueError
@@ -672,6 +891,16 @@ class PilotModel:
         """A model in which the named fixed parameters are estimated again (a free one named
         stays free).
 
+        Parameters
+        ----------
+        *names : str
+            Names of the parameters to free.
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.
+
         Raises
         ------
         ValueError
@@ -685,6 +914,22 @@ class PilotModel:
 
     def add_stage(self, channel: str, stage: Stage, parameters: Iterable[Parameter] = ()) -> "PilotModel":
         """Append a linear stage (e.g. :class:`Washout`) to a channel, before its nonlinearity.
+
+        Parameters
+        ----------
+        channel : str
+            Name of the channel, e.g. ``"vestibular"``.
+        stage : Stage
+            The block to append after the channel's other stages.
+        parameters : iterable of Parameter, default ()
+            Declarations of the block's new parameters (bounds, default,
+            unit).  A name the model already declares may be given again
+            only with the same bounds, default and unit (it is then shared).
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.
 
         Raises
         ------
@@ -700,6 +945,23 @@ class PilotModel:
     def with_nonlinearity(self, channel: str, nonlinearity: Nonlinearity | None,
                           parameters: Iterable[Parameter] = ()) -> "PilotModel":
         """Replace a channel's nonlinearity (e.g. a :class:`SoftDeadZone` threshold; None: none).
+
+        Parameters
+        ----------
+        channel : str
+            Name of the channel, e.g. ``"vestibular"``.
+        nonlinearity : Nonlinearity or None
+            The new nonlinearity; None removes it.
+        parameters : iterable of Parameter, default ()
+            Declarations of the block's new parameters (bounds, default,
+            unit).  A name the model already declares may be given again
+            only with the same bounds, default and unit (it is then shared).
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.  The old nonlinearity's
+            parameters stay declared.
 
         Raises
         ------
@@ -717,6 +979,22 @@ class PilotModel:
                         parameters: Iterable[Parameter] = ()) -> "PilotModel":
         """Modulate a channel's gain over the run (e.g. :class:`LinearDrift`; None: constant).
 
+        Parameters
+        ----------
+        channel : str
+            Name of the channel, e.g. ``"visual"``.
+        modulation : Modulation or None
+            The new gain modulation; None makes the gain constant.
+        parameters : iterable of Parameter, default ()
+            Declarations of the block's new parameters (bounds, default,
+            unit).  A name the model already declares may be given again
+            only with the same bounds, default and unit (it is then shared).
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.
+
         Raises
         ------
         ValueError
@@ -730,6 +1008,20 @@ class PilotModel:
 
     def add_channel(self, channel: Channel, parameters: Iterable[Parameter] = ()) -> "PilotModel":
         """Add a parallel channel (e.g. an otolith channel).
+
+        Parameters
+        ----------
+        channel : Channel
+            The new channel; its name must differ from the model's channels'.
+        parameters : iterable of Parameter, default ()
+            Declarations of the channel's new parameters (bounds, default,
+            unit).  A name the model already declares may be given again
+            only with the same bounds, default and unit (it is then shared).
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.
 
         Raises
         ------
@@ -786,6 +1078,21 @@ class PilotModel:
 
     def with_output(self, output: Nonlinearity | None, parameters: Iterable[Parameter] = ()) -> "PilotModel":
         """Put a nonlinearity (e.g. :class:`Saturation`) on the model output (None: none).
+
+        Parameters
+        ----------
+        output : Nonlinearity or None
+            The block applied to the model output u (after H_nm); None
+            removes it.
+        parameters : iterable of Parameter, default ()
+            Declarations of the block's new parameters (bounds, default,
+            unit).  A name the model already declares may be given again
+            only with the same bounds, default and unit (it is then shared).
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.
 
         Raises
         ------

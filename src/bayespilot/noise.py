@@ -157,11 +157,48 @@ class ARNoise:
     @classmethod
     def from_residual(cls, eps: np.ndarray, *, order: int | None = None,
                       max_order: int = MAX_AR_ORDER) -> "ARNoise":
-        """The AR model of a residual by least squares, order by BIC (see :func:`fit_ar`)."""
+        """The AR model of a residual by least squares, order by BIC (see :func:`fit_ar`).
+
+        Parameters
+        ----------
+        eps : ndarray
+            The residual (1-D, finite), e.g. :meth:`Likelihood.residual
+            <bayespilot.likelihood.Likelihood.residual>` at a fit.
+        order : int, optional
+            Use this order instead of choosing one by BIC (0: white noise).
+        max_order : int, default :data:`MAX_AR_ORDER`
+            Largest order tried when ``order`` is not given.
+
+        Returns
+        -------
+        ARNoise
+
+        Raises
+        ------
+        ValueError
+            As :func:`fit_ar`.
+        """
         return cls(fit_ar(eps, order=order, max_order=max_order))
 
     def whiten(self, x: np.ndarray) -> np.ndarray:
-        """w = A(q) x along the first axis, without the first p values (which it conditions on)."""
+        """w = A(q) x along the first axis, without the first p values (which it conditions on).
+
+        Parameters
+        ----------
+        x : ndarray, shape (N, ...)
+            A series along the first axis (e.g. a residual, or the columns of
+            a Jacobian).
+
+        Returns
+        -------
+        ndarray, shape (N - p, ...)
+            The whitened series, in the units of ``x``.
+
+        Raises
+        ------
+        ValueError
+            If ``x`` has p samples or fewer.
+        """
         x = np.asarray(x, dtype=float)
         p = self.order
         if x.shape[0] <= p:
@@ -169,10 +206,28 @@ class ARNoise:
         return signal.lfilter(np.concatenate([[1.0], -self.a]), [1.0], x, axis=0)[p:]
 
     def to_dict(self) -> dict[str, Any]:
+        """The model as JSON-ready data: ``{"kind": "ar", "order": p, "a": [a_1, ..., a_p]}``."""
         return {"kind": "ar", "order": self.order, "a": [float(v) for v in self.a]}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ARNoise":
+        """The model :meth:`to_dict` wrote.
+
+        Parameters
+        ----------
+        d : mapping
+            ``{"kind": "ar", "a": [...]}``, optionally with ``"order"``.
+
+        Returns
+        -------
+        ARNoise
+
+        Raises
+        ------
+        ValueError
+            If ``d`` is not such a mapping, its ``order`` is not the number of
+            coefficients, or a coefficient is not finite.
+        """
         if not isinstance(d, Mapping) or d.get("kind") != "ar" or "a" not in d:
             raise ValueError(f"not an AR noise model: {d!r}")
         noise = cls(d["a"])

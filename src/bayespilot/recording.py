@@ -409,7 +409,27 @@ class Recording:
         return np.array([kc]), np.array([1.0, 0.0, 0.0])
 
     def with_signals(self, **signals: np.ndarray) -> "Recording":
-        """Return a copy with some signals replaced or added."""
+        """Return a copy with some signals replaced or added.
+
+        Parameters
+        ----------
+        **signals : ndarray
+            Column name -> 1-D array of :attr:`n_samples` values, in the
+            column's units (e.g. ``u=...`` in rad).
+
+        Returns
+        -------
+        Recording
+            The same rate, K_theta, task, metadata and source with the new
+            columns; this recording is unchanged.
+
+        Raises
+        ------
+        RecordingError
+            If a new column fails the checks of :class:`Recording` (another
+            length, complex or non-finite values, a ``t`` that is not the
+            rate's grid).
+        """
         new = dict(self.signals)
         new.update(signals)
         return Recording(new, self.sample_rate_hz, self.motion_gain, self.task,

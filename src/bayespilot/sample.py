@@ -97,6 +97,16 @@ class ConvergenceWarning(RuntimeWarning):
 
     ``tau`` holds the last estimate of the integrated autocorrelation times and
     ``n_steps`` the chain length, so a caller can decide how much longer to run.
+
+    Parameters
+    ----------
+    message : str
+        The warning's text.
+    tau : ndarray or None, optional
+        The last estimate of the integrated autocorrelation time per sampled
+        parameter, in steps (vector order); None if there was none.
+    n_steps : int, default 0
+        Steps the chain ran.
     """
 
     def __init__(self, message: str, tau: np.ndarray | None = None, n_steps: int = 0) -> None:
@@ -226,12 +236,46 @@ class Posterior:
             raise ValueError(f"unknown parameter {name!r}; sampled: {', '.join(self.parameter_names)}")
 
     def draws(self, name: str) -> np.ndarray:
-        """All retained draws of ``name``, walkers concatenated (1-D)."""
+        """All retained draws of ``name``, walkers concatenated (1-D).
+
+        Parameters
+        ----------
+        name : str
+            A sampled parameter (one of :attr:`parameter_names`).
+
+        Returns
+        -------
+        ndarray, shape (n_walkers * n_draws,)
+            The draws in the parameter's unit, walker by walker.
+
+        Raises
+        ------
+        ValueError
+            If ``name`` was not sampled.
+        """
         self._check_name(name)
         return np.asarray(self.idata.posterior[name].values, dtype=float).ravel()
 
     def credible_interval(self, name: str, prob: float = 0.9) -> tuple[float, float]:
-        """Highest-density interval of ``name`` holding ``prob`` of the posterior (arviz.hdi)."""
+        """Highest-density interval of ``name`` holding ``prob`` of the posterior (arviz.hdi).
+
+        Parameters
+        ----------
+        name : str
+            A sampled parameter (one of :attr:`parameter_names`).
+        prob : float, default 0.9
+            Posterior probability inside the interval, in (0, 1).
+
+        Returns
+        -------
+        (float, float)
+            Lower and upper end, in the parameter's unit.
+
+        Raises
+        ------
+        ValueError
+            If ``name`` was not sampled or ``prob`` is not in (0, 1).
+        """
         self._check_name(name)
         if not (isinstance(prob, (int, float)) and 0.0 < prob < 1.0):
             raise ValueError(f"prob must be in (0, 1), got {prob!r}")
@@ -269,7 +313,19 @@ class Posterior:
         return dict(self.settings.get("true_parameters") or {})
 
     def to_netcdf(self, path: str | os.PathLike) -> Path:
-        """Write the InferenceData (with everything needed by :meth:`from_netcdf`) to ``path``."""
+        """Write the InferenceData (with everything needed by :meth:`from_netcdf`) to ``path``.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The file to write (netCDF-4); an existing file is replaced only
+            once the new one is written.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         from ._files import replacing
 
         with replacing(path) as tmp:  # the old file is kept if the write fails
@@ -278,7 +334,24 @@ class Posterior:
 
     @classmethod
     def from_netcdf(cls, path: str | os.PathLike) -> "Posterior":
-        """Read a file written by :meth:`to_netcdf`."""
+        """Read a file written by :meth:`to_netcdf`.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The netCDF file.
+
+        Returns
+        -------
+        Posterior
+
+        Raises
+        ------
+        FileNotFoundError
+            If there is no such file.
+        ValueError
+            If the file is not netCDF, or not written by :meth:`to_netcdf`.
+        """
         az = _arviz()
         if not Path(path).is_file():
             raise FileNotFoundError(f"{path}: no such file")

@@ -146,6 +146,7 @@ class TrackingTask:
 
     @property
     def n_samples(self) -> int:
+        """Samples in the measurement window, round(duration * sample_rate_hz)."""
         return int(round(self.duration * self.sample_rate_hz))
 
     def metadata(self) -> dict[str, Any]:

@@ -204,6 +204,14 @@ class DiagnosisResult(_JSONSummary):
     elapsed : float
         Wall time, s.
     source : str or None
+        The recording diagnosed.
+    arrays : dict
+        What the report's figures are drawn from, kept in memory: the base
+        fit's residual and output, describing functions, amplitude spectra,
+        the chosen fit's output, residual, VAF (%) and -ln L (Eq. 4) before
+        and after, the forcing frequencies, the decision's noise model.
+        After :meth:`from_dict` only the numbers a result file keeps, and
+        ``"from_json"`` (the file, or True).
     posterior : Posterior or None
         The chosen extended model's posterior, once
         :func:`~bayespilot.diagnose.posterior.sample_chosen` has sampled it.
@@ -376,7 +384,17 @@ class DiagnosisResult(_JSONSummary):
     def report(self, directory: str | Path) -> dict[str, Path]:
         """Write PNG figures, ``report.html`` (figures embedded) and ``diagnosis.json``.
 
-        Returns the paths by name.
+        Parameters
+        ----------
+        directory : str or Path
+            Created, with its parents, if missing; files of the same names in
+            it are replaced.
+
+        Returns
+        -------
+        dict of str to Path
+            The files written, by name (see
+            :func:`~bayespilot.diagnose.report.write_report`).
 
         Raises
         ------

@@ -99,6 +99,7 @@ class Calibration:
     statistics: np.ndarray
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of the attributes (``statistics`` as a list)."""
         return {"physics": self.physics, "replicates": self.replicates,
                 "null_mean": self.null_mean, "reference_mean": self.reference_mean,
                 "scale": self.scale, "p_nominal": self.p_nominal, "p_value": self.p_value,
@@ -107,7 +108,23 @@ class Calibration:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Calibration":
-        """The Calibration a :meth:`to_dict` holds."""
+        """The Calibration a :meth:`to_dict` holds.
+
+        Parameters
+        ----------
+        d : dict
+            A :meth:`to_dict`, as read from JSON (a null number is NaN);
+            ``physics`` and ``replicates`` are required.
+
+        Returns
+        -------
+        Calibration
+
+        Raises
+        ------
+        KeyError
+            If ``physics`` or ``replicates`` is missing.
+        """
         return cls(d["physics"], int(d["replicates"]),
                    *(number(d.get(k)) for k in ("null_mean", "reference_mean", "scale",
                                                 "p_nominal", "p_value", "p_empirical")),

@@ -137,16 +137,45 @@ class NoiseModel:
     omega_c: float
 
     def reduce(self, x: np.ndarray) -> np.ndarray:
-        """Low-pass (causal) and decimate along the first axis, after ``skip``."""
+        """Low-pass (causal) and decimate along the first axis, after ``skip``.
+
+        Parameters
+        ----------
+        x : ndarray, shape (N, ...)
+            A series at the recording's rate along the first axis (a
+            residual, or the columns of a Jacobian).
+
+        Returns
+        -------
+        ndarray
+            ``x`` filtered by :attr:`fir` from its first sample (at rest
+            before it), then every ``decimation``-th sample from sample
+            ``skip`` on; in the units of ``x``.
+        """
         return signal.lfilter(self.fir, [1.0], x, axis=0)[self.skip::self.decimation]
 
     def whiten(self, x: np.ndarray) -> np.ndarray:
-        """A(q) applied to the reduced series; the first p values dropped."""
+        """A(q) applied to the reduced series; the first p values dropped.
+
+        Parameters
+        ----------
+        x : ndarray, shape (N, ...)
+            A series at the recording's rate along the first axis.
+
+        Returns
+        -------
+        ndarray
+            w = A(q) :meth:`reduce` (x) without its first p = ``ar.size``
+            values, in the units of ``x``.
+        """
         p = self.ar.size
         return signal.lfilter(np.concatenate([[1.0], -self.ar]), [1.0], self.reduce(x),
                               axis=0)[p:]
 
     def to_dict(self) -> dict[str, Any]:
+        """A JSON-ready description: ``omega_c`` (rad/s; None for no low-pass),
+        ``decimation``, ``fir_taps``, ``ar_order`` and ``skip_samples`` (not the
+        coefficients)."""
         return {"omega_c": self.omega_c if math.isfinite(self.omega_c) else None,
                 "decimation": self.decimation, "fir_taps": self.fir.size,
                 "ar_order": int(self.ar.size), "skip_samples": self.skip}
@@ -308,11 +337,35 @@ class Whitened:
         self.m = self.whiten(self.u).size
 
     def whiten(self, x: np.ndarray) -> np.ndarray:
-        """The whitened, reduced series (along the first axis)."""
+        """The whitened, reduced series (along the first axis).
+
+        Parameters
+        ----------
+        x : ndarray, shape (n_samples, ...)
+            A series at the recording's rate (a residual, or the columns of a
+            Jacobian).
+
+        Returns
+        -------
+        ndarray, shape (m, ...)
+            :meth:`NoiseModel.whiten` of ``x``.
+        """
         return self.noise.whiten(x)
 
     def neg_log_lik(self, params: Mapping[str, float]) -> float:
-        """GLS -ln L at ``params`` (+inf if the model is unstable there)."""
+        """GLS -ln L at ``params`` (+inf if the model is unstable there).
+
+        Parameters
+        ----------
+        params : mapping of str to float
+            Values by name; free parameters not given take the model's
+            defaults.
+
+        Returns
+        -------
+        float
+            m/2 ln(mean w^2) + m/2 (the mean floored at 1e-300), or +inf.
+        """
         y = self.lik.response(params)
         if not np.all(np.isfinite(y)):
             return math.inf
@@ -322,7 +375,25 @@ class Whitened:
 
 @dataclass
 class FitSummary:
-    """A GLS (or censored) fit: parameters, -ln L, covariance of the refined parameters."""
+    """A GLS (or censored) fit: parameters, -ln L, covariance of the refined parameters.
+
+    Attributes
+    ----------
+    params : dict of str to float
+        Every free parameter of the fitted model at the fit.
+    neg_log_lik : float
+        -ln L of the fit on the decision (GLS) likelihood; NaN for a start
+        that was not evaluated.
+    refined : tuple of str
+        The parameters that were optimised (the others held).
+    cov : ndarray, shape (len(refined), len(refined))
+        Their covariance, in the parameters' units squared: s2 (J^T J)^+
+        from the whitened residual's Jacobian J for a GLS fit, the inverse
+        Hessian scaled for the residual's correlation for a censored one
+        (empty when nothing was refined).
+    nfev : int, default 0
+        Residual evaluations the optimiser made.
+    """
 
     params: dict[str, float]
     neg_log_lik: float
@@ -332,6 +403,8 @@ class FitSummary:
 
     @property
     def stderr(self) -> dict[str, float]:
+        """Standard error of each refined parameter, sqrt of the covariance's diagonal, in the
+        parameter's unit."""
         d = np.sqrt(np.clip(np.diag(self.cov), 0, None)) if self.cov.size else np.zeros(0)
         return {n: float(s) for n, s in zip(self.refined, d)}
 
@@ -735,6 +808,13 @@ class CandidateResult:
         (max of -log10 p over its signature keys; 0 when nothing is located).
     justified : bool
         p_value < the per-candidate level.
+    fit : FitSummary or None
+        The extension's fit behind the test (after :meth:`report_fit`, the
+        reported one); for a pooled test only the pooled -ln L.  None when
+        no fit was made (not testable, the fit failed) and after
+        :meth:`from_dict`.
+    model : PilotModel or None
+        The extended model that was fitted; None as for ``fit``.
     calibration : Calibration or None
         The parametric bootstrap's calibration of this test
         (:mod:`bayespilot.diagnose.calibrate`), when it was made; ``p_value``
@@ -776,6 +856,9 @@ class CandidateResult:
     interval: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of the attributes except ``fit``, ``model`` and ``noise`` (the
+        calibration and intervals by their own ``to_dict``; NaN as None, infinities as
+        ``"inf"``/``"-inf"``)."""
         def num(x):
             x = float(x)
             return x if math.isfinite(x) else (None if math.isnan(x) else ("inf" if x > 0 else "-inf"))
@@ -799,7 +882,23 @@ class CandidateResult:
         """The CandidateResult a :meth:`to_dict` holds, as a result file keeps it: its
         numbers, calibration and profile intervals, without the fit, the extended model and
         the noise model objects (``fit``, ``model`` and ``noise`` are None; the reported
-        fit's noise model stays in ``refit["noise_model"]`` as a dict)."""
+        fit's noise model stays in ``refit["noise_model"]`` as a dict).
+
+        Parameters
+        ----------
+        d : mapping
+            A :meth:`to_dict`, as read from JSON; only ``physics`` and
+            ``testable`` are required (the others take their defaults).
+
+        Returns
+        -------
+        CandidateResult
+
+        Raises
+        ------
+        KeyError
+            If ``physics`` or ``testable`` is missing.
+        """
         from .calibrate import Calibration
         from .profile import ProfileInterval
 
@@ -824,7 +923,21 @@ class CandidateResult:
         """Report the estimates of ``fit`` (of this candidate's extended model) instead of
         the test's; the test's statistics and standard errors are kept (measured to cover
         the reported estimates where the refit's own do not), the test's estimates and the
-        refit's standard errors move to ``refit``."""
+        refit's standard errors move to ``refit``.
+
+        Changes this result in place: ``params``, ``all_params``, ``fit``,
+        ``refit`` and ``noise``.
+
+        Parameters
+        ----------
+        fit : FitSummary
+            A fit of this candidate's extended model (:attr:`model`), e.g. by
+            :func:`final_fit`.
+        noise : NoiseModel
+            The noise model ``fit`` was made with.
+        how : str
+            How the fit was made, recorded in ``refit["how"]``.
+        """
         self.record_refit(fit.params, fit.stderr, noise, how,
                           [self.all_params.get("delta_abs"), fit.params.get("delta_abs")])
         if self.model is not None:
@@ -837,7 +950,27 @@ class CandidateResult:
         """The part of :meth:`report_fit` a pooled diagnosis shares: the new parameters'
         estimates from ``params``, the test's and the refit's standard errors kept in
         ``refit`` with ``how``, ``delta_abs`` (before, after) and ``more``; ``noise`` (a
-        NoiseModel, or one per run) stored."""
+        NoiseModel, or one per run) stored.
+
+        Changes this result in place: ``params``, ``refit`` and ``noise``.
+
+        Parameters
+        ----------
+        params : mapping of str to float
+            The refit's estimates, by name; those of this candidate's new
+            parameters (the keys of ``params`` already set) are taken.
+        own_stderr : mapping of str to float
+            The refit's own standard errors, by name.
+        noise : NoiseModel or list of NoiseModel
+            The refit's noise model, or one per run (pooled).
+        how : str
+            How the refit was made.
+        delta_abs : list
+            delta_abs before and after the refit, IPUT (None where the model
+            has none).
+        **more : Any
+            Further entries of ``refit``.
+        """
         noises = noise if isinstance(noise, list) else None
         self.refit = {"how": how, "test_params": dict(self.params),
                       "own_stderr": {n: float(v) for n, v in own_stderr.items()},

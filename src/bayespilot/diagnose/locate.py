@@ -724,7 +724,25 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
 
 @dataclass
 class Evidence:
-    """One located statistic with its bootstrap calibration."""
+    """One located statistic with its bootstrap calibration.
+
+    Attributes
+    ----------
+    key : str
+        The statistic's name (a key of :data:`EVIDENCE`).
+    value : float
+        Its value on the recording (NaN if it could not be computed).
+    null_mean, null_sd : float
+        Mean and standard deviation of its bootstrap replicates under the
+        fitted base model; NaN without replicates (the sd also with one).
+    p_value : float
+        One-sided bootstrap p-value, (1 + #{replicates >= value}) /
+        (replicates + 1); NaN without replicates.
+    description : str
+        What the statistic measures, one sentence.
+    replicates : int, default 0
+        Finite bootstrap replicates used.
+    """
 
     key: str
     value: float
@@ -736,11 +754,13 @@ class Evidence:
 
     @property
     def z(self) -> float:
+        """(value - null_mean) / null_sd, in null standard deviations; NaN without a spread."""
         if not (self.null_sd > 0):
             return math.nan
         return (self.value - self.null_mean) / self.null_sd
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of the attributes and :attr:`z` (a non-finite number as None)."""
         def num(x):
             return float(x) if math.isfinite(x) else None
         return {"key": self.key, "value": num(self.value), "null_mean": num(self.null_mean),
@@ -749,7 +769,23 @@ class Evidence:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "Evidence":
-        """The Evidence a :meth:`to_dict` holds (``z`` is computed, not read)."""
+        """The Evidence a :meth:`to_dict` holds (``z`` is computed, not read).
+
+        Parameters
+        ----------
+        d : mapping
+            A :meth:`to_dict`, as read from JSON (a null number is NaN); only
+            ``key`` and ``value`` are required.
+
+        Returns
+        -------
+        Evidence
+
+        Raises
+        ------
+        KeyError
+            If ``key`` or ``value`` is missing.
+        """
         return cls(d["key"], number(d["value"]), number(d.get("null_mean")),
                    number(d.get("null_sd")), number(d.get("p_value")),
                    d.get("description", ""), int(d.get("replicates", 0)))

@@ -81,7 +81,15 @@ ERR_SCALE = 2.5
 @dataclass(frozen=True)
 class EvidenceSummary:
     """What a result file keeps of one model's evidence (:class:`bayespilot.compare.Evidence`
-    without the nested-sampling details): ln Z, its error and the largest ln L met."""
+    without the nested-sampling details): ln Z, its error and the largest ln L met.
+
+    Attributes
+    ----------
+    log_z, log_z_err : float
+        ln Z and its standard error (NaN if the file has none).
+    max_log_lik : float
+        The largest ln L met (NaN if the file has none).
+    """
 
     log_z: float
     log_z_err: float
@@ -149,7 +157,23 @@ class ExtensionBayesFactor:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "ExtensionBayesFactor":
         """The Bayes factor a :meth:`to_dict` holds; its evidences are
-        :class:`EvidenceSummary` objects (a result file keeps no draws)."""
+        :class:`EvidenceSummary` objects (a result file keeps no draws).
+
+        Parameters
+        ----------
+        d : mapping
+            A :meth:`to_dict`, as read from JSON (a null number is NaN).
+
+        Returns
+        -------
+        ExtensionBayesFactor
+
+        Raises
+        ------
+        KeyError
+            If ``physics``, ``log_bayes_factor``, ``log_bayes_factor_err``,
+            ``category`` or ``favours`` is missing.
+        """
         def evidence(which):
             return EvidenceSummary(number(d.get(f"log_z_{which}")),
                                    number(d.get(f"log_z_{which}_err")),

@@ -226,7 +226,23 @@ class SharedPosterior:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "SharedPosterior":
-        """The posterior a :meth:`to_dict` holds (the log density from its density)."""
+        """The posterior a :meth:`to_dict` holds (the log density from its density).
+
+        Parameters
+        ----------
+        d : dict
+            A :meth:`to_dict`, as read from JSON (a null number is NaN).
+
+        Returns
+        -------
+        SharedPosterior
+
+        Raises
+        ------
+        KeyError
+            If ``physics``, ``names``, ``grid``, ``density`` or ``marginals`` is
+            missing.
+        """
         marginals = {n: {k: ([number(x) for x in v] if isinstance(v, list) else number(v))
                          for k, v in m.items()}
                      for n, m in d["marginals"].items()}

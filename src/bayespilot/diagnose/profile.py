@@ -66,10 +66,11 @@ class ProfileInterval:
     Attributes
     ----------
     name : str
+        The parameter.
     level : float
         Its coverage (0.9: 90 %).
     lower, upper : float
-        The interval's ends.
+        The interval's ends, in the parameter's unit.
     lower_open, upper_open : bool
         True where the profile had not risen far enough by its last step (short
         of the parameter's bound): the interval reaches at least that far.  An
@@ -96,6 +97,7 @@ class ProfileInterval:
         return float(stats.chi2.ppf(self.level, 1))
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of the attributes except ``name`` (arrays as lists)."""
         return {"level": self.level, "lower": float(self.lower), "upper": float(self.upper),
                 "lower_open": self.lower_open, "upper_open": self.upper_open,
                 "scale": float(self.scale), "values": [float(v) for v in self.values],
@@ -104,7 +106,25 @@ class ProfileInterval:
     @classmethod
     def from_dict(cls, name: str, d: Mapping[str, Any]) -> "ProfileInterval":
         """The interval of parameter ``name`` that a :meth:`to_dict` holds (the dict is keyed
-        by the name and does not repeat it)."""
+        by the name and does not repeat it).
+
+        Parameters
+        ----------
+        name : str
+            The parameter (the key the dict is stored under).
+        d : mapping
+            A :meth:`to_dict`, as read from JSON (a null number is NaN); only
+            ``level``, ``lower`` and ``upper`` are required.
+
+        Returns
+        -------
+        ProfileInterval
+
+        Raises
+        ------
+        KeyError
+            If ``level``, ``lower`` or ``upper`` is missing.
+        """
         return cls(name, number(d["level"]), number(d["lower"]), number(d["upper"]),
                    bool(d.get("lower_open", False)), bool(d.get("upper_open", False)),
                    number(d.get("scale", 1.0)),

@@ -38,8 +38,14 @@ class RefineResult:
     refined : tuple of str
         The parameters that were optimised.
     nfev, njev : int
+        Residual and Jacobian evaluations the optimiser made.
     success : bool
+        The optimiser's convergence flag (:func:`scipy.optimize.least_squares`).
     message : str
+        The optimiser's reason for stopping.
+    extra : dict, default {}
+        Further details a caller may attach; :func:`refine` leaves it empty
+        and :meth:`to_dict` does not write it.
     """
 
     params: dict[str, float]
@@ -53,6 +59,7 @@ class RefineResult:
     extra: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of every attribute except ``extra`` (``refined`` as a list)."""
         return {"params": dict(self.params), "neg_log_lik": self.neg_log_lik,
                 "start_neg_log_lik": self.start_neg_log_lik, "refined": list(self.refined),
                 "nfev": self.nfev, "njev": self.njev, "success": self.success,

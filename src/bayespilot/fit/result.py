@@ -57,7 +57,18 @@ class FitResult:
     def to_dict(self, *, full: bool = True) -> dict[str, Any]:
         """JSON-ready dict: ``params``, ``neg_log_lik``, ``vaf``, ``method``, ``seed``, ... .
 
-        With ``full=False`` the per-step details are left out.
+        Parameters
+        ----------
+        full : bool, default True
+            Include ``steps``, the per-step details (the GA histories, each
+            refinement, the scan); False leaves them out (a short summary).
+
+        Returns
+        -------
+        dict
+            ``params``, ``neg_log_lik``, ``vaf``, ``method``, ``seed``,
+            ``threshold``, ``elapsed_seconds`` (s), ``source``, ``settings``
+            and, with ``full``, ``steps``.
         """
         d = {"params": dict(self.params), "neg_log_lik": self.neg_log_lik, "vaf": self.vaf,
              "method": self.method, "seed": self.seed, "threshold": self.threshold,
@@ -67,12 +78,39 @@ class FitResult:
         return d
 
     def to_json(self, path: str | Path, *, full: bool = True) -> Path:
-        """Write :meth:`to_dict` to ``path`` (parent folders created)."""
+        """Write :meth:`to_dict` to ``path`` (parent folders created).
+
+        Non-finite numbers are written as null (read back as NaN by
+        :meth:`from_json`); an existing file is replaced only once the new one
+        is written.
+
+        Parameters
+        ----------
+        path : str or Path
+            The JSON file to write.
+        full : bool, default True
+            Include the per-step details (see :meth:`to_dict`).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         return write_text_atomic(path, dumps(self.to_dict(full=full)))
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "FitResult":
         """The fit a :meth:`to_dict` holds (a null number is NaN).
+
+        Parameters
+        ----------
+        d : dict
+            A :meth:`to_dict` (as read from JSON); ``steps`` may be absent
+            (``full=False``), as may the fields after ``method``.
+
+        Returns
+        -------
+        FitResult
 
         Raises
         ------
@@ -96,6 +134,15 @@ class FitResult:
     @classmethod
     def from_json(cls, path: str | Path) -> "FitResult":
         """The fit a :meth:`to_json` file holds.
+
+        Parameters
+        ----------
+        path : str or Path
+            The JSON file.
+
+        Returns
+        -------
+        FitResult
 
         Raises
         ------

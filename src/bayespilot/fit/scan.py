@@ -19,10 +19,15 @@ class ScanResult:
     Attributes
     ----------
     name : str
-    grid, neg_log_lik : ndarray
+        The scanned parameter.
+    grid : ndarray
+        Its values, in the parameter's unit.
+    neg_log_lik : ndarray
+        -ln L at each grid value (+inf where the model is unstable).
     best : float
         The grid value with the lowest -ln L (the first one on ties).
     best_neg_log_lik : float
+        -ln L there.
     """
 
     name: str
@@ -32,6 +37,7 @@ class ScanResult:
     best_neg_log_lik: float
 
     def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of the attributes: arrays as lists, a non-finite -ln L as None."""
         return {"name": self.name, "grid": self.grid.tolist(),
                 "neg_log_lik": [float(v) if np.isfinite(v) else None for v in self.neg_log_lik],
                 "best": self.best, "best_neg_log_lik": self.best_neg_log_lik}
