@@ -106,7 +106,7 @@ def test_result_readers_name_a_file_of_another_kind(tmp_path):
     "file signature not found"."""
     import json
 
-    from bayespilot.compare import Comparison
+    from bayespilot.compare import Comparison, PooledComparison
     from bayespilot.fit.result import FitResult
     from bayespilot.sample import Posterior
 
@@ -119,6 +119,9 @@ def test_result_readers_name_a_file_of_another_kind(tmp_path):
         FitResult.from_json(side)
     with pytest.raises(ValueError, match="run.json: not a comparison: no log_bayes_factor"):
         Comparison.from_json(side)
+    with pytest.raises(ValueError, match="run.json: not a pooled comparison: no n, "
+                                         "log_bayes_factor"):
+        PooledComparison.from_json(side)
     for read in (FitResult.from_json, Comparison.from_json):
         with pytest.raises(ValueError, match="run.csv is not a JSON file"):
             read(csv)

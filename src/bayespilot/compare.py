@@ -96,13 +96,13 @@ import sys
 import time
 import types
 import warnings
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ._files import WrongKind, dumps, nan_for_null, read_json, read_result, write_text_atomic
+from ._files import WrongKind, dumps, nan_for_null, read_result, write_text_atomic
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
@@ -1530,9 +1530,15 @@ class PooledComparison:
 
         Raises
         ------
-        TypeError
-            If ``d`` lacks an attribute without a default.
+        ValueError
+            ``d`` lacks an attribute without a default: another kind of result.
         """
+        need = [f.name for f in fields(cls)
+                if f.default is MISSING and f.default_factory is MISSING]
+        missing = [k for k in need if k not in d]
+        if missing:
+            raise WrongKind(f"not a pooled comparison: no {', '.join(missing)} (this one has "
+                            f"{', '.join(list(d)[:6]) or 'nothing'})")
         return cls(**nan_for_null(cls, {k: d[k] for k in (f.name for f in fields(cls))
                                        if k in d}))
 
@@ -1554,12 +1560,10 @@ class PooledComparison:
         FileNotFoundError
             No file at ``path``.
         ValueError
-            The file is not JSON, or holds no JSON object (the message names it).
-        TypeError
-            The object lacks an attribute of a pooled comparison (see
-            :meth:`from_dict`).
+            The file is not JSON, or not a pooled comparison's (the message
+            names it).
         """
-        return cls.from_dict(read_json(path, "a PooledComparison"))
+        return read_result(path, cls.from_dict, "a PooledComparison")
 
     def summary(self) -> str:
         """One line for people: the sum ln BF and decision, the per-recording counts, the tests."""
