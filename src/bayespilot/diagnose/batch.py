@@ -578,7 +578,7 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
     """Write ``out_dir/summary.csv`` (:func:`batch_summary_rows`) and, when any diagnosis
     finished, ``out_dir/summary.png`` (:func:`~bayespilot.diagnose.report.plot_batch`);
     returns the CSV's path."""
-    from .report import _pyplot, plot_batch
+    from .report import _png, plot_batch
 
     out = Path(out_dir)
     found = _diagnoses(tasks, out)
@@ -586,7 +586,5 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
                             batch_summary_rows(tasks, out, found))
     done = [(key, d) for key, d in found.items() if d is not None]
     if done:
-        fig = plot_batch(done)
-        fig.savefig(out / "summary.png", dpi=110)
-        _pyplot().close(fig)
+        _png(plot_batch(done), out / "summary.png")  # (closed even when saving fails)
     return path

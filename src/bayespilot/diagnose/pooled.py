@@ -252,10 +252,10 @@ class PooledDiagnosisResult(_JSONSummary):
     def report(self, directory: str | Path) -> dict[str, Path]:
         """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``
         (and ``posterior.png`` once :func:`~bayespilot.diagnose.shared_posterior` has run)."""
-        import base64
         import html
 
-        from .report import _png, plot_candidates, plot_shared_posterior
+        from .report import (_STYLE, _candidate_table, _img, _png, _yes_no, plot_candidates,
+                             plot_shared_posterior)
 
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
@@ -267,20 +267,28 @@ class PooledDiagnosisResult(_JSONSummary):
                                       out / "posterior.png")
         self.to_json(paths["json"])
 
-        def img(p):
-            data = base64.b64encode(Path(p).read_bytes()).decode("ascii")
-            return f'<img alt="{p.stem}" src="data:image/png;base64,{data}" style="max-width:100%">'
-
         title = f"bayespilot pooled diagnosis: {html.escape(self.physics)}"
         page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-                f"<title>{title}</title></head><body style=\"font-family:sans-serif;"
-                f"max-width:1000px;margin:auto\"><h1>{title}</h1>"
+                f"<title>{title}</title><style>{_STYLE}</style></head><body><h1>{title}</h1>"
                 f"<p>{len(self.runs)} runs; extension parameters shared, pilot parameters per "
-                f"run. Mismatch: <b>{self.mismatch}</b>.</p>"
-                f"<h2>Candidates (pooled)</h2>{img(paths['candidates'])}"
-                f"<h2>Each run's share</h2>{img(paths['runs'])}"
-                + (f"<h2>Posterior of the shared parameters</h2>{img(paths['posterior'])}"
-                   if "posterior" in paths else "") +
+                f"run. Mismatch: <b>{_yes_no(self.mismatch)}</b>. Decision at family-wise "
+                f"level alpha = {self.settings['alpha']:g} "
+                f"({self.settings['level_per_candidate']:.2g} per candidate).</p>"
+                f"<h2>Candidates (pooled)</h2>{_candidate_table(self.ranking)}"
+                + _img(paths["candidates"],
+                       "Improvement of the pooled decision likelihood (summed over the runs) by "
+                       "each candidate with its parameters shared; the black mark is what its "
+                       "test needs, the p-values are at the right.") +
+                "<h2>Each run's share</h2>"
+                + _img(paths["runs"],
+                       "Each run's improvement at the pooled fit: a real omission improves "
+                       "every run, one run's artefact only that run.") +
+                (("<h2>Posterior of the shared parameters</h2>"
+                  + _img(paths["posterior"],
+                         "Marginal posterior of each shared parameter (grid, Laplace over the "
+                         "runs' own parameters) with the pooled fit, its standard error and "
+                         "the central 90 % interval."))
+                 if "posterior" in paths else "") +
                 f"<pre>{html.escape(self.summary())}</pre></body></html>\n")
         paths["html"] = out / "report.html"
         write_text_atomic(paths["html"], page)
@@ -291,29 +299,40 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
     """Each run's improvement of -ln L per candidate at the pooled fit (grouped bars).
 
     A real omission improves every run a little; one run's artefact improves one run.
+    The runs are named by their source's file stem (``run j`` without one), in a legend
+    beside the axes; a new figure uses constrained layout, given axes' figure is left as it is.
     """
     from .report import _figure_and_axes
 
-    fig, ax = _figure_and_axes(ax)
+    # each run's name: its source's file stem (recs/s1_run2.csv -> s1_run2), "run j" without
+    # one; a name two runs share gets its run number
+    names = []
+    for j, r in enumerate(result.runs):
+        src = r.get("source")
+        names.append((Path(str(src)).stem or str(src)) if src else f"run {j + 1}")
+    names = [f"{n} (run {j + 1})" if names.count(n) > 1 else n for j, n in enumerate(names)]
+    fig, ax = _figure_and_axes(ax, figsize=(9, 4))
     rows = [c for c in result.ranking if c.testable]
     R = len(result.runs)
     width = 0.8 / max(R, 1)
     top = 0.0
-    for j, r in enumerate(result.runs):
+    for j, (r, name) in enumerate(zip(result.runs, names)):
         d = [r["delta_neg_log_lik"].get(c.physics, math.nan) for c in rows]
         top = max(top, float(np.nanmax(np.abs(d), initial=0.0)))
-        ax.barh(np.arange(len(rows)) + (j - (R - 1) / 2) * width, d, height=width,
-                label=f"run {j + 1}")
+        ax.barh(np.arange(len(rows)) + (j - (R - 1) / 2) * width, d, height=width, label=name)
     ax.axvline(0.0, color="k", lw=0.8)
     ax.set_yticks(range(len(rows)))
     ax.set_yticklabels([c.physics for c in rows], fontsize=8)
-    ax.invert_yaxis()
+    ax.set_ylim(len(rows) - 0.5, -0.5)
     if top > 50:  # a censored fit's large gain beside the GLS candidates' few units
         ax.set_xscale("symlog", linthresh=1.0)
-    ax.set_xlabel("-ln L(base) - -ln L(pooled extension), per run")
-    ax.set_title(f"Each run's share (decision: {result.physics})")
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
+    ax.grid(True, axis="x", alpha=0.3)
+    ax.set_axisbelow(True)
+    ax.set_xlabel(r"$\Delta(-\ln L)$ of each run at the pooled fit: "
+                  r"$-\ln L_\mathrm{base} - (-\ln L_\mathrm{pooled\ extension})$")
+    ax.set_title(f"Each run's share (decision: {result.physics})", fontsize=10)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="run",
+              title_fontsize=7)
     return fig
 
 

@@ -4,7 +4,9 @@ Every plotting function takes a result (a single-run
 :class:`~bayespilot.diagnose.DiagnosisResult`; :func:`plot_candidates` also a pooled
 one, :func:`plot_shared_posterior` a ``SharedPosterior``, :func:`plot_batch` the
 diagnoses' dicts) and optional axes, and returns the figure (it never calls
-``plt.show()``); :func:`write_report` writes them all.
+``plt.show()``); :func:`write_report` writes them all.  A figure made here uses
+matplotlib's constrained layout; on axes the caller gives, the caller's figure and its
+layout are left as they are.
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from .._files import write_text_atomic
+from .._labels import parameter_label
+from ..plots import _pyplot  # (one backend rule for every figure; batch.py imports it here)
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -31,23 +35,19 @@ __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_c
            "write_report"]
 
 
-def _pyplot():
-    import matplotlib
-
-    if matplotlib.get_backend().lower() not in ("agg", "pdf", "svg", "ps", "cairo"):
-        try:
-            matplotlib.use("Agg")
-        except Exception:  # a backend already in use elsewhere; plotting still works
-            pass
-    import matplotlib.pyplot as plt
-
-    return plt
+def _subplots(*args, **kwargs):
+    """A new figure and its axes, laid out by matplotlib's constrained layout."""
+    return _pyplot().subplots(*args, layout="constrained", **kwargs)
 
 
 #: Length of a Welch segment of the residual spectrum, s (1024 samples at the paper's
 #: 100 Hz): the spectrum's lowest frequency, 2 pi / 10.24 = 0.61 rad/s, is the same at
 #: every sample rate (a fixed 1024 samples started it at 6.1 rad/s at 1 kHz).
 WELCH_SECONDS = 10.24
+
+#: Units of the describing functions' magnitudes: u and e in rad, theta_ddot_m in rad/s^2.
+H_V_UNIT = "rad/rad"
+H_M_UNIT = "rad/(rad/s$^2$)"
 
 
 def _sample_interval(result: DiagnosisResult, recording: Any = None) -> float:
@@ -63,19 +63,48 @@ def _sample_interval(result: DiagnosisResult, recording: Any = None) -> float:
 
 
 def _residual_psd(x: np.ndarray, fs: float) -> tuple[np.ndarray, np.ndarray]:
-    """Welch PSD of a residual in segments of :data:`WELCH_SECONDS` (at most the record),
-    without the zero frequency: omega (rad/s) and the PSD."""
+    """One-sided Welch PSD of a residual (rad) in segments of :data:`WELCH_SECONDS` (at most
+    the record), without the zero frequency: omega (rad/s) and the density per rad/s,
+    rad^2/(rad/s) (scipy's per-Hz density divided by 2 pi, so that it integrates over omega
+    to the variance)."""
     from scipy import signal
 
     nperseg = max(1, min(int(round(WELCH_SECONDS * fs)), x.size))
     f, P = signal.welch(x, fs=fs, nperseg=nperseg)
-    return 2 * np.pi * f[1:], P[1:]
+    return 2 * np.pi * f[1:], P[1:] / (2 * np.pi)
+
+
+def _decision_band(result: DiagnosisResult) -> float:
+    """The decision likelihood's low-pass cut-off omega_c, rad/s (inf: the whole band)."""
+    from .decide import OMEGA_C
+
+    nm = (result.settings or {}).get("noise_model")
+    if isinstance(nm, Mapping) and "omega_c" in nm:
+        w = nm["omega_c"]
+        return math.inf if w is None else float(w)
+    noise = result.arrays.get("noise")
+    w = getattr(noise, "omega_c", None)
+    return float(w) if w is not None else OMEGA_C
 
 
 def _align(phase: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """Shift an unwrapped phase (deg) by whole turns to lie closest to ``ref``."""
     k = np.round(np.nanmedian(ref - phase) / 360.0)
     return phase + 360.0 * k
+
+
+def _no_describing_function(result: DiagnosisResult) -> str:
+    """Why a result has no describing function, in a sentence (for the figure and the report)."""
+    arr = result.arrays
+    if arr.get("forcing_frequencies") is None:
+        why = "the recording's forcing functions are unknown"
+    else:
+        why = ("the record is not whole periods of the forcing functions, or one of them is "
+               "zero throughout")
+    n, dt = np.size(arr.get("residual", ())), (result.settings or {}).get("dt")
+    length = f" (this record: {n * dt:g} s)" if n and dt else ""
+    return (f"No describing function: {why}{length}. The two-input estimate needs both "
+            f"forcing functions over whole periods of the record (81.92 s for the paper's).")
 
 
 def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure:
@@ -86,54 +115,79 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
     result : DiagnosisResult
         A single-run diagnosis: the describing functions at the forcing
         frequencies of the data and of the base model, and of the extended
-        model when an extension was chosen (``result.arrays``).
+        model when an extension was chosen (``result.arrays``).  The models'
+        are the same two-input estimate made from the model's simulated
+        control output, so they exist only at the forcing frequencies and are
+        drawn as markers there (the motion channel's threshold makes it
+        depend on the signal's amplitude: there is no one curve between).
     axes : array of matplotlib Axes, optional
         Four axes, taken as 2 x 2 (rows: magnitude, phase in deg; columns:
-        visual H_v per rad of e, motion H_m per rad/s^2 of theta_ddot_m);
-        default: a new figure.
+        visual H_v = u/e in rad/rad, motion H_m = u/theta_ddot_m in
+        rad/(rad/s^2)); default: a new figure.
 
     Returns
     -------
     matplotlib.figure.Figure
-        The figure of the axes.  Without forcing functions over whole periods
-        of the record the axes say so and show nothing else.
+        The figure of the axes.  Without a describing function (forcing
+        functions unknown, not whole periods of the record, or one zero
+        throughout) a new figure is one short panel saying so; on given axes
+        the first says so and the others are blank.
     """
-    plt = _pyplot()
+    from matplotlib.lines import Line2D
+
     arr = result.arrays
-    if axes is None:
-        fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), sharex=True)
+    if "df_data" not in arr:
+        msg = _no_describing_function(result)
+        if axes is None:
+            fig, ax = _subplots(figsize=(8, 1.6))
+            rest = []
+        else:
+            flat = list(np.ravel(axes))
+            fig, ax, rest = flat[0].figure, flat[0], flat[1:]
+        for a in (ax, *rest):
+            a.set_axis_off()
+        ax.text(0.5, 0.5, msg, ha="center", va="center", transform=ax.transAxes, wrap=True,
+                fontsize=9)
+        return fig
+    created = axes is None
+    if created:
+        fig, axes = _subplots(2, 2, figsize=(10, 7), sharex=True)
     else:
         fig = np.ravel(axes)[0].figure
     axes = np.asarray(axes).reshape(2, 2)
-    if "df_data" not in arr:
-        for ax in axes.ravel():
-            ax.text(0.5, 0.5, "no describing function: the forcing functions are unknown,\n"
-                    "not whole periods of the record, or one is zero throughout",
-                    ha="center", va="center", transform=ax.transAxes)
-        return fig
     d, mb = arr["df_data"], arr["df_model"]
     ma = arr.get("df_after")
     w = d["omega"]
-    for col, key, label in ((0, "H_v", "visual H_v (per rad of e)"),
-                            (1, "H_m", "motion H_m (per rad/s^2 of theta_ddot_m)")):
+    data_kw = dict(ls="none", marker="o", ms=4, color="k")
+    base_kw = dict(ls="none", marker="s", ms=6, mfc="none", mec="C0", mew=1.2)
+    after_kw = dict(ls="none", marker="^", ms=6, mfc="none", mec="C3", mew=1.2)
+    for col, key, title, unit in (
+            (0, "H_v", r"visual channel $H_\mathrm{v} = u/e$", H_V_UNIT),
+            (1, "H_m", r"motion channel $H_\mathrm{m} = u/\ddot\theta_\mathrm{m}$", H_M_UNIT)):
         ax_m, ax_p = axes[0, col], axes[1, col]
-        ax_m.loglog(w, np.abs(d[key]), "ko", ms=4, label="data (two-input multisine estimate)")
-        ax_m.loglog(w, np.abs(mb[key]), "C0-", label="base model")
+        ax_m.loglog(w, np.abs(d[key]), **data_kw)
+        ax_m.loglog(w, np.abs(mb[key]), **base_kw)
         ph_d = np.degrees(np.unwrap(np.angle(d[key])))
-        ax_p.semilogx(w, ph_d, "ko", ms=4)
-        ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(mb[key]))), ph_d), "C0-")
+        ax_p.semilogx(w, ph_d, **data_kw)
+        ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(mb[key]))), ph_d), **base_kw)
         if ma is not None:
-            ax_m.loglog(w, np.abs(ma[key]), "C3--", label=f"with {result.physics}")
-            ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(ma[key]))), ph_d), "C3--")
-        ax_m.set_title(label)
-        ax_m.set_ylabel("magnitude")
-        ax_p.set_ylabel("phase, deg")
-        ax_p.set_xlabel("omega, rad/s")
+            ax_m.loglog(w, np.abs(ma[key]), **after_kw)
+            ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(ma[key]))), ph_d), **after_kw)
+        ax_m.set_title(title, fontsize=10)
+        ax_m.set_ylabel(f"magnitude ({unit})")
+        ax_p.set_ylabel("phase (deg)")
+        ax_p.set_xlabel(r"$\omega$ (rad/s)")
         ax_m.grid(True, which="both", alpha=0.3)
         ax_p.grid(True, which="both", alpha=0.3)
-    axes[0, 0].legend(fontsize=8)
-    fig.suptitle("Describing functions at the forcing frequencies")
-    fig.tight_layout()
+    handles = [Line2D([], [], **data_kw, label="data (two-input multisine estimate)"),
+               Line2D([], [], **base_kw, label="base model (same estimate, model output)")]
+    if ma is not None:
+        handles.append(Line2D([], [], **after_kw, label=f"with {result.physics}"))
+    if created:
+        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8)
+        fig.suptitle("Describing functions at the forcing frequencies", fontsize=11)
+    else:
+        axes[0, 0].legend(handles=handles, fontsize=7)
     return fig
 
 
@@ -148,13 +202,16 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
         extension was chosen, the extended model's (``result.arrays``), each
         after the first ``skip_seconds``.
     axes : array of matplotlib Axes, optional
-        Four axes, taken as 2 x 2: the residual's PSD (Welch) with the
-        forcing frequencies marked, its variance over eight segments of the
-        run, and its mean times sign conditioned on |i(t - tau_m)| (IPUT) and
-        on |u| (rad); default: a new figure.  The PSD is averaged over
-        segments of :data:`WELCH_SECONDS` (10.24 s, at most the record), so
-        its lowest frequency, 2 pi / 10.24 rad/s, is the same at every
-        sample rate.
+        Four axes, taken as 2 x 2: the residual's one-sided PSD (Welch), in
+        rad^2/(rad/s) against omega in rad/s, with the forcing frequencies
+        marked; its variance over eight segments of the run; and its mean
+        times sign conditioned on |i(t - tau_m)| (IPUT) and on |u| (rad);
+        default: a new figure.  The PSD is averaged over segments of
+        :data:`WELCH_SECONDS` (10.24 s, at most the record), so its lowest
+        frequency, 2 pi / 10.24 rad/s, is the same at every sample rate; it
+        is drawn up to twice the decision likelihood's cut-off omega_c
+        (``settings["noise_model"]``, 25 rad/s by default), the part above
+        omega_c, which the decision does not use, shaded.
     recording : Recording, optional
         The recording diagnosed: its sample interval is used when the
         result's ``settings`` have none (``diagnose`` always records it).
@@ -171,10 +228,11 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
         Neither ``result.settings["dt"]`` nor ``recording`` gives the
         sample interval.
     """
-    plt = _pyplot()
+    from matplotlib.lines import Line2D
+
     arr = result.arrays
     if axes is None:
-        fig, axes = plt.subplots(2, 2, figsize=(10, 6.5))
+        fig, axes = _subplots(2, 2, figsize=(10, 7))
     else:
         fig = np.ravel(axes)[0].figure
     axes = np.asarray(axes).reshape(2, 2)
@@ -183,22 +241,35 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
     before = arr["residual"][skip:]
     after = arr.get("after_residual")
     after = after[skip:] if after is not None else None
+    omega_c = _decision_band(result)
+    w_max = 2.0 * omega_c if math.isfinite(omega_c) else math.inf
     ax = axes[0, 0]
+    handles = []
     for x, lab, st in ((before, "base model", "C0-"), (after, f"with {result.physics}", "C3-")):
         if x is None:
             continue
         om, P = _residual_psd(np.asarray(x, float), fs)
-        ax.loglog(om, P, st, lw=1, label=lab)
+        keep = om <= w_max
+        handles += ax.loglog(om[keep], P[keep], st, lw=1, label=lab)
     ff = arr.get("forcing_frequencies")
     if ff is not None:
         for w in ff[0]:
-            ax.axvline(w, color="0.7", lw=0.5, ls=":")
+            ax.axvline(w, color="0.6", lw=0.6, ls=":")
         for w in ff[1]:
-            ax.axvline(w, color="0.85", lw=0.5, ls="--")
-    ax.set_xlabel("omega, rad/s")
-    ax.set_ylabel("residual PSD")
-    ax.set_title("residual spectrum (dotted: target, dashed: disturbance)")
-    ax.legend(fontsize=8)
+            ax.axvline(w, color="0.75", lw=0.6, ls="--")
+        handles += [Line2D([], [], color="0.6", lw=0.8, ls=":", label="target frequencies"),
+                    Line2D([], [], color="0.75", lw=0.8, ls="--",
+                           label="disturbance frequencies")]
+    if math.isfinite(omega_c):
+        ax.axvspan(omega_c, w_max, color="0.5", alpha=0.15, lw=0)
+        ax.set_xlim(right=w_max)
+        handles.append(Line2D([], [], color="0.5", alpha=0.3, lw=6,
+                              label=rf"above $\omega_c$ = {omega_c:g} rad/s: not in the "
+                                    "decision"))
+    ax.set_xlabel(r"$\omega$ (rad/s)")
+    ax.set_ylabel("one-sided PSD (rad$^2$/(rad/s))")
+    ax.set_title("residual spectrum", fontsize=10)
+    ax.legend(handles=handles, fontsize=7, loc="lower left")
     ax = axes[0, 1]
     nseg = 8
     for x, lab, st in ((before, "base model", "C0o-"), (after, f"with {result.physics}", "C3s-")):
@@ -206,11 +277,13 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
             continue
         v = [np.var(s) for s in np.array_split(x, nseg)]
         ax.plot(np.arange(nseg) + 1, v, st, label=lab)
-    ax.set_xlabel("segment of the run")
-    ax.set_ylabel("residual variance")
-    ax.set_title("residual over the run")
-    for ax, key, lab in ((axes[1, 0], "amp_canal", "|i(t - tau_m)|, IPUT"),
-                         (axes[1, 1], "amp_control", "|u|, rad")):
+    ax.set_xlabel(f"segment of the run (eighths, after the first {result.settings['skip_seconds']:g} s)")
+    ax.set_ylabel("residual variance (rad$^2$)")
+    ax.set_title("residual over the run", fontsize=10)
+    ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
+    for ax, key, lab, what in ((axes[1, 0], "amp_canal", r"$|i(t - \tau_\mathrm{m})|$ (IPUT)",
+                                r"$|i(t - \tau_\mathrm{m})|$"),
+                               (axes[1, 1], "amp_control", "$|u|$ (rad)", "$|u|$")):
         b = arr.get(key)
         if b is None:
             ax.set_visible(False)
@@ -226,10 +299,9 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
             ax.plot(bb["centre"], bb["mean"], "C3s-", label=f"with {result.physics}")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_xlabel(lab)
-        ax.set_ylabel("mean residual x sign")
-        ax.set_title(f"residual conditioned on {lab.split(',')[0]}")
-    axes[1, 0].legend(fontsize=8)
-    fig.tight_layout()
+        ax.set_ylabel("mean residual × sign (rad)")
+        ax.set_title(f"residual conditioned on {what}", fontsize=10)
+    axes[0, 1].legend(fontsize=8)
     return fig
 
 
@@ -247,39 +319,71 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
     Returns
     -------
     matplotlib.figure.Figure
-        One bar per statistic with a finite value (red at -log10 p >= 1.3;
-        0 where p is not a finite positive number, as without a bootstrap),
-        p = 0.05 dashed and the smallest p the bootstrap can give,
-        1 / (B + 1), dotted.
+        One bar per statistic with a finite value (red at p <= 0.05), "n/a"
+        where its p-value is not a finite positive number, p = 0.05 dashed
+        and the smallest p the bootstrap of B replicates can give,
+        1 / (B + 1), as a wide grey line (both in the legend; at B = 19 they
+        are the same).  Without a bootstrap (``n_bootstrap=0``, or skipped)
+        the axes say "no bootstrap p-values" and draw no bars.
     """
-    plt = _pyplot()
+    from matplotlib.lines import Line2D
+
     if ax is None:
-        fig, ax = plt.subplots(figsize=(8, 4.5))
+        fig, ax = _subplots(figsize=(8, 4.8))
     else:
         fig = ax.figure
     keys = [k for k, e in result.where.items() if math.isfinite(e.value)]
     p = [result.where[k].p_value for k in keys]
-    val = [-math.log10(x) if math.isfinite(x) and x > 0 else 0.0 for x in p]
-    ax.barh(range(len(keys)), val, color=["C3" if v >= 1.3 else "C0" for v in val])
+    ok = [math.isfinite(x) and x > 0 for x in p]
+    B = int((result.settings.get("bootstrap") or {}).get("replicates", 0) or 0)
     ax.set_yticks(range(len(keys)))
     ax.set_yticklabels(keys, fontsize=8)
-    ax.invert_yaxis()
-    B = result.settings["bootstrap"].get("replicates", 0)
+    ax.set_ylim(len(keys) - 0.5, -0.5)
+    ax.set_title("Where the data and the base model differ", fontsize=10)
+    if not any(ok):
+        why = (result.settings.get("bootstrap") or {}).get("skipped")
+        ax.text(0.5, 0.5, "no bootstrap p-values: the located statistics were not tested\n"
+                + (f"({why})" if why else "(diagnose(n_bootstrap=0), --bootstrap 0)"),
+                ha="center", va="center", transform=ax.transAxes, fontsize=9, wrap=True,
+                bbox=dict(fc="white", ec="0.6"))
+        ax.set_xticks([])
+        ax.set_xlabel(r"$-\log_{10} p$ (no parametric bootstrap)")
+        return fig
+    val = [-math.log10(x) if good else 0.0 for x, good in zip(p, ok)]
+    crit = -math.log10(0.05)
+    ax.barh(range(len(keys)), val,
+            color=["C3" if good and x <= 0.05 else "C0" for x, good in zip(p, ok)])
+    for i, good in enumerate(ok):
+        if not good:
+            ax.text(0.02, i, "n/a", va="center", fontsize=7, color="0.3",
+                    transform=ax.get_yaxis_transform())
+    handles = []
     if B:
-        ax.axvline(math.log10(B + 1), color="0.5", ls=":", lw=1)
-    ax.axvline(-math.log10(0.05), color="k", ls="--", lw=0.8)
-    ax.set_xlabel(f"-log10 p (parametric bootstrap, B = {B}; dashed: p = 0.05, dotted: "
-                  f"smallest possible)")
-    ax.set_title("Where the data and the base model differ")
-    fig.tight_layout()
+        floor = math.log10(B + 1)
+        ax.axvline(floor, color="0.6", lw=5, alpha=0.5, solid_capstyle="butt")
+        handles.append(Line2D([], [], color="0.6", lw=5, alpha=0.5,
+                              label=f"smallest possible p, 1/(B + 1) = {1 / (B + 1):.2g}"))
+    ax.axvline(crit, color="k", ls="--", lw=1)
+    handles.insert(0, Line2D([], [], color="k", ls="--", lw=1, label="p = 0.05"))
+    ax.set_xlim(0, 1.1 * max(max(val), crit, math.log10(B + 1) if B else 0.0))
+    ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.set_xlabel(rf"$-\log_{{10}}\,p$ (parametric bootstrap, B = {B}; red: p $\leq$ 0.05)")
     return fig
 
 
 def _figure_and_axes(ax: Any = None, figsize=(8, 4)):
-    """``(figure, axes)``: the given axes and their figure, or a new figure of ``figsize``."""
+    """``(figure, axes)``: the given axes and their figure, or a new (constrained-layout)
+    figure of ``figsize``."""
     if ax is None:
-        return _pyplot().subplots(figsize=figsize)
+        return _subplots(figsize=figsize)
     return ax.figure, ax
+
+
+def _p_text(p: float) -> str:
+    """A p-value as the figures and the report write it."""
+    if p is None or not math.isfinite(p):
+        return "—"
+    return "0" if p == 0 else f"{p:.2g}"
 
 
 def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = None
@@ -297,14 +401,17 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     Returns
     -------
     matplotlib.figure.Figure
-        One bar per testable candidate, d(-ln L) on a symlog axis (red:
-        justified), its p-value beside it, and for an entry with new
+        One bar per testable candidate, d(-ln L) (red: justified; a symlog
+        axis when the largest bar or threshold is above 10, else linear), its
+        p-value in a column at the right, and for an entry with new
         parameters a black mark at the d(-ln L) its test needs at the level
         per candidate: half the chi2(df) quantile at the level, or for a
         one-parameter boundary null (chi-bar-squared: the p-value halved)
         half the chi2(1) quantile at twice the level; times the bootstrap's
         scale where the test was calibrated and the scale is above 1.
+        The marks are the axes' only lines.
     """
+    from matplotlib import ticker
     from scipy import stats
 
     from .catalogue import get_extension
@@ -315,6 +422,7 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     names = [c.physics for c in rows]
     d = [c.delta_neg_log_lik for c in rows]
     ax.barh(range(len(rows)), d, color=["C3" if c.justified else "C0" for c in rows])
+    crits = []
     for i, c in enumerate(rows):
         if c.df > 0:
             # the threshold of the test that decided (decide.lr_p_value, calibrate.Calibration)
@@ -322,16 +430,30 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
             crit = 0.5 * stats.chi2.isf(2.0 * level if boundary else level, c.df)
             if c.calibration is not None:
                 crit *= max(1.0, c.calibration.scale)
+            crits.append(crit)
             ax.plot([crit, crit], [i - 0.4, i + 0.4], "k-", lw=2)
-        p = "0" if c.p_value == 0 else f"{c.p_value:.2g}"
-        ax.text(max(d[i], 0) * 1.02 + 0.1, i, f"p = {p}", va="center", fontsize=8)
     ax.set_yticks(range(len(rows)))
     ax.set_yticklabels(names, fontsize=8)
-    ax.invert_yaxis()
-    ax.set_xscale("symlog", linthresh=1.0)
-    ax.set_xlabel("-ln L(base) - -ln L(extension) (black: threshold of the test)")
-    ax.set_title(f"Candidates (decision: {result.physics})")
-    fig.tight_layout()
+    ax.set_ylim(len(rows) - 0.5, -0.5)
+    top = max([0.0, *(x for x in d if math.isfinite(x)), *crits])
+    if top > 10:
+        ax.set_xscale("symlog", linthresh=1.0)
+        ax.set_xlim(min(0.0, *(x for x in d if math.isfinite(x))), top * 1.6)
+        ax.xaxis.set_major_locator(ticker.SymmetricalLogLocator(base=10, linthresh=1.0,
+                                                                subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_minor_locator(ticker.NullLocator())
+        ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.grid(True, axis="x", alpha=0.3)
+    ax.set_axisbelow(True)
+    # the p-values as a column at the right, clear of the bars and the marks
+    right = ax.secondary_yaxis("right")
+    right.set_yticks(range(len(rows)))
+    right.set_yticklabels([f"p = {_p_text(c.p_value)}" for c in rows], fontsize=8)
+    right.tick_params(length=0)
+    ax.set_xlabel(r"$\Delta(-\ln L) = -\ln L_\mathrm{base} - (-\ln L_\mathrm{extension})$"
+                  "\nblack mark: what the test needs at the level per candidate "
+                  f"({level:.2g}); red: justified", fontsize=9)
+    ax.set_title(f"Candidates (decision: {result.physics})", fontsize=10)
     return fig
 
 
@@ -344,21 +466,25 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
         ``(key, diagnosis)`` with ``diagnosis`` as ``DiagnosisResult.to_dict()``
         (or the pooled one) writes it.
     ax : matplotlib Axes, optional
+        Default: a new figure, at least 3.6 in tall (its colour bar's label
+        whole) and 0.28 in more per diagnosis.
 
     Returns
     -------
     matplotlib.figure.Figure
         One row per diagnosis, one column per catalogue entry, coloured by
-        -log10 p (grey: not testable on that recording); a dot where p is
-        below the decision's level per candidate, a box around the chosen
-        extension, the decision at the right.
+        -log10 p up to 6 (where a p is below 1e-6, an arrow on the colour bar
+        says the scale is capped there; grey: not
+        testable on that recording); a dot where p is below the decision's
+        level per candidate (the white line on the colour bar), a box around
+        the chosen extension, the decision at the left.
     """
     from .catalogue import NAMES
 
     plt = _pyplot()
     n = len(diagnoses)
     if ax is None:
-        fig, ax = plt.subplots(figsize=(8.5, min(1.6 + 0.28 * n, 60.0)))
+        fig, ax = _subplots(figsize=(8.5, min(max(3.6, 1.9 + 0.28 * n), 60.0)))
     else:
         fig = ax.figure
     z = np.full((n, len(NAMES)), np.nan)
@@ -377,8 +503,13 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")
     im = ax.imshow(np.ma.masked_invalid(z), aspect="auto", cmap=cmap, vmin=0, vmax=6,
                    interpolation="nearest")
-    cb = fig.colorbar(im, ax=ax, label="-log10 p (dot: below the level; box: chosen)",
-                      shrink=0.8)
+    capped = bool(np.any(z[np.isfinite(z)] > 6))
+    # a bar about 0.15 in wide however tall the axes (matplotlib's default aspect of 20 made
+    # it 0.6 in wide beside 40 diagnoses)
+    tall = fig.get_size_inches()[1] * ax.get_position().height
+    cb = fig.colorbar(im, ax=ax, extend="max" if capped else "neither", pad=0.02,
+                      aspect=max(20.0, tall / 0.15),
+                      label=r"$-\log_{10} p$" + (" (arrow: p < 1e-6)" if capped else ""))
     levels = [d["settings"]["level_per_candidate"] for _, d in diagnoses]
     if levels:  # the decision's level per candidate (the median, should they differ)
         cb.ax.axhline(-math.log10(float(np.median(levels))), color="w", lw=2)
@@ -386,31 +517,52 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     ax.set_xticklabels(NAMES, rotation=30, ha="right", fontsize=8)
     ax.set_yticks(range(n))
     ax.set_yticklabels([f"{k}: {d['physics']}" for k, d in diagnoses], fontsize=7)
-    ax.set_title(f"{n} diagnoses: every candidate's p-value")
-    fig.tight_layout()
+    ax.set_title(f"{n} {'diagnosis' if n == 1 else 'diagnoses'}: every candidate's p-value\n"
+                 "dot: below the level per candidate (white line); box: chosen; grey: not "
+                 "testable", fontsize=9)
     return fig
 
 
-def _axes_row(n: int, axes: Any = None):
-    """(figure, n axes in a row): new ones, or the given ones'."""
+def _axes_row(n: int, axes: Any = None, height: float = 4.2):
+    """(figure, n axes in a row): new ones (constrained layout), or the given ones'."""
     if axes is None:
-        plt = _pyplot()
-        fig, axes = plt.subplots(1, n, figsize=(4.5 * n, 3.4), squeeze=False)
+        fig, axes = _subplots(1, n, figsize=(4.8 * n, height), squeeze=False)
         return fig, axes[0]
     axes = np.atleast_1d(axes)
     return axes[0].figure, axes
 
 
+def _units_model(physics: str, model: Any = None) -> Any:
+    """A model that declares the units of ``physics``'s new parameters: ``model`` when given,
+    else the catalogue entry built on the paper's model; None if neither can be had (another
+    lab's extension read back from a file): the labels then have no units."""
+    if model is not None:
+        return model
+    try:
+        from ..model import paper_model
+        from .catalogue import get_extension
+
+        return get_extension(physics).build(paper_model())
+    except Exception:  # an unknown name, a build that needs more: labels without units
+        return None
+
+
+def _legend_below(ax, ncols: int = 2) -> None:
+    """The axes' legend under them, clear of the data (constrained layout makes room)."""
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncols=ncols,
+              frameon=False)
+
+
 def _mark_fit(ax, value: float, stderr: float, label: str) -> None:
-    """A maximum-likelihood fit and its +-1 standard error on a marginal's axes."""
+    """A maximum-likelihood fit and its ±1 standard error on a marginal's axes."""
     ax.axvline(value, color="C3", ls="--", lw=1, label=label)
     if math.isfinite(stderr):
-        ax.axvspan(value - stderr, value + stderr, color="C3", alpha=0.12, label="+-1 s.e.")
+        ax.axvspan(value - stderr, value + stderr, color="C3", alpha=0.12, label="±1 s.e.")
 
 
 def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
     """Marginal posteriors of the chosen extension's new parameters, with the maximum-likelihood
-    fit and its +-1 standard error (from the decision likelihood) marked, and its
+    fit and its ±1 standard error (from the decision likelihood) marked, and its
     profile-likelihood interval where it was made.
 
     Parameters
@@ -426,12 +578,15 @@ def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
     Returns
     -------
     matplotlib.figure.Figure
+        Each panel's x axis is the parameter in the paper's notation with
+        its unit (the extended model's), its legend under the axes.
     """
     from ..plots import plot_marginal
 
     post, chosen = result.posterior, result.chosen
     names = [n for n in chosen.params if n in post.parameter_names]
     fig, axes = _axes_row(len(names), axes)
+    model = _units_model(chosen.physics, getattr(chosen, "model", None))
     for ax, n in zip(axes, names):
         plot_marginal(post, n, ax=ax)
         _mark_fit(ax, chosen.params[n], chosen.stderr.get(n, math.nan),
@@ -441,9 +596,11 @@ def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
             for k, end in enumerate((iv.lower, iv.upper)):
                 ax.axvline(end, color="C3", ls=":", lw=1.2,
                            label=f"{100 * iv.level:.0f} % profile interval" if k == 0 else None)
-        ax.legend(fontsize=7)
-    fig.suptitle(f"{chosen.physics}: posterior of its new parameters", fontsize=9)
-    fig.tight_layout()
+        ax.set_xlabel(parameter_label(model, n))
+        ax.set_title(f"{post.draws(n).size} draws ("
+                     f"{'converged' if post.converged else 'not converged'})", fontsize=8)
+        _legend_below(ax)
+    fig.suptitle(f"{chosen.physics}: posterior of its new parameters", fontsize=10)
     return fig
 
 
@@ -463,6 +620,8 @@ def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
     Returns
     -------
     matplotlib.figure.Figure
+        Each panel's x axis is the parameter in the paper's notation with
+        its unit, its legend under the axes.
 
     Raises
     ------
@@ -476,28 +635,29 @@ def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
                          "diagnosis, or diagnose(intervals=False))")
     names = list(chosen.interval)
     fig, axes = _axes_row(len(names), axes)
+    model = _units_model(chosen.physics, getattr(chosen, "model", None))
     for ax, n in zip(axes, names):
         iv = chosen.interval[n]
         ok = np.isfinite(iv.deviance)
         ax.plot(iv.values[ok], iv.deviance[ok], "o-", color="C0", ms=3, lw=1,
                 label="scaled deviance (profile)")
         q = iv.quantile
-        ax.axhline(q, color="0.4", ls=":", lw=1, label=f"chi2_1 {100 * iv.level:.0f} %")
+        ax.axhline(q, color="0.4", ls=":", lw=1,
+                   label=rf"$\chi^2_1$ {100 * iv.level:.0f} % quantile")
         ax.axvspan(iv.lower, iv.upper, color="C0", alpha=0.12,
                    label=f"{100 * iv.level:.0f} % interval {iv}")
         ax.axvline(chosen.params[n], color="C3", ls="--", lw=1, label="reported fit")
         ax.set_ylim(-0.05 * q, 3 * q)
-        ax.set_xlabel(n)
-        ax.set_ylabel("2 d(-ln L) x scale")
-        ax.legend(fontsize=7)
-    fig.suptitle(f"{chosen.physics}: profile likelihood of its new parameters", fontsize=9)
-    fig.tight_layout()
+        ax.set_xlabel(parameter_label(model, n))
+        ax.set_ylabel(r"$2\,\Delta(-\ln L)$ × scale")
+        _legend_below(ax)
+    fig.suptitle(f"{chosen.physics}: profile likelihood of its new parameters", fontsize=10)
     return fig
 
 
 def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
     """The marginal posteriors of a pooled diagnosis's shared parameters
-    (:func:`~bayespilot.diagnose.shared_posterior`), with the pooled fit and its +-1 standard
+    (:func:`~bayespilot.diagnose.shared_posterior`), with the pooled fit and its ±1 standard
     error and the central 90 % interval marked.
 
     Parameters
@@ -511,9 +671,12 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
     Returns
     -------
     matplotlib.figure.Figure
+        Each panel's x axis is the parameter in the paper's notation with
+        the unit its catalogue entry declares, its legend under the axes.
     """
     names = list(post.names)
     fig, axes = _axes_row(len(names), axes)
+    model = _units_model(post.physics)
     for a, (ax, n) in enumerate(zip(axes, names)):
         g, m = post.grid[a], np.asarray(post.marginals[n]["density"])
         ax.plot(g, m, color="C0", lw=1.5, label="posterior (grid, Laplace)")
@@ -521,12 +684,11 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
         inside = (g >= lo) & (g <= hi)
         ax.fill_between(g[inside], m[inside], color="C0", alpha=0.2, label="central 90 %")
         _mark_fit(ax, post.ml[n], post.stderr.get(n, math.nan), "pooled ML fit")
-        ax.set_xlabel(n)
-        ax.set_ylabel("density")
-        ax.legend(fontsize=7)
+        ax.set_xlabel(parameter_label(model, n))
+        ax.set_ylabel("posterior density")
+        _legend_below(ax)
     fig.suptitle(f"{post.physics}: posterior of the parameters shared by "
-                 f"{post.settings['n_runs']} runs", fontsize=9)
-    fig.tight_layout()
+                 f"{post.settings['n_runs']} runs", fontsize=10)
     return fig
 
 
@@ -537,6 +699,72 @@ def _png(fig, path: Path) -> Path:
     finally:
         plt.close(fig)
     return path
+
+
+def _number(x: Any, fmt: str, missing: str = "—") -> str:
+    """``x`` formatted by ``fmt`` for the report: ``missing`` when it is not a number, NaN
+    or -inf (a statistic not computed), "∞" for +inf, and never a negative zero ("-0.00"
+    reads "0.00")."""
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return missing
+    if x == math.inf:
+        return "∞"
+    if not math.isfinite(x):
+        return missing
+    s = format(x, fmt)
+    if s.startswith("-") and float(s) == 0.0:
+        s = s[1:]
+    return s
+
+
+def _yes_no(flag: Any) -> str:
+    return "yes" if flag else "no"
+
+
+def _candidate_table(ranking: Sequence[Any]) -> str:
+    """The candidates' HTML table of a report (single-run or pooled): one row per candidate,
+    a justified one bold; "—" where a number does not apply (a censored fit's Delta BIC)."""
+    rows = []
+    for c in ranking:
+        if not c.testable:
+            rows.append(f"<tr><td>{html.escape(c.physics)}</td><td colspan=5>not tested: "
+                        f"{html.escape(c.reason)}</td></tr>")
+            continue
+        interval = getattr(c, "interval", None) or {}
+        ps = ", ".join(f"{html.escape(k)} = {_number(v, '.4g')} &plusmn; "
+                       f"{_number(c.stderr.get(k), '.2g')}"
+                       + (f" ({100 * interval[k].level:.0f} % profile interval "
+                          f"{html.escape(str(interval[k]))})" if k in interval else "")
+                       for k, v in c.params.items())
+        if not ps and c.reason:  # no fit to show (control-saturation without flat tops)
+            ps = html.escape(c.reason)
+        bold = ' style="font-weight:bold"' if c.justified else ''  # a justified candidate: bold
+        rows.append(f"<tr{bold}>"
+                    f"<td>{html.escape(c.physics)}</td>"
+                    f"<td>{_number(c.delta_neg_log_lik, '.2f')}</td>"
+                    f"<td>{_number(c.p_value, '.3g')}</td>"
+                    f"<td>{_number(c.delta_bic, '.1f')}</td>"
+                    f"<td>{_number(c.signature_score, '.2f')}</td><td>{ps}</td></tr>")
+    return ("<table><tr><th>physics</th><th>&Delta;(-ln L)</th><th>p</th><th>&Delta;BIC</th>"
+            "<th>signature</th><th>parameters</th></tr>\n" + "\n".join(rows) + "</table>\n"
+            "<p><small>Bold: justified at the level per candidate. &mdash;: not computed "
+            "(no fit was made).</small></p>")
+
+
+def _img(path: Path, caption: str = "") -> str:
+    """A PNG embedded in the page, with its caption."""
+    data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+    cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+    return (f'<figure style="margin:0 0 1em 0"><img alt="{html.escape(Path(path).stem)}" '
+            f'src="data:image/png;base64,{data}" style="max-width:100%">{cap}</figure>')
+
+
+#: The style of both reports' pages.
+_STYLE = ("body{font-family:sans-serif;max-width:1000px;margin:auto}"
+          "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:3px 6px;"
+          "font-size:90%}figcaption{font-size:85%;color:#444}")
 
 
 def write_report(result: DiagnosisResult, directory: str | Path, *, recording: Any = None
@@ -563,7 +791,9 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         chosen extension has profile intervals), ``posterior`` (PNG, when
         ``result.posterior`` is set), ``json`` (``diagnosis.json``,
         :meth:`DiagnosisResult.to_json`) and ``html`` (``report.html``, the
-        figures embedded).
+        figures embedded).  Without a describing function (a record that is
+        not whole periods of the forcing) ``frequency_response.png`` says so
+        and the page says it in words instead of showing it.
 
     Raises
     ------
@@ -590,29 +820,22 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
     paths["json"] = out / "diagnosis.json"
     result.to_json(paths["json"])
 
-    def img(p):
-        data = base64.b64encode(Path(p).read_bytes()).decode("ascii")
-        return f'<img alt="{p.stem}" src="data:image/png;base64,{data}" style="max-width:100%">'
-
-    rows = []
-    for c in result.ranking:
-        if not c.testable:
-            rows.append(f"<tr><td>{html.escape(c.physics)}</td><td colspan=5>not tested: "
-                        f"{html.escape(c.reason)}</td></tr>")
-            continue
-        ps = ", ".join(f"{k} = {v:.4g} &plusmn; {c.stderr.get(k, math.nan):.2g}"
-                       + (f" ({100 * c.interval[k].level:.0f} % profile interval "
-                          f"{html.escape(str(c.interval[k]))})"
-                          if k in c.interval else "")
-                       for k, v in c.params.items())
-        bold = ' style="font-weight:bold"' if c.justified else ''  # a justified candidate: bold
-        rows.append(f"<tr{bold}>"
-                    f"<td>{html.escape(c.physics)}</td><td>{c.delta_neg_log_lik:.2f}</td>"
-                    f"<td>{c.p_value:.3g}</td><td>{c.delta_bic:.1f}</td>"
-                    f"<td>{c.signature_score:.2f}</td><td>{ps}</td></tr>")
+    physics = html.escape(result.physics)
+    after = f" and with {physics}" if chosen is not None else ""
+    tested = [e for e in result.where.values() if math.isfinite(e.value)]
     ev = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(e.description)}</td>"
-                 f"<td>{e.value:.4g}</td><td>{'' if not math.isfinite(e.p_value) else f'{e.p_value:.3f}'}</td></tr>"
+                 f"<td>{_number(e.value, '.4g')}</td><td>{_number(e.p_value, '.3f')}</td></tr>"
                  for k, e in result.where.items() if math.isfinite(e.value))
+    no_p = "" if any(math.isfinite(e.p_value) for e in tested) else (
+        "<p>No bootstrap p-values: the located statistics were not tested "
+        "(diagnose(n_bootstrap=0), or the bootstrap was skipped).</p>")
+    if "df_data" in result.arrays:
+        freq = _img(paths["frequency_response"],
+                    f"Describing functions u/e (visual) and u/theta_ddot_m (motion) at the "
+                    f"forcing frequencies: the data's two-input estimate (dots), the same "
+                    f"estimate from the base model's output{after}.")
+    else:
+        freq = f"<p>{html.escape(_no_describing_function(result))}</p>"
     from . import _calibration_lines
 
     cal = "".join(f"<p>{html.escape(line)}</p>" for line in _calibration_lines(result.ranking)
@@ -625,29 +848,35 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         f"{html.escape(', '.join(f'{k} in [{lo:g}, {hi:g}]' for k, (lo, hi) in bf.prior.items()))}"
         f"); {bf.settings['runs']} nested-sampling runs per model, {bf.settings['nlive']} live "
         f"points. The decision is the likelihood-ratio test's.</p>")
-    title = f"bayespilot diagnosis: {html.escape(result.physics)}"
+    omega_c = _decision_band(result)
+    band = (f"the decision's band, up to omega_c = {omega_c:g} rad/s, unshaded"
+            if math.isfinite(omega_c) else "the decision uses the whole band")
+    title = f"bayespilot diagnosis: {physics}"
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
-<style>body{{font-family:sans-serif;max-width:1000px;margin:auto}}table{{border-collapse:collapse}}
-td,th{{border:1px solid #ccc;padding:3px 6px;font-size:90%}}</style></head><body>
+<style>{_STYLE}</style></head><body>
 <h1>{title}</h1>
-<p>Recording: {html.escape(str(result.source))}. Mismatch: <b>{result.mismatch}</b>.
+<p>Recording: {html.escape(str(result.source))}. Mismatch: <b>{_yes_no(result.mismatch)}</b>.
 Base model: -ln L (Eq. 4) = {result.base['neg_log_lik']:.2f}, VAF = {result.base['vaf']:.2f} %.
 Decision at family-wise level alpha = {result.settings['alpha']:g}
 ({result.settings['level_per_candidate']:.2g} per candidate). Time {result.elapsed:.1f} s.</p>
 <h2>Candidates</h2>
-<table><tr><th>physics</th><th>&Delta;(-ln L)</th><th>p</th><th>&Delta;BIC</th><th>signature</th><th>parameters</th></tr>
-{''.join(rows)}</table>
+{_candidate_table(result.ranking)}
 {cal}
-{img(paths['candidates'])}
+{_img(paths['candidates'], "Improvement of the decision likelihood by each candidate; the black "
+      "mark is what its test needs, the p-values are at the right.")}
 {bf_html}
 <h2>Where</h2>
 <table><tr><th>evidence</th><th>what</th><th>value</th><th>bootstrap p</th></tr>{ev}</table>
-{img(paths['evidence'])}
-<h2>Frequency responses</h2>{img(paths['frequency_response'])}
-<h2>Residuals before and after</h2>{img(paths['residuals'])}
-{f"<h2>Profile likelihood of the new parameters</h2>{img(paths['profile'])}" if "profile" in paths else ""}
-{f"<h2>Posterior of the extended model</h2>{img(paths['posterior'])}" if post is not None else ""}
+{no_p}
+{_img(paths['evidence'], "-log10 of each located statistic's parametric-bootstrap p-value.")}
+<h2>Frequency responses</h2>{freq}
+<h2>Residuals before and after</h2>
+{_img(paths['residuals'], f"Residual u - u_hat of the base model{after}: its spectrum ({band}), "
+      "its variance over the run, and its mean times sign against the canal output and the "
+      "control.")}
+{f"<h2>Profile likelihood of the new parameters</h2>{_img(paths['profile'], 'Scaled deviance along each new parameter, the level it must stay below, the interval and the reported fit.')}" if "profile" in paths else ""}
+{f"<h2>Posterior of the extended model</h2>{_img(paths['posterior'], 'Marginal posterior of each new parameter with the maximum-likelihood fit and its standard error.')}" if post is not None else ""}
 <pre>{html.escape(result.summary())}</pre>
 </body></html>
 """

@@ -1,0 +1,369 @@
+"""The diagnosis figures and reports (bayespilot.diagnose.report, pooled.plot_runs and the
+pooled report): layout and backend left to the caller, readable labels with units, no
+empty or misleading panels, legends clear of the data, and the HTML tables' numbers."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from types import SimpleNamespace
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from matplotlib.layout_engine import ConstrainedLayoutEngine  # noqa: E402
+
+from bayespilot import presets  # noqa: E402
+from bayespilot._labels import label, parameter_label  # noqa: E402
+from bayespilot.diagnose import diagnose, diagnose_pooled, get_extension  # noqa: E402
+from bayespilot.diagnose import report as R  # noqa: E402
+from bayespilot.diagnose.pooled import plot_runs  # noqa: E402
+from bayespilot.model import paper_model  # noqa: E402
+from bayespilot.simulate import simulate  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    yield
+    plt.close("all")
+
+
+@pytest.fixture(scope="module")
+def washout():
+    """An 81.92-s FD run with a washout the base model leaves out, diagnosed without a
+    bootstrap on two candidates (~10 s): washout chosen, with its profile interval and the
+    describing functions; control-saturation's Delta BIC is -inf."""
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=100).recording
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2,
+                       candidates=["motion-washout", "control-saturation"])
+    assert res.physics == "motion-washout" and res.chosen.interval and "df_data" in res.arrays
+    return res
+
+
+@pytest.fixture(scope="module")
+def pooled():
+    """Two 40.96-s runs with a washout, pooled on one candidate, without a bootstrap."""
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    recs = []
+    for s in (200, 201):
+        rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=s,
+                       duration=40.96).recording
+        recs.append(dataclasses.replace(rec, source=f"/data/pilot3/FD_k1_run{s - 199}.csv"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2,
+                               candidates=["motion-washout"])
+
+
+def _batch_dict(p: float = 1e-4):
+    return {"physics": "motion-washout", "settings": {"level_per_candidate": 0.005},
+            "ranking": [{"physics": "motion-washout", "p_value": p, "testable": True},
+                        {"physics": "threshold-shape", "p_value": 0.5, "testable": True}]}
+
+
+def _without_df(res):
+    """The result as a record that is not whole forcing periods gives it: no describing
+    function."""
+    arrays = {k: v for k, v in res.arrays.items() if not k.startswith("df_")}
+    return dataclasses.replace(res, arrays=arrays)
+
+
+def _with_bootstrap(res, B: int):
+    """The result with a bootstrap of B replicates: p-values k/(B+1) on the statistics."""
+    where = {}
+    for j, (k, e) in enumerate(res.where.items()):
+        where[k] = dataclasses.replace(e, p_value=(1 + j % (B + 1)) / (B + 1))
+    settings = dict(res.settings, bootstrap=dict(res.settings["bootstrap"], replicates=B))
+    return dataclasses.replace(res, where=where, settings=settings)
+
+
+def _fake_posterior(res):
+    import arviz as az
+
+    from bayespilot.sample import Posterior
+
+    rng = np.random.default_rng(0)
+    n = res.chosen.params["omega_w"]
+    idata = az.from_dict(posterior={"omega_w": n + 0.04 * rng.standard_normal((4, 200))})
+    return Posterior(idata, ("omega_w",), {"omega_w": 10.0}, True, {"likelihood": "coloured"})
+
+
+def _fake_pooled_for_runs(sources):
+    ranking = [SimpleNamespace(physics="motion-washout", testable=True),
+               SimpleNamespace(physics="otolith-channel", testable=True)]
+    runs = [{"source": s, "delta_neg_log_lik": {"motion-washout": 10.0 + j,
+                                                "otolith-channel": 1.0}}
+            for j, s in enumerate(sources)]
+    return SimpleNamespace(ranking=ranking, runs=runs, physics="motion-washout")
+
+
+# -- 1. layout: only figures made here, made with constrained layout --------------------------
+
+
+def _user_figure(layout):
+    fig, (a, b) = plt.subplots(1, 2, figsize=(12, 3.5), layout=layout)
+    b.plot([0, 1])
+    return fig, a
+
+
+@pytest.mark.parametrize("layout", ["constrained", None])
+def test_given_axes_keep_their_figures_layout(washout, layout):
+    """On the caller's axes nothing lays out the caller's figure: a constrained figure stays
+    constrained (plot_batch raised RuntimeError there: tight_layout after a colour bar), one
+    without a layout engine gets none (plot_evidence and plot_candidates switched it to
+    tight)."""
+    calls = {
+        "batch": lambda ax: R.plot_batch([("a", _batch_dict()), ("b", _batch_dict(0.3))], ax=ax),
+        "evidence": lambda ax: R.plot_evidence(washout, ax=ax),
+        "candidates": lambda ax: R.plot_candidates(washout, ax=ax),
+        "profile": lambda ax: R.plot_profile(washout, axes=[ax]),
+        "runs": lambda ax: plot_runs(_fake_pooled_for_runs(["a.csv", "b.csv"]), ax=ax),
+    }
+    for name, call in calls.items():
+        fig, ax = _user_figure(layout)
+        engine = fig.get_layout_engine()
+        assert call(ax) is fig, name
+        assert fig.get_layout_engine() is engine, name
+        fig.canvas.draw()  # lays out without error
+        plt.close(fig)
+
+
+def test_given_2x2_axes_keep_their_layout(washout):
+    for fn in (R.plot_frequency_response, R.plot_residuals):
+        fig, axes = plt.subplots(2, 2, layout="constrained")
+        assert fn(washout, axes) is fig
+        assert isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine)
+        fig.canvas.draw()
+
+
+def test_new_figures_are_constrained(washout, pooled):
+    figs = [R.plot_frequency_response(washout), R.plot_residuals(washout),
+            R.plot_evidence(washout), R.plot_candidates(washout), R.plot_profile(washout),
+            R.plot_batch([("a", _batch_dict())]), plot_runs(pooled),
+            R.plot_frequency_response(_without_df(washout))]
+    for fig in figs:
+        assert isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine)
+
+
+# -- 2. the backend is the caller's ------------------------------------------------------------
+
+
+def test_report_keeps_the_callers_backend(washout):
+    """With pyplot imported on another backend (Jupyter's, Qt's), drawing a diagnosis does not
+    switch it to Agg: one rule for all figures, bayespilot.plots._pyplot."""
+    from bayespilot import plots
+
+    assert R._pyplot is plots._pyplot
+    old = matplotlib.get_backend()
+    plt.switch_backend("template")
+    try:
+        R.plot_candidates(washout)
+        R.plot_evidence(washout)
+        assert matplotlib.get_backend() == "template"
+    finally:
+        plt.close("all")
+        plt.switch_backend(old)
+
+
+# -- 3. plot_batch: no clipped label, singular, capped scale ------------------------------------
+
+
+def test_batch_of_one_is_tall_enough_and_singular():
+    fig = R.plot_batch([("subject01/run1", _batch_dict(1e-9))])
+    assert fig.get_size_inches()[1] >= 3.5
+    ax, cax = fig.axes[0], fig.axes[1]
+    assert ax.get_title().startswith("1 diagnosis:")
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    box = fig.bbox
+    lab = cax.yaxis.label.get_window_extent(r)
+    assert lab.y0 >= box.y0 and lab.y1 <= box.y1 and lab.x1 <= box.x1  # the label whole
+    # p = 1e-9 is beyond the scale's cap of 6: the colour bar says so with an arrow
+    assert ax.images[0].colorbar.extend == "max"
+    fig2 = R.plot_batch([("a", _batch_dict(1e-4)), ("b", _batch_dict(1e-3))])
+    assert fig2.axes[0].get_title().startswith("2 diagnoses:")
+    assert fig2.axes[0].images[0].colorbar.extend == "neither"
+
+
+# -- 4. empty and misleading panels ---------------------------------------------------------
+
+
+def test_no_describing_function_is_one_message(washout, tmp_path):
+    """A record that is not whole forcing periods: one panel, one message (four empty axes
+    with the message repeated before), and the report says it once, in words."""
+    res = _without_df(washout)
+    fig = R.plot_frequency_response(res)
+    assert len(fig.axes) == 1
+    texts = [t.get_text() for t in fig.axes[0].texts]
+    assert len(texts) == 1 and texts[0].startswith("No describing function")
+    html = R.write_report(res, tmp_path)["html"].read_text(encoding="utf-8")
+    assert html.count("No describing function") == 1
+    assert 'alt="frequency_response"' not in html
+
+
+def test_evidence_without_bootstrap_says_so(washout):
+    fig = R.plot_evidence(washout)  # n_bootstrap=0
+    ax = fig.axes[0]
+    assert not ax.patches  # no empty bars
+    assert any("no bootstrap p-values" in t.get_text() for t in ax.texts)
+
+
+def test_evidence_lines_are_both_named_when_they_coincide(washout):
+    """B = 19: the smallest possible p, 1/20, is the 0.05 line; the legend names both."""
+    fig = R.plot_evidence(_with_bootstrap(washout, 19))
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "p = 0.05" in labels
+    assert any(lab.startswith("smallest possible p") and "0.05" in lab for lab in labels)
+    xs = sorted(line.get_xdata()[0] for line in ax.lines)
+    assert xs == pytest.approx([-math.log10(0.05)] * 2)
+
+
+# -- 5. labels and units ----------------------------------------------------------------------
+
+
+def test_frequency_response_axes_carry_units(washout):
+    fig = R.plot_frequency_response(washout)
+    ylabels = [ax.get_ylabel() for ax in fig.axes]
+    assert "magnitude (rad/rad)" in ylabels
+    assert "magnitude (rad/(rad/s$^2$))" in ylabels
+    assert ylabels.count("phase (deg)") == 2
+    assert all(ax.get_xlabel() in ("", r"$\omega$ (rad/s)") for ax in fig.axes)
+
+
+def test_residual_psd_is_per_rad_per_second_in_the_decision_band(washout):
+    """The PSD is a density per rad/s against omega in rad/s (it integrates over omega to the
+    variance), drawn to 2 omega_c with the part above omega_c shaded."""
+    fig = R.plot_residuals(washout)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == r"$\omega$ (rad/s)"
+    assert ax.get_ylabel() == "one-sided PSD (rad$^2$/(rad/s))"
+    omega_c = washout.settings["noise_model"]["omega_c"]
+    assert ax.get_xlim()[1] == pytest.approx(2 * omega_c)
+    assert max(line.get_xdata().max() for line in ax.lines if line.get_label() == "base model"
+               ) <= 2 * omega_c
+    # the density's unit: the full spectrum integrates over omega to the residual's variance
+    fs = 1.0 / washout.settings["dt"]
+    x = washout.arrays["residual"][int(round(washout.settings["skip_seconds"] * fs)):]
+    om, P = R._residual_psd(np.asarray(x, float), fs)
+    assert np.sum(P) * (om[1] - om[0]) == pytest.approx(np.var(x), rel=0.05)
+    # the band's edge is marked
+    assert any(np.isclose(p.get_x(), omega_c) for p in ax.patches)
+
+
+def test_parameter_axes_use_the_papers_notation_with_units(washout):
+    model = washout.chosen.model
+    want = parameter_label(model, "omega_w")
+    assert "rad/s" in want
+    assert R.plot_profile(washout).axes[0].get_xlabel() == want
+    res = dataclasses.replace(washout, posterior=_fake_posterior(washout))
+    assert R.plot_posterior(res).axes[0].get_xlabel() == want
+    # a result read back from a file has no model: the catalogue entry declares the unit
+    assert parameter_label(R._units_model("motion-washout"), "omega_w") == want
+    # another lab's extension: the name in the paper's style, without a unit
+    assert parameter_label(R._units_model("no-such-extension"), "k_x") == label("k_x")
+
+
+def test_no_raw_ascii_notation_in_legends(washout):
+    res = dataclasses.replace(washout, posterior=_fake_posterior(washout))
+    for fig in (R.plot_profile(washout), R.plot_posterior(res)):
+        texts = [t.get_text() for ax in fig.axes if ax.get_legend()
+                 for t in ax.get_legend().get_texts()]
+        assert texts and not any("chi2" in t or "+-" in t for t in texts)
+        assert any("±1 s.e." in t for t in texts) or any(r"$\chi^2_1$" in t for t in texts)
+
+
+# -- 6. legends and annotations clear of the data ----------------------------------------------
+
+
+def _below(fig, ax):
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    return ax.get_legend().get_window_extent(r).y1 <= ax.get_window_extent(r).y0 + 1
+
+
+def test_profile_and_posterior_legends_are_below_the_axes(washout):
+    fig = R.plot_profile(washout)
+    assert _below(fig, fig.axes[0])
+    res = dataclasses.replace(washout, posterior=_fake_posterior(washout))
+    fig = R.plot_posterior(res)
+    assert _below(fig, fig.axes[0])
+
+
+def test_candidates_p_values_are_outside_the_axes_and_symlog_has_ticks(washout):
+    fig = R.plot_candidates(washout)
+    ax = fig.axes[0]
+    assert not [t for t in ax.texts if t.get_text().startswith("p =")]
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    right = ax.child_axes[0]
+    labels = [t for t in right.get_yticklabels() if t.get_text().startswith("p = ")]
+    assert len(labels) == len([c for c in washout.ranking if c.testable])
+    x1 = ax.get_window_extent(r).x1
+    assert all(t.get_window_extent(r).x0 >= x1 for t in labels)
+    assert labels[0].get_window_extent(r).x1 <= fig.bbox.x1
+    assert ax.get_xscale() == "symlog"  # the washout's gain is about 50
+    lo, hi = ax.get_xlim()
+    shown = [t for t in ax.get_xticks() if lo <= t <= hi]
+    assert len(shown) >= 5
+
+
+def test_runs_are_named_by_their_files(pooled):
+    fig = plot_runs(pooled)
+    names = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert names == ["FD_k1_run1", "FD_k1_run2"]
+    fig = plot_runs(_fake_pooled_for_runs([None, "x/a.csv", "y/a.csv"]))
+    names = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert names == ["run 1", "a (run 2)", "a (run 3)"]
+
+
+# -- 7. the model's describing function is where it exists --------------------------------------
+
+
+def test_model_describing_functions_are_points_not_lines(washout):
+    """The models' describing functions are estimates at the forcing frequencies only (the
+    threshold makes the motion channel amplitude-dependent): markers, no lines between."""
+    fig = R.plot_frequency_response(washout)
+    for ax in fig.axes:
+        for line in ax.get_lines():
+            assert line.get_linestyle() == "None"
+
+
+# -- 8. the HTML reports -------------------------------------------------------------------------
+
+
+def test_numbers_in_the_report():
+    assert R._number(-0.001, ".2f") == "0.00"
+    assert R._number(-math.inf, ".1f") == "—"
+    assert R._number(math.inf, ".1f") == "∞"
+    assert R._number(math.nan, ".3g") == "—"
+    assert R._number(None, ".3g") == "—"
+    assert R._number(-1.234, ".2f") == "-1.23"
+
+
+def test_single_run_report_table(washout, tmp_path):
+    html = R.write_report(washout, tmp_path)["html"].read_text(encoding="utf-8")
+    assert "Mismatch: <b>yes</b>" in html and "Mismatch: <b>True</b>" not in html
+    html = html[:html.index("<pre>")]  # (the text summary after it is summary()'s)
+    assert "-inf" not in html and "-0.00" not in html and ">nan<" not in html
+    row = html[html.index("<td>control-saturation</td>"):]
+    row = row[:row.index("</tr>")]
+    assert "<td>—</td>" in row  # its Delta BIC does not apply
+    assert '<tr style="font-weight:bold"><td>motion-washout</td>' in html
+    assert html.count("<figcaption>") >= 4
+
+
+def test_pooled_report_has_the_candidate_table_and_captions(pooled, tmp_path):
+    html = pooled.report(tmp_path)["html"].read_text(encoding="utf-8")
+    assert "<th>&Delta;BIC</th>" in html and "<td>motion-washout</td>" in html
+    assert html.count("<figcaption>") >= 2
+    assert f"Mismatch: <b>{'yes' if pooled.mismatch else 'no'}</b>" in html
