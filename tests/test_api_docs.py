@@ -16,7 +16,6 @@ import importlib
 import inspect
 import pkgutil
 import re
-import warnings
 from pathlib import Path
 
 import pytest
@@ -102,14 +101,6 @@ def test_docstring_examples_run(module):
 ROOT = Path(__file__).resolve().parents[1]
 API_MODULES = re.findall(r"^::: (\S+)", (ROOT / "docs" / "api.md").read_text(), re.M)
 
-# Objects whose docstrings are being rewritten in another change (plots, cli, example,
-# diagnose.report, diagnose.pooled, diagnose.batch); each failed the check below when it was
-# written.  Remove a name once its docstring passes -- the list may only shrink.
-_PENDING: set[str] = {
-    "bayespilot.diagnose.batch.DiagnoseTask.pooled",  # property: no docstring
-    "bayespilot.diagnose.pooled.PooledDiagnosisResult.report",  # no Parameters section
-    "bayespilot.diagnose.pooled.diagnose_pooled",  # progress documented before n_calibrate
-}
 
 # A section header: a line, then a line of (at least three) dashes.
 _SECTION = re.compile(r"^([^\n]+)\n-{3,}[ \t]*$", re.M)
@@ -304,12 +295,6 @@ def test_the_api_walk_finds_classes_methods_and_properties():
                  "bayespilot.model.PilotModel.n_free", "bayespilot.campaign.Job",
                  "bayespilot.diagnose.pooled.diagnose_pooled"):
         assert name in names, name
-    assert not [n for n in _PENDING if n not in names], "a _PENDING name the walk does not find"
-    pending_modules = {"bayespilot.plots", "bayespilot.cli", "bayespilot.example",
-                       "bayespilot.diagnose.report", "bayespilot.diagnose.pooled",
-                       "bayespilot.diagnose.batch"}
-    others = [n for n in _PENDING if not any(n.startswith(m + ".") for m in pending_modules)]
-    assert not others, f"_PENDING is only for the files being rewritten elsewhere: {others}"
 
 
 def test_parameters_sections_match_the_signatures():
@@ -319,10 +304,6 @@ def test_parameters_sections_match_the_signatures():
     ``docs/api.md`` renders; ``self``/``cls`` and trivial dunders are exempt, as is a method
     with no other parameter; every public property has a docstring.
     """
-    problems = _api_doc_problems()
-    stale = sorted(n for n in _PENDING if n not in problems)
-    if stale:
-        warnings.warn(f"_PENDING entries that now pass, remove them: {stale}", stacklevel=1)
-    offenders = {q: p for q, p in problems.items() if q not in _PENDING}
+    offenders = _api_doc_problems()
     assert not offenders, f"{len(offenders)} docstrings do not match their signatures:\n" + "\n".join(
         f"  {q}: {'; '.join(p)}" for q, p in sorted(offenders.items()))

@@ -98,6 +98,7 @@ class DiagnoseTask:
 
     @property
     def pooled(self) -> bool:
+        """True if the task diagnoses several runs together (:func:`diagnose_pooled`)."""
         return len(self.paths) > 1
 
 

@@ -251,7 +251,25 @@ class PooledDiagnosisResult(_JSONSummary):
 
     def report(self, directory: str | Path) -> dict[str, Path]:
         """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``
-        (and ``posterior.png`` once :func:`~bayespilot.diagnose.shared_posterior` has run)."""
+        (and ``posterior.png`` once :func:`~bayespilot.diagnose.shared_posterior` has run).
+
+        Parameters
+        ----------
+        directory : str or Path
+            Created, with its parents, if missing; files of the same names in
+            it are replaced.
+
+        Returns
+        -------
+        dict of str to Path
+            The files by name: ``candidates``, ``runs``, ``posterior`` (when
+            set), ``json`` and ``html``.
+
+        Raises
+        ------
+        OSError
+            ``directory`` cannot be created or a file in it written.
+        """
         import html
 
         from .report import (_STYLE, _candidate_table, _img, _png, _yes_no, plot_candidates,
@@ -747,7 +765,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         the runs' order is part of the seed: the same runs in another order
         draw other bootstrap replicates).  None draws one from fresh
         entropy, recorded in ``settings["seed"]``.
-    alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample, progress
+    alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample
         As for :func:`~bayespilot.diagnose.diagnose`.  With ``omega_c`` above
         25 rad/s every extension is also started from its pooled fit on the
         25-rad/s band (:func:`_pooled_guide`).
@@ -765,6 +783,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         stays in ``chosen.refit`` and in ``arrays["fits"]``, and
         :func:`~bayespilot.diagnose.shared_posterior` (under the decision
         likelihood) starts from it.
+    progress : bool
+        As for :func:`~bayespilot.diagnose.diagnose`.
 
     Returns
     -------
