@@ -142,6 +142,12 @@ def _kind_check(d: Mapping[str, Any], pooled: bool, source_file: str | None) -> 
                          f".from_json")
 
 
+def _bic(c) -> str:
+    """A candidate's delta BIC for the summary's table ("-" where none was computed: an entry
+    fitted without a likelihood, such as control-saturation without flat tops)."""
+    return f"{c.delta_bic:.1f}" if math.isfinite(c.delta_bic) else "-"
+
+
 def _fitted_lines(chosen) -> list[str]:
     """The chosen extension's reported parameters +- standard errors, and how they were made
     when refitted after the test (beside the test's estimate)."""
@@ -288,7 +294,7 @@ class DiagnosisResult(_JSONSummary):
                 continue
             ps = ", ".join(f"{k}={v:.4g}" for k, v in c.params.items())
             p = f"{c.p_value:.2g}"
-            lines.append(f"{c.physics:<24} {c.delta_neg_log_lik:9.2f} {p:>9} {c.delta_bic:9.1f} "
+            lines.append(f"{c.physics:<24} {c.delta_neg_log_lik:9.2f} {p:>9} {_bic(c):>9} "
                          f"{c.signature_score:5.2f}  {ps}{'  *' if c.justified else ''}")
         lines += _calibration_lines(self.ranking)
         if self.chosen is not None:

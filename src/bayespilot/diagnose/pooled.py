@@ -42,7 +42,7 @@ from .._blas import one_blas_thread
 from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
-               _base_from, _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
+               _base_from, _bic, _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
                _kind_check,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
@@ -181,7 +181,7 @@ class PooledDiagnosisResult(_JSONSummary):
                            for r in self.runs)
             ps = ", ".join(f"{k}={v:.4g}" for k, v in c.params.items())
             lines.append(f"{c.physics:<24} {c.delta_neg_log_lik:9.2f} {c.p_value:9.2g} "
-                         f"{c.delta_bic:9.1f}  {per}  {ps}{'  *' if c.justified else ''}")
+                         f"{_bic(c):>9}  {per}  {ps}{'  *' if c.justified else ''}")
         lines += _calibration_lines(self.ranking)
         if self.chosen is not None and self.chosen.params:
             lines += ["", f"fitted {self.chosen.physics} (shared by the {R} runs):",
