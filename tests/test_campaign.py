@@ -249,10 +249,15 @@ def test_plot_threshold_histograms():
     fig = plot_threshold_histograms(res)  # F_n = 0.1 is not among the default fractions
     assert len(fig.axes) == 2 * 2 * 2
     plt.close(fig)
-    # the first panel has no fits: the legend goes to the first one that has
+    # on a new figure one figure legend below the grid; on axes given, the legend goes to the
+    # first panel that has fits (here not the first: it has none)
     part = [r for r in res if not (r["task"] == "FD" and r["remnant_fraction"] == 0.0
                                    and r["motion_gain"] == 0.25)]
     fig = plot_threshold_histograms(part)
+    assert all(a.get_legend() is None for a in fig.axes) and len(fig.legends) == 1
+    plt.close(fig)
+    fig, axes = plt.subplots(4, 2)
+    plot_threshold_histograms(part, ax=axes)
     assert fig.axes[0].get_legend() is None
     assert sum(a.get_legend() is not None for a in fig.axes) == 1
     plt.close(fig)

@@ -114,12 +114,20 @@ def _oversample_argument(p: argparse.ArgumentParser) -> None:
 
 
 # --- helpers --------------------------------------------------------------------------
-def _save_figure(fig, png: Path) -> None:
-    """Write a figure to PNG and close it; a failed write is a runtime failure (exit 1)."""
+#: Resolution of the figures the commands write, dots per inch (a print-quality PNG).
+PLOT_DPI = 200
+#: Formats 'bayespilot plot --format' writes (matplotlib picks the writer by the suffix).
+PLOT_FORMATS = ("png", "pdf", "svg")
+
+
+def _save_figure(fig, path: Path, dpi: int = PLOT_DPI) -> None:
+    """Write a figure (format from ``path``'s suffix) and close it; a failed write is a
+    runtime failure (exit 1).  ``dpi`` sets a PNG's resolution; in a PDF or SVG only the
+    rasterized point clouds (the pair plot's) use it."""
     try:
-        fig.savefig(png, dpi=110)
+        fig.savefig(path, dpi=dpi)
     except OSError as exc:
-        raise CommandFailed(f"{png}: cannot write the plot ({_os_reason(exc)})") from None
+        raise CommandFailed(f"{path}: cannot write the plot ({_os_reason(exc)})") from None
     finally:
         import matplotlib.pyplot as plt
 
@@ -773,17 +781,17 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     names = post.parameter_names
     main = "delta_abs" if "delta_abs" in names else names[0]
     written = []
-    png = out / f"marginal_{main}.png"
-    _save_figure(plot_marginal(post, main, truth=truth.get(main)), png)
-    written.append(png)
+    path = out / f"marginal_{main}.{args.format}"
+    _save_figure(plot_marginal(post, main, truth=truth.get(main)), path, args.dpi)
+    written.append(path)
     pair = [n for n in ("K_m", "tau_m", "delta_abs") if n in names]
     if pair:
-        png = out / "pair.png"
-        _save_figure(plot_pair(post, pair, truth=truth), png)
-        written.append(png)
-    png = out / "trace.png"
-    _save_figure(plot_chains(post), png)
-    written.append(png)
+        path = out / f"pair.{args.format}"
+        _save_figure(plot_pair(post, pair, truth=truth), path, args.dpi)
+        written.append(path)
+    path = out / f"trace.{args.format}"
+    _save_figure(plot_chains(post), path, args.dpi)
+    written.append(path)
     note = (f" (true {main} = {truth[main]:g} marked)" if main in truth else "")
     _say(args, "wrote " + ", ".join(str(p) for p in written) + note)
     return EXIT_OK
@@ -1229,10 +1237,14 @@ PLOT_EPILOG = """\
 Plots a posterior written by 'bayespilot sample' into DIR:
 marginal_delta_abs.png (histogram with the 90% HDI, the median and, for a
 simulated recording, the true value), pair.png (K_m, tau_m, delta_abs) and
-trace.png (every walker and the log posterior against the step).
+trace.png (every walker and the log posterior against the step); with
+--format pdf or svg the same names end in .pdf or .svg (vector figures for a
+paper: --dpi then only sets the resolution of the pair plot's point clouds).
 
 Examples:
   bayespilot plot out/run-post.nc -o out/run-plots
+  bayespilot plot out/run-post.nc -o out/run-plots --format pdf
+  bayespilot plot out/run-post.nc -o out/run-plots --dpi 300
 """
 
 DIAGNOSE_BATCH_EPILOG = """\
@@ -1505,7 +1517,12 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Plots of a posterior written by 'bayespilot sample'.")
     p.add_argument("posterior", metavar="POST.nc", help="netCDF file from 'bayespilot sample'")
     p.add_argument("-o", "--output", required=True, metavar="DIR",
-                   help="folder for the PNG files (created if missing)")
+                   help="folder for the figures (created if missing)")
+    p.add_argument("--format", choices=PLOT_FORMATS, default="png",
+                   help="file format of the figures (default png; pdf and svg are vector)")
+    p.add_argument("--dpi", type=_whole_number(20), default=PLOT_DPI, metavar="N",
+                   help=f"resolution of a PNG, dots per inch (default {PLOT_DPI}); pdf and svg "
+                        f"use it only for the pair plot's rasterized point clouds")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_plot)
 

@@ -39,7 +39,9 @@ __all__ = ["run_example"]
 def _save(fig, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    fig.savefig(path, dpi=100)
+    from .cli import PLOT_DPI  # the resolution of every figure the commands write
+
+    fig.savefig(path, dpi=PLOT_DPI)
     plt.close(fig)
 
 

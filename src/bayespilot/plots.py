@@ -5,6 +5,11 @@ a :class:`~bayespilot.simulate.Simulation`, arrays), draws on the axes it is
 given or on a new figure, and returns the figure.  Nothing here calls
 ``plt.show()``; matplotlib is imported only when a figure is drawn, so
 ``import bayespilot`` stays cheap.
+
+Parameters are labelled in the paper's notation with their units
+(:mod:`bayespilot._labels`).  A new figure is at most :data:`PAGE_WIDTH` x
+:data:`PAGE_HEIGHT` inches (panels shrink as they multiply; ``figsize=``
+overrides), in constrained layout, with its legends outside the plotted data.
 """
 
 from __future__ import annotations
@@ -26,6 +31,14 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["plot_traces", "plot_threshold_histograms"]
 
+#: Default figures are at most this wide (in), a full page of a paper, so that their text
+#: (:data:`SMALLEST_FONT` pt or more) prints at about its size; ``figsize=`` gives another.
+PAGE_WIDTH = 7.5
+#: ... and at most this tall (in).
+PAGE_HEIGHT = 9.5
+#: The smallest text (pt) in a figure drawn here.
+SMALLEST_FONT = 7.0
+
 
 def _pyplot():
     """matplotlib.pyplot, on the Agg backend when there is no display to draw on."""
@@ -40,8 +53,85 @@ def _pyplot():
     return plt
 
 
+def _figsize(figsize: Any, ax: Any, default: tuple[float, float]) -> tuple[float, float]:
+    """The size of a new figure: ``figsize`` as given, else ``default`` capped at a page."""
+    if figsize is None:
+        return min(default[0], PAGE_WIDTH), min(default[1], PAGE_HEIGHT)
+    if ax is not None:
+        raise ValueError("figsize sizes a new figure; it cannot be given with ax")
+    try:
+        w, h = (float(v) for v in figsize)
+    except (TypeError, ValueError):
+        raise ValueError(f"figsize must be (width, height) in inches, got {figsize!r}") from None
+    if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
+        raise ValueError(f"figsize must be two positive numbers (inches), got {figsize!r}")
+    return w, h
+
+
+def _new_figure(nrows: int, ncols: int, size: tuple[float, float], **kw):
+    """plt.subplots in constrained layout (it makes room for legends outside the axes)."""
+    plt = _pyplot()
+    return plt.subplots(nrows, ncols, figsize=size, layout="constrained", **kw)
+
+
+def _param_label(name: str, model: Any = None) -> str:
+    """A parameter's axis label: the paper's notation with its unit (:mod:`._labels`).
+
+    The unit is the one ``model`` declares.  Without a model (a Posterior keeps only its
+    model's name) the paper's parameters have Table 1's units, a partial autocorrelation
+    ``pacf_j`` none, and another lab's parameter its symbol without a unit.
+    """
+    from . import presets
+    from ._labels import label, parameter_label
+
+    if model is not None:
+        try:
+            model.parameter(name)
+        except (KeyError, ValueError, AttributeError):
+            pass
+        else:
+            return parameter_label(model, name)
+    if name.startswith("pacf_"):
+        return label(name, "-")
+    return label(name, presets.PARAMETER_UNITS.get(name))
+
+
+def _wrap(text: str, width_in: float, fontsize: float) -> str:
+    """``text`` broken into lines that fit ``width_in`` inches at ``fontsize`` pt (mathtext
+    spans are kept whole)."""
+    import textwrap
+
+    chars = max(16, int(width_in * 72.0 / (0.58 * fontsize)))
+    # a space inside $...$ must not break a line: protect it
+    parts = text.split("$")
+    protected = "$".join(p.replace(" ", "\0") if i % 2 else p for i, p in enumerate(parts))
+    return textwrap.fill(protected, chars, break_long_words=False).replace("\0", " ")
+
+
+def _legend_below(fig, handles, labels, ncols: int):
+    """A figure legend under the axes of a figure made here (constrained layout makes room),
+    in at most ``ncols`` columns, fewer where the entries would not fit the figure's width."""
+    return fig.legend(handles, labels, loc="outside lower center",
+                      ncols=_legend_columns(labels, fig.get_figwidth(), ncols),
+                      fontsize="small", frameon=False)
+
+
+def _legend_columns(labels: Sequence[str], width: float, ncols: int) -> int:
+    """How many of at most ``ncols`` columns of legend entries fit ``width`` inches."""
+    from matplotlib.font_manager import FontProperties
+
+    size = FontProperties(size="small").get_size_in_points()
+    # an entry: its handle and padding (about 0.55 in) and its text (0.6 em a character)
+    widths = [0.55 + 0.6 * size * len(str(s)) / 72.0 for s in labels]
+    ncols = max(1, min(ncols, len(labels)))
+    while ncols > 1 and sum(sorted(widths)[-ncols:]) > width - 0.2:
+        ncols -= 1
+    return ncols
+
+
 def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | np.ndarray | None = None,
-                delta_abs: float | None = None, ax: Sequence[Any] | None = None) -> Figure:
+                delta_abs: float | None = None, ax: Sequence[Any] | None = None,
+                figsize: tuple[float, float] | None = None) -> Figure:
     """Plot a run's signals over time: e, u, theta_ddot_m and, if given, the canal output i.
 
     Parameters
@@ -55,10 +145,15 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
         fourth panel.
     delta_abs : float, optional
         Threshold (IPUT, >= 0) drawn as a band +-delta_abs on the canal panel;
-        needs ``canal``.
+        needs ``canal``.  Its legend, with the share of the time |i| exceeds
+        it, is above the canal panel of a new figure (where it hides no data)
+        and where it covers least on given axes.
     ax : sequence of matplotlib Axes, optional
         One axes per panel (3 without ``canal``, 4 with it).  Default: a new
         figure.
+    figsize : (float, float), optional
+        Size of the new figure, inches (default 7 in wide, 1.55 in per panel);
+        not with ``ax``.
 
     Returns
     -------
@@ -70,8 +165,9 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
         If ``recording`` is neither a Recording nor a Simulation.
     ValueError
         If ``canal`` is not a finite 1-D array with one value per sample,
-        ``delta_abs`` is negative, not finite or given without ``canal``, or
-        ``ax`` has the wrong number of axes.
+        ``delta_abs`` is negative, not finite or given without ``canal``,
+        ``ax`` has the wrong number of axes, or ``figsize`` is given with
+        ``ax`` or is not two positive numbers.
 
     Examples
     --------
@@ -81,6 +177,8 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
     >>> len(fig.axes)
     4
     """
+    from ._labels import label, symbol
+
     if isinstance(recording, Simulation):
         sim = recording
         recording = sim.recording
@@ -107,18 +205,19 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
         if not (math.isfinite(delta_abs) and delta_abs >= 0):
             raise ValueError(f"delta_abs must be a finite number >= 0, got {delta_abs!r}")
 
-    panels = [(recording.e, "e (rad)", "tracking error"),
-              (recording.u, "u (rad)", "control output"),
-              (recording.theta_ddot_m, r"$\ddot\theta_m$ (rad/s$^2$)", "motion acceleration")]
+    panels = [(recording.e, label("e", "rad"), "tracking error"),
+              (recording.u, label("u", "rad"), "control output"),
+              (recording.theta_ddot_m, r"$\ddot\theta_\mathrm{m}$ (rad/s$^2$)",
+               "motion acceleration")]
     if canal is not None:
-        panels.append((canal, "i (IPUT)", "canal output"))
+        panels.append((canal, label("i", "IPUT"), "canal output"))
 
     if ax is None:
-        plt = _pyplot()
-        fig, axes = plt.subplots(len(panels), 1, sharex=True, figsize=(9.0, 2.0 * len(panels) + 0.8),
-                                 layout="constrained")
+        size = _figsize(figsize, ax, (7.0, 1.55 * len(panels) + 0.7))
+        fig, axes = _new_figure(len(panels), 1, size, sharex=True)
         axes = list(np.atleast_1d(axes))
     else:
+        _figsize(figsize, ax, (0.0, 0.0))
         axes = list(np.atleast_1d(np.asarray(ax, dtype=object)))
         if len(axes) != len(panels):
             raise ValueError(f"ax must hold {len(panels)} axes (one per panel: "
@@ -126,38 +225,58 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
         fig = axes[0].figure
 
     t = recording.t
-    for a, (y, label, _) in zip(axes, panels):
+    for a, (y, ylabel, _) in zip(axes, panels):
         a.plot(t, y, lw=0.7, color="C0")
-        a.set_ylabel(label)
+        a.set_ylabel(ylabel)
         a.grid(True, lw=0.3, alpha=0.6)
     if canal is not None and delta_abs is not None:
         a = axes[3]
+        d = symbol("delta_abs")
         a.axhspan(-delta_abs, delta_abs, color="C3", alpha=0.2, lw=0,
-                  label=rf"$\pm\delta_{{abs}}$ = $\pm${delta_abs:g}")
+                  label=rf"$\pm${d} = $\pm${delta_abs:g} IPUT")
         for level in (-delta_abs, delta_abs):
             a.axhline(level, color="C3", lw=0.6, ls="--")
         above = float(np.mean(np.abs(canal) > delta_abs))
-        a.legend(loc="upper right", fontsize="small",
-                 title=f"|i| > threshold {100 * above:.0f}% of the time",
-                 title_fontsize="small")
-    axes[-1].set_xlabel("t (s)")
+        share = rf"$|i| > {d.strip('$')}$ {100 * above:.0f} % of the time"
+        if ax is None:
+            # above the panel, right of the share: nothing of the signal is under them
+            a.set_title(share, loc="left", fontsize="small")
+            a.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2,
+                     fontsize="small", frameon=False)
+        else:
+            a.legend(loc="best", fontsize="small", title=share, title_fontsize="small")
+    axes[-1].set_xlabel("$t$ (s)")
     axes[-1].set_xlim(t[0], t[-1])
     src = f"{recording.source}: " if recording.source else ""
-    axes[0].set_title(f"{src}task {recording.task}, $K_\\theta$ = {recording.motion_gain:g}, "
-                      f"{recording.duration:g} s")
+    title = (f"{src}task {recording.task}, $K_\\theta$ = {recording.motion_gain:g}, "
+             f"{recording.duration:g} s")
+    axes[0].set_title(_wrap(title, fig.get_figwidth() - 0.8, 10.0) if ax is None else title)
     return fig
 
 
 def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[float] = (0.0, 0.2, 0.3),
                               method: str | None = None, bins: int = 40,
-                              upper: float = 0.1, ax: Any = None) -> Figure:
+                              upper: float = 0.1, ax: Any = None,
+                              figsize: tuple[float, float] | None = None) -> Figure:
     """Histograms of the estimated threshold over realizations, after Figs. 14 and 15.
 
     One panel per (task, F_n, K_theta) cell present in ``results`` (rows:
     task and F_n; columns: K_theta), for the fits with threshold.  Each panel
     shows the histogram of the final delta_abs on [0, ``upper``], the true
     value (dashed line) and the +-50 % margins around it (shaded), with our
-    mu, sigma and N50 and, where Figs. 14/15 have the cell, the paper's.
+    mu, sigma and N50 and, where Figs. 14/15 have the cell, the paper's
+    ("paper mu, sigma" and "(paper N50)"; the text is red where they
+    differ, by :func:`bayespilot.campaign.summarise`'s flags).
+
+    A fit whose delta_abs is not finite (a failed fit) is counted as
+    "k failed" and left out of the histogram, mu and sigma, which are those of
+    the finite fits; N50 counts the fits within +-50 % out of *every*
+    realization of the cell, failed ones included, as the paper's "number of
+    realizations out of 100" does (a failed fit is not within 50 %).
+    Without failed fits every number is :func:`~bayespilot.campaign.summarise`'s.
+    Fits at or above ``upper`` are drawn, hatched, in the last bin and
+    counted in the panel ("≥ upper: n").  The statistics sit in the top
+    right corner above the bars (the y axis is extended to make room).
 
     Parameters
     ----------
@@ -176,6 +295,9 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     ax : array of matplotlib Axes, optional
         One axes per panel (rows x columns as above, or flat in that order).
         Default: a new figure.
+    figsize : (float, float), optional
+        Size of the new figure, inches (default: 2.3 in per column and 1.75 in
+        per row, at most 7.5 x 9.5 in); not with ``ax``.
 
     Returns
     -------
@@ -186,7 +308,8 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     ValueError
         If no fit with threshold at the requested ``fractions`` is in
         ``results``, several methods are present and ``method`` is not given,
-        or ``ax`` has the wrong number of axes.
+        ``ax`` has the wrong number of axes, or ``figsize`` is given with
+        ``ax`` or is not two positive numbers.
 
     Examples
     --------
@@ -198,6 +321,10 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     >>> len(fig.axes)
     1
     """
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from ._labels import symbol
     from .campaign import summarise
 
     if isinstance(bins, bool) or not isinstance(bins, (int, np.integer)) or bins < 1:
@@ -217,17 +344,39 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
         raise ValueError("no fits with threshold at F_n in "
                          f"{{{', '.join(f'{f:g}' for f in wanted)}}}"
                          + (f" by the {method} method" if method else "") + " to plot")
+
+    def _delta(r) -> float:
+        return float(r["fit"]["params"]["delta_abs"])
+
     stats = {(r["task"], r["F_n"], r["K_theta"]): r for r in summarise(sel)}
+    # mu, sigma (and their flag) of the finite fits; N50 and n of every realization
+    finite_stats = {(r["task"], r["F_n"], r["K_theta"]): r
+                    for r in summarise([r for r in sel if math.isfinite(_delta(r))])}
     rows = sorted({(t, f) for (t, f, _) in stats})
     cols = sorted({k for (_, _, k) in stats})
 
+    finite = np.array([_delta(r) for r in sel], dtype=float)
+    any_over = bool(np.any(finite[np.isfinite(finite)] >= upper))
+    handles = [Patch(color="C2", alpha=0.25, lw=0, label=r"true $\pm$50 %"),
+               Line2D([], [], color="k", ls="--", lw=0.9, label="true")]
+    if any_over:
+        handles.append(Patch(facecolor="C1", alpha=0.85, hatch="////", lw=0,
+                             label=f"≥ {upper:g} IPUT (in the last bin)"))
+    labels = [h.get_label() for h in handles]
+    title = (f"Estimated threshold over realizations ({sel[0]['method']} method; Figs. 14/15 "
+             f"of Pool et al. 2012); red text: differs from the paper")
+
     if ax is None:
-        plt = _pyplot()
-        fig, axes = plt.subplots(len(rows), len(cols), sharex=True, squeeze=False,
-                                 figsize=(2.9 * len(cols) + 0.6, 2.1 * len(rows) + 0.8),
-                                 layout="constrained")
+        size = _figsize(figsize, ax, (2.3 * len(cols) + 0.9, 1.75 * len(rows) + 1.1))
+        if figsize is None:
+            # a narrow figure: room for the wrapped title's and the legend's extra lines
+            extra = 0.2 * (len(_wrap(title, size[0] - 0.3, 10.0).splitlines()) - 1
+                           + math.ceil(len(labels) / _legend_columns(labels, size[0], 3)) - 1)
+            size = _figsize(None, ax, (size[0], size[1] + extra))
+        fig, axes = _new_figure(len(rows), len(cols), size, sharex=True, squeeze=False)
         axes = np.asarray(axes, dtype=object)
     else:
+        _figsize(figsize, ax, (0.0, 0.0))
         flat = np.atleast_1d(np.asarray(ax, dtype=object)).ravel()
         if flat.size != len(rows) * len(cols):
             raise ValueError(f"ax must hold {len(rows) * len(cols)} axes ({len(rows)} rows of "
@@ -236,48 +385,93 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
         fig = axes[0, 0].figure
 
     edges = np.linspace(0.0, upper, bins + 1)
+    boxes = []  # (axes, statistics text, bar heights) to keep the text above the bars
     for i, (task, fn) in enumerate(rows):
         for j, k in enumerate(cols):
             a = axes[i, j]
+            if i == 0:
+                a.set_title(f"$K_\\theta$ = {k:g}", fontsize="medium")
+            if j == 0:
+                a.set_ylabel(f"{task}, {symbol('F_n')} = {fn:g}\ncount")
+            if i == len(rows) - 1:
+                a.set_xlabel(_param_label("delta_abs"))
             st = stats.get((task, fn, k))
             if st is None:
                 a.text(0.5, 0.5, "no fits", ha="center", va="center", transform=a.transAxes)
                 a.set_yticks([])
                 continue
-            d = np.array([float(r["fit"]["params"]["delta_abs"]) for r in sel
+            d = np.array([_delta(r) for r in sel
                           if r["task"] == task and abs(float(r["remnant_fraction"]) - fn) < 1e-9
                           and abs(float(r["motion_gain"]) - k) < 1e-9])
+            fin = d[np.isfinite(d)]
+            failed = d.size - fin.size
+            n_over = int(np.count_nonzero(fin >= upper))
             true = st["true_delta_abs"]
-            a.axvspan(0.5 * true, 1.5 * true, color="C2", alpha=0.25, lw=0,
-                      label=r"true $\pm$50 %")
-            a.hist(np.clip(d, 0.0, upper), bins=edges, color="C0", alpha=0.85)
-            a.axvline(true, color="k", ls="--", lw=0.9, label="true")
-            sig = "" if math.isnan(st["sigma"]) else f", $\\sigma$={st['sigma']:.4f}"
-            text = (f"$\\mu$={st['mu']:.4f}{sig}\nN50={st['N50']}/{st['n']}")
-            if st["paper_mu"] is not None:
-                text += (f"\npaper: {st['paper_mu']:.4f}, {st['paper_sigma']:.4f}, "
-                         f"{st['paper_N50']}%")
-            a.text(0.97, 0.95, text, ha="right", va="top", fontsize="x-small",
-                   transform=a.transAxes, color="C3" if st["flag"] else "k",
-                   bbox={"facecolor": "white", "alpha": 0.75, "lw": 0, "pad": 1.5})
+            a.axvspan(0.5 * true, 1.5 * true, color="C2", alpha=0.25, lw=0)
+            heights, _, _ = a.hist(fin[fin < upper], bins=edges, color="C0", alpha=0.85)
+            heights = np.array(heights, dtype=float)
+            if n_over:
+                a.bar(edges[-2], n_over, width=edges[-1] - edges[-2], bottom=heights[-1],
+                      align="edge", color="C1", alpha=0.85, hatch="////", lw=0)
+                heights[-1] += n_over
+            a.axvline(true, color="k", ls="--", lw=0.9)
+            fs = finite_stats.get((task, fn, k))
+            paper = st["paper_mu"] is not None
+            # short lines: four panels side by side on a page leave about 1.5 in for them
+            lines = ["no finite fit"] if fs is None else [
+                f"$\\mu$={fs['mu']:.4f}"
+                + ("" if math.isnan(fs["sigma"]) else f", $\\sigma$={fs['sigma']:.4f}")]
+            if paper:
+                lines.append(f"paper {st['paper_mu']:.4f}, {st['paper_sigma']:.4f}")
+            lines.append(f"N50={st['N50']}/{st['n']}"
+                         + (f" (paper {st['paper_N50']})" if paper else ""))
+            if failed:
+                lines.append(f"{failed} failed" + (f" ($\\mu$, $\\sigma$ of {fs['n']})"
+                                                   if fs is not None and fs["n"] > 1 else ""))
+            if n_over:
+                lines.append(f"≥{upper:g}: {n_over}")
+            flag = st["flag_N50"] or bool(fs is not None and fs["flag_mu"])
+            txt = a.text(0.97, 0.96, "\n".join(lines), ha="right", va="top",
+                         fontsize=SMALLEST_FONT, transform=a.transAxes,
+                         color="C3" if flag else "k",
+                         bbox={"facecolor": "white", "alpha": 0.75, "lw": 0, "pad": 1.0})
+            boxes.append((a, txt, heights))
             a.yaxis.get_major_locator().set_params(integer=True)
             a.set_xlim(0.0, upper)
+            a.set_ylim(0.0, max(1.0, float(heights.max())) * 1.05)
             a.grid(True, lw=0.3, alpha=0.5)
-            if i == 0:
-                a.set_title(f"$K_\\theta$ = {k:g}", fontsize="medium")
-            if j == 0:
-                a.set_ylabel(f"{task}, $F_n$ = {fn:g}\ncount")
-            if i == len(rows) - 1:
-                a.set_xlabel(r"$\delta_{abs}$ (IPUT)")
-    # the legend on the first panel that has fits (a panel may say "no fits")
-    for a in axes.flat:
-        if a.get_legend_handles_labels()[0]:
-            a.legend(loc="center right", fontsize="x-small")
-            break
-    which = sel[0]["method"]
-    fig.suptitle(f"Estimated threshold over realizations ({which} method; Figs. 14/15 of "
-                 f"Pool et al. 2012); red text: differs from the paper")
+
+    if ax is None:
+        _legend_below(fig, handles, labels, ncols=3)
+        fig.suptitle(_wrap(title, fig.get_figwidth() - 0.3, 10.0), fontsize=10)
+    else:
+        # on a user's axes: the first panel with fits, where it covers least
+        first = next((a for a, _, _ in boxes), axes.flat[0])
+        first.legend(handles=handles, loc="best", fontsize=SMALLEST_FONT)
+        fig.suptitle(title, fontsize=10)
+    _clear_bars(fig, edges, boxes)
     return fig
+
+
+def _clear_bars(fig, edges: np.ndarray, boxes) -> None:
+    """Raise each panel's y limit until its statistics text is above the bars under it."""
+    if not boxes:
+        return
+    fig.draw_without_rendering()  # lays the figure out: the text's place on the page
+    for a, txt, heights in boxes:
+        tb, ab = txt.get_window_extent(), a.get_window_extent()
+        if ab.height <= 0:
+            continue
+        bottom = (tb.y0 - ab.y0) / ab.height  # the text's bottom, fraction of the axes height
+        x0, x1 = a.transData.inverted().transform([[tb.x0, 0.0], [tb.x1, 0.0]])[:, 0]
+        under = heights[(edges[1:] > x0) & (edges[:-1] < x1)]
+        top = float(under.max()) if under.size else 0.0
+        if top <= 0:
+            continue
+        room = max(bottom - 0.04, 0.3)  # a tiny panel: at least the lower 30 % for the bars
+        lo, hi = a.get_ylim()
+        if top > lo + room * (hi - lo):
+            a.set_ylim(lo, lo + (top - lo) / room)
 
 
 # --- posteriors (bayespilot.sample) ------------------------------------------------------------
@@ -289,8 +483,14 @@ def _posterior_or_raise(posterior):
     return posterior
 
 
+def _run_note(posterior, n_draws: int) -> str:
+    return (f"{n_draws} draws ({posterior.settings.get('likelihood', '?')} likelihood, "
+            f"{'converged' if posterior.converged else 'not converged'})")
+
+
 def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | None = None,
-                  ax: Any = None) -> Figure:
+                  ax: Any = None, *, model: Any = None,
+                  figsize: tuple[float, float] | None = None) -> Figure:
     """Histogram of one parameter's posterior draws with its 90 % HDI, median and (if given) truth.
 
     Parameters
@@ -301,7 +501,13 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
     truth : float, optional
         The true value (simulations), drawn as a dashed line.
     ax : matplotlib Axes, optional
-        Default: a new figure.
+        Default: a new figure, with the legend under the axes; on given axes
+        the legend goes where it covers least.
+    model : bayespilot.model.PilotModel, optional
+        The sampled model, for the unit of a parameter outside the paper's
+        (those have Table 1's units without it).
+    figsize : (float, float), optional
+        Size of the new figure, inches (default 5.5 x 3.8); not with ``ax``.
 
     Returns
     -------
@@ -312,8 +518,11 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
     TypeError
         If ``posterior`` is not a Posterior.
     ValueError
-        If ``name`` was not sampled, or ``truth`` is not a finite number.
+        If ``name`` was not sampled, ``truth`` is not a finite number, or
+        ``figsize`` is given with ``ax`` or is not two positive numbers.
     """
+    from ._labels import symbol
+
     posterior = _posterior_or_raise(posterior)
     x = posterior.draws(name)
     if truth is not None:
@@ -324,10 +533,11 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
         if not math.isfinite(truth):
             raise ValueError(f"truth must be finite, got {truth!r}")
     lo, hi = posterior.credible_interval(name, 0.9)
-    if ax is None:
-        plt = _pyplot()
-        fig, ax = plt.subplots(figsize=(5.5, 3.6), layout="constrained")
+    new = ax is None
+    if new:
+        fig, ax = _new_figure(1, 1, _figsize(figsize, None, (5.5, 3.8)))
     else:
+        _figsize(figsize, ax, (0.0, 0.0))
         fig = ax.figure
     ax.hist(x, bins=50, density=True, color="C0", alpha=0.7, lw=0)
     ax.axvspan(lo, hi, color="C0", alpha=0.15, lw=0, label=f"90% HDI [{lo:.4g}, {hi:.4g}]")
@@ -335,17 +545,25 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
     ax.axvline(med, color="C0", lw=1.2, label=f"median {med:.4g}")
     if truth is not None:
         ax.axvline(truth, color="k", lw=1.2, ls="--", label=f"truth {truth:.4g}")
-    ax.set_xlabel(name)
+    ax.set_xlabel(_param_label(name, model))
     ax.set_ylabel("posterior density")
-    ax.legend(loc="best", fontsize="small")
-    ax.set_title(f"{name}: {x.size} draws ({posterior.settings.get('likelihood', '?')} likelihood, "
-                 f"{'converged' if posterior.converged else 'not converged'})", fontsize="medium")
+    if new:
+        handles, labels = ax.get_legend_handles_labels()
+        _legend_below(fig, handles, labels, ncols=3)
+    else:
+        ax.legend(loc="best", fontsize="small")
+    ax.set_title(f"{symbol(name)}: {_run_note(posterior, x.size)}", fontsize="medium")
     return fig
 
 
 def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "delta_abs"),
-              truth: Mapping[str, float] | None = None, ax: Any = None) -> Figure:
+              truth: Mapping[str, float] | None = None, ax: Any = None, *, model: Any = None,
+              figsize: tuple[float, float] | None = None) -> Figure:
     """Pairwise scatter of posterior draws (lower triangle) with marginal histograms (diagonal).
+
+    A new figure has a title (draws, likelihood, convergence).  Where ``truth``
+    gives values, a legend (in the empty upper-right panel; under the axes
+    for one parameter) says that the dashed lines and crosses mark them.
 
     Parameters
     ----------
@@ -356,6 +574,11 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
         True values, drawn as dashed lines / crosses where given.
     ax : 2-D array of matplotlib Axes, optional
         len(names) x len(names) axes.  Default: a new figure.
+    model : bayespilot.model.PilotModel, optional
+        The sampled model, for the units of parameters outside the paper's.
+    figsize : (float, float), optional
+        Size of the new figure, inches (default: 2.3 in per panel, at most
+        7.5 in wide); not with ``ax``.
 
     Returns
     -------
@@ -366,8 +589,13 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     TypeError
         If ``posterior`` is not a Posterior.
     ValueError
-        If a name was not sampled, ``names`` is empty, or ``ax`` has the wrong shape.
+        If a name was not sampled, ``names`` is empty, ``ax`` has the wrong
+        shape, or ``figsize`` is given with ``ax`` or is not two positive
+        numbers.
     """
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
+
     posterior = _posterior_or_raise(posterior)
     names = tuple(names)
     if not names:
@@ -375,16 +603,31 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     draws = [posterior.draws(n) for n in names]
     truth = dict(truth or {})
     k = len(names)
-    if ax is None:
-        plt = _pyplot()
-        fig, axes = plt.subplots(k, k, figsize=(2.4 * k + 0.6, 2.4 * k + 0.4), squeeze=False,
-                                 layout="constrained")
+    new = ax is None
+    if new:
+        side = min(2.3, (PAGE_WIDTH - 0.7) / k)  # per panel
+        fig, axes = _new_figure(k, k, _figsize(figsize, None, (side * k + 0.7, side * k + 0.9)),
+                                squeeze=False)
     else:
+        _figsize(figsize, ax, (0.0, 0.0))
         axes = np.asarray(ax, dtype=object)
         if axes.size != k * k:
             raise ValueError(f"ax must hold {k} x {k} axes, got {axes.size}")
         axes = axes.reshape(k, k)
         fig = axes[0, 0].figure
+    panel = min(fig.get_figwidth(), fig.get_figheight()) / k
+    small = panel < 1.5  # many panels: fewer, smaller ticks
+    labels = [_param_label(n, model) for n in names]
+    # one range per parameter, shared by its column (x) and its row (y): tick labels only
+    # on the outer panels, so the panels keep their room
+    lims = []
+    for n, x in zip(names, draws):
+        lo, hi = float(np.min(x)), float(np.max(x))
+        if n in truth:
+            lo, hi = min(lo, float(truth[n])), max(hi, float(truth[n]))
+        pad = 0.05 * (hi - lo) if hi > lo else 0.05 * max(abs(lo), 1.0)
+        lims.append((lo - pad, hi + pad))
+    marked_line = marked_cross = False
     for i in range(k):
         for j in range(k):
             a = axes[i, j]
@@ -396,23 +639,61 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
                 a.set_yticks([])
                 if names[i] in truth:
                     a.axvline(truth[names[i]], color="k", ls="--", lw=1)
+                    marked_line = True
             else:
                 a.plot(draws[j], draws[i], ".", ms=1.5, color="C0", alpha=0.3, rasterized=True)
                 if names[i] in truth and names[j] in truth:
-                    a.plot(truth[names[j]], truth[names[i]], "kx", ms=7, mew=1.5)
+                    a.plot(truth[names[j]], truth[names[i]], "kx", ms=7 if not small else 5,
+                           mew=1.5)
+                    marked_cross = True
+            a.set_xlim(*lims[j])
+            if i != j:
+                a.set_ylim(*lims[i])
+            if small:
+                a.tick_params(labelsize=SMALLEST_FONT)
+                a.xaxis.set_major_locator(MaxNLocator(3))
+                if i != j:
+                    a.yaxis.set_major_locator(MaxNLocator(3))
             if i == k - 1:
-                a.set_xlabel(names[j])
+                a.set_xlabel(labels[j], fontsize=8 if small else None)
+                if small:
+                    a.tick_params(axis="x", labelrotation=45)
+            else:
+                a.tick_params(labelbottom=False)
             if j == 0 and i > 0:
-                a.set_ylabel(names[i])
+                a.set_ylabel(labels[i], fontsize=8 if small else None)
+            elif i != j:
+                a.tick_params(labelleft=False)
+    handles = []
+    if marked_line:
+        handles.append(Line2D([], [], color="k", ls="--", lw=1, label="true value (histograms)"))
+    if marked_cross:
+        handles.append(Line2D([], [], color="k", marker="x", ls="none", ms=7, mew=1.5,
+                              label="true values (scatter)"))
+    if handles:
+        if k > 1:
+            # in the empty upper triangle, from its right corner leftwards; not laid out (the
+            # layout would widen the last column to hold it)
+            axes[0, k - 1].legend(handles=handles, loc="upper right", fontsize="small",
+                                  frameon=False, borderaxespad=0.0).set_in_layout(False)
+        elif new:
+            _legend_below(fig, handles, [h.get_label() for h in handles], ncols=2)
+        else:
+            axes[0, 0].legend(handles=handles, loc="best", fontsize="small")
+    if new:
+        title = f"Posterior: {_run_note(posterior, draws[0].size)}"
+        fig.suptitle(_wrap(title, fig.get_figwidth() - 0.3, 10.0), fontsize=10)
     return fig
 
 
 def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
-                ax: Sequence[Any] | None = None) -> Figure:
+                ax: Sequence[Any] | None = None, *, model: Any = None,
+                figsize: tuple[float, float] | None = None) -> Figure:
     """Retained draws of every walker against the step number, one panel per parameter, and lp.
 
     The x axis is the step of the full chain (burn-in ``discard`` and the
-    thinning ``thin`` of the Posterior undone), so panels line up with tau.
+    thinning ``thin`` of the Posterior undone), so panels line up with tau,
+    each parameter's integrated autocorrelation time, written above its panel.
 
     Parameters
     ----------
@@ -421,6 +702,11 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
         Parameters to show (default: all sampled).
     ax : sequence of matplotlib Axes, optional
         len(names) + 1 axes (the last for the log posterior).  Default: a new figure.
+    model : bayespilot.model.PilotModel, optional
+        The sampled model, for the units of parameters outside the paper's.
+    figsize : (float, float), optional
+        Size of the new figure, inches (default 7 in wide, about 1 in per
+        panel, at most 9.5 in tall); not with ``ax``.
 
     Returns
     -------
@@ -431,7 +717,8 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     TypeError
         If ``posterior`` is not a Posterior.
     ValueError
-        If a name was not sampled, or ``ax`` has the wrong number of axes.
+        If a name was not sampled, ``ax`` has the wrong number of axes, or
+        ``figsize`` is given with ``ax`` or is not two positive numbers.
     """
     posterior = _posterior_or_raise(posterior)
     names = posterior.parameter_names if names is None else tuple(names)
@@ -442,30 +729,34 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     thin = int(posterior.settings.get("thin", 1))
     n_panels = len(names) + 1
     if ax is None:
-        plt = _pyplot()
-        fig, axes = plt.subplots(n_panels, 1, sharex=True, figsize=(8.0, 1.3 * n_panels + 0.8),
-                                 layout="constrained")
+        size = _figsize(figsize, ax, (7.0, 1.05 * n_panels + 0.8))
+        fig, axes = _new_figure(n_panels, 1, size, sharex=True)
         axes = list(np.atleast_1d(axes))
     else:
+        _figsize(figsize, ax, (0.0, 0.0))
         axes = list(np.atleast_1d(np.asarray(ax, dtype=object)))
         if len(axes) != n_panels:
             raise ValueError(f"ax must hold {n_panels} axes (one per parameter and one for lp), "
                              f"got {len(axes)}")
         fig = axes[0].figure
-    series = [(n, np.asarray(post[n].values, float)) for n in names]
-    series.append(("lp", np.asarray(posterior.idata.sample_stats["lp"].values, float)))
-    for a, (label, v) in zip(axes, series):
+    series = [(n, _param_label(n, model), np.asarray(post[n].values, float)) for n in names]
+    series.append(("lp", "log posterior",
+                   np.asarray(posterior.idata.sample_stats["lp"].values, float)))
+    for a, (name, ylabel, v) in zip(axes, series):
         steps = discard + thin * np.arange(v.shape[1])
         a.plot(steps, v.T, lw=0.4, alpha=0.5, color="C0")
-        a.set_ylabel(label)
-        tau = posterior.tau.get(label)
+        a.set_ylabel(ylabel)
+        tau = posterior.tau.get(name) if name != "lp" else None
         if tau is not None and math.isfinite(tau):
-            a.text(1.0, 1.0, f"tau = {tau:.0f}", transform=a.transAxes, ha="right", va="top",
-                   fontsize="x-small")
+            # above the top spine, right-aligned (the panel's title, if any, is on the left)
+            a.annotate(f"autocorrelation time {tau:.0f} steps", xy=(1.0, 1.0),
+                       xycoords="axes fraction", xytext=(0.0, 2.0), textcoords="offset points",
+                       ha="right", va="bottom", fontsize=SMALLEST_FONT)
         a.grid(True, lw=0.3, alpha=0.6)
     axes[-1].set_xlabel("step")
-    axes[0].set_title(f"{len(series[0][1])} walkers, {posterior.settings.get('n_steps', '?')} steps, "
-                      f"{'converged' if posterior.converged else 'NOT converged'}", fontsize="medium")
+    axes[0].set_title(f"{len(series[0][2])} walkers, {posterior.settings.get('n_steps', '?')} steps, "
+                      f"{'converged' if posterior.converged else 'NOT converged'}",
+                      fontsize="medium", loc="left")
     return fig
 
 
