@@ -249,31 +249,56 @@ def figure(rows, path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from bayespilot._labels import symbol
 
     liks = [lk for lk in LIKELIHOODS if any(r["likelihood"] == lk for r in rows)]
-    fig, axes = plt.subplots(1, len(liks), figsize=(5.2 * len(liks), 3.8), sharey=True,
-                             squeeze=False, layout="constrained")
+    # two panels a row (a page's width, 7.5 in); the legend in the free cell, else below
+    ncols = min(len(liks), 2)
+    nrows = math.ceil(len(liks) / ncols)
+    free = nrows * ncols > len(liks)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(7.5, 2.5 * nrows + 0.6 + (0 if free else 0.4)),
+                             sharey=True, squeeze=False, layout="constrained")
     x = np.arange(len(NAMES))
-    for a, lik in zip(axes[0], liks):
+    colours = dict(zip(LEVELS, ("C0", "C1")))
+    for a, lik in zip(axes.flat, liks):
         cov = coverage(rows, lik)
         n = cov[NAMES[0]][LEVELS[0]][1]
-        for j, (lv, col) in enumerate(zip(LEVELS, ("C0", "C1"))):
+        for j, lv in enumerate(LEVELS):
+            col = colours[lv]
             band = 1.96 * math.sqrt(lv * (1 - lv) / n)
             a.axhspan(lv - band, lv + band, color=col, alpha=0.15, lw=0)
             a.axhline(lv, color=col, lw=0.8, ls="--")
             f = np.array([cov[nm][lv][0] / n for nm in NAMES])
             ci = np.array([wilson(cov[nm][lv][0], n) for nm in NAMES])
             a.errorbar(x + (j - 0.5) * 0.2, f, yerr=[f - ci[:, 0], ci[:, 1] - f], fmt="o",
-                       color=col, ms=4, capsize=2, label=f"{int(lv * 100)}% intervals")
-        a.set_xticks(x, NAMES, rotation=45, ha="right")
+                       color=col, ms=3.5, capsize=2)
+        a.set_xticks(x, [symbol(nm) for nm in NAMES])
         a.set_ylim(0, 1.02)
         a.set_title(f"{LABELS[lik]}: {n} recordings", fontsize="medium")
         a.grid(True, axis="y", lw=0.3, alpha=0.6)
-    axes[0, 0].set_ylabel("fraction of intervals holding the truth")
-    axes[0, 0].legend(loc="lower left", fontsize="small")
-    fig.suptitle(f"Coverage of central credible intervals (F_n = {F_N}, K_theta = {K_THETA:g}, "
-                 "FD and FT; bars: 95% Wilson CI, bands: nominal +- binomial 95%)",
-                 fontsize="medium")
+    for a in axes[:, 0]:
+        a.set_ylabel("share of intervals\nholding the truth")
+    handles = []
+    for lv in LEVELS:
+        c = colours[lv]
+        handles += [Line2D([], [], ls="none", marker="o", ms=3.5, color=c,
+                           label=f"{int(lv * 100)} % intervals: share, 95 % Wilson interval"),
+                    Line2D([], [], color=c, lw=0.8, ls="--",
+                           label=f"nominal {int(lv * 100)} %"),
+                    Patch(color=c, alpha=0.15, lw=0,
+                          label=f"95 % range of a calibrated method's {int(lv * 100)} %")]
+    if free:  # the empty cell of the grid holds the legend, off every panel's points
+        for a in list(axes.flat)[len(liks):]:
+            a.set_axis_off()
+        axes.flat[-1].legend(handles=handles, loc="center", fontsize="small", frameon=False)
+    else:
+        fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize="small",
+                   frameon=False)
+    fig.suptitle(f"Coverage of central credible intervals\n({symbol('F_n')} = {F_N}, "
+                 f"$K_\\theta$ = {K_THETA:g}, FD and FT)", fontsize="medium")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -79,7 +79,7 @@ def main(argv=None) -> int:
             print(f"{task} K_theta={kt:<5} delta_abs={fit.params['delta_abs']:.4f}  "
                   f"-ln L={fit.neg_log_lik:.1f}  VAF={fit.vaf:.1f} %  ({fit.elapsed:.0f} s)")
 
-    labels = [f"{t}, K$_\\theta$ = {k}" for t in ("FD", "FT") for k in gains]
+    labels = [f"{t}, $K_\\theta$ = {k:g}" for t in ("FD", "FT") for k in gains]
     figs = {
         "fig06_step1_thresholds.png": plot_step_one_thresholds(
             [fits[t, k] for t in ("FD", "FT") for k in gains], labels),

@@ -137,11 +137,17 @@ def figure(rows, path: Path, lik: str) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from bayespilot._labels import label, symbol
     from bayespilot.presets import FIG14_15
 
-    fig, axes = plt.subplots(3, 2, figsize=(11, 9.5), sharex=True, layout="constrained",
-                             gridspec_kw={"height_ratios": [1.3, 1.3, 1]})
+    d_abs, k_theta, f_n = symbol("delta_abs"), r"$K_\theta$", symbol("F_n")
+    fig, axes = plt.subplots(3, 2, figsize=(7.5, 9.0), sharex=True, sharey="row",
+                             layout="constrained", gridspec_kw={"height_ratios": [1.3, 1.3, 1]})
     width = 0.8 / len(FRACTIONS)
+    missing = False
     colors = plt.cm.viridis(np.linspace(0, 0.9, len(FRACTIONS)))
     for col, task in enumerate(TASKS):
         a, h, b = axes[0, col], axes[1, col], axes[2, col]
@@ -151,8 +157,8 @@ def figure(rows, path: Path, lik: str) -> None:
                 x0 = ik + (jf - (len(FRACTIONS) - 1) / 2) * width
                 for m, r in enumerate(sel):
                     x = x0 + (m - (len(sel) - 1) / 2) * width / max(len(sel), 1) * 0.8
-                    a.plot([x, x], [r["q05"], r["q95"]], color=colors[jf], lw=1.4)
-                    a.plot(x, r["median"], "o", color=colors[jf], ms=3)
+                    a.plot([x, x], [r["q05"], r["q95"]], color=colors[jf], lw=1.1)
+                    a.plot(x, r["median"], "o", color=colors[jf], ms=2.5)
                 # the pooled histogram of the draws, as a column of shades
                 if sel:
                     hist = np.sum([r["histogram"] for r in sel], axis=0).astype(float)
@@ -160,29 +166,45 @@ def figure(rows, path: Path, lik: str) -> None:
                     h.imshow(hist[:, None], extent=(x0 - width / 2, x0 + width / 2, 0, 0.1),
                              origin="lower", aspect="auto", cmap="Blues", vmin=0, vmax=1)
                     b.bar(x0, np.mean([r["p50"] for r in sel]), width=width * 0.9,
-                          color=colors[jf], label=f"F_n = {fn:g}" if ik == 0 else None)
+                          color=colors[jf])
+                else:  # a cell not run, apart from a probability of 0
+                    b.plot(x0, 0.03, "x", color="0.5", ms=4)
+                    missing = True
                 paper = FIG14_15.get((task, fn, k))
                 if paper is not None:
-                    b.plot(x0, paper[2] / 100, "s", mfc="none", mec="k", ms=6,
-                           label="paper N50% / 100" if (ik == 0 and jf == 0) else None)
+                    b.plot(x0, paper[2] / 100, "s", mfc="none", mec="k", ms=5)
         for ax in (a, h):
-            ax.axhspan(0.5 * TRUE, 1.5 * TRUE, color="C3", alpha=0.15, lw=0)
-            ax.axhline(TRUE, color="C3", lw=0.8, ls="--")
+            # the package's convention (plot_threshold_histograms): the true value a dashed
+            # black line, its +-50 % a green band
+            ax.axhspan(0.5 * TRUE, 1.5 * TRUE, color="C2", alpha=0.25, lw=0)
+            ax.axhline(TRUE, color="k", lw=0.9, ls="--")
             ax.set_ylim(0, 0.1)
             ax.set_xlim(-0.5, len(GAINS) - 0.5)
-        a.set_title(f"task {task}: posterior median and 90% interval of delta_abs "
-                    f"(colour: F_n)", fontsize="medium")
-        h.set_title("posterior draws pooled over realizations (darker: denser)", fontsize="medium")
-        a.set_ylabel("delta_abs (IPUT)")
-        h.set_ylabel("delta_abs (IPUT)")
-        b.set_ylabel("P(|delta - 0.0075| <= 50%)")
+        a.set_title(f"task {task}: posterior median, 90 % interval", fontsize="medium")
+        h.set_title(f"task {task}: draws pooled over realizations", fontsize="medium")
+        b.set_title(f"task {task}: P({d_abs} within true $\\pm$50 %)", fontsize="medium")
         b.set_ylim(0, 1.05)
-        b.set_xticks(range(len(GAINS)), [f"K_theta = {k:g}" for k in GAINS])
+        b.set_xticks(range(len(GAINS)), [f"{k_theta} = {k:g}" for k in GAINS],
+                     fontsize="small")
         b.grid(True, axis="y", lw=0.3, alpha=0.6)
-    axes[2, 0].legend(fontsize="x-small", ncol=3, loc="upper left")
+    axes[0, 0].set_ylabel(label("delta_abs", "IPUT"))
+    axes[1, 0].set_ylabel(label("delta_abs", "IPUT") + "\n(darker: more draws)")
+    axes[2, 0].set_ylabel("posterior probability")
+    # one legend below the panels, off the bars and intervals
+    handles = [Patch(color=c, label=f"{f_n} = {fn:g}") for c, fn in zip(colors, FRACTIONS)]
+    handles += [Patch(color="C2", alpha=0.25, lw=0, label=r"true $\pm$50 %"),
+                Line2D([], [], color="k", ls="--", lw=0.9,
+                       label=f"true {d_abs} = {TRUE:g} IPUT"),
+                Line2D([], [], ls="none", marker="s", mfc="none", mec="k", ms=5,
+                       label="paper $N_{50\\%}$ / 100 (Figs. 14/15)")]
+    if missing:
+        handles.append(Line2D([], [], ls="none", marker="x", color="0.5", ms=4,
+                              label="cell not run"))
+    fig.legend(handles=handles, loc="outside lower center",
+               ncol=4 if len(handles) % 4 == 0 else 3, fontsize="small", frameon=False)
     n = len(rows)
-    fig.suptitle(f"Identifiability of the threshold from posteriors ({lik} likelihood, {n} "
-                 "recordings; true delta_abs = 0.0075, red band +-50%)", fontsize="medium")
+    fig.suptitle(f"Identifiability of the threshold from posteriors\n({lik} likelihood, "
+                 f"{n} recordings; colour: remnant fraction {f_n})", fontsize="medium")
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

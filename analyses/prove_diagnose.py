@@ -561,27 +561,7 @@ def summarize() -> dict:
           f"{np.max(times):.0f} s (B = {N_BOOTSTRAP}, one numba thread, shared machine)")
     # figures
     FIG.mkdir(parents=True, exist_ok=True)
-    fig, axes = plt.subplots(2, 3, figsize=(11, 6), sharey=True)
-    for ax, (e, row) in zip(axes.ravel(), curves.items()):
-        x = np.arange(len(row))
-        rate = [k / n if n else np.nan for _, k, n, _ in row]
-        ax.plot(x, rate, "o-")
-        for xi, (_, k, n, c) in zip(x, row):
-            ax.annotate(f"{k}/{n}", (xi, rate[xi] if n else 0), textcoords="offset points",
-                        xytext=(0, 6), ha="center", fontsize=8)
-        ax.set_xticks(x)
-        # "name=value" labels: the values on the axis, the name below it
-        ax.set_xticklabels([lab.split("=")[-1] for lab, *_ in row], fontsize=8)
-        ax.set_xlabel(row[0][0].split("=")[0] if row else "", fontsize=8)
-        ax.set_ylim(-0.05, 1.15)
-        ax.set_title(e, fontsize=9)
-        ax.grid(alpha=0.3)
-    axes[0, 0].set_ylabel("rate named correctly")
-    axes[1, 0].set_ylabel("rate named correctly")
-    fig.suptitle("diagnose: detection against effect size (smallest effect left)")
-    fig.tight_layout()
-    fig.savefig(FIG / f"diagnose_detection{FIG_SUFFIX}.png", dpi=110)
-    plt.close(fig)
+    plot_detection(curves, FIG / f"diagnose_detection{FIG_SUFFIX}.png")
     fig, ax = plt.subplots(figsize=(7, 5))
     M = np.array([[conf[t][d] for d in cols] for t in labels], float)
     rows = M.sum(axis=1, keepdims=True)
@@ -613,6 +593,77 @@ def summarize() -> dict:
         summary["against_optimal_test"] = pooled_against_oracle(rs)
     (OUT / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
+
+
+def _effect_axis(entry: str) -> str:
+    """The x axis of an entry's detection curve: what its effect size is, with its unit
+    (the catalogue's parameter, or how the saturation limit was set)."""
+    from bayespilot._labels import label, symbol
+
+    return {
+        "motion-system-dynamics": "platform bandwidth " + label("omega_ms", "rad/s"),
+        "motion-washout": "washout break frequency " + label("omega_w", "rad/s"),
+        "otolith-channel": "otolith gain " + label("K_ot", "rad/(m/s^2)")
+                           + f", {symbol('h_head')} = 1 m",
+        "threshold-shape": "soft-threshold corner width " + label("w_soft", "IPUT"),
+        "time-varying-gains": f"relative drift of {symbol('K_v')} and {symbol('K_m')} "
+                              "over the run",
+        "control-saturation": "control samples clipped by the limit (%)",
+    }.get(entry, entry)
+
+
+def _wilson_95(k: int, n: int) -> tuple[float, float]:
+    """The 95 % Wilson interval of a proportion k/n (scipy.stats.binomtest)."""
+    from scipy.stats import binomtest
+
+    ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    return float(ci.low), float(ci.high)
+
+
+def plot_detection(curves: dict, path: Path) -> None:
+    """The detection curves: per entry, the share of its cases named correctly at each
+    effect size (``curves[entry]`` = [(label, correct, n, concealed), ...], smallest effect
+    first) as points with 95 % Wilson intervals; an effect size without cases is marked."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    FIG.mkdir(parents=True, exist_ok=True)
+    ncols = 3
+    nrows = math.ceil(len(curves) / ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(7.5, 2.5 * nrows + 0.5), sharey=True,
+                             squeeze=False, layout="constrained")
+    for ax, (e, row) in zip(axes.flat, curves.items()):
+        x = np.arange(len(row))
+        for xi, (_, k, n, _) in zip(x, row):
+            if not n:
+                ax.text(xi, 0.02, "no cases", rotation=90, ha="center", va="bottom",
+                        fontsize=7, color="0.4")
+                continue
+            rate = k / n
+            lo, hi = _wilson_95(k, n)
+            # categorical sizes: points with their intervals, not joined
+            ax.errorbar(xi, rate, yerr=[[rate - lo], [hi - rate]], fmt="o", ms=4, capsize=2,
+                        color="C0", lw=1)
+            ax.annotate(f"{k}/{n}", (xi, hi), textcoords="offset points", xytext=(0, 3),
+                        ha="center", fontsize=7)
+        ax.set_xticks(x, [lab.split("=")[-1].rstrip("%") for lab, *_ in row], fontsize=8)
+        ax.set_xlim(-0.5, len(row) - 0.5)
+        ax.set_xlabel(_effect_axis(e), fontsize=7)
+        ax.set_ylim(-0.03, 1.15)
+        ax.set_yticks(np.linspace(0, 1, 6))
+        ax.set_title(e, fontsize=9)
+        ax.grid(alpha=0.3, axis="y")
+    for ax in list(axes.flat)[len(curves):]:
+        ax.set_visible(False)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("share named correctly")
+    fig.suptitle("diagnose: detection against effect size, all cases (smallest effect left;\n"
+                 "point: share named correctly out of the cases shown; bar: its 95 % Wilson "
+                 "interval)", fontsize=9)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def alpha_sweep(rs: list[dict], alphas=(0.01, 0.02, 0.05)) -> list[dict]:

@@ -23,7 +23,8 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
-from ..plots import _pyplot
+from .._labels import symbol
+from ..plots import _param_label, _pyplot
 from .result import FitResult
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -31,8 +32,10 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["plot_step_one_thresholds", "plot_ga_convergence", "plot_step_two", "plot_step_three"]
 
-#: Groen et al.'s passive pitch threshold, the grey line of Fig. 6, IPUT (= the paper's true value).
+#: Groen et al.'s passive pitch threshold, the line of Fig. 6, IPUT (= the paper's true value).
 PASSIVE_THRESHOLD = 0.0075
+#: -ln L as the axes show it.
+_NLL = r"$-\ln L$"
 
 
 def _paper_fit(result: FitResult, what: str) -> dict:
@@ -61,12 +64,15 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
     results : sequence of FitResult, or sequence of sequences of FitResult
         One entry per panel (condition). An entry may itself be a list of fits
         (the paper's five runs per condition), drawn as separate lines.
+        One legend above the panels names the lines and the true value.
     labels : sequence of str, optional
         Panel titles.
     ncols : int, optional
         Panels per row (default up to 4).
     true_value : float or None
-        Horizontal reference line (Groen et al.'s 0.0075 IPUT).
+        The true delta_abs, a dashed black horizontal line named in the
+        legend (default Groen et al.'s 0.0075 IPUT, the paper's true value);
+        None for no line.
 
     Returns
     -------
@@ -79,8 +85,8 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
     if labels is not None and len(labels) != len(panels):
         raise ValueError(f"{len(labels)} labels for {len(panels)} panels")
     nrows, ncols = _grid(len(panels), ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.0 * ncols, 2.6 * nrows), sharey=True,
-                             squeeze=False)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.0 * ncols, 2.6 * nrows + 0.3),
+                             sharey=True, squeeze=False, layout="constrained")
     for k, (ax, fits) in enumerate(zip(axes.flat, panels)):
         for j, fit in enumerate(fits):
             s1 = _paper_fit(fit, "plot_step_one_thresholds")["step1"]
@@ -89,16 +95,22 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
             deltas = np.array([r["x"][i] for r in s1["runs"]])
             order = np.argsort(funs, kind="stable")
             ax.plot(np.arange(1, len(order) + 1), deltas[order], "o-", ms=3, lw=0.8,
-                    label=f"run {j + 1}" if len(fits) > 1 else None)
+                    label=f"run {j + 1}" if len(fits) > 1 else "Step I estimate")
         if true_value is not None:
-            ax.axhline(true_value, color="0.6", lw=2, zorder=0)
+            # the package's mark of a true value: a dashed black line
+            ax.axhline(true_value, color="k", ls="--", lw=0.9, zorder=0,
+                       label=f"true {symbol('delta_abs')} ({true_value:g} IPUT)")
         ax.set_title(labels[k] if labels is not None else f"condition {k + 1}", fontsize=9)
-        ax.set_xlabel("GA repetition (by -ln L)")
+        ax.set_xlabel(f"GA repetition (ascending {_NLL})")
         if k % ncols == 0:
-            ax.set_ylabel(r"$\hat\delta_{abs}$ after Step I, IPUT")
+            ax.set_ylabel(r"$\hat{\delta}_\mathrm{abs}$ after Step I (IPUT)")
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
-    fig.tight_layout()
+    # one legend for every panel, above them (the panels with most runs name them all)
+    widest = max(range(len(panels)), key=lambda k: len(panels[k]))
+    handles, names = axes.flat[widest].get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside upper center", ncol=min(len(names), 4),
+               fontsize="small", frameon=False)
     return fig
 
 
@@ -108,7 +120,8 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     """Fig. 7: the best-so-far individual over the GA generations.
 
     Rows are -ln L and ``parameters``; columns are the fits (conditions); each
-    panel shows ``repetitions`` GA runs as separate lines.
+    panel shows ``repetitions`` GA runs as separate lines, repetition j in
+    the same colour in every panel, named by one legend above the panels.
 
     Parameters
     ----------
@@ -146,26 +159,35 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     if repetitions < 1:
         raise ValueError(f"repetitions must be >= 1, got {repetitions}")
     _check_labels(labels, len(results))
-    rows = ["-ln L", *parameters]
-    fig, axes = plt.subplots(len(rows), len(results), figsize=(3.0 * len(results), 1.7 * len(rows)),
-                             sharex=True, squeeze=False)
+    rows = [_NLL, *(_param_label(p) for p in parameters)]
+    fig, axes = plt.subplots(len(rows), len(results),
+                             figsize=(3.0 * len(results), 1.7 * len(rows) + 0.3),
+                             sharex=True, squeeze=False, layout="constrained")
+    drawn = 0
     for c, fit in enumerate(results):
         s1 = _paper_fit(fit, "plot_ga_convergence")["step1"]
         names = s1["parameter_names"]
         missing = [p for p in parameters if p not in names]
         if missing:
             raise ValueError(f"parameter(s) {missing} not estimated in Step I ({', '.join(names)})")
-        for run in s1["runs"][:repetitions]:
+        for j, run in enumerate(s1["runs"][:repetitions]):
             hx = np.asarray(run["history_best_x"])
             gen = np.arange(hx.shape[0])
-            line = axes[0, c].plot(gen, run["history_best_fun"], lw=1)[0]
+            # repetition j has colour Cj in every column: one legend names them all
+            color = f"C{j % 10}"
+            axes[0, c].plot(gen, run["history_best_fun"], lw=1, color=color,
+                            label=f"GA repetition {j + 1}")
             for r, p in enumerate(parameters, start=1):
-                axes[r, c].plot(gen, hx[:, names.index(p)], lw=1, color=line.get_color())
+                axes[r, c].plot(gen, hx[:, names.index(p)], lw=1, color=color)
+        drawn = max(drawn, min(repetitions, len(s1["runs"])))
         axes[0, c].set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
         axes[-1, c].set_xlabel("GA generation")
     for r, name in enumerate(rows):
         axes[r, 0].set_ylabel(name)
-    fig.tight_layout()
+    handles, names = next(ax for ax in axes[0]
+                          if len(ax.get_lines()) == drawn).get_legend_handles_labels()
+    fig.legend(handles, names, loc="outside upper center", ncol=len(names), fontsize="small",
+               frameon=False, title="best-so-far individual of", title_fontsize="small")
     return fig
 
 
@@ -236,7 +258,8 @@ def plot_step_three(results: Sequence[FitResult],
 
     The Step I estimates of each repetition are crosses on the curve, the
     Step II value (the mean of the best Step I runs) an open circle and a
-    vertical line, the final minimum a filled circle and a vertical line.
+    dashed vertical line, the scan's minimum a filled circle and a solid
+    vertical line; one legend above the panels names them.
 
     Parameters
     ----------
@@ -284,25 +307,41 @@ def plot_step_three(results: Sequence[FitResult],
             raise ValueError(f"scan={scan} but a fit has {len(steps['step3'])} Step III "
                              f"scan(s)")
         chosen.append((steps, steps["step3"][scan]))
-    results, fig, axes = _one_row(results, labels)
+    from matplotlib.lines import Line2D
+
+    if not results:
+        raise ValueError("no fits to plot")
+    _check_labels(labels, len(results))
+    # (as _one_row's, with room above the panels for the legend)
+    fig, axes = _pyplot().subplots(1, len(results), figsize=(3.0 * len(results), 3.3),
+                                   squeeze=False, layout="constrained")
     for c, (ax, (steps, one)) in enumerate(zip(axes[0], chosen)):
         scan_c = one
         grid = np.asarray(scan_c["grid"], dtype=float)
         nll = np.array([np.nan if v is None else v for v in scan_c["neg_log_lik"]], dtype=float)
-        ax.plot(grid, nll, "k-", lw=1)
+        ax.plot(grid, nll, "k-", lw=1, label="Step III scan")
         s1 = steps["step1"]
         i = s1["parameter_names"].index("delta_abs")
         d1 = np.array([r["x"][i] for r in s1["runs"]])
         ax.plot(d1, np.interp(d1, grid, nll), "x", color="0.4", ms=6, label="Step I")
         d2 = steps["step1_delta_abs"]
-        ax.axvline(d2, color="k", lw=0.8)
+        ax.axvline(d2, color="k", lw=0.8, ls="--")
         ax.plot(d2, np.interp(d2, grid, nll), "o", mfc="white", mec="k", ms=7, label="Step II")
         ax.axvline(scan_c["best"], color="k", lw=0.8)
         ax.plot(scan_c["best"], scan_c["best_neg_log_lik"], "ko", ms=6, label="Step III")
         ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
-        ax.set_xlabel(r"$\delta_{abs}$, IPUT")
+        ax.set_xlabel(_param_label("delta_abs"))
         if c == 0:
-            ax.set_ylabel("-ln L")
-            ax.legend(fontsize=7)
-    fig.tight_layout()
+            ax.set_ylabel(_NLL)
+    d = symbol("delta_abs")
+    handles = [Line2D([], [], color="k", lw=1, label=f"{_NLL} along {d}, Step II parameters "
+                                                      "held"),
+               Line2D([], [], ls="none", marker="x", color="0.4", ms=6,
+                      label=f"Step I estimates of {d}"),
+               Line2D([], [], color="k", lw=0.8, ls="--", marker="o", mfc="white", mec="k",
+                      ms=7, label=f"Step II {d} (mean of the best Step I runs)"),
+               Line2D([], [], color="k", lw=0.8, marker="o", ms=6,
+                      label="Step III minimum of the scan")]
+    fig.legend(handles=handles, loc="outside upper center", ncol=2, fontsize="small",
+               frameon=False)
     return fig
