@@ -23,6 +23,8 @@ def symbol(name: str) -> str:
     --------
     >>> symbol("delta_abs"), symbol("K_m"), symbol("drift_v")
     ('$\\\\delta_\\\\mathrm{abs}$', '$K_\\\\mathrm{m}$', '$\\\\mathrm{drift}_\\\\mathrm{v}$')
+    >>> symbol("K_theta")
+    '$K_\\\\theta$'
     """
     base, _, sub = str(name).partition("_")
     if base in _GREEK:
@@ -33,6 +35,8 @@ def symbol(name: str) -> str:
         head = r"\mathrm{%s}" % base.replace("_", r"\_")
     if not sub:
         return f"${head}$"
+    if sub in _GREEK:  # K_theta: K with a theta under it
+        return "$%s_\\%s$" % (head, sub)
     return "$%s_\\mathrm{%s}$" % (head, sub.replace("_", r"\_"))
 
 

@@ -364,7 +364,7 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
                              label=f"≥ {upper:g} IPUT (in the last bin)"))
     labels = [h.get_label() for h in handles]
     title = (f"Estimated threshold over realizations ({sel[0]['method']} method; Figs. 14/15 "
-             f"of Pool et al. 2012); red text: differs from the paper")
+             f"of Pool et al. 2012); ≠ and red: differs from the paper")
 
     if ax is None:
         size = _figsize(figsize, ax, (2.3 * len(cols) + 0.9, 1.75 * len(rows) + 1.1))
@@ -418,12 +418,17 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
             fs = finite_stats.get((task, fn, k))
             paper = st["paper_mu"] is not None
             # short lines: four panels side by side on a page leave about 1.5 in for them
+            # a value that differs from the paper's: "≠" in front, not the colour alone (grey
+            # print, colour-blind readers)
+            mark = {True: "≠", False: ""}
             lines = ["no finite fit"] if fs is None else [
-                f"$\\mu$={fs['mu']:.4f}"
+                mark[bool(fs["flag_mu"])] + f"$\\mu$={fs['mu']:.4f}"
                 + ("" if math.isnan(fs["sigma"]) else f", $\\sigma$={fs['sigma']:.4f}")]
             if paper:
                 lines.append(f"paper {st['paper_mu']:.4f}, {st['paper_sigma']:.4f}")
-            lines.append(f"N50={st['N50']}/{st['n']}"
+            # (of 100 realizations, as the paper counts: "/n" only for another number)
+            lines.append(mark[bool(st["flag_N50"])] + f"N50={st['N50']}"
+                         + ("" if st["n"] == 100 else f"/{st['n']}")
                          + (f" (paper {st['paper_N50']})" if paper else ""))
             if failed:
                 lines.append(f"{failed} failed" + (f" ($\\mu$, $\\sigma$ of {fs['n']})"
