@@ -781,6 +781,11 @@ def test_a_diagnosis_read_back_from_its_json_is_the_same(washout_case, control_r
         DiagnosisResult.from_json(tmp_path / "d.json").report(tmp_path / "rep")
     with pytest.raises(ValueError, match="does not carry 'motion-washout'.s fitted model"):
         sample_chosen(back, rec)
+    from bayespilot.diagnose.nested import bayes_factor
+    for kw in ({}, {"physics": "motion-washout"}):  # (said 'decided by its flat tops' before)
+        with pytest.raises(ValueError, match="read back from JSON, which keeps the "
+                                             "candidates' numbers but not their fitted models"):
+            bayes_factor(DiagnosisResult.from_json(tmp_path / "d.json"), rec, **kw)
     # not a diagnosis, a pooled one, not JSON
     (tmp_path / "x.json").write_text('{"log_bayes_factor": 1.0}')
     with pytest.raises(ValueError, match="x.json holds not a diagnosis result"):
@@ -791,3 +796,14 @@ def test_a_diagnosis_read_back_from_its_json_is_the_same(washout_case, control_r
     (tmp_path / "t.json").write_text("physics: none")
     with pytest.raises(ValueError, match="t.json is not a JSON file"):
         DiagnosisResult.from_json(tmp_path / "t.json")
+
+
+def test_summary_tells_an_infinite_bic_from_one_not_computed():
+    """Exact flat tops give the censored test delta BIC = +inf, its strongest finding; -inf or
+    NaN is an entry with no likelihood fitted (the summary printed '-inf', then '-' for both)."""
+    import types
+
+    from bayespilot.diagnose import _bic
+
+    assert [_bic(types.SimpleNamespace(delta_bic=v)) for v in
+            (12.34, math.inf, -math.inf, math.nan)] == ["12.3", "inf", "-", "-"]

@@ -294,6 +294,27 @@ def test_fix_unknown_parameter():
     assert paper_model().fix(delta_abs=0.1).fixed == {"delta_abs": 0.1}  # the bound itself
 
 
+def test_a_threshold_bounded_away_from_zero_still_has_its_threshold_free_fits():
+    """The package's nested model is delta_abs = 0 whatever the threshold's bounds: fixing it
+    is not the user's fix (which refuses a value outside them), or fit_fast refused its own
+    threshold-free start on a model with delta_abs in [0.001, 0.1]."""
+    from dataclasses import replace
+
+    from bayespilot.fit.fast import fit_fast
+    from bayespilot.simulate import simulate
+
+    m = paper_model()
+    m = replace(m, parameters=tuple(replace(p, lower=0.001) if p.name == "delta_abs" else p
+                                    for p in m.parameters))
+    with pytest.raises(ValueError, match="outside its bounds"):
+        m.fix(delta_abs=0.0)
+    rec = simulate(task="FD", remnant_fraction=0.1, seed=0, duration=10.0).recording
+    for threshold in (True, False):
+        fit = fit_fast(rec, m, seed=0, n_starts=1, threshold=threshold, profile_step=0.02)
+        assert np.isfinite(fit.neg_log_lik)
+        assert (fit.params["delta_abs"] >= 0.001) if threshold else fit.params["delta_abs"] == 0
+
+
 def test_bad_parameter_and_channel_definitions():
     with pytest.raises(ValueError, match="outside"):
         Parameter("omega_w", 0.01, 10.0, 20.0)

@@ -1394,7 +1394,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--noise", choices=("white", "ar"), default="white",
                    help="'white': Eq. 4 as the paper has it (default); 'ar': a prediction-error "
                         "fit, the residual whitened by an AR model and the first 2 s left out "
-                        "(with --method fast, on a record of at least 4 s; see "
+                        "(a quarter of a record under 8 s; with --method fast; see "
                         "docs/fitting.md)")
     p.add_argument("--iterate", action="store_true",
                    help="repeat Steps II and III until delta_abs and -ln L stop changing "

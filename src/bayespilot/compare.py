@@ -1361,7 +1361,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         if not isinstance(posterior, Posterior):
             raise TypeError(f"posterior must be a bayespilot.sample.Posterior, got "
                             f"{type(posterior).__name__}")
-    none_model = model.fix(**{THRESHOLD: 0.0})
+    none_model = model._fixed(**{THRESHOLD: 0.0})
     ss = np.random.SeedSequence(seed)
     s1, s0, s_mc = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
     noise = None

@@ -877,14 +877,21 @@ class PilotModel:
             On an unknown parameter, or a value that is complex, not finite or
             outside the parameter's bounds.
         """
+        known = {p.name: p for p in self.parameters}
+        for k, v in values.items():
+            p, x = known.get(k), _real(v, f"fixed value of {k}")
+            if p is not None and math.isfinite(x) and not p.lower <= x <= p.upper:
+                raise ValueError(f"fix: {k} = {x:g} is outside its bounds "
+                                 f"[{p.lower:g}, {p.upper:g}]")
+        return self._fixed(**values)
+
+    def _fixed(self, **values: float) -> "PilotModel":
+        """:meth:`fix` without the bounds check, for the package's nested models: the model
+        without threshold is ``delta_abs = 0`` whatever the bounds a user gave the threshold
+        (a lower bound above 0 made every fit refuse its own threshold-free start), and a
+        control limit is the level read from the flat tops."""
         fixed = dict(self.fixed)
         fixed.update({k: _real(v, f"fixed value of {k}") for k, v in values.items()})
-        known = {p.name: p for p in self.parameters}
-        for k in values:
-            p = known.get(k)
-            if p is not None and math.isfinite(fixed[k]) and not p.lower <= fixed[k] <= p.upper:
-                raise ValueError(f"fix: {k} = {fixed[k]:g} is outside its bounds "
-                                 f"[{p.lower:g}, {p.upper:g}]")
         return replace(self, fixed=fixed)
 
     def free(self, *names: str) -> "PilotModel":

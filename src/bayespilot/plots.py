@@ -41,12 +41,17 @@ SMALLEST_FONT = 7.0
 
 
 def _pyplot():
-    """matplotlib.pyplot, on the Agg backend when there is no display to draw on."""
+    """matplotlib.pyplot, on the Agg backend when there is no display to draw on, or when it is
+    first imported off the main thread (a batch's report drawn in a dask worker's thread,
+    where a GUI backend cannot run); a backend already chosen is kept."""
+    import threading
+
     import matplotlib
 
     headless = (sys.platform.startswith("linux")
                 and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"))
-    if headless and "matplotlib.pyplot" not in sys.modules:
+    worker = threading.current_thread() is not threading.main_thread()
+    if (headless or worker) and "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

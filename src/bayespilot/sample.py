@@ -890,8 +890,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     ValueError
         Bad settings, a prior for an unknown parameter or with no
         probability inside that parameter's bounds, a backend file of
-        another run, or an ``init`` with a parameter the model does not have
-        or one outside its bounds.
+        another run, or a mapping ``init`` with a parameter the model does
+        not have or one outside its bounds (a FitResult's estimates are moved
+        onto the bounds instead: the paper's unbounded Gauss-Newton step can
+        leave one just outside).
     TypeError
         ``recording``/``model``/``init``/``prior`` of the wrong type.
 

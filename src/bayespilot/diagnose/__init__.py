@@ -143,9 +143,12 @@ def _kind_check(d: Mapping[str, Any], pooled: bool, source_file: str | None) -> 
 
 
 def _bic(c) -> str:
-    """A candidate's delta BIC for the summary's table ("-" where none was computed: an entry
+    """A candidate's delta BIC for the summary's table: "inf" for exact flat tops (the
+    censored test's strongest finding), "-" where none was computed (-inf or NaN: an entry
     fitted without a likelihood, such as control-saturation without flat tops)."""
-    return f"{c.delta_bic:.1f}" if math.isfinite(c.delta_bic) else "-"
+    if math.isfinite(c.delta_bic):
+        return f"{c.delta_bic:.1f}"
+    return "inf" if c.delta_bic > 0 else "-"
 
 
 def _fitted_lines(chosen) -> list[str]:
@@ -1085,7 +1088,7 @@ def _saturation(recording, base_model, base, where, boot_info):
                    f"(diagnose with n_bootstrap > 0); censored likelihood fit")
     fit, f_start, sigma = D.fit_censored(base_model, recording, base.params, tops)
     d = max(0.0, f_start - fit.neg_log_lik)
-    model = ext.build(base_model).fix(u_max=max(abs(tops["hi"]), abs(tops["lo"])))
+    model = ext.build(base_model)._fixed(u_max=max(abs(tops["hi"]), abs(tops["lo"])))
     params = {"u_max": tops["hi"], "u_min": tops["lo"], "n_censored": float(tops["n_samples"]),
               "sigma": sigma}
     all_params = dict(fit.params)

@@ -311,6 +311,10 @@ def _candidate(result: Any, physics: str | None):
     ranking = getattr(result, "ranking", None)
     if ranking is None:
         raise TypeError(f"result must be a DiagnosisResult, got {type(result).__name__}")
+    if getattr(result, "arrays", {}).get("from_json"):
+        raise ValueError("this diagnosis was read back from JSON, which keeps the candidates' "
+                         "numbers but not their fitted models: diagnose the recording again to "
+                         "weigh an extension")
     fitted = [c for c in ranking if get_extension(c.physics).likelihood == "gls"
               and c.testable and getattr(c, "model", None) is not None]
     if physics is not None:

@@ -139,7 +139,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     model = _model_for(model, threshold)
     _check_fittable(recording, model, discard)
     has_delta = "delta_abs" in model.parameter_names
-    base = model.fix(delta_abs=0.0) if has_delta else model
+    base = model._fixed(delta_abs=0.0) if has_delta else model
     given = noise if isinstance(noise, ARNoise) else None
     lik0 = Likelihood(base, recording, initial=initial, discard=discard, noise=given)
     lo, hi = base.bounds

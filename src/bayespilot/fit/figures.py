@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from .._labels import symbol
-from ..plots import _param_label, _pyplot
+from ..plots import _legend_columns, _param_label, _pyplot
 from .result import FitResult
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -109,8 +109,9 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
     # one legend for every panel, above them (the panels with most runs name them all)
     widest = max(range(len(panels)), key=lambda k: len(panels[k]))
     handles, names = axes.flat[widest].get_legend_handles_labels()
-    fig.legend(handles, names, loc="outside upper center", ncol=min(len(names), 4),
-               fontsize="small", frameon=False)
+    fig.legend(handles, names, loc="outside upper center",
+               ncol=_legend_columns(names, fig.get_figwidth(), 4), fontsize="small",
+               frameon=False)
     return fig
 
 
@@ -173,8 +174,10 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
         for j, run in enumerate(s1["runs"][:repetitions]):
             hx = np.asarray(run["history_best_x"])
             gen = np.arange(hx.shape[0])
-            # repetition j has colour Cj in every column: one legend names them all
-            color = f"C{j % 10}"
+            # repetition j has one colour in every column: one legend names them all (the
+            # default cycle up to 10, then a colour map, whose colours do not repeat)
+            color = (f"C{j}" if repetitions <= 10
+                     else plt.cm.viridis(j / max(1, repetitions - 1)))
             axes[0, c].plot(gen, run["history_best_fun"], lw=1, color=color,
                             label=f"GA repetition {j + 1}")
             for r, p in enumerate(parameters, start=1):
@@ -186,7 +189,8 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
         axes[r, 0].set_ylabel(name)
     handles, names = next(ax for ax in axes[0]
                           if len(ax.get_lines()) == drawn).get_legend_handles_labels()
-    fig.legend(handles, names, loc="outside upper center", ncol=len(names), fontsize="small",
+    fig.legend(handles, names, loc="outside upper center",
+               ncol=_legend_columns(names, fig.get_figwidth(), len(names)), fontsize="small",
                frameon=False, title="best-so-far individual of", title_fontsize="small")
     return fig
 
@@ -342,6 +346,7 @@ def plot_step_three(results: Sequence[FitResult],
                       ms=7, label=f"Step II {d} (mean of the best Step I runs)"),
                Line2D([], [], color="k", lw=0.8, marker="o", ms=6,
                       label="Step III minimum of the scan")]
-    fig.legend(handles=handles, loc="outside upper center", ncol=2, fontsize="small",
-               frameon=False)
+    fig.legend(handles=handles, loc="outside upper center",
+               ncol=_legend_columns([h.get_label() for h in handles], fig.get_figwidth(), 2),
+               fontsize="small", frameon=False)
     return fig

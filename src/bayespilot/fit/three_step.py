@@ -40,7 +40,7 @@ def _model_for(model: PilotModel | None, threshold: bool) -> PilotModel:
     if not isinstance(model, PilotModel):
         raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
     if not threshold and "delta_abs" in model.parameter_names:
-        return model.fix(delta_abs=0.0)
+        return model._fixed(delta_abs=0.0)
     return model
 
 
