@@ -375,3 +375,64 @@ def test_replicate_cli_refuses_a_non_bool_iterate(tmp_path, capsys, stopped_camp
     err = capsys.readouterr().err
     assert code == 2 and "--fit-option: option iterate must be True or False, got 'yes'" in err
     assert stopped_campaign == []
+
+
+def test_run_keyed_reports_a_lost_cluster_not_failed_tasks(tmp_path, monkeypatch):
+    """Futures cancelled when the scheduler dies are not the tasks' failures: no error files
+    (they read 'NoneType: None'), the finished results kept, a CampaignError to resume."""
+    import distributed
+
+    import bayespilot.campaign as C
+
+    class Fut:
+        def __init__(self, status, value=None):
+            self.status, self.value = status, value
+
+        def result(self):
+            return self.value
+
+        def release(self):
+            pass
+
+    class Client:
+        def submit(self, fn, *args, pure=False):
+            return Fut(*fn(*args))
+
+    monkeypatch.setattr(C, "_connect", lambda *a, **k: Client())
+    monkeypatch.setattr(distributed, "as_completed", lambda futs: list(futs))
+    tasks = [("a", lambda: ("finished", {"x": 1}), (), {}),
+             ("b", lambda: ("cancelled", None), (), {}),
+             ("c", lambda: ("lost", None), (), {})]
+    with pytest.raises(C.CampaignError, match="lost the dask cluster: 2 of 3 tasks did not "
+                                              "finish .1 finished and were saved.; run the "
+                                              "same command again to resume"):
+        C.run_keyed(tasks, tmp_path, total=3, skipped=0, scheduler=None, workers=1,
+                    progress=False, connect_timeout=1.0)
+    assert json.loads((tmp_path / "a.json").read_text()) == {"x": 1}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json"]
+
+
+def test_a_scheduler_address_that_does_not_answer_dask_is_refused_in_time(monkeypatch):
+    """A port that answers but is not a scheduler (its dashboard's) kept Client waiting past
+    its timeout; a peer answering something else failed with a MemoryError."""
+    import time as _time
+
+    import bayespilot.campaign as C
+
+    monkeypatch.setattr(C, "CONNECT_GRACE", 0.2)
+
+    def hangs(address, timeout):
+        _time.sleep(30)
+
+    t0 = _time.perf_counter()
+    with pytest.raises(C.CampaignError, match="no dask answer within 0.3 s .is it the "
+                                              "scheduler's address"):
+        C._client_within(hangs, "tcp://127.0.0.1:8787", 0.1)
+    assert _time.perf_counter() - t0 < 5
+
+    def garbage(address, timeout):
+        raise MemoryError("Unable to allocate 3.07 EiB")
+
+    with pytest.raises(C.CampaignError, match="cannot reach the dask scheduler at "
+                                              "'tcp://x:1' within 0.1 s .MemoryError"):
+        C._client_within(garbage, "tcp://x:1", 0.1)

@@ -123,7 +123,7 @@ def test_batch_matches_direct_diagnoses_and_resumes(recordings, tmp_path):
                         **OPTIONS)
     assert (s2.completed, s2.skipped) == (0, 2)
     assert [(out / f"{k}.json").stat().st_mtime_ns for k in direct] == stamp
-    with pytest.raises(CampaignError, match="other recordings or settings"):
+    with pytest.raises(CampaignError, match="from other settings: seed 3 there, 4 here"):
         diagnose_batch(recordings, out, pool=True, seed=4, workers=1, progress=False,
                        **OPTIONS)
 
@@ -294,15 +294,69 @@ def test_resume_compares_resolved_recordings_and_defaults(done_without_reports, 
         s = diagnose_batch([stem], out, n_bootstrap=0, candidates=list(NAMES), progress=False,
                            warm_cache=False)
     assert (s.total, s.completed, s.skipped) == (1, 0, 1)
-    with pytest.raises(CampaignError, match="other recordings or settings"):
+    with pytest.raises(CampaignError, match="from other settings: candidates"):
         diagnose_batch([stem], out, n_bootstrap=0, candidates=list(NAMES)[:-1], progress=False)
     # reports=True on it: named by a warning, nothing written
     with pytest.warns(UserWarning, match=r"1 diagnosis finished before.*\(s7-run1\)"):
         diagnose_batch([f"{stem}.csv"], out, n_bootstrap=0, reports=True, progress=False)
     assert not (out / "s7-run1").exists()
-    # other settings or another recording are still refused
-    with pytest.raises(CampaignError, match="other recordings or settings"):
+    # other settings or another recording are still refused, saying which
+    with pytest.raises(CampaignError, match="from other settings: alpha 0.01 there, 0.05 here"):
         diagnose_batch([stem], out, n_bootstrap=0, alpha=0.05, progress=False)
     other = _write(tmp_path, "s7-run1", subject="s7", seed=8)  # the same key, another file
-    with pytest.raises(CampaignError, match="other recordings or settings"):
+    with pytest.raises(CampaignError, match="from other recordings;"):
         diagnose_batch([other], out, n_bootstrap=0, progress=False)
+    # the same recording by its content: results made in another working folder, or with
+    # the recordings since moved (their stored paths no longer resolve), still resume
+    assert len(stored["recording_digests"]) == 1
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    (moved / "s7-run1.json").write_text(json.dumps(dict(stored, recordings=["old/s7-run1"])))
+    with pytest.warns(Warning):
+        s = diagnose_batch([stem], moved, n_bootstrap=0, progress=False, warm_cache=False)
+    assert (s.total, s.completed, s.skipped) == (1, 0, 1)
+    # one recording named twice (both files of it, as a glob gives them) is diagnosed once
+    with pytest.warns(Warning):
+        s = diagnose_batch([f"{stem}.csv", f"{stem}.json", stem], out, n_bootstrap=0,
+                           progress=False, warm_cache=False)
+    assert (s.total, s.skipped) == (1, 1)
+
+
+def test_output_folder_that_cannot_be_written_in_is_refused_before_computing(recordings,
+                                                                             tmp_path,
+                                                                             monkeypatch):
+    """A folder that exists but refuses files: said before the first diagnosis (it was said
+    when the first result was written, after the cluster's start and a diagnosis)."""
+    import bayespilot.diagnose.batch as B
+
+    def no_run(*a, **k):
+        raise AssertionError("a diagnosis started")
+
+    monkeypatch.setattr(B, "run_diagnose_task", no_run)
+    out = tmp_path / "ro"
+    out.mkdir()
+    real = B.replacing
+
+    def refused(path):
+        if path.name == ".bayespilot-write-check":
+            raise PermissionError(13, "Permission denied")
+        return real(path)
+
+    monkeypatch.setattr(B, "replacing", refused)
+    with pytest.warns(Warning), pytest.raises(CampaignError, match="ro: cannot write in the "
+                                                                   "output folder"):
+        diagnose_batch(recordings[:1], out, n_bootstrap=0, progress=False)
+
+
+def test_cli_refuses_a_csv_without_its_sidecar_in_a_folder(lone_folder, tmp_path, capsys):
+    """recording-format.md: a CSV without its JSON is not a recording; a folder holding one
+    was diagnosed without it, silently."""
+    import shutil
+
+    folder = tmp_path / "recs"
+    shutil.copytree(lone_folder, folder)
+    (folder / "s9-run2.csv").write_text((folder / "s9-run1.csv").read_text())
+    code = main(["diagnose-batch", str(folder), "--out", str(tmp_path / "o"), "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and "s9-run2.csv without its JSON sidecar" in err, err
+    assert not (tmp_path / "o").exists()

@@ -589,8 +589,10 @@ def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
         # 2026-11-25 and did not recur on rerunning; a second failure is reported.
         for attempt in range(2):
             try:
+                # (dashboard_address=None does not turn the dashboard off, dask/distributed
+                # #8136: a random port instead of a warning that 8787 is taken)
                 cluster = stack.enter_context(LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                    n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                     env={"NUMBA_NUM_THREADS": str(numba_threads)}))
                 break
             except Exception as exc:
@@ -598,11 +600,7 @@ def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
                     raise CampaignError(f"cannot start a local dask cluster with {n} workers "
                                         f"({_first_line(exc)})") from None
         return stack.enter_context(Client(cluster))
-    try:
-        client = Client(scheduler, timeout=f"{connect_timeout}s")
-    except (OSError, TimeoutError, ValueError, TypeError) as exc:
-        raise CampaignError(f"cannot reach the dask scheduler at {scheduler!r} within "
-                            f"{connect_timeout:g} s ({_first_line(exc)})") from None
+    client = _client_within(Client, scheduler, connect_timeout)
     stack.enter_context(client)
     try:
         client.wait_for_workers(1, timeout=connect_timeout)
@@ -610,6 +608,40 @@ def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
         raise CampaignError(f"the dask scheduler at {scheduler!r} has no workers "
                             f"(waited {connect_timeout:g} s: {_first_line(exc)})") from None
     return client
+
+
+def _client_within(Client: Any, scheduler: str, connect_timeout: float):
+    """``Client(scheduler)``, or a CampaignError when it fails or does not answer in time.
+
+    Made in a thread that is given up after ``connect_timeout`` and a grace of
+    :data:`CONNECT_GRACE` s: a port that answers but is not a dask scheduler (its
+    dashboard's, 8787, given by mistake) kept ``Client`` waiting past its own timeout, and a
+    peer answering something else made it fail with a MemoryError of exabytes."""
+    import threading
+
+    box: dict[str, Any] = {}
+
+    def connect() -> None:
+        try:
+            box["client"] = Client(scheduler, timeout=f"{connect_timeout}s")
+        except BaseException as exc:  # noqa: BLE001 - any failure is "cannot reach"
+            box["error"] = exc
+
+    worker = threading.Thread(target=connect, name="bayespilot-connect", daemon=True)
+    worker.start()
+    worker.join(connect_timeout + CONNECT_GRACE)
+    if worker.is_alive():
+        raise CampaignError(f"cannot reach the dask scheduler at {scheduler!r}: no dask answer "
+                            f"within {connect_timeout + CONNECT_GRACE:g} s (is it the "
+                            f"scheduler's address, tcp://HOST:8786, not its dashboard's?)")
+    if "error" in box:
+        raise CampaignError(f"cannot reach the dask scheduler at {scheduler!r} within "
+                            f"{connect_timeout:g} s ({_first_line(box['error'])})")
+    return box["client"]
+
+
+#: Seconds beyond ``connect_timeout`` that :func:`_client_within` waits for a connection.
+CONNECT_GRACE = 5.0
 
 
 def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: Path, *,
@@ -658,8 +690,13 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
         bar = stack.enter_context(tqdm(total=total, initial=skipped, desc=desc, unit=unit,
                                        disable=not progress, file=sys.stderr,
                                        smoothing=0.1, dynamic_ncols=True))
+        lost = []
         for fut in as_completed(futures):
             key, ctx = futures.pop(fut)
+            if fut.status not in ("finished", "error"):  # cancelled, lost: not the task's fault
+                lost.append(key)
+                bar.update(1)
+                continue
             if fut.status == "finished":
                 value = fut.result()
                 _write_json_atomic(out / f"{key}.json",
@@ -681,6 +718,11 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
             fut.release()
             bar.update(1)
             bar.set_postfix(failed=len(errors), refresh=False)
+    if lost:
+        raise CampaignError(f"lost the dask cluster: {len(lost)} of {len(tasks)} tasks did not "
+                            f"finish ({completed} finished and were saved"
+                            f"{f', {len(errors)} failed' if errors else ''}); run the same "
+                            f"command again to resume")
     return completed, errors
 
 

@@ -927,6 +927,13 @@ def _recordings_in(args_paths: Sequence[str]) -> list[str]:
             continue
         found = sorted({str(c.with_suffix("")) for c in d.glob("*.csv")
                         if c.with_suffix(".json").is_file()} | {str(m) for m in d.glob("*.mat")})
+        orphans = sorted(c.name for c in d.glob("*.csv") if not c.with_suffix(".json").is_file())
+        if orphans:  # (a CSV without its sidecar is not a recording: said, not skipped)
+            raise UsageError(f"{a}: {', '.join(orphans[:5])}{' ...' if len(orphans) > 5 else ''}"
+                             f" without {'its' if len(orphans) == 1 else 'their'} JSON sidecar"
+                             f" (a recording is NAME.csv with NAME.json); add "
+                             f"{'it' if len(orphans) == 1 else 'them'}, or move the CSV "
+                             f"file{'' if len(orphans) == 1 else 's'} out of the folder")
         if not found:
             raise UsageError(f"{a}: a folder without recordings (no NAME.csv with its "
                              "NAME.json, no .mat file)")
@@ -936,14 +943,15 @@ def _recordings_in(args_paths: Sequence[str]) -> list[str]:
 
 def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     from .campaign import CampaignError
-    from .diagnose.batch import MissingReportWarning, diagnose_batch
+    from .diagnose.batch import MissingReportWarning, _the_recording, diagnose_batch
+    from .diagnose.locate import EvidenceWarning
 
     if args.scheduler is not None and args.workers is not None:
         raise UsageError("give --scheduler (an existing cluster) or --workers (a local one), "
                          "not both")
     paths = _recordings_in(args.recording)
     where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
-    _say(args, f"diagnosing {len(paths)} recording(s)"
+    _say(args, f"diagnosing {len({_the_recording(p) for p in paths})} recording(s)"
                f"{', the runs of each subject and condition pooled' if args.pool else ''} "
                f"on {where} -> {args.out}")
     unreported = []  # MissingReportWarning: finished before, without a report
@@ -953,7 +961,10 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
         print(f"{PROG}: warning: {message}", file=sys.stderr)
 
     try:
-        with _questionable_said(), _warnings_of(MissingReportWarning, said):
+        # (the evidence's gaps: one line per kind of gap, after the diagnoses, from their
+        # results; the workers keep them quiet)
+        with _questionable_said(), _warnings_of(MissingReportWarning, said), \
+                _warnings_of(EvidenceWarning, _warning_line):
             summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
                                      alpha=args.alpha, n_bootstrap=args.bootstrap,
                                      n_calibrate=args.calibrate,

@@ -440,3 +440,15 @@ class Recording:
         src = f" from {self.source!r}" if self.source else ""
         return (f"Recording({self.n_samples} samples at {self.sample_rate_hz:g} Hz, "
                 f"task={self.task}, K_theta={self.motion_gain:g}, columns=[{cols}]{src})")
+
+
+def _signals_digest(recording: Recording) -> str:
+    """SHA-256 of a recording's signals (names and float64 values): the same run however it
+    is named or wherever it lies (a batch's resume; pooling one run twice)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for name in sorted(recording.signals):
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(recording.signals[name], dtype=float).tobytes())
+    return h.hexdigest()

@@ -9,9 +9,14 @@ the cluster loop of :func:`bayespilot.campaign.run_campaign` (atomic result
 files, an ``<key>.error.json`` for a task that raised while the others go on,
 a progress bar) and its resume semantics: a result file that exists, parses
 and was made from the same recordings and settings is not redone; one made
-from others is an error, not a silent mix.  "The same" as the files resolve
-(a recording's stem, ``.csv`` or ``.json`` path name one recording) and with
-the defaults filled in (an option left out is its default).  ``reports`` is
+from others is an error that says what differs, not a silent mix.  "The same"
+recordings by their content (the digests of their signals, which each result
+records: a batch run again from another working folder, or with its
+recordings moved, resumes; results made before digests were recorded: as the
+files resolve), and the same settings with the defaults filled in (an option
+left out is its default).  A recording named twice (a glob giving both its
+``.csv`` and its ``.json``) is diagnosed once.  A lost cluster (the scheduler
+gone mid-run) stops the batch with what finished saved, to resume.  ``reports`` is
 not a setting: a diagnosis done before keeps what it has, and one without a
 report is named by a :class:`MissingReportWarning`.
 
@@ -23,7 +28,8 @@ results (and, with ``reports=True``, each diagnosis's HTML report) are
 written here.
 
 Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``,
-``diagnosis``: the same dict as ``bayespilot diagnose --json`` writes,
+``recording_digests``, ``diagnosis``: the same dict as ``bayespilot diagnose
+--json`` writes,
 ``elapsed_seconds``, ``host``, ``versions``), ``<key>/`` (the report, with
 ``reports=True``), ``summary.png`` (every candidate's p-value in every
 diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`) and
@@ -47,12 +53,15 @@ import math
 import platform
 import re
 import time
+import warnings
 from collections import Counter, defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
-from .._files import write_csv_atomic
+from .._files import replacing, write_csv_atomic
+from ..recording import _signals_digest
+from .locate import EvidenceWarning
 
 if TYPE_CHECKING:
     from ..campaign import CampaignSummary
@@ -225,17 +234,17 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
         An option that is not a keyword of the diagnosis, or a recording that
         is not a Recording.
     """
-    import warnings
-
     from . import diagnose, diagnose_pooled, get_extension, sample_chosen, shared_posterior
 
     opts = dict(options)
     want = bool(opts.pop("posterior", False))
     t0 = time.perf_counter()
-    if task.pooled:
-        res = diagnose_pooled(list(recordings), **opts)
-    else:
-        res = diagnose(recordings[0], **opts)
+    with warnings.catch_warnings():  # kept in the result (_notes), said by the batch once
+        warnings.simplefilter("ignore", EvidenceWarning)
+        if task.pooled:
+            res = diagnose_pooled(list(recordings), **opts)
+        else:
+            res = diagnose(recordings[0], **opts)
     if want and res.chosen is not None and get_extension(res.physics).likelihood == "gls":
         try:
             if task.pooled:
@@ -249,13 +258,19 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
     return res, time.perf_counter() - t0
 
 
+def _notes(res: Any) -> list[str]:
+    """The EvidenceWarnings a diagnosis kept (``settings["evidence_notes"]``; a pooled one's
+    per run), each text once."""
+    notes = list(res.settings.get("evidence_notes", ()))
+    for run in getattr(res, "runs", None) or ():
+        notes += list(run.get("evidence_notes", ()))
+    return list(dict.fromkeys(notes))
+
+
 def _warm() -> None:
     """One short diagnosis here, so that the workers load numba's cache (campaign module docs)."""
-    import warnings
-
     from ..simulate import simulate
     from . import diagnose
-    from .locate import EvidenceWarning
 
     with warnings.catch_warnings():  # (about this 20-s run of ours, not the user's)
         warnings.simplefilter("ignore", EvidenceWarning)
@@ -263,8 +278,16 @@ def _warm() -> None:
                           duration=20.0).recording, seed=0, n_bootstrap=1)
 
 
-def _settings(task: DiagnoseTask, options: Mapping[str, Any]) -> dict[str, Any]:
-    return json.loads(json.dumps({"recordings": list(task.paths), "settings": dict(options)}))
+def _settings(task: DiagnoseTask, options: Mapping[str, Any],
+              digests: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """What a result file records of how it was made: the recordings as given, their
+    content's digests (``digests``: path -> :func:`~bayespilot.recording._signals_digest`;
+    what a resume compares) and the options."""
+    d: dict[str, Any] = {"recordings": list(task.paths)}
+    if digests is not None:
+        d["recording_digests"] = [digests[p] for p in task.paths]
+    d["settings"] = dict(options)
+    return json.loads(json.dumps(d))
 
 
 def _the_recording(path: Any) -> str:
@@ -280,12 +303,17 @@ def _the_recording(path: Any) -> str:
         return str(path)
 
 
-def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
-    """What must agree for a result file to count as done: its recordings, resolved
-    (:func:`_the_recording`) and sorted (a pooled task's runs are in the files' order, which
-    results made before that was so may not have), and its settings with ``defaults`` filled
-    in (``candidates=None`` as the whole catalogue)."""
+def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any], *,
+                 by_content: bool = False) -> Any:
+    """What must agree for a result file to count as done: its recordings and its settings
+    with ``defaults`` filled in (``candidates=None`` as the whole catalogue).  The recordings
+    by their content's digests (``by_content``, results that record them: the same runs
+    from another working folder, or moved), else as the files they resolve to
+    (:func:`_the_recording`); sorted either way (a pooled task's runs are in the files'
+    order, which results made before that was so may not have)."""
     recs, settings = stored.get("recordings"), stored.get("settings")
+    if by_content:
+        recs = stored.get("recording_digests")
     if not isinstance(recs, list) or not isinstance(settings, dict):
         return None
     from .catalogue import NAMES
@@ -293,7 +321,20 @@ def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
     merged = {**defaults, **settings}
     if merged.get("candidates") is None:  # None tests the whole catalogue, in its order
         merged["candidates"] = list(NAMES)
-    return {"recordings": sorted(_the_recording(p) for p in recs), "settings": merged}
+    return {"recordings": sorted(recs if by_content else (_the_recording(p) for p in recs)),
+            "settings": merged}
+
+
+def _differs(old: Any, new: Any) -> str:
+    """What of two :func:`_resume_view` differs, for the refusal's message."""
+    if not (isinstance(old, dict) and isinstance(new, dict)):
+        return "it is not a result of this batch"
+    if old["recordings"] != new["recordings"]:
+        return "other recordings"
+    keys = sorted(k for k in set(old["settings"]) | set(new["settings"])
+                  if old["settings"].get(k) != new["settings"].get(k))
+    return "other settings: " + ", ".join(f"{k} {old['settings'].get(k)!r} there, "
+                                          f"{new['settings'].get(k)!r} here" for k in keys)
 
 
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
@@ -350,17 +391,22 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         A bad setting, a recording the settings do not suit (too short), keys
         that clash, ``pool`` without subjects; nothing is run.
     CampaignError
-        The cluster cannot be reached or started, a result cannot be written,
-        or ``out_dir`` holds a result of the same key made from other
-        recordings or settings.  The recordings are compared as the files
-        they resolve to (``run``, ``run.csv`` and ``run.json`` are one), the
-        settings with the diagnosis's defaults filled in (``alpha=None`` and
-        ``alpha=0.01`` are one).
+        The cluster cannot be reached or started or is lost during the run
+        (what finished is saved), ``out_dir`` cannot be written in (checked
+        before computing) or a result cannot be written, or ``out_dir``
+        holds a result of the same key made from other recordings or
+        settings (the message says which).  The recordings are compared by
+        their content (module docs), the settings with the diagnosis's
+        defaults filled in (``alpha=None`` and ``alpha=0.01`` are one).
 
     Warns
     -----
     MissingReportWarning
         ``reports`` and finished diagnoses without a report (above).
+    EvidenceWarning
+        Once per gap in the diagnoses' evidence (no forcing, a record not
+        whole periods, ...), naming how many diagnoses and which have it;
+        each result keeps its own in its settings.
 
     Examples
     --------
@@ -380,6 +426,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no recordings given")
+    # a recording named twice (run.csv and run.json from one glob, or the same path) is one
+    seen: set[str] = set()
+    paths = [p for p in paths
+             if not (_the_recording(p) in seen or seen.add(_the_recording(p)))]
     recs, bad = [], []
     for p in paths:
         try:
@@ -411,11 +461,16 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             raise ValueError(f"{p}: {exc}") from None
     tasks = plan_batch(paths, recs, pool=pool)
     by_path = dict(zip(paths, recs))
+    digests = {p: _signals_digest(r) for p, r in by_path.items()}
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
+        # a folder that exists but cannot be written in: said now, not after the first result
+        with replacing(out / ".bayespilot-write-check") as probe:
+            probe.write_text("")
+        (out / ".bayespilot-write-check").unlink()
     except OSError as exc:
-        raise C.CampaignError(f"{out}: cannot create the output folder "
+        raise C.CampaignError(f"{out}: cannot write in the output folder "
                               f"({exc.strerror or exc})") from None
     # what an option left out means, so that a result made with it given (the CLI gives
     # every one) and one made without it (alpha=None) resume each other
@@ -428,16 +483,17 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         if not (isinstance(old, dict) and old.get("key") == t.key and "diagnosis" in old):
             pending.append(t)
             continue
-        if _resume_view(old, implied) != _resume_view(_settings(t, options), implied):
+        by_content = isinstance(old.get("recording_digests"), list)
+        was = _resume_view(old, implied, by_content=by_content)
+        now = _resume_view(_settings(t, options, digests), implied, by_content=by_content)
+        if was != now:
             raise C.CampaignError(f"{out / (t.key + '.json')} holds a diagnosis of {t.key} "
-                                  f"from other recordings or settings; use another output "
-                                  f"folder or delete it")
+                                  f"from {_differs(was, now)}; use another output folder or "
+                                  f"delete it")
         skipped += 1
         if reports and not (out / t.key / "report.html").is_file():
             unreported.append(t.key)
     if unreported:
-        import warnings
-
         n = len(unreported)
         one = n == 1
         warnings.warn(f"{n} diagnos{'is' if one else 'es'} finished before, without a "
@@ -461,16 +517,27 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             except OSError as exc:
                 raise C.CampaignError(f"{out / key}: cannot write the report "
                                       f"({exc.strerror or exc})") from None
-        return C._jsonable({"key": key, **_settings(t, options), "diagnosis": res.to_dict(),
+        for note in _notes(res):  # (silenced on the worker, said here once per text)
+            noted.setdefault(note, []).append(key)
+        return C._jsonable({"key": key, **_settings(t, options, digests),
+                            "diagnosis": res.to_dict(),
                             "elapsed_seconds": elapsed, "host": platform.node(),
                             "versions": C._versions()})
 
-    completed, errors = C.run_keyed(
-        [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths], options),
-          _settings(t, options)) for t in pending], out,
-        total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
-        progress=progress, connect_timeout=connect_timeout, warm=_warm if warm_cache else None,
-        desc="diagnoses", unit="diagnosis", to_json=to_json, scatter=True)
+    noted: dict[str, list[str]] = {}
+    try:
+        completed, errors = C.run_keyed(
+            [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths], options),
+              _settings(t, options, digests)) for t in pending], out,
+            total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
+            progress=progress, connect_timeout=connect_timeout,
+            warm=_warm if warm_cache else None, desc="diagnoses", unit="diagnosis",
+            to_json=to_json, scatter=True)
+    finally:
+        for note, keys in noted.items():
+            n = len(keys)
+            warnings.warn(f"{n} diagnos{'is' if n == 1 else 'es'} ({', '.join(keys[:3])}"
+                          f"{' ...' if n > 3 else ''}): {note}", EvidenceWarning, stacklevel=2)
     write_summary(tasks, out)
     return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
                              time.perf_counter() - t0, "diagnoses")

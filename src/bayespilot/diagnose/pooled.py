@@ -357,15 +357,11 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
 def _refuse_repeats(recs: Sequence[Recording]) -> None:
     """Refuse a run given twice: pooling it would count its evidence twice (a path and the same
     file's .csv, or a copy, are the same run; what is compared is the signals)."""
-    import hashlib
+    from ..recording import _signals_digest
 
     seen: dict[str, int] = {}
     for j, rec in enumerate(recs):
-        h = hashlib.sha256()
-        for name in sorted(rec.signals):
-            h.update(name.encode())
-            h.update(np.ascontiguousarray(rec.signals[name], dtype=float).tobytes())
-        key = h.hexdigest()
+        key = _signals_digest(rec)
         if key in seen:
             i = seen[key]
             raise ValueError(f"runs {i + 1} and {j + 1} ({recs[i].source or 'run ' + str(i + 1)}, "
