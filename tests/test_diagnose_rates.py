@@ -172,11 +172,16 @@ def test_residual_spectrum_starts_at_the_same_frequency_at_100_hz_and_1_khz():
     lowest = 2 * np.pi / 10.24
     assert w100[0] == pytest.approx(lowest, rel=1e-9)
     assert w1k[0] == pytest.approx(lowest, rel=1e-9)  # was 2 pi / 1.024 = 6.1 rad/s
-    # at 100 Hz exactly the former 1024-sample Welch estimate
+    # at 100 Hz exactly the former 1024-sample Welch estimate, as a density per rad/s (its
+    # per-Hz density over 2 pi), up to twice the decision's cut-off (the band it uses)
+    from bayespilot.diagnose.decide import OMEGA_C
+
     x = _fake_result(100.0).arrays["residual"][500:]
     f, P = signal.welch(x, fs=100.0, nperseg=1024)
-    np.testing.assert_array_equal(w100, 2 * np.pi * f[1:])
-    np.testing.assert_array_equal(P100, P[1:])
+    keep = 2 * np.pi * f[1:] <= 2 * OMEGA_C
+    np.testing.assert_array_equal(w100, 2 * np.pi * f[1:][keep])
+    np.testing.assert_allclose(P100, P[1:][keep] / (2 * np.pi), rtol=1e-12)
+    assert w1k[-1] == pytest.approx(w100[-1], rel=1e-9)
 
 
 def test_residual_spectrum_segment_is_capped_at_the_record():
@@ -196,6 +201,8 @@ def test_residual_spectrum_sample_interval_comes_from_the_recording():
     res = _fake_result(1000.0, with_dt=False)
     with pytest.raises(ValueError, match="sample interval"):
         _spectrum_line(res)
-    w, _ = _spectrum_line(res, recording=types.SimpleNamespace(dt=1e-3))
+    w, P = _spectrum_line(res, recording=types.SimpleNamespace(dt=1e-3))
     assert w[0] == pytest.approx(2 * np.pi / 10.24, rel=1e-9)
-    assert w[-1] == pytest.approx(2 * np.pi * 500.0, rel=1e-9)  # not 0.01's 50 Hz
+    # the density at the recording's rate (1 kHz: a 10240-sample Welch segment), not 0.01's
+    f, P1k = signal.welch(res.arrays["residual"][5000:], fs=1000.0, nperseg=10240)
+    np.testing.assert_allclose(P, P1k[1:w.size + 1] / (2 * np.pi), rtol=1e-12)
