@@ -130,6 +130,22 @@ def _base_from(d: Mapping[str, Any]) -> dict[str, Any]:
     return {k: numbers(v) if isinstance(v, Mapping) else number(v) for k, v in d.items()}
 
 
+def _ranking_and_chosen(d: Mapping[str, Any], pooled: bool, source_file: str | None):
+    """A result file's dict of a diagnosis of the kind asked for (:func:`_kind_check`): its
+    ranking (CandidateResults) and its chosen candidate, the ranking's entry of that name
+    (built from ``d["chosen"]`` if the ranking lacks it), or None."""
+    from .decide import CandidateResult
+
+    _kind_check(d, pooled, source_file)
+    ranking = [CandidateResult.from_dict(c) for c in d["ranking"]]
+    c = d.get("chosen")
+    if c is None:
+        return ranking, None
+    chosen = next((r for r in ranking if r.physics == c["physics"]), None)
+    return ranking, chosen or CandidateResult.from_dict(dict(
+        {"testable": True, "justified": True}, **c))
+
+
 def _kind_check(d: Mapping[str, Any], pooled: bool, source_file: str | None) -> None:
     """Refuse a dict that is not a diagnosis's of the kind asked for, naming what it is."""
     where = f"{source_file} holds" if source_file else "this dict is"
@@ -363,19 +379,13 @@ class DiagnosisResult(_JSONSummary):
             ``d`` is not a diagnosis's, or is a pooled one's
             (:meth:`PooledDiagnosisResult.from_dict`).
         """
-        from .decide import CandidateResult
         from .locate import Evidence
         from .nested import ExtensionBayesFactor
 
-        _kind_check(d, False, source_file)
-        ranking = [CandidateResult.from_dict(c) for c in d["ranking"]]
+        ranking, chosen = _ranking_and_chosen(d, False, source_file)
         c = d.get("chosen")
-        chosen = None
         arrays: dict[str, Any] = {"from_json": source_file or True}
         if c is not None:
-            chosen = next((r for r in ranking if r.physics == c["physics"]), None)
-            if chosen is None:
-                chosen = CandidateResult.from_dict(dict(c, testable=True, justified=True))
             for key, name in (("before_vaf", "vaf_before"), ("after_vaf", "vaf_after"),
                               ("before_eq4_neg_log_lik", "neg_log_lik_before"),
                               ("after_eq4_neg_log_lik", "neg_log_lik_after")):

@@ -43,7 +43,7 @@ from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
                _base_from, _bic, _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
-               _kind_check,
+               _ranking_and_chosen,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -226,16 +226,10 @@ class PooledDiagnosisResult(_JSONSummary):
             ``d`` is not a diagnosis's, or is a single run's
             (:meth:`DiagnosisResult.from_dict`).
         """
-        from .decide import CandidateResult
         from .locate import Evidence
         from .posterior import SharedPosterior
 
-        _kind_check(d, True, source_file)
-        ranking = [CandidateResult.from_dict(c) for c in d["ranking"]]
-        c = d.get("chosen")
-        chosen = None if c is None else next(
-            (r for r in ranking if r.physics == c["physics"]), None) or \
-            CandidateResult.from_dict(c)
+        ranking, chosen = _ranking_and_chosen(d, True, source_file)
         runs = []
         for r in d.get("runs", ()):
             run = dict(r, base=_base_from(r["base"]),
