@@ -2195,28 +2195,43 @@ def _oracle_table(rows: list[dict]) -> None:
     for R in (2, 4, 8, 16):
         print(f"  R = {R:>2} runs pooled (lambda x R, 25 rad/s): expected "
               f"{sum(power(r, 'lowpass', R) for r in conc):.1f} of {len(conc)}")
-    fig, axes = plt.subplots(1, len(panels), figsize=(3.0 * len(panels), 3.4), sharey=True)
-    for ax, (e, row) in zip(np.atleast_1d(axes), panels.items()):
+    ncols = 3
+    nrows = math.ceil((len(panels) + 1) / ncols)  # (a cell left for the legend)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(7.5, 2.5 * nrows + 0.5), sharey=True,
+                             squeeze=False, layout="constrained")
+    for ax, (e, row) in zip(axes.flat, panels.items()):
         x = np.arange(len(row))
         n = np.array([v[1] for v in row], float)
-        ax.plot(x, [v[3] for v in row] / n, "k--", label="optimal test, 1 run")
-        ax.plot(x, [v[4][0] for v in row] / n, ":", color="0.5", label="optimal, 4 runs")
-        ax.plot(x, [v[4][1] for v in row] / n, "-.", color="0.7", label="optimal, 8 runs")
-        ax.plot(x, [v[2] for v in row] / n, "o", color="C0", label="diagnose, 1 run")
+        ax.plot(x, [v[3] for v in row] / n, "k--", lw=1, label="optimal test, 1 run")
+        ax.plot(x, [v[4][0] for v in row] / n, ":", color="0.45", lw=1,
+                label="optimal test, 4 runs")
+        ax.plot(x, [v[4][1] for v in row] / n, "-.", color="0.65", lw=1,
+                label="optimal test, 8 runs")
         for xi, v in zip(x, row):
-            ax.annotate(f"{v[2]}/{v[1]}", (xi, v[2] / v[1]), textcoords="offset points",
-                        xytext=(0, 6), ha="center", fontsize=7)
-        ax.set_xticks(x)
-        ax.set_xticklabels([v[0].split("=")[-1] for v in row], fontsize=7)
-        ax.set_xlabel(row[0][0].split("=")[0], fontsize=8)
-        ax.set_title(e, fontsize=8)
-        ax.set_ylim(-0.05, 1.1)
-        ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].set_ylabel("rate named (concealed cases)")
-    np.atleast_1d(axes)[0].legend(fontsize=6, loc="upper left")
-    fig.suptitle("diagnose against the best any test could do at its false-alarm level",
-                 fontsize=9)
-    fig.tight_layout()
+            k, m = v[2], v[1]
+            lo, hi = _wilson_95(k, m)
+            ax.errorbar(xi, k / m, yerr=[[k / m - lo], [hi - k / m]], fmt="o", ms=4,
+                        capsize=2, color="C0", lw=1,
+                        label="diagnose, 1 run (95 % Wilson interval)" if xi == 0 else None)
+            ax.annotate(f"{k}/{m}", (xi, hi), textcoords="offset points", xytext=(0, 3),
+                        ha="center", fontsize=7)
+        ax.set_xticks(x, [v[0].split("=")[-1] for v in row], fontsize=8)
+        ax.set_xlim(-0.5, len(row) - 0.5)
+        ax.set_xlabel(_effect_axis(e), fontsize=7)
+        ax.set_title(e, fontsize=9)
+        ax.set_ylim(-0.03, 1.15)
+        ax.grid(alpha=0.3, axis="y")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("share named (concealed cases)")
+    spare = list(axes.flat)[len(panels):]
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    for ax in spare:
+        ax.set_visible(False)
+    spare[0].set_visible(True)
+    spare[0].axis("off")
+    spare[0].legend(handles, labels, loc="center", fontsize=7, frameon=False)
+    fig.suptitle("diagnose against the best any test could do at its false-alarm level "
+                 "(lines: an optimal test's expected share)", fontsize=9)
     FIG.mkdir(parents=True, exist_ok=True)
     fig.savefig(FIG / "diagnose_oracle.png", dpi=110)
     plt.close(fig)
