@@ -123,6 +123,15 @@ class WrongKind(ValueError):
     the file in front of the message."""
 
 
+def require_keys(d: Mapping[str, Any], keys: Iterable[str], what: str) -> None:
+    """Refuse (:class:`WrongKind`) a result file's dict that lacks any of ``keys``: another
+    kind of file than ``what`` (e.g. "a fit result"), naming what is missing and what it has."""
+    missing = [k for k in keys if k not in d]
+    if missing:
+        raise WrongKind(f"not {what}: no {', '.join(missing)} (this one has "
+                        f"{', '.join(list(d)[:6]) or 'nothing'})")
+
+
 def read_result(path: str | os.PathLike, from_dict: Any, what: str) -> Any:
     """``from_dict`` of the JSON object in the file ``path`` (``what``: the kind of result, for
     messages); a dict of another kind is a ValueError that names the file."""

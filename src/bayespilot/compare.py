@@ -102,7 +102,7 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ._files import WrongKind, dumps, nan_for_null, read_result, write_text_atomic
+from ._files import dumps, nan_for_null, read_result, require_keys, write_text_atomic
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
@@ -1072,11 +1072,8 @@ class Comparison:
         ValueError
             ``d`` lacks what a comparison's dict has: another kind of file.
         """
-        missing = [k for k in ("log_bayes_factor", "decision", "evidence_threshold",
-                               "evidence_none", "information_criteria") if k not in d]
-        if missing:
-            raise WrongKind(f"not a comparison: no {', '.join(missing)} (this one has "
-                             f"{', '.join(list(d)[:6]) or 'nothing'})")
+        require_keys(d, ("log_bayes_factor", "decision", "evidence_threshold", "evidence_none",
+                         "information_criteria"), "a comparison")
         sd = d.get("savage_dickey")
         def num(v):
             return math.nan if v is None else float(v)
@@ -1533,12 +1530,9 @@ class PooledComparison:
         ValueError
             ``d`` lacks an attribute without a default: another kind of result.
         """
-        need = [f.name for f in fields(cls)
-                if f.default is MISSING and f.default_factory is MISSING]
-        missing = [k for k in need if k not in d]
-        if missing:
-            raise WrongKind(f"not a pooled comparison: no {', '.join(missing)} (this one has "
-                            f"{', '.join(list(d)[:6]) or 'nothing'})")
+        require_keys(d, (f.name for f in fields(cls)
+                         if f.default is MISSING and f.default_factory is MISSING),
+                     "a pooled comparison")
         return cls(**nan_for_null(cls, {k: d[k] for k in (f.name for f in fields(cls))
                                        if k in d}))
 

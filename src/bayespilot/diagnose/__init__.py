@@ -41,7 +41,6 @@ forcing functions); never the ``simulation`` key of a simulated run's sidecar.
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -50,7 +49,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .._files import json_ready, number, numbers, read_json, write_text_atomic
+from .._files import dumps, json_ready, number, numbers, read_json, write_text_atomic
 from .catalogue import CATALOGUE, NAMES, Extension, get_extension
 from .locate import EvidenceWarning
 from .._blas import one_blas_thread
@@ -87,7 +86,7 @@ class _JSONSummary:
 
     def to_json(self, path: str | Path | None = None) -> str:
         """The JSON summary as text; also written to ``path`` when given."""
-        text = json.dumps(self.to_dict(), indent=1)
+        text = dumps(self.to_dict())
         if path is not None:
             write_text_atomic(path, text)
         return text

@@ -427,9 +427,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     if not paths:
         raise ValueError("no recordings given")
     # a recording named twice (run.csv and run.json from one glob, or the same path) is one
-    seen: set[str] = set()
-    paths = [p for p in paths
-             if not (_the_recording(p) in seen or seen.add(_the_recording(p)))]
+    first: dict[str, str] = {}
+    for p in paths:
+        first.setdefault(_the_recording(p), p)
+    paths = list(first.values())
     recs, bad = [], []
     for p in paths:
         try:

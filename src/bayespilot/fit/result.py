@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .._files import WrongKind, dumps, read_result, write_text_atomic
+from .._files import dumps, read_result, require_keys, write_text_atomic
 from .. import presets
 
 __all__ = ["FitResult"]
@@ -118,10 +118,7 @@ class FitResult:
             ``d`` lacks what a fit's dict has (``params``, ``neg_log_lik``,
             ``vaf``, ``method``): another kind of file.
         """
-        missing = [k for k in ("params", "neg_log_lik", "vaf", "method") if k not in d]
-        if missing:
-            raise WrongKind(f"not a fit result: no {', '.join(missing)} (a FitResult's JSON "
-                             f"has them; this one has {', '.join(list(d)[:6]) or 'nothing'})")
+        require_keys(d, ("params", "neg_log_lik", "vaf", "method"), "a fit result")
 
         def num(v):  # (a non-finite number was written as null, _files.dumps)
             return math.nan if v is None else float(v)

@@ -155,8 +155,8 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     discard = 0.0 if discard is None else discard
-    lik = Likelihood(model, recording, initial=initial, discard=discard)
     _check_fittable(recording, model, discard)
+    lik = Likelihood(model, recording, initial=initial, discard=discard)
     has_delta = "delta_abs" in model.parameter_names
 
     s1 = step_one(lik, repetitions=repetitions, n_best=n_best, seed=seed, progress=progress,
