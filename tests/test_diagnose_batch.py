@@ -360,3 +360,17 @@ def test_cli_refuses_a_csv_without_its_sidecar_in_a_folder(lone_folder, tmp_path
     err = capsys.readouterr().err
     assert code == 2 and "s9-run2.csv without its JSON sidecar" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_summary_json_cells_are_standard_json():
+    """A run's posterior without an HDI (a missing number) is null in the summary's JSON cell,
+    not Python's NaN token that strict JSON readers (R's jsonlite, JavaScript) refuse."""
+    from bayespilot.diagnose.batch import _posterior_cell
+
+    d = {"posterior": {"params": {"w_soft": {"median": 0.2}}}}
+    cell = _posterior_cell(d, {"params": {"w_soft": 0.21}})
+
+    def refuse(token):
+        raise ValueError(token)
+
+    assert json.loads(cell, parse_constant=refuse) == {"w_soft": [0.2, None, None]}

@@ -253,6 +253,43 @@ def test_netcdf_round_trip(coloured_run, tmp_path):
                                   coloured_run.idata.sample_stats["lp"].values)
 
 
+def test_netcdf_metadata_is_standard_json_with_nan_tau(tmp_path):
+    """A tau that is not finite (a chain too short to estimate it) is written as JSON null, not
+    as Python's NaN token that strict JSON parsers refuse, and is NaN again when read back."""
+    import json
+
+    from bayespilot.sample import _META_ATTR, _to_idata
+
+    class Chain:  # the two methods _to_idata reads from an emcee sampler
+        def __init__(self):
+            self.x = make_rng(1).standard_normal((40, 6, 2))
+
+        def get_chain(self):
+            return self.x
+
+        def get_log_prob(self):
+            return -0.5 * (self.x ** 2).sum(axis=2)
+
+    tau = np.array([3.0, np.nan])
+    meta = {"parameter_names": ["a", "b"], "tau": {"a": 3.0, "b": float("nan")},
+            "converged": False, "seed": 1,
+            "settings": {"tau_history": [[20, float("nan")], [40, 3.0]]}}
+    idata, meta = _to_idata(Chain(), ["a", "b"], tau, meta)
+    text = idata.posterior.attrs[_META_ATTR]
+
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+
+    stored = json.loads(text, parse_constant=refuse)
+    assert stored["tau"]["b"] is None and stored["settings"]["tau_history"][0] == [20, None]
+    path = Posterior(idata, ("a", "b"), meta["tau"], False, meta["settings"], 1).to_netcdf(
+        tmp_path / "nan_tau.nc")
+    back = Posterior.from_netcdf(path)
+    assert back.tau["a"] == 3.0 and np.isnan(back.tau["b"])
+    assert back.settings["tau_history"][1] == [40, 3.0]
+    assert np.isnan(back.settings["tau_history"][0][1])
+
+
 def test_plots_return_figures(coloured_run, short_sim):
     from bayespilot.plots import plot_chains, plot_marginal, plot_pair
 

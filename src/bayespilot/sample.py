@@ -62,6 +62,7 @@ from typing import Any, Callable, Mapping
 import numba
 import numpy as np
 
+from . import _files
 from .fit.result import FitResult
 from .kernels import _coloured as C
 from .likelihood import Likelihood
@@ -365,8 +366,12 @@ class Posterior:
         except KeyError:
             raise ValueError(f"{path}: not written by bayespilot.sample (no {_META_ATTR!r} "
                              "attribute on the posterior group)") from None
-        return cls(idata, tuple(meta["parameter_names"]), dict(meta["tau"]),
-                   bool(meta["converged"]), dict(meta["settings"]), meta["seed"])
+        settings = dict(meta["settings"])
+        if "tau_history" in settings:  # [[iteration, max tau], ...]; max tau null when NaN
+            settings["tau_history"] = [[int(it), _files.number(t)]
+                                       for it, t in settings["tau_history"]]
+        return cls(idata, tuple(meta["parameter_names"]), _files.numbers(meta["tau"]),
+                   bool(meta["converged"]), settings, meta["seed"])
 
     def __str__(self) -> str:
         s = self.summary()
@@ -717,7 +722,9 @@ def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
     stats = {"lp": lp[idx].T.copy(), "acceptance": acc.T.copy()}
     meta = dict(meta)
     meta["settings"] = dict(meta["settings"], discard=discard, thin=thin, n_draws=int(idx.size))
-    attrs = {"inference_library": "emcee", _META_ATTR: json.dumps(meta, allow_nan=True)}
+    # Standard JSON (non-finite numbers as null, as every result file of the project), which
+    # strict parsers outside Python read; from_netcdf makes tau's nulls NaN again.
+    attrs = {"inference_library": "emcee", _META_ATTR: _files.dumps(meta)}
     for k, v in meta["settings"].items():
         if isinstance(v, (str, int, float)) and not isinstance(v, bool):
             attrs[k] = v

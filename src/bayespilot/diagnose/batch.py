@@ -59,7 +59,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
-from .._files import replacing, write_csv_atomic
+from .._files import json_ready, replacing, write_csv_atomic
 from ..recording import _signals_digest
 from .locate import EvidenceWarning
 
@@ -570,7 +570,12 @@ def _posterior_cell(d: Mapping[str, Any], chosen: Mapping[str, Any]) -> str:
             if p is not None:
                 lo, hi = p.get("hdi_90", [math.nan, math.nan])
                 cells[n] = [p.get("median"), lo, hi]
-    return json.dumps(cells)
+    return _cell(cells)
+
+
+def _cell(obj: Any) -> str:
+    """A summary CSV cell holding JSON: standard JSON (a missing number as null, not NaN)."""
+    return json.dumps(json_ready(obj), allow_nan=False)
 
 
 def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
@@ -627,9 +632,9 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
             if chosen is not None:
                 row.update(p_value=chosen.get("p_value"),
                            delta_neg_log_lik=chosen.get("delta_neg_log_lik"),
-                           params=json.dumps(chosen.get("params") or {}),
-                           interval=json.dumps({n: [iv["lower"], iv["upper"]] for n, iv in
-                                                (chosen.get("interval") or {}).items()}),
+                           params=_cell(chosen.get("params") or {}),
+                           interval=_cell({n: [iv["lower"], iv["upper"]] for n, iv in
+                                           (chosen.get("interval") or {}).items()}),
                            posterior=_posterior_cell(d, chosen))
             tested = [c for c in d["ranking"] if isinstance(c.get("p_value"), (int, float))]
             if tested:  # the nearest miss when the answer is none
