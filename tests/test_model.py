@@ -350,3 +350,65 @@ def test_stage_jacobian_in_periodic_steady_state(fd_rec, omega_w):
         d = (lik.response(dict(p, **{name: p[name] + h}))
              - lik.response(dict(p, **{name: p[name] - h}))) / (2 * h)
         np.testing.assert_allclose(J[:, k], d, rtol=1e-5, atol=1e-6 * np.abs(d).max())
+
+
+def test_a_block_kind_the_kernels_do_not_compute_is_refused():
+    """The kernels pass an unknown kind code through as no block: a user's Hysteresis (code 7)
+    gave the same -ln L at every threshold, the threshold-free model's, without a word."""
+    from dataclasses import dataclass
+
+    from bayespilot.model import Modulation, Nonlinearity, Stage
+
+    @dataclass(frozen=True)
+    class Hysteresis(Nonlinearity):
+        kind = 7
+        parameters: tuple = ("delta_abs",)
+
+    @dataclass(frozen=True)
+    class LeadLag(Stage):
+        kind = 42
+        parameters: tuple = ()
+
+    @dataclass(frozen=True)
+    class Wobble(Modulation):
+        kind = True  # a bool is no code, though True == 1 == MOD_LINEAR
+        parameters: tuple = ("drift",)
+
+    m = paper_model()
+    with pytest.raises(ValueError, match=r"Hysteresis.kind = 7 is not a Nonlinearity code.*"
+                                         r"NL_DEADZONE = 1.*NL_SATURATION = 3"):
+        m.with_nonlinearity("vestibular", Hysteresis())
+    with pytest.raises(ValueError, match="LeadLag.kind = 42 is not a Stage code"):
+        m.add_stage("visual", LeadLag())
+    with pytest.raises(ValueError, match="LeadLag.kind = 42"):
+        Channel("c", "e", delay="tau_v", stages=(LeadLag(),))
+    with pytest.raises(ValueError, match="Wobble.kind = True is not a Modulation code"):
+        m.with_modulation("visual", Wobble(), [Parameter("drift", -1.0, 1.0, 0.0)])
+    with pytest.raises(ValueError, match="Hysteresis.kind = 7"):
+        m.with_output(Hysteresis())
+
+
+def test_a_parameter_no_block_reads_is_refused_and_a_replaced_blocks_are_dropped():
+    """A free parameter no block reads has a zero Jacobian column (fit_fast "estimated" a
+    delta_abs of 0.09 for a model whose dead zone had been replaced): it is refused, and
+    replacing a block drops the parameters only that block used."""
+    from bayespilot.model import PilotModel
+
+    m = paper_model()
+    idle = PilotModel(m.channels, m.parameters + (Parameter("zzz", 0.0, 1.0, 0.5),))
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.15, seed=1, duration=5.0)
+    with pytest.raises(ValueError, match="used by no block: zzz"):
+        Likelihood(idle, rec.recording)  # refused where it is put to use
+    # a fixed one is harmless and allowed
+    Likelihood(idle.fix(zzz=0.5), rec.recording)
+    capped = m.with_nonlinearity("vestibular", Saturation("i_max"),
+                                 [Parameter("i_max", 1e-3, 1.0, 0.1)])
+    assert capped.all_names == m.all_names[:-1] + ("i_max",) and not capped.has_threshold
+    assert paper_model(threshold=False).with_nonlinearity("vestibular", None).fixed == {}
+    soft = m.with_nonlinearity("vestibular", SoftDeadZone("delta_abs", "w_soft"),
+                               [Parameter("w_soft", 1e-5, 0.05, 0.002)])
+    assert soft.all_names == m.all_names + ("w_soft",)  # delta_abs is still read: kept
+    drift = m.with_modulation("visual", LinearDrift("g_v"), [Parameter("g_v", -1.0, 1.0, 0.0)])
+    assert drift.with_modulation("visual", None).all_names == m.all_names
+    sat = m.with_output(Saturation("u_max"), [Parameter("u_max", 1e-6, 10.0, 1.0)]).fix(u_max=2.0)
+    assert sat.with_output(None).all_names == m.all_names and sat.with_output(None).fixed == {}

@@ -21,10 +21,12 @@ Models are values: :meth:`PilotModel.add_stage`, :meth:`PilotModel.add_channel`,
 registered.  :meth:`PilotModel.plan` compiles any such model into the plain
 arrays that the numba simulator and likelihood interpret, so an extension
 needs no change to the simulator, the likelihood or the fitters.  A new kind
-of linear block or nonlinearity is one new code in ``kernels/_blocks.py``
-plus a small class here, a subclass of :class:`Stage`, :class:`Nonlinearity`
-or :class:`Modulation` (the kind codes of the three families overlap, so each
-slot of a channel takes only its own family).
+of linear block or nonlinearity is a new code in ``kernels/_blocks.py`` (with
+its derivative there or in ``kernels/_sensitivity.py``; docs/model.md lists the
+places) plus a small class here, a subclass of :class:`Stage`,
+:class:`Nonlinearity` or :class:`Modulation` (the kind codes of the three
+families overlap, so each slot of a channel takes only its own family; a code
+the kernels do not compute is refused).
 
 Sign convention
 ---------------
@@ -207,14 +209,48 @@ class Modulation:
     __slots__ = ()
 
 
+def _used_names(channels: Iterable["Channel"], output: Any, omega_nm: str,
+                zeta_nm: str) -> set[str]:
+    """The parameter names some block of a model reads."""
+    used = {omega_nm, zeta_nm}
+    for c in channels:
+        used.update(c.parameter_names)
+    if output is not None:
+        used.update(output.parameters)
+    return used
+
+
+#: The kernel code prefix of each block family.
+_KIND_PREFIX = {Stage: "STAGE_", Nonlinearity: "NL_", Modulation: "MOD_"}
+
+
+def _kernel_codes(prefix: str) -> dict[int, str]:
+    """The kind codes ``kernels/_blocks.py`` computes for one family (``STAGE_`` ...), code ->
+    name, without the family's NONE."""
+    return {v: k for k, v in vars(B).items()
+            if k.startswith(prefix) and k != prefix + "NONE" and isinstance(v, int)}
+
+
 def _check_block(block, family: type, where: str, optional: bool = True) -> None:
-    """Raise TypeError unless ``block`` belongs to ``family`` (or is None, if optional)."""
-    if (optional and block is None) or isinstance(block, family):
+    """Raise TypeError unless ``block`` belongs to ``family`` (or is None, if optional), and
+    ValueError if its ``kind`` is no code of that family that the kernels compute."""
+    if optional and block is None:
         return
-    members = ", ".join(c.__name__ for c in family.__subclasses__())
-    alt = " or None" if optional else ""
-    raise TypeError(f"{where} must be a {family.__name__} ({members}){alt}, "
-                    f"got {type(block).__name__}")
+    if not isinstance(block, family):
+        members = ", ".join(c.__name__ for c in family.__subclasses__())
+        alt = " or None" if optional else ""
+        raise TypeError(f"{where} must be a {family.__name__} ({members}){alt}, "
+                        f"got {type(block).__name__}")
+    # The kernels switch on the code and pass an unknown one through unchanged: a subclass with
+    # a code of its own would run as no block at all, without a word.
+    codes = _kernel_codes(_KIND_PREFIX[family])
+    kind = getattr(block, "kind", None)
+    if isinstance(kind, (bool, np.bool_)) or kind not in codes:
+        known = ", ".join(f"{v} = {k}" for k, v in codes.items())
+        raise ValueError(
+            f"{where}: {type(block).__name__}.kind = {kind!r} is not a {family.__name__} code "
+            f"the kernels compute ({known}); a new kind of block needs kernel code "
+            "(docs/model.md, 'Extending the model')")
 
 
 # --- linear stages ---------------------------------------------------------------
@@ -654,11 +690,7 @@ class PilotModel:
             raise ValueError("duplicate parameter names")
         if len({c.name for c in self.channels}) != len(self.channels):
             raise ValueError("duplicate channel names")
-        used = {self.omega_nm, self.zeta_nm}
-        for c in self.channels:
-            used.update(c.parameter_names)
-        if self.output is not None:
-            used.update(self.output.parameters)
+        used = _used_names(self.channels, self.output, self.omega_nm, self.zeta_nm)
         missing = sorted(used - set(known))
         if missing:
             raise ValueError(f"parameters used but not declared: {', '.join(missing)}")
@@ -840,6 +872,19 @@ class PilotModel:
                     "(use another name, or declare it alike to share it)")
         return tuple(params)
 
+    def _rebuilt(self, **fields: Any) -> "PilotModel":
+        """``replace(self, **fields)`` without the parameters that no block uses any more (a
+        replaced block's; dropped from ``fixed`` too), so that a builder never leaves a
+        parameter behind for the fitters to estimate in vain."""
+        get = lambda k: fields.get(k, getattr(self, k))  # noqa: E731
+        used = _used_names(get("channels"), get("output"), get("omega_nm"), get("zeta_nm"))
+        before = _used_names(self.channels, self.output, self.omega_nm, self.zeta_nm)
+        # only parameters this change stopped using: one the model declared unused (fixed) stays
+        dropped = before - used
+        fields["parameters"] = tuple(p for p in get("parameters") if p.name not in dropped)
+        fields["fixed"] = {k: v for k, v in get("fixed").items() if k not in dropped}
+        return replace(self, **fields)
+
     def _channel(self, name: str) -> int:
         for i, c in enumerate(self.channels):
             if c.name == name:
@@ -854,8 +899,8 @@ class PilotModel:
         chans = list(self.channels)
         i = self._channel(name)
         chans[i] = replace(chans[i], **{k: f(chans[i]) for k, f in change.items()})
-        return replace(self, channels=tuple(chans), parameters=self._with_params(params),
-                       name=f"{self.name} + {type(block).__name__} on {name}")
+        return self._rebuilt(channels=tuple(chans), parameters=self._with_params(params),
+                             name=f"{self.name} + {type(block).__name__} on {name}")
 
     def fix(self, **values: float) -> "PilotModel":
         """A model with some parameters held fixed, e.g. ``fix(delta_abs=0.0)``.
@@ -968,7 +1013,8 @@ class PilotModel:
         -------
         PilotModel
             A new model; this one is unchanged.  The old nonlinearity's
-            parameters stay declared.
+            parameters that no other block uses are dropped (a threshold
+            replaced by a saturation leaves no ``delta_abs`` to estimate).
 
         Raises
         ------
@@ -1000,7 +1046,8 @@ class PilotModel:
         Returns
         -------
         PilotModel
-            A new model; this one is unchanged.
+            A new model; this one is unchanged.  Parameters that only the
+            replaced block used are dropped.
 
         Raises
         ------
@@ -1099,7 +1146,8 @@ class PilotModel:
         Returns
         -------
         PilotModel
-            A new model; this one is unchanged.
+            A new model; this one is unchanged.  Parameters that only the
+            replaced block used are dropped.
 
         Raises
         ------
@@ -1110,8 +1158,8 @@ class PilotModel:
             If ``output`` is neither a :class:`Nonlinearity` nor None.
         """
         _check_block(output, Nonlinearity, "with_output: the output block")
-        return replace(self, output=output, parameters=self._with_params(parameters),
-                       name=f"{self.name} + output {type(output).__name__}")
+        return self._rebuilt(output=output, parameters=self._with_params(parameters),
+                             name=f"{self.name} + output {type(output).__name__}")
 
     @property
     def has_threshold(self) -> bool:
@@ -1126,7 +1174,23 @@ class PilotModel:
     # -- compile --------------------------------------------------------------
     @cached_property
     def plan(self) -> Plan:
-        """The model as kernel tables (cached)."""
+        """The model as kernel tables (cached).
+
+        Raises
+        ------
+        ValueError
+            If a free parameter is read by no block.
+        """
+        # A free parameter that no block reads has a zero Jacobian column: a fitter would
+        # "estimate" it anywhere in its bounds and report it (a delta_abs without a dead zone).
+        # Checked here, where the model is put to use, not when it is built: a builder may
+        # declare a parameter one step before the block that reads it (add_channel twice).
+        used = _used_names(self.channels, self.output, self.omega_nm, self.zeta_nm)
+        idle = [n for n in self.parameter_names if n not in used]
+        if idle:
+            raise ValueError(f"parameters declared but used by no block: {', '.join(idle)} "
+                             "(a parameter no block reads cannot be estimated: leave it out, "
+                             "or fix it)")
         names = self.all_names
         idx = {n: i for i, n in enumerate(names)}
 

@@ -63,6 +63,23 @@ def _check_fittable(recording: Recording, model: PilotModel, discard: float) -> 
         raise RecordingError(f"{recording.source or 'the recording'}: the control output u is "
                          f"constant ({u[0]:g}){f' after the first {discard:g} s' if skip else ''}"
                          ": there is nothing to fit")
+    _warn_unnamed_threshold(model)
+
+
+def _warn_unnamed_threshold(model: PilotModel) -> None:
+    """Warn of a free dead-zone threshold not named ``delta_abs``: the fitters scan and
+    profile the threshold by that name (the paper's third step), so such a one is fitted as an
+    ordinary parameter and can stop far from its optimum (another K_m, -ln L worse)."""
+    from .._caller import warn_at_caller
+    from ..model import DeadZone, SoftDeadZone
+
+    blocks = [c.nonlinearity for c in model.channels] + [model.output]
+    names = sorted({b.parameters[0] for b in blocks if isinstance(b, (DeadZone, SoftDeadZone))
+                    and b.parameters[0] != "delta_abs" and b.parameters[0] not in model.fixed})
+    if names:
+        warn_at_caller(f"the dead zone's threshold {', '.join(names)} is fitted as an ordinary "
+                       "parameter, without the threshold scan: the fitters scan only a "
+                       "threshold named delta_abs (name it so to have it scanned)", UserWarning)
 
 
 @one_blas_thread

@@ -11,8 +11,12 @@ biquad in state-space form (:func:`biquad_ss`) at a finer step.  A static
 nonlinearity is :func:`nonlinearity` (a kind code and two parameters).
 
 Extension point: a new parametric linear block is a new ``STAGE_*`` code with
-its coefficients in :func:`stage_tf`; a new static nonlinearity is a new
-``NL_*`` code in :func:`nonlinearity`.  Nothing else in the kernels changes.
+its coefficients in :func:`stage_tf` and their derivative in
+``_sensitivity.stage_tf_tangent``; a new static nonlinearity is a new ``NL_*``
+code in :func:`nonlinearity` and :func:`nonlinearity_tangent` (and, if it is
+piecewise linear, in ``_oversample._piece`` and ``_oversample._piecewise``).
+``model.py`` refuses a block whose code is not here: the functions below pass an
+unknown code through as no block.
 """
 
 from __future__ import annotations
