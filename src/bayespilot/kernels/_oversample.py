@@ -324,12 +324,16 @@ def fold_channel_tangent(src, dsrc, M, m, K, dK, periodic, nl, p0, p1, dp0, dp1,
 
 
 @njit
-def modulate(v, mod_kind, mp, dmp, dv, tangent):
+def modulate(v, mod_kind, mp, dmp, dv, tangent, pre=0):
     """The channel's gain modulation on its folded input, at the output sample's time
-    (``v *= g(k / n)``; with ``tangent``, ``dv = g dv + dg v`` first)."""
+    (``v *= g(k / n)``; with ``tangent``, ``dv = g dv + dg v`` first).
+
+    ``pre``: ``v`` starts ``pre`` samples before the record (a lead-in from rest, see
+    ``_response.lead_in``), so its sample k is at the record's time k - pre (g
+    extrapolated before the start) and the record has v.shape[0] - pre samples."""
     n = v.shape[0]
     for k in range(n):
-        frac = k / n
+        frac = (k - pre) / (n - pre)
         g = modulation(mod_kind, frac, mp)
         if tangent:
             dg = dmp * (frac - 0.5) if mod_kind == MOD_LINEAR else 0.0

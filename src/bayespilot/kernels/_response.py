@@ -17,7 +17,14 @@ start from the end of the record, and the model starts in periodic steady
 state as the pilot, who was already tracking, did: the H_nm recursion (fast)
 is first run over the last ``warm`` samples; a parametric stage, which can be
 slow, starts from its exact periodic state (:func:`periodic_state`).  With ``periodic=False`` the model
-starts from rest (zero state, zero input before t = 0).
+starts from rest (zero state, zero input before t = 0): the zero-state response, every
+block at rest until its input becomes non-zero.  A negative delay (tau_c < 0, which an
+unconstrained fit step can reach) reads q_c ahead, so d_c is non-zero from t = tau_c < 0 on
+and H_nm responds to it from there: the recursion then runs over a lead-in of
+:func:`lead_in` samples before the record, from rest, so that the delay stays a pure
+time shift (as it is in the periodic case) and every path (the fused -ln L falls back to
+:func:`response_into` here, the modulated channels, the oversampled ones and the tangents
+of ``kernels/_sensitivity.py``) computes the same u_hat.
 """
 
 from __future__ import annotations
@@ -160,8 +167,11 @@ def _accumulate_delayed(v, src, m, c0, c1, c2, c3, periodic):
 
 
 @njit
-def _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind, mod_p, periodic):
-    """Like _accumulate_delayed, for a channel whose gain is modulated in time."""
+def _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind, mod_p, periodic, pre=0):
+    """Like _accumulate_delayed, for a channel whose gain is modulated in time.
+
+    ``pre`` (rest only): ``src`` and ``v`` start with a lead-in of ``pre`` samples before the
+    record (:func:`lead_in`), so sample k is at the record's time k - pre."""
     n = src.shape[0]
     d1 = 0.0
     d2 = 0.0
@@ -169,11 +179,49 @@ def _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind, mod_p, periodic):
     for k in range(start, n):
         j = k - m
         dk = (1.0 - f) * _tap(src, j, n, periodic) + f * _tap(src, j - 1, n, periodic)
-        dk *= modulation(mod_kind, ((k + n) % n) / n, mod_p)
+        frac = ((k + n) % n) / n if periodic else (k - pre) / (n - pre)
+        dk *= modulation(mod_kind, frac, mod_p)
         if k >= 0:
             v[k] += B0 * dk + B1 * d1 + B2 * d2
         d2 = d1
         d1 = dk
+
+
+@njit
+def lead_in(theta, ch_int, dt, n):
+    """Samples of lead-in the recording-rate channels need when starting from rest: the
+    largest -m over channels with a negative delay of m + f samples (0 if none).
+
+    A channel's d_c is non-zero from sample m on (q_c is zero before the start), so the
+    recursion through H_nm, from rest at sample -lead_in, is the zero-state response.
+    Delays out of range are left to the caller's check."""
+    P = 0
+    for c in range(ch_int.shape[0]):
+        if oversampling(ch_int, c) > 1:
+            continue  # its own recursion and lead-in (fine_lead_in)
+        dd = theta[ch_int[c, CH_DELAY]] / dt
+        if abs(dd) < n - 4:
+            m = int(math.floor(dd))
+            if -m > P:
+                P = -m
+    return P
+
+
+@njit
+def fine_lead_in(m, M):
+    """Lead-in (samples at the recording's rate) of an oversampled channel from rest with a
+    delay of m fine samples: its fine input is non-zero from fine sample m - M on (the
+    interval before the start is interpolated from rest), and the decimated recursion at
+    sample k - P starts from rest when none of it lies at or before fine sample -(P + 1) M."""
+    return -(m // M) if m < 0 else 0
+
+
+@njit
+def _with_lead_in(src, pre):
+    """``src`` after ``pre`` zeros (rest before the start)."""
+    out = np.zeros(src.shape[0] + pre)
+    out[pre:] = src
+    return out
 
 
 @njit
@@ -236,8 +284,14 @@ def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, pe
     _, _, _, A1, A2 = tustin(w2, 0.0, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
     if not stable(A1, A2):
         return False  # an unstable (or marginal) H_nm is no pilot: -ln L = +inf
-    for k in range(n):
-        v[k] = 0.0
+    # rest with a negative delay: v (and the recursion) start pre samples before the record
+    pre = 0 if periodic else lead_in(theta, ch_int, dt, n)
+    vv = v
+    if pre > 0:
+        vv = np.zeros(n + pre)
+    else:
+        for k in range(n):
+            v[k] = 0.0
     fine = w.shape[0] > 0
     for k in range(w.shape[0]):
         w[k] = 0.0
@@ -273,12 +327,28 @@ def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, pe
             m = int(math.floor(dd))
             K, _, A1p, A2p, _, _ = OV.coefficients(fA1, fA2, B0, B1, B2, dd - m, M,
                                                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-            OV.fold_channel(src, M, m, K, periodic, nl, param_or(theta, ch_int[c, CH_NL_P0], 0.0),
-                            param_or(theta, ch_int[c, CH_NL_P1], 0.0), fb, b)
-            if mod_kind != MOD_NONE:
-                OV.modulate(b, mod_kind, param_or(theta, ch_int[c, CH_MOD_P0], 0.0), 0.0, b,
-                            False)
-            f1, f2 = OV.recursion_add(b, A1p, A2p, periodic, warm, w)
+            pc = 0 if periodic else fine_lead_in(m, M)
+            if pc > 0:
+                # rest, negative delay: its recursion from rest pc samples before the record
+                bx = np.empty(n + pc)
+                OV.fold_channel(_with_lead_in(src, pc), M, m, K, periodic, nl,
+                                param_or(theta, ch_int[c, CH_NL_P0], 0.0),
+                                param_or(theta, ch_int[c, CH_NL_P1], 0.0), np.empty(n + pc), bx)
+                if mod_kind != MOD_NONE:
+                    OV.modulate(bx, mod_kind, param_or(theta, ch_int[c, CH_MOD_P0], 0.0), 0.0, bx,
+                                False, pc)
+                wx = np.zeros(n + pc)
+                f1, f2 = OV.recursion_add(bx, A1p, A2p, periodic, warm, wx)
+                for k in range(n):
+                    w[k] += wx[pc + k]
+            else:
+                OV.fold_channel(src, M, m, K, periodic, nl,
+                                param_or(theta, ch_int[c, CH_NL_P0], 0.0),
+                                param_or(theta, ch_int[c, CH_NL_P1], 0.0), fb, b)
+                if mod_kind != MOD_NONE:
+                    OV.modulate(b, mod_kind, param_or(theta, ch_int[c, CH_MOD_P0], 0.0), 0.0, b,
+                                False)
+                f1, f2 = OV.recursion_add(b, A1p, A2p, periodic, warm, w)
             if not (math.isfinite(f1) and math.isfinite(f2)):
                 return False
             continue
@@ -302,16 +372,24 @@ def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, pe
             return False
         m = int(math.floor(dd))
         f = dd - m
+        if pre > 0:
+            src = _with_lead_in(src, pre)  # v and src both start pre samples early: same m
         if mod_kind == MOD_NONE:
-            _accumulate_delayed(v, src, m, B0 * (1.0 - f), B0 * f + B1 * (1.0 - f),
+            _accumulate_delayed(vv, src, m, B0 * (1.0 - f), B0 * f + B1 * (1.0 - f),
                                 B1 * f + B2 * (1.0 - f), B2 * f, periodic)
         else:
-            _accumulate_modulated(v, src, m, f, B0, B1, B2, mod_kind,
-                                  param_or(theta, ch_int[c, CH_MOD_P0], 0.0), periodic)
+            _accumulate_modulated(vv, src, m, f, B0, B1, B2, mod_kind,
+                                  param_or(theta, ch_int[c, CH_MOD_P0], 0.0), periodic, pre)
     # The common recursion through H_nm, added to the oversampled channels' share
     for k in range(n):
         y[k] = w[k] if fine else 0.0
-    y1, y2 = OV.recursion_add(v, A1, A2, periodic, warm, y)
+    if pre > 0:
+        yx = np.zeros(n + pre)
+        y1, y2 = OV.recursion_add(vv, A1, A2, periodic, warm, yx)
+        for k in range(n):
+            y[k] += yx[pre + k]
+    else:
+        y1, y2 = OV.recursion_add(v, A1, A2, periodic, warm, y)
     out_nl = out_int[OUT_NL_KIND]
     if out_nl != NL_NONE:
         o0 = param_or(theta, out_int[OUT_NL_P0], 0.0)
@@ -506,6 +584,8 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
         if not (abs(dd) < pad - 4):
             return np.inf, False, False
         m = int(math.floor(dd))
+        if m < 0 and not periodic:
+            return np.inf, False, False  # rest, negative delay: lead-in (response_into)
         f = dd - m
         ms[c] = m
         gain = ch_float[c, CHF_GAIN_CONST] * ch_float[c, CHF_SIGN] \

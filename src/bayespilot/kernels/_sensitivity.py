@@ -23,7 +23,8 @@ from . import _oversample as OV
 from ._blocks import (MOD_LINEAR, MOD_NONE, NL_NONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
                       STAGE_LOWPASS1, STAGE_LOWPASS2, STAGE_NONE, modulation, nonlinearity,
                       nonlinearity_tangent, param_or, stable, stage_tf, tustin)
-from ._response import (_tap, any_oversampled, oversampling, periodic_state, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
+from ._response import (_tap, _with_lead_in, any_oversampled, fine_lead_in, lead_in,
+                        oversampling, periodic_state, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
                         CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_NSTAGES, CHF_GAIN_CONST, CHF_SIGN,
                         OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1, OUT_OMEGA, OUT_ZETA)
 
@@ -126,9 +127,12 @@ def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic
 
 @njit
 def _accumulate_tangent(v, dv, src, dsrc, m, f, df, B0, B1, B2, dB0, dB1, dB2, mod_kind, mp,
-                        dmp, periodic):
+                        dmp, periodic, pre=0):
     """The channel's delayed, gain-modulated Tustin numerator into ``v`` and its tangent into
-    ``dv`` (``_response._accumulate_delayed`` / ``_accumulate_modulated`` with derivatives)."""
+    ``dv`` (``_response._accumulate_delayed`` / ``_accumulate_modulated`` with derivatives).
+
+    ``pre`` (rest only): the arrays start with a lead-in of ``pre`` samples before the record
+    (``_response.lead_in``), so sample k is at the record's time k - pre."""
     n = src.shape[0]
     d1 = 0.0
     d2 = 0.0
@@ -144,7 +148,7 @@ def _accumulate_tangent(v, dv, src, dsrc, m, f, df, B0, B1, B2, dB0, dB1, dB2, m
         dk = (1.0 - f) * sa + f * sb
         tk = (1.0 - f) * dsa + f * dsb + df * (sb - sa)
         if mod_kind != MOD_NONE:
-            frac = ((k + n) % n) / n
+            frac = ((k + n) % n) / n if periodic else (k - pre) / (n - pre)
             g = modulation(mod_kind, frac, mp)
             dg = dmp * (frac - 0.5) if mod_kind == MOD_LINEAR else 0.0
             tk = g * tk + dg * dk
@@ -176,8 +180,10 @@ def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_i
     if not stable(A1, A2):
         return False
     _, _, _, dA1, dA2 = tustin_tangent(w2, 0.0, 0.0, w2, a1c, 1.0, dw2, 0.0, 0.0, dw2, da1c, 0.0, dt)
-    v = np.zeros(n)
-    dv = np.zeros(n)
+    # rest with a negative delay: v, dv and the recursion start pre samples before the record
+    pre = 0 if periodic else lead_in(theta, ch_int, dt, n)
+    v = np.zeros(n + pre)
+    dv = np.zeros(n + pre)
     q = np.empty(n)
     dq = np.empty(n)
     q2 = np.empty(n)
@@ -254,12 +260,30 @@ def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_i
             K, dK, A1p, A2p, dA1p, dA2p = OV.coefficients(fA1, fA2, B0, B1, B2, dd - m, M,
                                                           fdA1, fdA2, dB0, dB1, dB2,
                                                           _dparam(dtheta, idl) / dtf)
-            OV.fold_channel_tangent(src, dsrc, M, m, K, dK, periodic, nl, p0, p1, dp0, dp1,
-                                    D, dD, q2, dq2)
-            if mod_kind != MOD_NONE:
-                OV.modulate(q2, mod_kind, mp, dmp, dq2, True)
-            f1, df1 = OV.recursion_add_tangent(q2, dq2, A1p, A2p, dA1p, dA2p, periodic, warm,
-                                               wf, dwf)
+            pc = 0 if periodic else fine_lead_in(m, M)
+            if pc > 0:
+                # rest, negative delay: as _response.response_into, from rest pc samples early
+                bx = np.empty(n + pc)
+                dbx = np.empty(n + pc)
+                OV.fold_channel_tangent(_with_lead_in(src, pc), _with_lead_in(dsrc, pc), M,
+                                        m, K, dK, periodic, nl, p0, p1, dp0, dp1,
+                                        np.empty(n + pc), np.empty(n + pc), bx, dbx)
+                if mod_kind != MOD_NONE:
+                    OV.modulate(bx, mod_kind, mp, dmp, dbx, True, pc)
+                wx = np.zeros(n + pc)
+                dwx = np.zeros(n + pc)
+                f1, df1 = OV.recursion_add_tangent(bx, dbx, A1p, A2p, dA1p, dA2p, periodic, warm,
+                                                   wx, dwx)
+                for k in range(n):
+                    wf[k] += wx[pc + k]
+                    dwf[k] += dwx[pc + k]
+            else:
+                OV.fold_channel_tangent(src, dsrc, M, m, K, dK, periodic, nl, p0, p1, dp0, dp1,
+                                        D, dD, q2, dq2)
+                if mod_kind != MOD_NONE:
+                    OV.modulate(q2, mod_kind, mp, dmp, dq2, True)
+                f1, df1 = OV.recursion_add_tangent(q2, dq2, A1p, A2p, dA1p, dA2p, periodic, warm,
+                                                   wf, dwf)
             if not (math.isfinite(f1) and math.isfinite(df1)):
                 return False
             continue
@@ -280,12 +304,23 @@ def response_tangent(theta, dtheta, X, ch_int, ch_float, st_int, st_const, out_i
         if not (abs(dd) < n - 4):
             return False
         m = int(math.floor(dd))
-        _accumulate_tangent(v, dv, src, dsrc, m, dd - m, _dparam(dtheta, idl) / dt, B0, B1, B2,
-                            dB0, dB1, dB2, mod_kind, mp, dmp, periodic)
+        if pre > 0:
+            src = _with_lead_in(src, pre)  # v and src both start pre samples early: same m
+            dsrc = _with_lead_in(dsrc, pre)
+        _accumulate_tangent(v, dv, src, dsrc, m, dd - m, _dparam(dtheta, idl) / dt, B0, B1,
+                            B2, dB0, dB1, dB2, mod_kind, mp, dmp, periodic, pre)
     for k in range(n):
         y[k] = 0.0
         dy[k] = 0.0
-    y1, dy1 = OV.recursion_add_tangent(v, dv, A1, A2, dA1, dA2, periodic, warm, y, dy)
+    if pre > 0:
+        yx = np.zeros(n + pre)
+        dyx = np.zeros(n + pre)
+        y1, dy1 = OV.recursion_add_tangent(v, dv, A1, A2, dA1, dA2, periodic, warm, yx, dyx)
+        for k in range(n):
+            y[k] = yx[pre + k]
+            dy[k] = dyx[pre + k]
+    else:
+        y1, dy1 = OV.recursion_add_tangent(v, dv, A1, A2, dA1, dA2, periodic, warm, y, dy)
     if fine:
         for k in range(n):
             y[k] += wf[k]
