@@ -256,3 +256,108 @@ def test_default_integration_is_1_khz_or_finer():
     assert simulate(params=presets.TABLE3["FD"], task=task, seed=0).settings["oversample"] == 2
     with pytest.raises(ValueError, match="oversample"):
         simulate(task="FD", motion_gain=1.0, seed=0, duration=5.0, oversample=True)
+
+
+def test_a_diverging_loop_is_refused_not_recorded(tmp_path, capsys):
+    """K_v = 2.7 (FD, K_theta = 1) diverges slowly, about 2.3 times every 10 s: the loop's states
+    stay under the kernel's 1e6 limit, and the run was returned as a valid recording (rms u
+    4.3 rad in its first 5 s, 3100 rad in its last 5).  The growth test refuses it, through
+    every entry (simulate, the remnant calibration, the command line), as the 1e6 case is."""
+    from bayespilot.cli import main
+    from bayespilot.simulate import calibrate_remnant_gain
+
+    with pytest.raises(RuntimeError, match=r"the closed loop diverged for these parameters "
+                                           r"\(.*'K_v': 2.7.*\): the rms of u grows"):
+        simulate(task="FD", params={"K_v": 2.7}, seed=1)
+    with pytest.raises(RuntimeError, match="the closed loop diverged"):
+        simulate(task="FD", params={"K_v": 2.7}, remnant_fraction=0.2, seed=1)
+    with pytest.raises(RuntimeError, match="the closed loop diverged"):
+        calibrate_remnant_gain(0.2, params={"K_v": 2.7}, seeds=[0])
+    with pytest.raises(RuntimeError, match="plant's state passed 1e6"):  # as before
+        simulate(task="FD", params={"K_v": 2.8}, seed=1)
+    (tmp_path / "p.json").write_text('{"K_v": 2.7}')
+    code = main(["simulate", "--task", "FD", "--motion-gain", "1", "--remnant-fraction", "0",
+                 "--seed", "1", "--params", str(tmp_path / "p.json"), "-o",
+                 str(tmp_path / "kv27")])
+    assert code == 1 and "diverged" in capsys.readouterr().err
+    assert not (tmp_path / "kv27.csv").exists()
+    from bayespilot.simulate import _diverging, _growth
+
+    # K_v = 2.6 is stable but lightly damped (rms u 0.23-0.77 over 10-s windows): recorded
+    sim = simulate(task="FD", params={"K_v": 2.6}, seed=1, remnant_gain=0.1)
+    assert _diverging(sim.recording.u, 100.0) is None
+    # the statistic: 4 windows, steady growth by over 10 times; windows under 5 s not judged
+    t = np.arange(8192) / 100.0
+    grow = np.exp(t / 20) * np.sin(2 * t) * (1 + 0.5 * np.sin(0.3 * t))
+    assert "grows 21.8 times" in _diverging(grow, 100.0)
+    assert _diverging(grow[::-1], 100.0) is None
+    assert _growth(grow[:1999], 100.0) is None and _growth(grow[:2000], 100.0) is not None
+    assert _diverging(np.zeros(8192), 100.0) is None
+    for p in (1.5, 2, 3, 6):  # a start-up from rest grows, but ever more slowly
+        r = _growth(t**p * np.sin(2 * t), 100.0)
+        assert r[-1] > 10 * r[0] and np.all(np.diff(r) > 0)
+        assert _diverging(t**p * np.sin(2 * t), 100.0) is None
+
+
+@pytest.mark.parametrize("task, motion_gain", [("FD", 0.0), ("FT", 0.5), ("FD", 1.0)])
+def test_the_growth_test_leaves_stable_loops_alone(task, motion_gain):
+    """Stable loops, the paper's and from rest (run_in = 0, where the record begins with the
+    loop's start-up): the rise of u's rms over the record stays far below the growth test's
+    limit (at most 1.8 and 4.5 over many seeds), and the calibration still meets F_n."""
+    from bayespilot.simulate import GROWTH_RATIO, _growth
+
+    for tt, kw in ((TrackingTask.paper(task, motion_gain, duration=20.0), {"remnant_gain": 0.1}),
+                   (TrackingTask.paper(task, motion_gain, duration=20.0, run_in=0.0),
+                    {"remnant_gain": 0.0})):
+        r = _growth(simulate(task=tt, seed=2, **kw).recording.u, 100.0)
+        assert r[-1] / r[0] < GROWTH_RATIO / 2, r
+    fn = 0.2 if motion_gain else 0.08  # (without motion feedback 0.1 cannot be reached)
+    sim = simulate(task=task, motion_gain=motion_gain, remnant_fraction=fn, seed=4,
+                   duration=20.0)
+    assert sim.remnant_fraction == pytest.approx(fn, abs=1e-4)
+
+
+def test_a_plant_of_relative_degree_below_2_is_refused_with_why_and_the_workaround():
+    """K/s was refused with "must be strictly proper with relative degree >= 2" alone: the
+    message says why (theta_ddot, the motion cue, is made from the plant's state and input)
+    and the workaround that works, a fast extra pole."""
+    ft, fd = presets.paper_forcing("FD")
+    with pytest.raises(ValueError) as info:
+        TrackingTask(ft, fd, controlled_element=([2.0], [1.0, 0.0]))
+    msg = str(info.value)
+    assert "relative degree 1" in msg and "num=[2.0], den=[1.0, 0.0]" in msg
+    assert "theta_ddot" in msg and "derivative of delta" in msg
+    assert "K/(s (0.01 s + 1))" in msg and "controlled_element=([2.0], [0.01, 1.0, 0.0])" in msg
+    with pytest.raises(ValueError, match=r"relative degree 0.*\[0.0002, 0.04, 2.0\]"):
+        TrackingTask(ft, fd, controlled_element=([3.0], [2.0]))
+    # the suggested plant runs (with a pilot for a rate-command plant: little lead)
+    task = TrackingTask(ft, fd, controlled_element=([2.0], [0.01, 1.0, 0.0]), duration=20.0,
+                        run_in=20.0)
+    assert task.controlled_element == ((2.0,), (0.01, 1.0, 0.0))
+    pilot = dict(K_v=1.0, T_vl=0.05, tau_v=0.25, K_m=0.1, tau_m=0.2, omega_nm=11.0,
+                 zeta_nm=0.3, delta_abs=0.004)
+    sim = simulate(params=pilot, task=task, remnant_fraction=0.05, seed=0)
+    assert sim.remnant_fraction == pytest.approx(0.05, abs=1e-4)
+
+
+def test_a_forcing_line_at_or_above_nyquist_is_refused():
+    """A 30-Hz line at 50 Hz was recorded aliased, without a word."""
+    w0 = 2 * np.pi / 40.96
+    fd = Multisine(w0, [4, 8, 14], [0.005, 0.01, 0.015], [0, 1, 2])
+
+    def task(n, amplitude=0.001, fs=50.0, where="target"):
+        f = Multisine(w0, [3, 7, n], [0.03, 0.02, amplitude], [0, 0, 0])
+        pair = (f, fd) if where == "target" else (fd, f)
+        return TrackingTask(*pair, sample_rate_hz=fs, duration=40.96, run_in=20.48)
+
+    with pytest.raises(ValueError, match=r"the target's line n = 1229 at 30.0049 Hz "
+                                         r"\(188.526 rad/s\) is at or above the Nyquist "
+                                         r"frequency 25 Hz of the 50-Hz recording"):
+        task(1229)
+    with pytest.raises(ValueError, match="disturbance's line n = 1024 at 25 Hz"):  # exactly at
+        task(1024, where="disturbance")
+    assert task(1023).sample_rate_hz == 50.0  # just below
+    assert task(1229, amplitude=0.0).sample_rate_hz == 50.0  # no amplitude: nothing recorded
+    assert task(1229, fs=100.0).sample_rate_hz == 100.0
+    with pytest.raises(ValueError, match="Nyquist"):  # the paper's lines reach 2.6 Hz
+        TrackingTask.paper("FD", sample_rate_hz=5.0)

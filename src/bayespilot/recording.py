@@ -396,7 +396,9 @@ class Recording:
 
     @property
     def control_gain(self) -> float:
-        """K_delta_u, the stick-to-control-input gain (default 0.69)."""
+        """K_delta_u, the stick-to-control-input gain: the metadata's ``control_gain``, or
+        the paper's 0.69 when it is not given (``diagnose`` warns when a task ``"other"``
+        leaves it out and its bootstrap would simulate the loop with 0.69)."""
         return float(self.metadata.get("control_gain", 0.69))
 
     @property

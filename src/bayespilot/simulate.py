@@ -76,13 +76,19 @@ class TrackingTask:
     Parameters
     ----------
     target, disturbance : Multisine
-        f_t (rad) and f_d (rad, inserted before the controlled element).
+        f_t (rad) and f_d (rad, inserted before the controlled element);
+        every line of nonzero amplitude below the Nyquist frequency,
+        ``sample_rate_hz / 2`` (a line at or above it would be recorded
+        aliased).
     motion_gain : float
         K_theta (0 = no motion).
     controlled_element : (num, den)
         delta -> theta transfer function in powers of s, highest first;
-        strictly proper with relative degree >= 2 (theta_ddot must not depend
-        on the derivative of the input).  Default K_c / s^2 with K_c = 4.
+        strictly proper with relative degree >= 2: the simulator makes
+        theta_ddot (the motion cue) from the plant's state and input, so it
+        must not depend on the derivative of the input.  A plant of lower
+        relative degree can be run with a fast extra pole, e.g. K/s as
+        K/(s (0.01 s + 1)).  Default K_c / s^2 with K_c = 4.
     control_gain : float
         K_delta_u.
     sample_rate_hz : float
@@ -93,6 +99,13 @@ class TrackingTask:
         Simulated time before the measurement window starts, s.
     task : {"FD", "FT", "other"}
         Label written to the recording.
+
+    Raises
+    ------
+    ValueError
+        On a non-finite or out-of-range number, an unknown task label, a
+        controlled element of relative degree below 2, or a forcing line at
+        or above the Nyquist frequency.
     """
 
     target: Multisine
@@ -121,9 +134,37 @@ class TrackingTask:
         den = np.atleast_1d(np.asarray(den, float))
         num = np.trim_zeros(num, "f") if np.any(num) else np.array([0.0])
         den = np.trim_zeros(den, "f")
-        if den.size == 0 or den.size - num.size < 2:
-            raise ValueError("controlled_element must be strictly proper with relative degree >= 2 "
-                             f"(got num={num.tolist()}, den={den.tolist()})")
+        if den.size == 0:
+            raise ValueError(f"controlled_element needs a denominator, got den={den.tolist()}")
+        degree = den.size - num.size
+        if degree < 2:
+            fast = den
+            for _ in range(2 - degree):
+                fast = np.polymul(fast, [0.01, 1.0])
+            raise ValueError(
+                f"controlled_element must be strictly proper with relative degree >= 2, got "
+                f"num={num.tolist()}, den={den.tolist()} (relative degree {degree}): the "
+                f"simulator makes the motion cue theta_ddot_m = K_theta theta_ddot from the "
+                f"plant's state and its input delta, which is exact only when theta_dot does "
+                f"not depend on delta directly (theta_ddot of a lower relative degree needs "
+                f"the derivative of delta, that is of the pilot's output and of f_d). Add a "
+                f"fast pole far above the task's frequencies, e.g. K/s as K/(s (0.01 s + 1)): "
+                f"controlled_element=({num.tolist()}, {[float(f'{x:.6g}') for x in fast]})")
+        for name in ("target", "disturbance"):
+            f = getattr(self, name)
+            nyquist = math.pi * self.sample_rate_hz  # rad/s
+            high = np.flatnonzero((f.frequencies >= nyquist * (1 - 1e-12)) & (f.amplitude != 0))
+            if high.size:
+                i = high[np.argmax(f.frequencies[high])]
+                w = float(f.frequencies[i])
+                raise ValueError(
+                    f"the {name}'s line n = {int(f.n[i])} at {w / (2 * math.pi):.6g} Hz "
+                    f"({w:.6g} rad/s) is at or above the Nyquist frequency "
+                    f"{self.sample_rate_hz / 2:g} Hz of the {self.sample_rate_hz:g}-Hz "
+                    f"recording: it would be recorded aliased; raise sample_rate_hz above "
+                    f"{w / math.pi:.6g} Hz or leave the line out"
+                    + (f" ({high.size} of its lines are at or above the Nyquist frequency)"
+                       if high.size > 1 else ""))
         object.__setattr__(self, "controlled_element", (tuple(num), tuple(den)))
 
     @classmethod
@@ -281,6 +322,42 @@ def _plant_ss(task: TrackingTask):
             np.ascontiguousarray(C2), D2)
 
 
+#: The growth test of :func:`simulate` (a loop diverging too slowly for the kernel's limit
+#: on its states): the record is cut in :data:`GROWTH_WINDOWS` equal windows, and the loop
+#: is taken to diverge when the rms of u rises from each window to the next, is over
+#: :data:`GROWTH_RATIO` times higher in the last window than in the first, and still rises
+#: in the last step by at least :data:`GROWTH_STEADY` times the mean factor of a step (a
+#: diverging loop grows by a steady factor; a start-up from rest slows down).  Records
+#: whose windows would be shorter than :data:`GROWTH_MIN_WINDOW` s are not judged.
+GROWTH_WINDOWS = 4
+GROWTH_RATIO = 10.0
+GROWTH_STEADY = 0.8
+GROWTH_MIN_WINDOW = 5.0
+
+
+def _growth(u: np.ndarray, sample_rate_hz: float) -> np.ndarray | None:
+    """rms of u about zero in each of :data:`GROWTH_WINDOWS` equal windows of the record
+    (None if the windows are shorter than :data:`GROWTH_MIN_WINDOW` s)."""
+    m = u.size // GROWTH_WINDOWS
+    if m < 2 or m < GROWTH_MIN_WINDOW * sample_rate_hz * (1 - 1e-9):
+        return None
+    w = np.asarray(u[:m * GROWTH_WINDOWS], float).reshape(GROWTH_WINDOWS, m)
+    return np.sqrt(np.mean(w * w, axis=1))
+
+
+def _diverging(u: np.ndarray, sample_rate_hz: float) -> str | None:
+    """Why the recorded u shows a diverging loop (the growth test), or None."""
+    r = _growth(u, sample_rate_hz)
+    if r is None or not (np.all(r[1:] > r[:-1]) and r[-1] > GROWTH_RATIO * r[0]):
+        return None
+    total = r[-1] / r[0]
+    if r[-1] / r[-2] < GROWTH_STEADY * total ** (1.0 / (GROWTH_WINDOWS - 1)):
+        return None
+    return (f"the rms of u grows {total:.3g} times over the record, window after window "
+            f"({', '.join(f'{x:.3g}' for x in r)} rad in its {GROWTH_WINDOWS} "
+            f"{u.size // GROWTH_WINDOWS / sample_rate_hz:g}-s windows)")
+
+
 def _run(model: PilotModel, theta: np.ndarray, task: TrackingTask, n_fine: np.ndarray,
          oversample: int):
     fs = task.sample_rate_hz
@@ -367,7 +444,27 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
         If ``model`` is not a PilotModel or ``task`` neither a str nor a
         TrackingTask.
     RuntimeError
-        If the closed loop diverges for these parameters.
+        If the closed loop diverges for these parameters: a state of the
+        plant passes 1e6 in the run, or the recorded u grows as only a
+        diverging loop's does (below).
+
+    Notes
+    -----
+    The growth test.  A loop that diverges slowly (e.g. the FD task with
+    K_v = 2.7, whose u grows about 2.3 times every 10 s) stays under the
+    kernel's limit of 1e6 over a whole run.  The record is therefore cut into
+    four equal windows, and the loop is taken to diverge when the rms of u
+    about zero rises from each window to the next, ends over 10 times higher
+    than it began, and still rises in the last step by at least 0.8 times the
+    mean factor of a step (exponential growth is steady; a start-up from rest
+    with ``run_in=0`` slows down, and growth as any power of the time since
+    rest does not pass).  Records shorter than 20 s (windows under 5 s) are not judged.  On
+    stable loops the rise from the first window to the last stays below 1.8
+    on the paper's tasks (FD and FT, K_theta 0 to 1, F_n 0 to 0.3, records of
+    20 to 81.92 s) and below 4.5 from rest, so the test leaves every stable
+    run as it was; a loop diverging slowly enough not to rise tenfold over the
+    record is not caught (FD with K_v = 2.62 to 2.65 over 81.92 s, K_v = 2.7
+    over 20 s).
 
     Examples
     --------
@@ -448,9 +545,11 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
 
     def run(kn):
         sig, xpre, qpost, ok, _, _ = _run(model, theta, tt, kn * unit, oversample)
-        if not ok:
+        why = "the plant's state passed 1e6" if not ok else \
+            _diverging(sig[:, CL.SIG_U], tt.sample_rate_hz)
+        if why is not None:
             raise RuntimeError("the closed loop diverged for these parameters "
-                               f"({model.as_dict(theta, full=True)})")
+                               f"({model.as_dict(theta, full=True)}): {why}")
         n = kn * np.interp(np.arange(tt.n_samples) / tt.sample_rate_hz + tt.run_in,
                            np.arange(unit.size) * h, unit)
         return sig, xpre, qpost, n
