@@ -2080,7 +2080,7 @@ def oracle_case(c: dict, rec, extra: dict,
     y_ext = Likelihood(ext.build(base_model), rec).response(truth)
     clean = Recording(dict(rec.signals, u=y_ext), rec.sample_rate_hz, rec.motion_gain, rec.task,
                       {}, "clean")
-    fit = fit_fast(rec, base_model, seed=0, n_starts=4, profile_step=0.005)
+    fit = fit_fast(rec, base_model, seed=0, n_starts=4, profile_step=0.005, discard=0.0)
     start = {q: v for q, v in fit.params.items() if q in base_model.parameter_names}
     skip = int(round(SKIP_SECONDS * rec.sample_rate_hz))
     row: dict = {"df": ext.df}
@@ -2411,7 +2411,8 @@ class _Twins:
         from bayespilot.diagnose import decide as D
         from bayespilot.fit.fast import fit_fast
 
-        fit = fit_fast(rec, self.base_model, seed=seed, n_starts=4, profile_step=0.005)
+        fit = fit_fast(rec, self.base_model, seed=seed, n_starts=4, profile_step=0.005,
+                       discard=0.0)  # as diagnose's base fit
         start = {q: v for q, v in fit.params.items() if q in self.base_model.parameter_names}
         _, noise, base = _base_gls(rec, self.base_model, start,
                                    skip=int(round(SKIP_SECONDS * rec.sample_rate_hz)),
@@ -2607,7 +2608,7 @@ def width_profile(ids: list[int]) -> None:
         rec = simulate_case(c)[0].recording
         base_model = paper_model()
         # diagnose's base fit and its GLS refit under the base residual's noise model
-        fit = fit_fast(rec, base_model, seed=0, n_starts=4, profile_step=0.005)
+        fit = fit_fast(rec, base_model, seed=0, n_starts=4, profile_step=0.005, discard=0.0)
         start = {k: v for k, v in fit.params.items() if k in base_model.parameter_names}
         _, noise, base = _base_gls(rec, base_model, start,
                                    skip=int(round(SKIP_SECONDS * rec.sample_rate_hz)))

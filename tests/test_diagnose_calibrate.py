@@ -85,7 +85,7 @@ def _statistic_by_hand(run, rep, seed0, ext, passes=1):
     the noise model and the GLS base fit, the extension's fit, the base refitted from it."""
     from bayespilot.likelihood import Likelihood
 
-    fit = fit_fast(rep, run.base_model, seed=seed0, n_starts=2, profile_step=0.005)
+    fit = fit_fast(rep, run.base_model, seed=seed0, n_starts=2, profile_step=0.005, discard=0.0)
     at = {k: v for k, v in fit.params.items() if k in run.base_model.parameter_names}
     for _ in range(passes):
         noise = D.noise_model(Likelihood(run.base_model, rep).residual(at), rep.dt,

@@ -1,10 +1,11 @@
 """diagnose on recordings from other labs: what the bootstrap and the frequency evidence need.
 
 Each case is a valid recording that the paper's never are: a plant the simulator cannot run
-(relative degree 1), a task "other" that leaves its plant out, no forcing functions, a
-rounded base frequency, a target-only or disturbance-only run.  The diagnosis goes on without
-what it cannot make, and says so once with an EvidenceWarning.  Short records (30 s), two
-bootstrap replicates and one candidate, so that each test takes seconds.
+(relative degree 1), a task "other" that leaves its plant (or its control gain) out, no
+forcing functions, a rounded base frequency, a target-only or disturbance-only run.  The
+diagnosis goes on without what it cannot make, and says so once with an EvidenceWarning.
+Short records (30 s), two bootstrap replicates and one candidate, so that each test takes
+seconds.
 """
 
 from __future__ import annotations
@@ -123,6 +124,27 @@ def test_a_task_other_that_leaves_its_plant_out_is_told_which_plant_is_simulated
     paper = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, "FD", meta)
     res, said, _ = _diagnose(paper)
     assert said == [] and res.settings["bootstrap"]["replicates"] == 2
+
+
+def test_a_task_other_that_gives_its_plant_but_no_control_gain_is_told_which_gain_is_simulated(
+        lab_rec, tmp_path):
+    """The plant given, control_gain left out: the recording format reads the paper's 0.69, and
+    the bootstrap simulated the loop with it without a word (only a missing plant was told)."""
+    meta = {k: v for k, v in lab_rec.metadata.items() if k != "control_gain"}
+    assert "controlled_element_gain" in meta
+    rec = _as_lab_file(lab_rec, tmp_path, meta)
+    assert rec.control_gain == 0.69
+    res, said, others = _diagnose(rec)
+    assert others == []
+    assert len(said) == 1, said
+    assert rec.source in said[0]
+    assert "gives its plant but no control_gain" in said[0] and "0.69" in said[0]
+    assert "if yours differs, give it in the sidecar" in said[0]
+    assert res.settings["bootstrap"]["replicates"] == 2
+    # nothing to say without a bootstrap, or for the paper's tasks (their gain is the paper's)
+    assert _diagnose(rec, n_bootstrap=0)[1] == []
+    paper = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, "FD", meta)
+    assert _diagnose(paper)[1] == []
 
 
 def test_no_forcing_functions_skip_the_bootstrap_and_say_what_to_give(lab_rec, tmp_path):

@@ -77,7 +77,9 @@ def test_fast_fit_recovers_threshold_and_is_never_worse_with_it(sim):
     assert with_t.neg_log_lik <= without.neg_log_lik + 1e-9
     assert without.params["delta_abs"] == 0.0 and not without.threshold
     assert with_t.params["delta_abs"] == pytest.approx(0.0075, abs=0.003)
-    lik = Likelihood(paper_model(), sim.recording)
+    # the 30-s record is not whole periods of the forcing: the fit leaves its start-up out
+    assert with_t.settings["discard"] == 2.0
+    lik = Likelihood(paper_model(), sim.recording, discard=with_t.settings["discard"])
     # on 30 s of data K_v and the motion channel trade off; the optimum is at least the truth's
     assert with_t.neg_log_lik <= lik.neg_log_lik(sim.params)
     assert lik.neg_log_lik(with_t.params) == pytest.approx(with_t.neg_log_lik, rel=1e-12)
@@ -209,7 +211,7 @@ def test_fits_refuse_a_recording_with_nothing_to_fit(sim):
         fit_fast(Recording({k: v[:28] for k, v in rec.signals.items()}, rec.sample_rate_hz, 1.0),
                  threshold=False)
     with pytest.raises(ValueError, match=r"u is constant \(0\): there is nothing to fit"):
-        fit_fast(rec.with_signals(u=np.zeros(rec.n_samples)), seed=0)
+        fit_fast(rec.with_signals(u=np.zeros(rec.n_samples)), seed=0, discard=0.0)
     cut = rec.with_signals(u=np.concatenate([rec.u[:300], np.full(rec.n_samples - 300, 0.5)]))
     with pytest.raises(ValueError, match=r"constant \(0.5\) after the first 4 s"):
         fit_fast(cut, seed=0, noise="ar", discard=4.0)
@@ -337,3 +339,145 @@ def test_a_threshold_of_another_name_is_fitted_with_a_warning(sim):
         _warn_unnamed_threshold(paper_model())  # the paper's threshold and a fixed one: silent
         _warn_unnamed_threshold(renamed.fix(delta_pitch=0.0))
     assert [w.filename for w in caught] == [__file__]
+
+
+@pytest.fixture(scope="module")
+def in_degrees(sim):
+    """The fixture's run with u in degrees instead of radians: the Table 1 box holds K_v to 10
+    (about 57 times the 0.97 the run needs)."""
+    return sim.recording.with_signals(u=np.degrees(sim.recording.u))
+
+
+def test_an_estimate_on_a_bound_is_flagged_and_warned_once(sim, in_degrees, tmp_path):
+    """u in degrees: fit_fast stopped K_v on its upper bound 10 and moved the others to make
+    up for it (an audit: delta_abs 0, tau_m 0.87, VAF 72 against 81 %) without a word.  Now
+    the result names the parameter (at_bounds, kept through JSON), the summary marks it, and
+    the fit warns once, at the user's line, of the bound and of the units."""
+    import warnings
+
+    from bayespilot.fit.result import EstimateOnBoundWarning
+
+    kw = dict(seed=0, n_starts=4, profile_step=0.01)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = fit_fast(in_degrees, **kw)
+    bound = [w for w in caught if issubclass(w.category, EstimateOnBoundWarning)]
+    assert len(bound) == 1 and bound[0].filename == __file__
+    text = str(bound[0].message)
+    assert "K_v = 10 on its upper bound (10)" in text and "delta_abs" not in text
+    assert "Table 1" in text and "units" in text
+    assert fit.params["K_v"] == pytest.approx(10.0, rel=1e-9)
+    assert fit.at_bounds["K_v"] == "upper"
+    assert fit.bounds["K_v"] == (0.0, 10.0) and fit.units["K_m"] == "rad/IPUT"
+    lines = fit.summary().splitlines()
+    (kv,) = [ln for ln in lines if ln.startswith("K_v ")]
+    assert kv.split()[1] == "10*"
+    assert any(ln.startswith("* on a bound of the search box: K_v (upper 10)") for ln in lines)
+    assert "may not suit the recording's units" in fit.summary()
+    back = FitResult.from_json(fit.to_json(tmp_path / "fit.json"))
+    assert back.at_bounds == fit.at_bounds and back.bounds == fit.bounds
+    assert back.summary() == fit.summary()
+    # a fit saved before the bounds were kept: the paper's model has Table 1's
+    old = {k: v for k, v in fit.to_dict().items() if k not in ("bounds", "units")}
+    assert FitResult.from_dict(old).at_bounds == fit.at_bounds
+    assert FitResult.from_dict(dict(old, settings={"model": "my lab"})).at_bounds == {}
+    # in radians nothing is on a bound but (perhaps) delta_abs = 0, the answer "no threshold"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        good = fit_fast(sim.recording, **kw)
+        nothr = fit_fast(sim.recording, threshold=False, **kw)
+    assert not [w for w in caught if issubclass(w.category, EstimateOnBoundWarning)]
+    assert set(good.at_bounds) <= {"delta_abs"} and nothr.at_bounds == {}
+    assert nothr.fixed == ("delta_abs",) and "delta_abs" not in nothr.bounds
+    # delta_abs = 0 is marked, named as "no threshold", and not warned of
+    zero = FitResult.from_dict(dict(good.to_dict(), params=dict(good.params, delta_abs=0.0)))
+    assert zero.at_bounds == {"delta_abs": "lower"}
+    assert "delta_abs (lower 0: no threshold)" in zero.summary()
+    assert "may not suit" not in zero.summary()
+    # the paper's Step II is unconstrained: an estimate past a bound counts, said as such
+    past = FitResult.from_dict(dict(good.to_dict(), params=dict(good.params, tau_m=-1.0)))
+    assert past.at_bounds["tau_m"] == "lower" and "tau_m (beyond lower 0)" in past.summary()
+
+
+def test_the_bound_warning_is_for_the_users_call_not_the_packages_loops(in_degrees):
+    """The package's own callers (diagnose, compare, campaigns, the calibration replicates,
+    the example, the command line) fit in loops and keep the flag to the result: a fit called
+    from a file of the package does not warn; fit_paper warns as fit_fast does."""
+    import warnings
+
+    from bayespilot._caller import _PACKAGE
+    from bayespilot.fit.result import EstimateOnBoundWarning
+
+    ns: dict = {}
+    exec(compile("def call(f, *a, **k):\n    return f(*a, **k)\n",
+                 str(_PACKAGE / "campaign.py"), "exec"), ns)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        inner = ns["call"](fit_fast, in_degrees, seed=0, n_starts=4, profile_step=0.01)
+    assert inner.at_bounds.get("K_v") == "upper"
+    assert not [w for w in caught if issubclass(w.category, EstimateOnBoundWarning)]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        paper = fit_paper(in_degrees, seed=0, repetitions=2, n_best=1, population=20,
+                          generations=5)
+    assert paper.at_bounds.get("K_v") == "upper"
+    bound = [w for w in caught if issubclass(w.category, EstimateOnBoundWarning)]
+    assert len(bound) == 1 and bound[0].filename == __file__ and "K_v" in str(bound[0].message)
+
+
+def test_summary_and_labels_take_the_units_of_the_models_parameters(sim):
+    """A parameter of the user's own (here a visual lag in s) printed a blank unit, and only
+    delta_abs was ever marked (fixed): the summary and the plots' labels now take the units
+    the model declares, and every fixed parameter is marked."""
+    import warnings
+
+    from bayespilot.model import FirstOrderLag
+    from bayespilot.plots import _param_label
+
+    model = paper_model().add_stage("visual", FirstOrderLag("T_vis"), [
+        Parameter("T_vis", 0.0, 0.5, 0.05, "s", "visual lag")]).fix(zeta_nm=0.3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = fit_fast(sim.recording, model, threshold=False, seed=0, n_starts=2)
+    rows = {ln.split()[0]: ln for ln in fit.summary().splitlines()[3:-1] if ln[:1].isalpha()}
+    assert rows["T_vis"].split()[2] == "s" and rows["K_m"].split()[2] == "rad/IPUT"
+    assert rows["zeta_nm"].endswith("(fixed)") and rows["delta_abs"].endswith("(fixed)")
+    assert not rows["K_v"].endswith("(fixed)")
+    assert fit.fixed == ("zeta_nm", "delta_abs") and "T_vis" in fit.bounds
+    back = FitResult.from_dict(fit.to_dict())
+    assert back.summary() == fit.summary()
+    assert _param_label("T_vis", back) == _param_label("T_vis", model) != _param_label("T_vis")
+    assert "(s)" in _param_label("T_vis", back)
+    # without units recorded (an older file) the paper's parameters keep Table 1's
+    old = FitResult.from_dict({k: v for k, v in fit.to_dict().items() if k != "units"})
+    assert "rad/IPUT" in old.summary()
+
+
+def test_an_offset_in_u_is_warned_of_before_fitting(sim):
+    """The model takes u as zero-mean about the trim: +0.02 rad on u moved delta_abs 0.0097 ->
+    0.0148 and K_m 0.60 -> 0.67 in an audit while the VAF (about the mean) hid it.  A mean of
+    u that is a sizeable fraction of its spread is warned of, at the user's line, before the
+    fit; the package's own runs stay silent."""
+    import warnings
+
+    from bayespilot.fit.three_step import OFFSET_RATIO, _check_fittable
+    from bayespilot.recording import QuestionableRecordingWarning
+
+    rec = sim.recording
+    shifted = rec.with_signals(u=rec.u + 0.02)  # |mean|/std 0.54-0.56
+    for fit in (fit_fast, fit_paper):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("error", QuestionableRecordingWarning)  # stops the fit
+            with pytest.raises(QuestionableRecordingWarning,
+                               match=r"u has a mean of 0.02\d*, 0.5\d of its standard "
+                                     r"deviation .*zero-mean.*remove the stick offset"):
+                fit(shifted, seed=0)
+        assert not caught
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _check_fittable(rec, paper_model(), 0.0)
+        _check_fittable(rec.with_signals(u=rec.u + 0.5 * OFFSET_RATIO * rec.u.std()),
+                        paper_model(), 0.0)
+        _check_fittable(shifted, paper_model(), 2.0)
+    assert len(caught) == 1 and "after the first 2 s" in str(caught[0].message)
+    assert caught[0].filename == __file__

@@ -4,12 +4,18 @@ Implements and extends the time-domain identification method of Pool et al.
 (2012), J. Guidance, Control, and Dynamics 35(3), 749-763.
 """
 
-from importlib.metadata import PackageNotFoundError, version
+from importlib import metadata as _metadata
 
 try:
-    __version__ = version("bayespilot")
-except PackageNotFoundError:  # running from a source tree that is not installed
+    __version__ = _metadata.version("bayespilot")
+except _metadata.PackageNotFoundError:  # running from a source tree that is not installed
     __version__ = "0.0.0+unknown"
+
+#: The public names: the two entry points, imported on first use (see
+#: :func:`__getattr__`); ``__version__`` besides.
+__all__ = ["sample", "compare"]
+
+_LAZY = ("sample", "compare")
 
 
 def __getattr__(name: str):
@@ -20,8 +26,13 @@ def __getattr__(name: str):
     :func:`bayespilot.sample.sample` and ``bayespilot.compare(recording)``
     runs :func:`bayespilot.compare.compare`.
     """
-    if name in ("sample", "compare"):
+    if name in _LAZY:
         from importlib import import_module
 
         return import_module(f".{name}", __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The module's names with the lazily imported entry points, for tab completion."""
+    return sorted(set(globals()) | set(_LAZY))

@@ -63,6 +63,7 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from . import presets
+from ._caller import warn_at_caller
 
 __all__ = ["Job", "CampaignError", "CampaignSummary", "paper_study", "run_job", "run_campaign",
            "load_results", "summarise", "summary_markdown", "write_summary_csv", "job_seed",
@@ -568,7 +569,7 @@ def _warm_numba_cache(methods: Iterable[str]) -> None:
             fit_paper(rec, threshold=thr, seed=0, repetitions=1, n_best=1, population=4,
                       generations=1)
         if "fast" in methods:
-            fit_fast(rec, threshold=thr, seed=0, n_starts=1, profile_step=0.05)
+            fit_fast(rec, threshold=thr, seed=0, n_starts=1, profile_step=0.05, discard=0.0)
 
 
 def _first_line(exc: BaseException) -> str:
@@ -670,7 +671,7 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
     if not tasks:
         return completed, errors
     from distributed import as_completed
-    from tqdm import tqdm
+    from tqdm.auto import tqdm  # a widget in a notebook, text on a terminal
 
     with ExitStack() as stack:
         # connect first, so that an unreachable scheduler is reported at once
@@ -679,9 +680,8 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
             try:
                 warm()
             except Exception as exc:  # not fatal: the workers then compile for themselves
-                warnings.warn(f"warming numba's cache failed ({_first_line(exc)}); each "
-                              f"worker compiles the kernels itself", RuntimeWarning,
-                              stacklevel=3)
+                warn_at_caller(f"warming numba's cache failed ({_first_line(exc)}); each "
+                               f"worker compiles the kernels itself", RuntimeWarning)
         futures = {}
         for key, fn, args, ctx in tasks:
             if scatter:  # each argument whole, as one future ([a]: not its items one by one)

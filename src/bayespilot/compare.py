@@ -90,6 +90,7 @@ Wilcoxon signed-rank test).
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 import sys
@@ -110,6 +111,7 @@ from .noise import ARNoise
 from .sample import likelihood_options
 from .recording import Recording
 from ._blas import one_blas_thread
+from ._caller import warn_at_caller
 
 if TYPE_CHECKING:  # pragma: no cover
     from .sample import Posterior
@@ -329,7 +331,7 @@ class Evidence:
         """JSON-ready dict of every attribute except ``samples`` and ``weights``."""
         d = {k: v for k, v in self.__dict__.items() if k not in ("samples", "weights")}
         d["best"], d["mean"] = dict(self.best), dict(self.mean)
-        d["settings"] = dict(self.settings)
+        d["settings"] = copy.deepcopy(self.settings)
         d["parameter_names"] = list(self.parameter_names)
         return d
 
@@ -1007,8 +1009,9 @@ class Comparison:
         return jeffreys_category(self.log_bayes_factor)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (the keys of the CLI's ``--json``)."""
-        ic = self.information_criteria
+        """JSON-ready dict (the keys of the CLI's ``--json``); a copy: changing it leaves the
+        comparison as it is."""
+        ic = copy.deepcopy(self.information_criteria)
         sd = self.savage_dickey
         return {
             "log_bayes_factor": self.log_bayes_factor,
@@ -1029,7 +1032,8 @@ class Comparison:
             "information_criteria": ic,
             "evidence_threshold": self.evidence_threshold.to_dict(),
             "evidence_none": self.evidence_none.to_dict(),
-            "settings": self.settings, "seed": self.seed, "elapsed_seconds": self.elapsed,
+            "settings": copy.deepcopy(self.settings), "seed": self.seed,
+            "elapsed_seconds": self.elapsed,
             "source": self.source,
         }
 
@@ -1139,6 +1143,29 @@ class Comparison:
 
     def __str__(self) -> str:
         return self.summary()
+
+    def __repr__(self) -> str:
+        """One line (the dataclass's would print both evidences and every setting)."""
+        n = self.settings.get("n_samples") if isinstance(self.settings, Mapping) else None
+        return (f"<Comparison: ln BF = {_num(self.log_bayes_factor, '+.2f')} +- "
+                f"{_num(self.log_bayes_factor_err, '.2f')} -> {self.decision}"
+                f"{'' if n is None else f', N = {n}'}{_source(self.source)}>")
+
+
+def _num(v, spec: str) -> str:
+    """``format(v, spec)``, or ``str(v)`` for what is not a number (a repr must not raise)."""
+    try:
+        return format(float(v), spec)
+    except (TypeError, ValueError):
+        return str(v)
+
+
+def _source(source) -> str:
+    """``", <source>"`` for a one-line repr, a long path cut to its end; "" without one."""
+    if not source:
+        return ""
+    text = str(source)
+    return f", {text if len(text) <= 60 else '...' + text[-57:]}"
 
 
 #: sample()'s arguments that compare sets itself (the recording, the model, the likelihood
@@ -1290,7 +1317,10 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         with threshold, serves both models).
     discard : float, optional
         Seconds at the start left out of the likelihood; default 0 for
-        ``"eq4"``, :data:`bayespilot.sample.COLOURED_DISCARD` for ``"coloured"``.
+        ``"eq4"``, :data:`bayespilot.sample.COLOURED_DISCARD` for ``"coloured"``;
+        for ``"eq4"`` on a record known not to be a whole number of forcing
+        periods, :func:`~bayespilot.likelihood.startup_discard` (2 s), as
+        :func:`~bayespilot.fit.fast.fit_fast` does.
     nlive, dlogz, sample
         dynesty settings (:func:`nested_evidence`).
     runs : int
@@ -1340,7 +1370,11 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     if discard is None:
         from .sample import COLOURED_DISCARD
 
-        discard = COLOURED_DISCARD if likelihood == "coloured" else 0.0
+        from .likelihood import _startup_default
+
+        # eq4 on a record cut mid-period: its start-up left out, as fit_fast does
+        discard = COLOURED_DISCARD if likelihood == "coloured" else \
+            _startup_default(recording, "periodic")
     if THRESHOLD not in model.parameter_names:
         raise ValueError(f"the model has no free {THRESHOLD!r} to compare against 0 "
                          f"(free: {', '.join(model.parameter_names)})")
@@ -1426,10 +1460,10 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
                 "posterior": post_info or None, "entropy": str(ss.entropy),
                 "threshold_runs": reruns, "mode_check": bool(mode_ok)}
     if not mode_ok:
-        warnings.warn(f"the nested sampler's best ln L with threshold ({ev1.max_log_lik:.1f}) is "
-                      f"below that without ({ev0.max_log_lik:.1f}) in all {len(reruns)} runs: "
-                      "they missed the main mode, so ln BF is too low; rerun with more nlive",
-                      RuntimeWarning, stacklevel=2)
+        warn_at_caller(f"the nested sampler's best ln L with threshold ({ev1.max_log_lik:.1f}) is "
+                       f"below that without ({ev0.max_log_lik:.1f}) in all {len(reruns)} runs: "
+                       "they missed the main mode, so ln BF is too low; rerun with more nlive",
+                       RuntimeWarning)
     i_max = threshold_input_max(model, recording)
     onset = plateau_onset(model, recording)
     plateau = None if onset is None else ev1.probability(THRESHOLD, onset)
@@ -1558,6 +1592,15 @@ class PooledComparison:
             names it).
         """
         return read_result(path, cls.from_dict, "a PooledComparison")
+
+    def __str__(self) -> str:
+        return self.summary()
+
+    def __repr__(self) -> str:
+        """One line: the condition, the number of recordings, the sum ln BF and the decision."""
+        return (f"<PooledComparison: {self.label + ', ' if self.label else ''}{self.n} "
+                f"recordings, sum ln BF = {_num(self.log_bayes_factor, '+.2f')} +- "
+                f"{_num(self.log_bayes_factor_err, '.2f')} -> {self.decision}>")
 
     def summary(self) -> str:
         """One line for people: the sum ln BF and decision, the per-recording counts, the tests."""

@@ -130,7 +130,7 @@ def _build(signals: dict[str, np.ndarray], rate: float, kth: float, task: str,
             msg = msg[len(prefix):]
         raise _fail(where, msg) from None
     # valid but unlike the paper's data (short, slow): warn, at the reader's caller
-    _warn_if_questionable(rec, stacklevel=3)
+    _warn_if_questionable(rec)
     return rec
 
 

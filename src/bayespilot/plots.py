@@ -41,17 +41,22 @@ SMALLEST_FONT = 7.0
 
 
 def _pyplot():
-    """matplotlib.pyplot, on the Agg backend when there is no display to draw on, or when it is
-    first imported off the main thread (a batch's report drawn in a dask worker's thread,
-    where a GUI backend cannot run); a backend already chosen is kept."""
+    """matplotlib.pyplot, on the Agg backend when there is no display to draw on and no
+    backend was chosen, or when it is first imported off the main thread (a batch's report
+    drawn in a dask worker's thread, where a GUI backend cannot run); a backend already in use
+    is kept, and so is one chosen by ``MPLBACKEND`` or matplotlibrc (Jupyter's kernel picks
+    its inline backend through ``MPLBACKEND``, also on a headless server)."""
     import threading
 
     import matplotlib
 
     headless = (sys.platform.startswith("linux")
                 and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"))
+    # (rcParams._get_backend_or_none is matplotlib's own test for "chosen"; absent: not known)
+    chosen = os.environ.get("MPLBACKEND") or getattr(
+        matplotlib.rcParams, "_get_backend_or_none", lambda: None)()
     worker = threading.current_thread() is not threading.main_thread()
-    if (headless or worker) and "matplotlib.pyplot" not in sys.modules:
+    if ((headless and not chosen) or worker) and "matplotlib.pyplot" not in sys.modules:
         matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -82,13 +87,17 @@ def _new_figure(nrows: int, ncols: int, size: tuple[float, float], **kw):
 def _param_label(name: str, model: Any = None) -> str:
     """A parameter's axis label: the paper's notation with its unit (:mod:`._labels`).
 
-    The unit is the one ``model`` declares.  Without a model (a Posterior keeps only its
-    model's name) the paper's parameters have Table 1's units, a partial autocorrelation
-    ``pacf_j`` none, and another lab's parameter its symbol without a unit.
+    The unit is the one ``model`` declares (``model`` a PilotModel, or a FitResult, which
+    keeps its model's units).  Without a model (a Posterior keeps only its model's name) the
+    paper's parameters have Table 1's units, a partial autocorrelation ``pacf_j`` none, and
+    another lab's parameter its symbol without a unit.
     """
     from . import presets
     from ._labels import label, parameter_label
 
+    units = getattr(model, "units", None)  # a FitResult's: as its model declared them
+    if isinstance(units, Mapping) and name in units:
+        return label(name, units[name])
     if model is not None:
         try:
             model.parameter(name)

@@ -9,7 +9,6 @@ turns files into Recordings and adds the file name to any error.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
@@ -80,11 +79,14 @@ def questionable(recording: "Recording") -> list[str]:
     return reasons
 
 
-def _warn_if_questionable(recording: "Recording", stacklevel: int = 2) -> None:
-    """Issue one :class:`QuestionableRecordingWarning` per reason :func:`questionable` gives."""
+def _warn_if_questionable(recording: "Recording") -> None:
+    """Issue one :class:`QuestionableRecordingWarning` per reason :func:`questionable` gives,
+    at the user's line (a recording read inside a batch or the CLI as much as a direct one)."""
+    from ._caller import warn_at_caller
+
     where = f"{recording.source}: " if recording.source else ""
     for reason in questionable(recording):
-        warnings.warn(where + reason, QuestionableRecordingWarning, stacklevel=stacklevel + 1)
+        warn_at_caller(where + reason, QuestionableRecordingWarning)
 
 
 # ---------------------------------------------------------------------------

@@ -65,11 +65,12 @@ import numpy as np
 from . import _files
 from .fit.result import FitResult
 from .kernels import _coloured as C
-from .likelihood import Likelihood
+from .likelihood import Likelihood, _startup_default
 from .model import PilotModel, paper_model
 from .noise import MAX_AR_ORDER, ARNoise
 from .recording import Recording
 from ._blas import one_blas_thread
+from ._caller import warn_at_caller
 from ._seeds import resolve_seed
 
 __all__ = ["sample", "Posterior", "ConvergenceWarning", "LIKELIHOODS", "AR_MODES", "PACF_BOUND",
@@ -253,9 +254,13 @@ class Posterior:
         ------
         ValueError
             If ``name`` was not sampled.
+
+        Notes
+        -----
+        A copy: changing it leaves the posterior as it is.
         """
         self._check_name(name)
-        return np.asarray(self.idata.posterior[name].values, dtype=float).ravel()
+        return np.array(self.idata.posterior[name].values, dtype=float).ravel()
 
     def credible_interval(self, name: str, prob: float = 0.9) -> tuple[float, float]:
         """Highest-density interval of ``name`` holding ``prob`` of the posterior (arviz.hdi).
@@ -372,6 +377,21 @@ class Posterior:
                                        for it, t in settings["tau_history"]]
         return cls(idata, tuple(meta["parameter_names"]), _files.numbers(meta["tau"]),
                    bool(meta["converged"]), settings, meta["seed"])
+
+    def __repr__(self) -> str:
+        """One line (the dataclass's would print the whole InferenceData and settings)."""
+        try:
+            sizes = self.idata.posterior.sizes
+            n_walkers, n_draws = int(sizes["chain"]), int(sizes["draw"])
+            draws = f", {n_walkers * n_draws} draws ({n_walkers} walkers x {n_draws})"
+        except Exception:  # an idata without the usual dims: still a repr
+            draws = ""
+        names = tuple(self.parameter_names)
+        shown = (", ".join(names) if len(names) <= 4
+                 else f"{', '.join(names[:3])}, ..., {names[-1]}")
+        return (f"<Posterior: {len(names)} parameters ({shown}){draws}, "
+                f"{(self.settings or {}).get('likelihood', '?')} likelihood, "
+                f"{'converged' if self.converged else 'NOT converged'}, seed {self.seed}>")
 
     def __str__(self) -> str:
         s = self.summary()
@@ -852,7 +872,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     discard : float, optional
         Seconds at the start left out of the likelihood (see
         :class:`~bayespilot.likelihood.Likelihood`).  Default 0 for ``"eq4"``
-        (the paper's Eq. 4) and :data:`COLOURED_DISCARD` for ``"coloured"``.
+        (the paper's Eq. 4) and :data:`COLOURED_DISCARD` for ``"coloured"``;
+        for ``"eq4"`` on a record known not to be a whole number of forcing
+        periods, :func:`~bayespilot.likelihood.startup_discard` (2 s), as
+        :func:`~bayespilot.fit.fast.fit_fast` does.
     init : FitResult or mapping, optional
         Centre of the initial ball.  Default: :func:`~bayespilot.fit.fast.fit_fast`
         with ``seed`` (a prediction-error fit, ``noise="ar"``, for ``"coloured"``).
@@ -931,7 +954,9 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         raise ValueError("noise is an ARNoise for likelihood='coloured' with ar='fixed' only, "
                          f"got {type(noise).__name__} with likelihood={likelihood!r}, ar={ar!r}")
     if discard is None:
-        discard = COLOURED_DISCARD if likelihood == "coloured" else 0.0
+        # eq4 on a record cut mid-period: its start-up left out, as fit_fast does
+        discard = COLOURED_DISCARD if likelihood == "coloured" else \
+            _startup_default(recording, "periodic")
     if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
             or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
         raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
@@ -1043,12 +1068,12 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
                      min_steps=min_steps, check_every=check_every, tau_factor=tau_factor,
                      tau_rtol=tau_rtol, random_state=rs, progress=progress, backend=bk)
     if not run.converged:
-        warnings.warn(ConvergenceWarning(
+        warn_at_caller(ConvergenceWarning(
             f"the chain reached max_steps = {max_steps} before it was {tau_factor:g} "
             f"autocorrelation times long with a settled tau (max tau = "
             f"{np.nanmax(run.tau) if np.any(np.isfinite(run.tau)) else float('nan'):.0f} steps); "
             "the posterior is a rough estimate: run longer (resume with the same backend)",
-            run.tau, run.n_steps), stacklevel=2)
+            run.tau, run.n_steps))
     acc = np.asarray(run.sampler.acceptance_fraction, float)
     settings.update({"n_steps": run.n_steps, "resumed_from": run.start_iteration,
                      "tau_history": run.history, "acceptance_fraction": float(np.mean(acc)),

@@ -124,6 +124,23 @@ class _JSONSummary:
         return cls.from_dict(d, source_file=str(path))
 
 
+def _short_repr(result: Any, what: str, source: Any = None) -> str:
+    """``<Class: decision, what, source>`` on one line, for a diagnosis in a notebook; it
+    does not raise on a result read back from its JSON (or half built)."""
+    try:
+        if getattr(result, "mismatch", False):
+            p = getattr(getattr(result, "chosen", None), "p_value", None)
+            decision = (f"{result.physics} justified"
+                        + ("" if p is None else f" (p = {float(p):.2g})"))
+        else:
+            decision = "no extension justified"
+    except Exception:  # noqa: BLE001 - a repr must not raise
+        decision = "?"
+    text = "" if not source else str(source)
+    text = text if len(text) <= 60 else "..." + text[-57:]
+    return f"<{type(result).__name__}: {decision}, {what}{', ' + text if text else ''}>"
+
+
 def _base_from(d: Mapping[str, Any]) -> dict[str, Any]:
     """A base fit's dict (``base``) as a result file holds it, its nulls NaN."""
     return {k: numbers(v) if isinstance(v, Mapping) else number(v) for k, v in d.items()}
@@ -202,7 +219,7 @@ def _calibration_lines(ranking) -> list[str]:
     return [""] + lines if lines else []
 
 
-@dataclass
+@dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
 class DiagnosisResult(_JSONSummary):
     """What :func:`diagnose` found.
 
@@ -259,6 +276,10 @@ class DiagnosisResult(_JSONSummary):
     posterior: Any = field(default=None, repr=False)
     bayes_factor: Any = field(default=None, repr=False)
     base_model: Any = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        """One line (the dataclass's would print every candidate's arrays)."""
+        return _short_repr(self, f"{len(self.ranking or ())} candidates", self.source)
 
     def _posterior_dict(self) -> dict[str, Any] | None:
         if self.chosen is None:
@@ -603,6 +624,12 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
                      "paper's plant, 4/s^2 (and control_gain 0.69 unless given): the "
                      "bootstrap simulates that plant; if yours differs, give it in the "
                      "sidecar, or the evidence's p-values are of the wrong plant")
+    elif obstacle is None and n_bootstrap > 0 and recording.task == "other" \
+            and "control_gain" not in recording.metadata:
+        notes.append("the recording (task 'other') gives its plant but no control_gain, which "
+                     "the recording format reads as the paper's K_delta_u, 0.69: the bootstrap "
+                     "simulates the loop with that gain; if yours differs, give it in the "
+                     "sidecar, or the evidence's p-values are of the wrong loop")
     for note in notes:
         _warn(recording, note)
     t0 = time.perf_counter()
@@ -610,8 +637,9 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
     bar.set_postfix_str("base fit")
     base_model = paper_model(oversample=oversample)
     if base_fit is None:
+        # discard=0: the diagnosis leaves out its own start (skip_seconds) of every statistic
         base_fit = fit_fast(recording, base_model, seed=seed, n_starts=n_starts,
-                            profile_step=0.005)
+                            profile_step=0.005, discard=0.0)
     start = {k: v for k, v in base_fit.params.items() if k in base_model.parameter_names}
     timings["base_fit"] = time.perf_counter() - t0
     skip = int(round(skip_seconds * recording.sample_rate_hz))
@@ -942,74 +970,76 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     from tqdm.auto import tqdm
 
     bar = tqdm(total=2 + len(names), desc="diagnose", unit="stage", disable=not progress)
-    run = _prepare(recording, seed=seed, n_bootstrap=n_bootstrap, base_fit=base_fit,
-                   skip_seconds=skip_seconds, omega_c=omega_c, n_starts=n_starts,
-                   profile_noise=profile_noise, bar=bar, oversample=oversample,
-                   noise_passes=noise_passes)
-    base_model, base_fit, base, noise = run.base_model, run.base_fit, run.base, run.noise
-    lik0, forcing, st, where, boot_info, skip = (run.lik0, run.forcing, run.statistics,
-                                                  run.where, run.boot_info, run.skip)
-    timings = run.timings
+    try:  # the bar closed however the call ends (an interrupt, an error)
+        run = _prepare(recording, seed=seed, n_bootstrap=n_bootstrap, base_fit=base_fit,
+                       skip_seconds=skip_seconds, omega_c=omega_c, n_starts=n_starts,
+                       profile_noise=profile_noise, bar=bar, oversample=oversample,
+                       noise_passes=noise_passes)
+        base_model, base_fit, base, noise = run.base_model, run.base_fit, run.base, run.noise
+        lik0, forcing, st, where, boot_info, skip = (run.lik0, run.forcing, run.statistics,
+                                                      run.where, run.boot_info, run.skip)
+        timings = run.timings
 
-    # -- name
-    t2 = time.perf_counter()
-    rebased = []
-    guide = None
-    if noise.omega_c > D.OMEGA_C:
-        # a wider band than the default: start each extension from its low-band fit too
-        bar.set_postfix_str(f"low-band fits (omega_c = {D.OMEGA_C:g} rad/s)")
-        guide = D.guide_fits(names, base_model, recording,
-                             {k: v for k, v in base_fit.params.items()
-                              if k in base_model.parameter_names}, skip, get_extension)
-    kept: dict[str, Any] = {}  # each candidate's best fit over the rounds
-    for _ in range(MAX_REBASE + 1):
-        results, refined = _fit_candidates(names, recording, base_model, base, noise, where,
-                                           boot_info, profile_noise, bar, guide)
-        for r in results:
-            old = kept.get(r.physics)
-            if (old is None or r.fit is None or old.fit is None
-                    or r.fit.neg_log_lik <= old.fit.neg_log_lik):
-                kept[r.physics] = r
-        if profile_noise:
-            break  # each fit has its own noise model: the -ln L are not comparable
-        better = _best_null(names, [kept[n] for n in names], base_model, recording, noise)
-        if better is None or not better.neg_log_lik < base.neg_log_lik:
-            break
-        gain = base.neg_log_lik - better.neg_log_lik
-        base = better
-        if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
-            rebased.append({"gain": gain, "refitted": False})
-            break
-        # a better basin of the base model: every extension again from there
-        rebased.append({"gain": gain, "refitted": True})
-        bar.total += len(names)  # every extension once more
-        bar.refresh()
-    results = [kept[n] for n in names]
-    if rebased:
-        # every test against the best base fit found (threshold-shape: or its refinement)
-        for r in results:
-            ext = get_extension(r.physics)
-            ref = base.neg_log_lik
-            if ext.refine_threshold and refined is not None:
-                ref = min(ref, refined.neg_log_lik)
-            D.retest(r, ext, ref)
-    timings["name"] = time.perf_counter() - t2
-    t3 = time.perf_counter()
-    calibrate = None
-    if n_calibrate > 0:
-        calibrate = _calibrator([dataclasses.replace(run, base=base)], [recording],
-                                n_calibrate, seed, bar, n_starts)
-    uncalibrated = run.obstacle if n_calibrate > 0 else None
-    ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
-    timings["calibrate"] = time.perf_counter() - t3
-    t4 = time.perf_counter()
-    if (refit and chosen is not None and chosen.fit is not None
-            and get_extension(chosen.physics).likelihood == "gls"):
-        bar.total += 1  # the refit and profile intervals: seconds, the bar still open
-        bar.set_postfix_str(f"refit of {chosen.physics}")
-        D.report_final_fit(chosen, base_model, recording, noise, intervals=intervals)
-        bar.update(1)
-    bar.close()
+        # -- name
+        t2 = time.perf_counter()
+        rebased = []
+        guide = None
+        if noise.omega_c > D.OMEGA_C:
+            # a wider band than the default: start each extension from its low-band fit too
+            bar.set_postfix_str(f"low-band fits (omega_c = {D.OMEGA_C:g} rad/s)")
+            guide = D.guide_fits(names, base_model, recording,
+                                 {k: v for k, v in base_fit.params.items()
+                                  if k in base_model.parameter_names}, skip, get_extension)
+        kept: dict[str, Any] = {}  # each candidate's best fit over the rounds
+        for _ in range(MAX_REBASE + 1):
+            results, refined = _fit_candidates(names, recording, base_model, base, noise, where,
+                                               boot_info, profile_noise, bar, guide)
+            for r in results:
+                old = kept.get(r.physics)
+                if (old is None or r.fit is None or old.fit is None
+                        or r.fit.neg_log_lik <= old.fit.neg_log_lik):
+                    kept[r.physics] = r
+            if profile_noise:
+                break  # each fit has its own noise model: the -ln L are not comparable
+            better = _best_null(names, [kept[n] for n in names], base_model, recording, noise)
+            if better is None or not better.neg_log_lik < base.neg_log_lik:
+                break
+            gain = base.neg_log_lik - better.neg_log_lik
+            base = better
+            if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
+                rebased.append({"gain": gain, "refitted": False})
+                break
+            # a better basin of the base model: every extension again from there
+            rebased.append({"gain": gain, "refitted": True})
+            bar.total += len(names)  # every extension once more
+            bar.refresh()
+        results = [kept[n] for n in names]
+        if rebased:
+            # every test against the best base fit found (threshold-shape: or its refinement)
+            for r in results:
+                ext = get_extension(r.physics)
+                ref = base.neg_log_lik
+                if ext.refine_threshold and refined is not None:
+                    ref = min(ref, refined.neg_log_lik)
+                D.retest(r, ext, ref)
+        timings["name"] = time.perf_counter() - t2
+        t3 = time.perf_counter()
+        calibrate = None
+        if n_calibrate > 0:
+            calibrate = _calibrator([dataclasses.replace(run, base=base)], [recording],
+                                    n_calibrate, seed, bar, n_starts)
+        uncalibrated = run.obstacle if n_calibrate > 0 else None
+        ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
+        timings["calibrate"] = time.perf_counter() - t3
+        t4 = time.perf_counter()
+        if (refit and chosen is not None and chosen.fit is not None
+                and get_extension(chosen.physics).likelihood == "gls"):
+            bar.total += 1  # the refit and profile intervals: seconds, the bar still open
+            bar.set_postfix_str(f"refit of {chosen.physics}")
+            D.report_final_fit(chosen, base_model, recording, noise, intervals=intervals)
+            bar.update(1)
+    finally:
+        bar.close()
     timings["refit"] = time.perf_counter() - t4
 
     # -- model and show: residual after the chosen extension

@@ -192,7 +192,8 @@ def _replicate(run, recording, gen, seed: int, n_starts: int):
     except RuntimeError:
         return None
     rec = sim.recording
-    fit = fit_fast(rec, run.base_model, seed=seed, n_starts=n_starts, profile_step=0.005)
+    fit = fit_fast(rec, run.base_model, seed=seed, n_starts=n_starts, profile_step=0.005,
+                   discard=0.0)  # as diagnose's base fit: the run's skip leaves the start out
     start = {k: v for k, v in fit.params.items() if k in run.base_model.parameter_names}
     if not np.all(np.isfinite(Likelihood(run.base_model, rec).residual(start))):
         return None

@@ -373,7 +373,7 @@ class Whitened:
         return 0.5 * self.m * math.log(max(float(np.mean(w * w)), 1e-300)) + 0.5 * self.m
 
 
-@dataclass
+@dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
 class FitSummary:
     """A GLS (or censored) fit: parameters, -ln L, covariance of the refined parameters.
 
@@ -773,7 +773,7 @@ def report_final_fit(chosen: "CandidateResult", base_model: PilotModel, recordin
     chosen.interval = found
 
 
-@dataclass
+@dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
 class CandidateResult:
     """The test of one catalogue extension against the base model.
 

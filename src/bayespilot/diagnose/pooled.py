@@ -39,11 +39,12 @@ import numpy as np
 from scipy import linalg, optimize, stats
 
 from .._blas import one_blas_thread
+from .._caller import warn_at_caller
 from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
                _base_from, _bic, _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
-               _ranking_and_chosen,
+               _ranking_and_chosen, _short_repr,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -104,7 +105,7 @@ def pooling_disagreements(recordings: Sequence[Recording]) -> str | None:
     return "; ".join(said) or None
 
 
-@dataclass
+@dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
 class PooledDiagnosisResult(_JSONSummary):
     """What :func:`diagnose_pooled` found.
 
@@ -146,6 +147,11 @@ class PooledDiagnosisResult(_JSONSummary):
     elapsed: float
     arrays: dict = field(default_factory=dict, repr=False)
     posterior: Any = field(default=None, repr=False)
+
+    def __repr__(self) -> str:
+        """One line (the dataclass's would print every run's and candidate's numbers)."""
+        return _short_repr(self, f"{len(self.runs or ())} runs pooled, "
+                                 f"{len(self.ranking or ())} candidates")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``runs``, ... ."""
@@ -810,88 +816,89 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     mixed = pooling_disagreements(recs)
     if mixed:
-        warnings.warn(f"the runs are not of one subject and condition ({mixed}); pooling "
-                      "assumes the physics left out is the same in every run", PoolingWarning,
-                      stacklevel=2)
+        warn_at_caller(f"the runs are not of one subject and condition ({mixed}); pooling "
+                       "assumes the physics left out is the same in every run", PoolingWarning)
     t0 = time.perf_counter()
     bar = tqdm(total=2 * len(recs) + len(names), desc="diagnose (pooled)", unit="stage",
                disable=not progress)
-    runs = [_prepare(rec, seed=seed + j, n_bootstrap=n_bootstrap,
-                     base_fit=None, skip_seconds=skip_seconds, omega_c=omega_c,
-                     n_starts=n_starts, profile_noise=False, bar=bar, oversample=oversample,
-                     noise_passes=noise_passes)
-            for j, rec in enumerate(recs)]
-    keys = sorted(set.intersection(*(set(r.where) for r in runs)))
-    where = {}
-    for k in keys:
-        ps = [r.where[k].p_value for r in runs]
-        ok = [min(max(q, 1e-300), 1.0) for q in ps if math.isfinite(q)]
-        where[k] = {"p_value": float(stats.combine_pvalues(ok, method="fisher")[1])
-                    if len(ok) == len(ps) and ok else math.nan,
-                    "values": [r.where[k].value for r in runs]}
-    guide = None
-    if runs[0].noise.omega_c > D.OMEGA_C:
-        # a wider band than the default: start each extension from its low-band fit too
-        bar.set_postfix_str(f"low-band fits (omega_c = {D.OMEGA_C:g} rad/s)")
-        guide = _pooled_guide(names, runs, recs)
-    rebased = []
-    kept: dict[str, Any] = {}  # each candidate's best pooled fit over the rounds
-    fits, shares, own = {}, {}, {}
-    for _ in range(MAX_REBASE + 1):
-        results, sh, fi, ow, refined = _pooled_candidates(names, runs, recs, where, bar, guide)
-        for r in results:
-            old = kept.get(r.physics)
-            if (old is None or r.fit is None or old.fit is None
-                    or r.fit.neg_log_lik <= old.fit.neg_log_lik):
-                kept[r.physics] = r
-                for store, new in ((fits, fi), (shares, sh), (own, ow)):
-                    if r.physics in new:
-                        store[r.physics] = new[r.physics]
-        better = _pooled_null(names, fits, runs, recs)
-        gain = float(sum(r.base.neg_log_lik - b.neg_log_lik for r, b in zip(runs, better)))
-        if not gain > 0:
-            break
-        for run, b in zip(runs, better):
-            run.base = b
-        if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
-            rebased.append({"gain": gain, "refitted": False})
-            break
-        # a better basin of the base model in some run: every extension again from there
-        rebased.append({"gain": gain, "refitted": True})
-        bar.total += len(names)  # every extension once more
-        bar.refresh()
-    results = [kept[n] for n in names]
-    if rebased:
-        # every test against the runs' best base fits found (threshold-shape: or the refined)
-        ref = float(sum(r.base.neg_log_lik for r in runs))
-        for r in results:
-            ext = get_extension(r.physics)
-            if ext.refine_threshold and refined is not None and refined[0] < ref:
-                D.retest(r, ext, refined[0])  # per-run shares stay against the refined base
-                continue
-            D.retest(r, ext, ref)
-            if r.physics in own:
-                shares[r.physics] = [float(run.base.neg_log_lik - g)
-                                     for run, g in zip(runs, own[r.physics])]
-    calibrate = (_calibrator(runs, recs, n_calibrate, seed, bar, n_starts) if n_calibrate > 0
-                 else None)
-    ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
-    final = None
-    t_refit = time.perf_counter()
-    if refit and chosen is not None and chosen.physics in fits:
-        bar.total += 1  # the pooled refit: seconds, the bar still open
-        bar.set_postfix_str(f"refit of {chosen.physics}")
-        ext = get_extension(chosen.physics)
-        ps, f, cov, own = pooled_final_fit(ext, runs[0].base_model, recs, fits[chosen.physics],
-                                           [run.noise for run in runs])
-        final = ps
-        se = np.sqrt(np.clip(np.diag(cov), 0, None))
-        # the estimates are reported, the standard errors stay the test's (as for one run)
-        chosen.record_refit(ps[0], dict(zip(ext.new_parameters, se)), own, POOLED_FINAL_FIT,
-                            [[q.get("delta_abs") for q in fits[chosen.physics]],
-                             [q.get("delta_abs") for q in ps]], neg_log_lik=float(f))
-        bar.update(1)
-    bar.close()
+    try:
+        runs = [_prepare(rec, seed=seed + j, n_bootstrap=n_bootstrap,
+                         base_fit=None, skip_seconds=skip_seconds, omega_c=omega_c,
+                         n_starts=n_starts, profile_noise=False, bar=bar, oversample=oversample,
+                         noise_passes=noise_passes)
+                for j, rec in enumerate(recs)]
+        keys = sorted(set.intersection(*(set(r.where) for r in runs)))
+        where = {}
+        for k in keys:
+            ps = [r.where[k].p_value for r in runs]
+            ok = [min(max(q, 1e-300), 1.0) for q in ps if math.isfinite(q)]
+            where[k] = {"p_value": float(stats.combine_pvalues(ok, method="fisher")[1])
+                        if len(ok) == len(ps) and ok else math.nan,
+                        "values": [r.where[k].value for r in runs]}
+        guide = None
+        if runs[0].noise.omega_c > D.OMEGA_C:
+            # a wider band than the default: start each extension from its low-band fit too
+            bar.set_postfix_str(f"low-band fits (omega_c = {D.OMEGA_C:g} rad/s)")
+            guide = _pooled_guide(names, runs, recs)
+        rebased = []
+        kept: dict[str, Any] = {}  # each candidate's best pooled fit over the rounds
+        fits, shares, own = {}, {}, {}
+        for _ in range(MAX_REBASE + 1):
+            results, sh, fi, ow, refined = _pooled_candidates(names, runs, recs, where, bar, guide)
+            for r in results:
+                old = kept.get(r.physics)
+                if (old is None or r.fit is None or old.fit is None
+                        or r.fit.neg_log_lik <= old.fit.neg_log_lik):
+                    kept[r.physics] = r
+                    for store, new in ((fits, fi), (shares, sh), (own, ow)):
+                        if r.physics in new:
+                            store[r.physics] = new[r.physics]
+            better = _pooled_null(names, fits, runs, recs)
+            gain = float(sum(r.base.neg_log_lik - b.neg_log_lik for r, b in zip(runs, better)))
+            if not gain > 0:
+                break
+            for run, b in zip(runs, better):
+                run.base = b
+            if gain <= REBASE_TOL or len(rebased) == MAX_REBASE:
+                rebased.append({"gain": gain, "refitted": False})
+                break
+            # a better basin of the base model in some run: every extension again from there
+            rebased.append({"gain": gain, "refitted": True})
+            bar.total += len(names)  # every extension once more
+            bar.refresh()
+        results = [kept[n] for n in names]
+        if rebased:
+            # every test against the runs' best base fits found (threshold-shape: or the refined)
+            ref = float(sum(r.base.neg_log_lik for r in runs))
+            for r in results:
+                ext = get_extension(r.physics)
+                if ext.refine_threshold and refined is not None and refined[0] < ref:
+                    D.retest(r, ext, refined[0])  # per-run shares stay against the refined base
+                    continue
+                D.retest(r, ext, ref)
+                if r.physics in own:
+                    shares[r.physics] = [float(run.base.neg_log_lik - g)
+                                         for run, g in zip(runs, own[r.physics])]
+        calibrate = (_calibrator(runs, recs, n_calibrate, seed, bar, n_starts) if n_calibrate > 0
+                     else None)
+        ranking, chosen, tested, level = _calibrated_decision(results, alpha, calibrate)
+        final = None
+        t_refit = time.perf_counter()
+        if refit and chosen is not None and chosen.physics in fits:
+            bar.total += 1  # the pooled refit: seconds, the bar still open
+            bar.set_postfix_str(f"refit of {chosen.physics}")
+            ext = get_extension(chosen.physics)
+            ps, f, cov, own = pooled_final_fit(ext, runs[0].base_model, recs, fits[chosen.physics],
+                                               [run.noise for run in runs])
+            final = ps
+            se = np.sqrt(np.clip(np.diag(cov), 0, None))
+            # the estimates are reported, the standard errors stay the test's (as for one run)
+            chosen.record_refit(ps[0], dict(zip(ext.new_parameters, se)), own, POOLED_FINAL_FIT,
+                                [[q.get("delta_abs") for q in fits[chosen.physics]],
+                                 [q.get("delta_abs") for q in ps]], neg_log_lik=float(f))
+            bar.update(1)
+    finally:
+        bar.close()
     t_refit = time.perf_counter() - t_refit
     run_d = []
     for j, (rec, run) in enumerate(zip(recs, runs)):

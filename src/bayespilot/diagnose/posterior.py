@@ -167,7 +167,7 @@ EDGE_DROP = 12.0
 MAX_WIDEN = 3
 
 
-@dataclass
+@dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
 class SharedPosterior:
     """The marginal posterior of a pooled diagnosis's shared extension parameters.
 
@@ -558,7 +558,6 @@ def shared_posterior(result: Any, recordings: Sequence[Recording], *, physics: s
             lo, hi = max(lo, c - width * se), min(hi, c + width * se)
         spans.append([lo, hi])
     centre = np.array([float(at[n]) for n in shared])
-    bar = tqdm(total=n_grid ** k, desc="shared posterior", unit="point", disable=not progress)
 
     def evaluate(grids):
         mesh = np.stack(np.meshgrid(*grids, indexing="ij"), axis=-1).reshape(-1, k)
@@ -590,33 +589,36 @@ def shared_posterior(result: Any, recordings: Sequence[Recording], *, physics: s
             bar.update(1)
         return logp.reshape(tuple(len(g) for g in grids)), best
 
-    grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
-    logp, best = evaluate(grids)
-    # the pooled fit's standard error is a local curvature; where the density has not fallen
-    # off at an edge of the grid inside the bounds (a ridge, a skew), that side is moved out
-    # by the grid's span (at most to the bound) and the grid evaluated again
-    widened = []
-    for _ in range(MAX_WIDEN):
-        if not np.any(np.isfinite(logp)):
-            break
-        top, moved = float(np.max(logp)), False
-        for a in range(k):
-            span = spans[a][1] - spans[a][0]
-            for side, j, sign in ((0, 0, -1.0), (1, -1, 1.0)):
-                if spans[a][side] != bounds[a][side] and \
-                        np.max(np.take(logp, j, axis=a)) > top - EDGE_DROP:
-                    edge = spans[a][side] + sign * span
-                    spans[a][side] = max(edge, bounds[a][0]) if side == 0 else \
-                        min(edge, bounds[a][1])
-                    widened.append(f"{shared[a]} {'lower' if side == 0 else 'upper'} to "
-                                   f"{spans[a][side]:.6g}")
-                    moved = True
-        if not moved:
-            break
-        bar.reset(total=n_grid ** k)
+    bar = tqdm(total=n_grid ** k, desc="shared posterior", unit="point", disable=not progress)
+    try:
         grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
         logp, best = evaluate(grids)
-    bar.close()
+        # the pooled fit's standard error is a local curvature; where the density has not fallen
+        # off at an edge of the grid inside the bounds (a ridge, a skew), that side is moved out
+        # by the grid's span (at most to the bound) and the grid evaluated again
+        widened = []
+        for _ in range(MAX_WIDEN):
+            if not np.any(np.isfinite(logp)):
+                break
+            top, moved = float(np.max(logp)), False
+            for a in range(k):
+                span = spans[a][1] - spans[a][0]
+                for side, j, sign in ((0, 0, -1.0), (1, -1, 1.0)):
+                    if spans[a][side] != bounds[a][side] and \
+                            np.max(np.take(logp, j, axis=a)) > top - EDGE_DROP:
+                        edge = spans[a][side] + sign * span
+                        spans[a][side] = max(edge, bounds[a][0]) if side == 0 else \
+                            min(edge, bounds[a][1])
+                        widened.append(f"{shared[a]} {'lower' if side == 0 else 'upper'} to "
+                                       f"{spans[a][side]:.6g}")
+                        moved = True
+            if not moved:
+                break
+            bar.reset(total=n_grid ** k)
+            grids = [np.linspace(lo, hi, n_grid) for lo, hi in spans]
+            logp, best = evaluate(grids)
+    finally:
+        bar.close()
     if not np.any(np.isfinite(logp)):
         raise ValueError("the pooled fit failed at every grid point")
     failed = int(np.sum(~np.isfinite(logp)))

@@ -34,14 +34,14 @@ import time
 import numpy as np
 from scipy.stats import qmc
 
-from ..likelihood import Likelihood
+from ..likelihood import Likelihood, _startup_default
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, ARNoise
 from ..recording import Recording
 from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
-from .three_step import _check_fittable, _model_for
+from .three_step import _check_fittable, _model_for, _warn_on_bounds
 from .._blas import one_blas_thread
 from .._seeds import resolve_seed
 
@@ -82,7 +82,14 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         whose whitening filter would otherwise
         amplify the model's start-up transient (from 0 s, a prediction-error
         fit of an 81.92-s FD run ended at T_vl 0.007 and tau_v 0.030 against
-        the truth's 0.409 and 0.279).
+        the truth's 0.409 and 0.279).  With the white output error and
+        ``initial="periodic"``, a record known not to be a whole number of
+        forcing periods (:func:`~bayespilot.likelihood.whole_periods`, e.g.
+        a 40-s run of the paper's 81.92-s forcing) gets
+        :func:`~bayespilot.likelihood.startup_discard` (2 s) too, and
+        ``settings["discard_reason"]`` says why: from 0 s the periodic start
+        wraps the cut, which took a remnant-free 40-s FT fit to K_v +6 %,
+        T_vl -10 %, zeta_nm +11 %.  Records of whole periods keep 0.
     noise : None, "ar" or ARNoise
         The output-error model: None, white (Eq. 4, the paper's); ``"ar"``, an
         AR model estimated from the data (see module docs); or a given
@@ -103,6 +110,17 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         A bad setting (``n_starts``, the steps, ``noise``, ``noise_order``
         without ``noise="ar"``), or a recording with no more than four samples
         per free parameter after ``discard`` or a constant u.
+
+    Warns
+    -----
+    EstimateOnBoundWarning
+        A parameter other than delta_abs ended on a bound of its search box
+        (:attr:`~bayespilot.fit.result.FitResult.at_bounds`), when called from
+        outside the package.
+    QuestionableRecordingWarning
+        The mean of u over the fitted samples is more than
+        :data:`~bayespilot.fit.three_step.OFFSET_RATIO` of its standard
+        deviation (a stick offset; u is taken as zero-mean about the trim).
 
     Examples
     --------
@@ -130,11 +148,19 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                          f"with noise={'None' if noise is None else 'an ARNoise'} it has none "
                          f"(got noise_order={noise_order!r})")
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
+    discard_reason = None  # why the default discard is not 0 where it was picked for that
     if discard is None:
         from ..sample import COLOURED_DISCARD
 
         # (at most a quarter of a short record: the likelihood keeps at least half)
         discard = 0.0 if noise is None else min(COLOURED_DISCARD, recording.duration / 4)
+        if discard == 0.0:
+            # a record cut mid-period: the periodic start wraps the cut (NotWholePeriodsWarning);
+            # 0 on whole periods, as before
+            discard = _startup_default(recording, initial)
+            if discard:
+                discard_reason = ("start-up left out: the record is not a whole number of "
+                                  "forcing periods")
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     _check_fittable(recording, model, discard)
@@ -158,14 +184,19 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         stages["starts_whitened"] = [r.to_dict() for r in runs]
     settings = {"n_starts": n_starts, "initial": initial, "discard": discard,
                 "model": model.name, "noise": None if given is None else given.to_dict()}
+    if discard_reason is not None:
+        settings["discard_reason"] = discard_reason
     if not has_delta:
         p, f = best0.params, best0.neg_log_lik
         if noise == "ar":
             p, f, given = _final_ar(base, recording, initial, discard, p, noise_order)
             settings["noise"] = given.to_dict()
         full = model.as_dict(model.full_vector(p), full=True)
-        return FitResult(full, f, lik0.vaf(p), "fast", seed, False, settings,
-                         stages, time.perf_counter() - t0, recording.source)
+        fit = FitResult(full, f, lik0.vaf(p), "fast", seed, False, settings,
+                        stages, time.perf_counter() - t0, recording.source,
+                        **FitResult._declared(model))
+        _warn_on_bounds(fit)
+        return fit
 
     lik = Likelihood(model, recording, initial=initial, discard=discard, noise=given)
     upper = model.parameter("delta_abs").upper
@@ -199,8 +230,10 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                    "scan": sc.to_dict()})
     full = model.as_dict(model.full_vector(params), full=True)
     settings.update({"profile_step": profile_step, "scan_step": scan_step})
-    return FitResult(full, float(fun), lik.vaf(params), "fast", seed, True, settings, stages,
-                     time.perf_counter() - t0, recording.source)
+    fit = FitResult(full, float(fun), lik.vaf(params), "fast", seed, True, settings, stages,
+                    time.perf_counter() - t0, recording.source, **FitResult._declared(model))
+    _warn_on_bounds(fit)
+    return fit
 
 
 def _ar_at(lik: Likelihood, params, order: int | None) -> ARNoise:

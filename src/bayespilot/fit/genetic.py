@@ -559,7 +559,7 @@ def step_one(likelihood: "Likelihood", *, repetitions: int = 20, n_best: int = 5
 
     bar = None
     if progress:
-        from tqdm import tqdm
+        from tqdm.auto import tqdm  # a widget in a notebook, text on a terminal
         bar = tqdm(total=repetitions, desc="Step I (GA)", unit="run")
     runs = []
     try:

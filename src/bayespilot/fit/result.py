@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import copy
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -10,7 +12,20 @@ from typing import Any
 from .._files import dumps, read_result, require_keys, write_text_atomic
 from .. import presets
 
-__all__ = ["FitResult"]
+__all__ = ["FitResult", "EstimateOnBoundWarning", "ON_BOUND_RTOL"]
+
+#: An estimate counts as on a bound (:attr:`FitResult.at_bounds`) within this fraction of the
+#: width of its search box (1e-5 of K_v's [0, 10]); the bounded fits stop a hair inside.
+ON_BOUND_RTOL = 1e-6
+
+#: The paper's model (with and without threshold, oversampled or not): a fit saved before the
+#: bounds were recorded had Table 1's.
+_PAPER_MODEL = re.compile(r"Pool et al\. \(2012\)(, no threshold)?(, \d+x vestibular)?")
+
+
+class EstimateOnBoundWarning(RuntimeWarning):
+    """A fitted parameter ended on a bound of its search box (:attr:`FitResult.at_bounds`): the
+    bound, not the data, stopped it, and the other estimates moved to make up for it."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -41,6 +56,13 @@ class FitResult:
         Wall time, s.
     source : str or None
         The recording it was fitted to.
+    bounds : dict
+        The search box: (lower, upper) of every free parameter by name, in
+        its unit (Table 1 for the paper's); empty in a result saved before it
+        was recorded (then Table 1 for the paper's model, see :attr:`at_bounds`).
+    units : dict
+        Every parameter's unit by name, as its model declares it; empty in a
+        result saved before it was recorded (then the paper's units).
     """
 
     params: dict[str, float]
@@ -53,6 +75,72 @@ class FitResult:
     steps: dict[str, Any] = field(default_factory=dict)
     elapsed: float = math.nan
     source: str | None = None
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def _declared(cls, model) -> dict[str, Any]:
+        """``bounds`` and ``units`` of a fit of ``model`` (keywords of the constructor)."""
+        free = set(model.parameter_names)
+        return {"bounds": {p.name: (float(p.lower), float(p.upper)) for p in model.parameters
+                           if p.name in free},
+                "units": {p.name: p.unit for p in model.parameters}}
+
+    def _box(self) -> dict[str, tuple[float, float]]:
+        """The free parameters' bounds: as recorded, or for a result saved before they were,
+        Table 1's when it is a fit of the paper's model (nothing known otherwise)."""
+        if self.bounds:
+            return self.bounds
+        if _PAPER_MODEL.fullmatch(str(self.settings.get("model", ""))):
+            fixed = () if self.threshold else ("delta_abs",)
+            return {k: tuple(presets.TABLE1_BOUNDS[k]) for k in self.params
+                    if k in presets.TABLE1_BOUNDS and k not in fixed}
+        return {}
+
+    @property
+    def fixed(self) -> tuple[str, ...]:
+        """The parameters held fixed, not estimated (``delta_abs`` without threshold, and any
+        a model fixed), in the order of :attr:`params`."""
+        box = self._box()
+        if box:
+            return tuple(k for k in self.params if k not in box)
+        return ("delta_abs",) if (not self.threshold and "delta_abs" in self.params) else ()
+
+    @property
+    def at_bounds(self) -> dict[str, str]:
+        """The free parameters whose estimate is on a bound of the search box, by name:
+        ``"lower"`` or ``"upper"``.
+
+        On means within :data:`ON_BOUND_RTOL` of the box's width, or beyond (the paper's
+        Step II is unconstrained).  Such an estimate is where the bound stopped the fit, not
+        an optimum of the likelihood, except ``delta_abs = 0``, the answer "no threshold".
+        An estimate on the upper bound of a gain, or of a delay, often means that the bounds
+        do not suit the recording's units (e.g. u in degrees: K_v ends on 10).  Empty if the
+        bounds are not known (a result of another model saved before they were recorded).
+        """
+        out = {}
+        for k, (lo, hi) in self._box().items():
+            v = self.params.get(k, math.nan)
+            tol = ON_BOUND_RTOL * (hi - lo)
+            if v <= lo + tol:
+                out[k] = "lower"
+            elif v >= hi - tol:
+                out[k] = "upper"
+        return out
+
+    def _edge_text(self, name: str, side: str) -> tuple[str, float]:
+        """("on" or "beyond", the bound) of a parameter in :attr:`at_bounds`."""
+        lo, hi = self._box()[name]
+        bound = lo if side == "lower" else hi
+        v = self.params[name]
+        beyond = ((v < lo if side == "lower" else v > hi)
+                  and abs(v - bound) > ON_BOUND_RTOL * (hi - lo))
+        return ("beyond" if beyond else "on"), bound
+
+    def _unit(self, name: str) -> str:
+        if name in self.units:
+            return self.units[name]
+        return presets.PARAMETER_UNITS.get(name, "")
 
     def to_dict(self, *, full: bool = True) -> dict[str, Any]:
         """JSON-ready dict: ``params``, ``neg_log_lik``, ``vaf``, ``method``, ``seed``, ... .
@@ -67,15 +155,27 @@ class FitResult:
         -------
         dict
             ``params``, ``neg_log_lik``, ``vaf``, ``method``, ``seed``,
-            ``threshold``, ``elapsed_seconds`` (s), ``source``, ``settings``
+            ``threshold``, ``elapsed_seconds`` (s), ``source``, ``settings``,
+            ``bounds`` (name -> [lower, upper] of the free parameters), ``units``
             and, with ``full``, ``steps``.
         """
+        # copies: a caller editing the dict (or the JSON it becomes) leaves the fit alone
         d = {"params": dict(self.params), "neg_log_lik": self.neg_log_lik, "vaf": self.vaf,
              "method": self.method, "seed": self.seed, "threshold": self.threshold,
-             "elapsed_seconds": self.elapsed, "source": self.source, "settings": self.settings}
+             "elapsed_seconds": self.elapsed, "source": self.source,
+             "settings": copy.deepcopy(self.settings),
+             "bounds": {k: list(b) for k, b in self.bounds.items()}, "units": dict(self.units)}
         if full:
-            d["steps"] = self.steps
+            d["steps"] = copy.deepcopy(self.steps)
         return d
+
+    def __repr__(self) -> str:
+        # one line: the dataclass's repr held every GA history (464,000 characters in a notebook)
+        n = len(self.params) - len(self.fixed)
+        where = f", {self.source}" if self.source else ""
+        return (f"<FitResult {self.method}: {n} parameters "
+                f"({'with' if self.threshold else 'without'} threshold), "
+                f"-ln L = {self.neg_log_lik:.6g}, VAF {self.vaf:.1f} %{where}>")
 
     def to_json(self, path: str | Path, *, full: bool = True) -> Path:
         """Write :meth:`to_dict` to ``path`` (parent folders created).
@@ -126,7 +226,9 @@ class FitResult:
         return cls({k: num(v) for k, v in d["params"].items()}, num(d["neg_log_lik"]),
                    num(d["vaf"]), d["method"], d.get("seed"), bool(d.get("threshold", True)),
                    d.get("settings", {}), d.get("steps", {}), num(d.get("elapsed_seconds")),
-                   d.get("source"))
+                   d.get("source"),
+                   {k: (num(lo), num(hi)) for k, (lo, hi) in (d.get("bounds") or {}).items()},
+                   {k: str(u) for k, u in (d.get("units") or {}).items()})
 
     @classmethod
     def from_json(cls, path: str | Path) -> "FitResult":
@@ -151,18 +253,37 @@ class FitResult:
         return read_result(path, cls.from_dict, "a FitResult")
 
     def summary(self) -> str:
-        """A readable table of the estimates and the fit."""
-        units = presets.PARAMETER_UNITS
+        """A readable table of the estimates and the fit.
+
+        Each parameter with the unit its model declares (the paper's for a result saved
+        before units were recorded); ``(fixed)`` beside those not estimated, and ``*``
+        beside an estimate on a bound of the search box (:attr:`at_bounds`), named under
+        the table.
+        """
+        fixed, edge = set(self.fixed), self.at_bounds
         lines = [f"bayespilot fit ({self.method} method, "
                  f"{'with' if self.threshold else 'without'} threshold, seed {self.seed})"]
         if self.source:
             lines.append(f"recording: {self.source}")
-        lines.append(f"{'parameter':<10} {'estimate':>12}  unit")
+        lines.append(f"{'parameter':<10} {'estimate':>12}   unit")
         for k, v in self.params.items():
-            fixed = "  (fixed)" if (k == "delta_abs" and not self.threshold) else ""
-            lines.append(f"{k:<10} {v:>12.6g}  {units.get(k, '')}{fixed}")
+            mark = "*" if k in edge else " "
+            note = "  (fixed)" if k in fixed else ""
+            lines.append(f"{k:<10} {v:>12.6g}{mark}  {self._unit(k)}{note}".rstrip())
         lines.append(f"-ln L = {self.neg_log_lik:.3f}   VAF = {self.vaf:.2f} %   "
                      f"time = {self.elapsed:.1f} s")
+        if edge:
+            said = []
+            for k, side in edge.items():
+                where, bound = self._edge_text(k, side)
+                said.append(f"{k} ({'' if where == 'on' else 'beyond '}{side} {bound:g}"
+                            + (": no threshold" if k == "delta_abs" and side == "lower" else "")
+                            + ")")
+            lines.append(f"* on a bound of the search box: {', '.join(said)}")
+            if set(edge) - {"delta_abs"}:
+                lines.append("  such an estimate is the bound's, not the data's: the bounds "
+                             "(Table 1 for the paper's parameters)\n  may not suit the "
+                             "recording's units (SI, angles in radians) or the model")
         return "\n".join(lines)
 
     __str__ = summary

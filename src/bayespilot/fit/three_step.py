@@ -17,7 +17,6 @@ at 0 (Step III is then empty).
 from __future__ import annotations
 
 import time
-import warnings
 from typing import Any
 
 import numpy as np
@@ -63,7 +62,39 @@ def _check_fittable(recording: Recording, model: PilotModel, discard: float) -> 
         raise RecordingError(f"{recording.source or 'the recording'}: the control output u is "
                          f"constant ({u[0]:g}){f' after the first {discard:g} s' if skip else ''}"
                          ": there is nothing to fit")
+    _warn_offset(recording, u, skip, discard)
     _warn_unnamed_threshold(model)
+
+
+#: |mean(u)| / std(u) over the fitted samples above which a fit warns of an offset in u.
+#: The package's own records stay far below it: simulated FD and FT runs (K_theta 0, 0.5, 1;
+#: F_n 0, 0.05, 0.1, 0.2, 0.3; seeds 0-5, 0-9 for FD without motion; 81.92, 40 and 30 s;
+#: from 0 s and from 2 s; 472 records) reached at most 0.052 (30 s; 0.036 on 40 s, 0.023 on
+#: 81.92 s; medians 0.008-0.03), the example's washout run (analyses/results/diagnose/example)
+#: 0.0005.  A stick
+#: offset of 0.02 rad on a simulated FD run (std(u) 0.032 rad: ratio 0.63) moved delta_abs
+#: from 0.0097 to 0.0148 and K_m from 0.60 to 0.67 while the VAF hid it (80.9 -> 80.5 %); at
+#: 0.2 an offset of a fifth of u's spread is warned of, four times the simulated maximum.
+OFFSET_RATIO = 0.2
+
+
+def _warn_offset(recording: Recording, u: np.ndarray, skip: int, discard: float) -> None:
+    """Warn (QuestionableRecordingWarning) of a control output u whose mean over the fitted
+    samples is a sizeable fraction of its standard deviation.  The model takes u as zero-mean
+    about the trim: Eq. 4 keeps an offset in the residual, and the threshold and motion gain
+    move to make up for part of it, while the VAF (about the mean) does not show it."""
+    from .._caller import warn_at_caller
+    from ..recording import QuestionableRecordingWarning
+
+    mean, std = float(np.mean(u)), float(np.std(u))
+    if abs(mean) > OFFSET_RATIO * std:
+        warn_at_caller(f"{recording.source or 'the recording'}: the control output u has a "
+                       f"mean of {mean:.3g}, {abs(mean) / std:.2f} of its standard deviation "
+                       f"{std:.3g}{f' after the first {discard:g} s' if skip else ''}: the "
+                       "model takes u as zero-mean about the trim, so an offset biases the "
+                       "fit (delta_abs, K_m) while the VAF does not show it; remove the stick "
+                       "offset (u - mean(u), or the trim) before fitting",
+                       QuestionableRecordingWarning)
 
 
 def _warn_unnamed_threshold(model: PilotModel) -> None:
@@ -80,6 +111,42 @@ def _warn_unnamed_threshold(model: PilotModel) -> None:
         warn_at_caller(f"the dead zone's threshold {', '.join(names)} is fitted as an ordinary "
                        "parameter, without the threshold scan: the fitters scan only a "
                        "threshold named delta_abs (name it so to have it scanned)", UserWarning)
+
+
+def _warn_on_bounds(fit: FitResult) -> None:
+    """One EstimateOnBoundWarning, at the user's line, naming the parameters other than
+    delta_abs that ended on a bound of the search box (:attr:`FitResult.at_bounds`; delta_abs
+    = 0 is the answer "no threshold").  Only for a fit the user's own code called: the
+    package's loops (diagnose, compare, campaigns, the calibration replicates, the example)
+    and its command line, whose summary marks them, keep it to the result."""
+    import sys
+    from pathlib import Path
+
+    from .._caller import _PACKAGE, warn_at_caller
+    from .result import EstimateOnBoundWarning
+
+    edge = {k: side for k, side in fit.at_bounds.items() if k != "delta_abs"}
+    if not edge:
+        return
+    # the first frame outside the fitters (and the BLAS-limit wrapper) is the fit's caller
+    inside = {Path(__file__).resolve(), Path(__file__).resolve().with_name("fast.py"),
+              _PACKAGE / "_blas.py"}
+    frame = sys._getframe(1)
+    while frame is not None and Path(frame.f_code.co_filename).resolve() in inside:
+        frame = frame.f_back
+    if frame is not None and Path(frame.f_code.co_filename).resolve().is_relative_to(_PACKAGE):
+        return
+    said, why = [], {}
+    for k, side in edge.items():
+        where, bound = fit._edge_text(k, side)
+        said.append(f"{k} = {fit.params[k]:g} {where} its {side} bound ({bound:g})")
+        why[where] = ("the bound, not the data, stopped the fit there and the other estimates "
+                      "moved to make up for it" if where == "on" else
+                      "the unconstrained Step II left the search box")
+    warn_at_caller(f"{', '.join(said)}: {'; '.join(why.values())}; the bounds (Table 1 for "
+                   "the paper's parameters) may not suit the recording's units (SI, angles in "
+                   "radians: u in degrees puts K_v on 10) or the model (FitResult.at_bounds)",
+                   EstimateOnBoundWarning)
 
 
 @one_blas_thread
@@ -145,6 +212,17 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         ``iterate`` not a bool, a setting the likelihood refuses, or a
         recording with no more than four samples per free parameter or a
         constant u.
+
+    Warns
+    -----
+    EstimateOnBoundWarning
+        A parameter other than delta_abs ended on a bound of its search box
+        (:attr:`~bayespilot.fit.result.FitResult.at_bounds`), when called from
+        outside the package.
+    QuestionableRecordingWarning
+        The mean of u over the fitted samples is more than
+        :data:`~bayespilot.fit.three_step.OFFSET_RATIO` of its standard
+        deviation (a stick offset; u is taken as zero-mean about the trim).
 
     Examples
     --------
@@ -213,9 +291,11 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         else:
             if iterate:
                 converged = False
-                warnings.warn(f"Steps II and III still changed delta_abs or -ln L after "
-                              f"{max_iterations} passes; raise max_iterations", RuntimeWarning,
-                              stacklevel=2)
+                from .._caller import warn_at_caller  # (fit_paper is wrapped: not stacklevel)
+
+                warn_at_caller(f"Steps II and III still changed delta_abs or -ln L after "
+                               f"{max_iterations} pass{'' if max_iterations == 1 else 'es'}; "
+                               "raise max_iterations", RuntimeWarning)
 
     full = dict(model.as_dict(model.full_vector(params), full=True))
     settings = {"repetitions": repetitions, "n_best": n_best, "population": population,
@@ -226,5 +306,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     steps = {"step1": s1.to_dict(), "step1_delta_abs": delta1,
              "step2": [r.to_dict() for r in step2], "step2_best": k_best,
              "step3": scans, "iterations": iterations, "iterations_converged": converged}
-    return FitResult(full, float(fun), lik.vaf(params), "paper", seed, has_delta, settings, steps,
-                     time.perf_counter() - t0, recording.source)
+    fit = FitResult(full, float(fun), lik.vaf(params), "paper", seed, has_delta, settings, steps,
+                    time.perf_counter() - t0, recording.source, **FitResult._declared(model))
+    _warn_on_bounds(fit)
+    return fit
