@@ -413,3 +413,30 @@ def test_plots_keep_a_backend_chosen_by_mplbackend_on_a_headless_machine():
     assert chosen == "svg"
     if sys.platform.startswith("linux"):
         assert default.lower() == "agg"  # no display, nothing chosen: Agg, as before
+
+
+def test_a_recordings_signals_and_metadata_refuse_changes_and_stay_read_only_when_copied():
+    """rec.signals["u"] = ... replaced u without any check, rec.metadata[...] = ... changed
+    the plant the bootstrap simulates, and a pickled or deep-copied recording (a dask
+    worker's) came back with writable arrays."""
+    import json
+    import pickle
+
+    from bayespilot.simulate import simulate
+
+    rec = simulate(task="FD", motion_gain=1.0, seed=1, duration=5.0).recording
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        rec.signals["u"] = np.zeros(rec.n_samples)
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        rec.metadata["controlled_element_gain"] = 99.0
+    with pytest.raises(TypeError):
+        rec.metadata.update(control_gain=1.0)
+    assert rec.metadata["controlled_element_gain"] == 4.0
+    for back in (pickle.loads(pickle.dumps(rec)), copy.deepcopy(rec)):
+        assert not back.u.flags.writeable and np.array_equal(back.u, rec.u)
+        assert back.metadata == rec.metadata and back.source == rec.source
+        with pytest.raises(TypeError):
+            back.signals["e"] = back.e
+    # still a dict wherever one is read
+    assert json.loads(json.dumps(rec.metadata)) == json.loads(json.dumps(dict(rec.metadata)))
+    assert set(dict(rec.signals, u=rec.u)) == set(rec.signals)

@@ -79,6 +79,24 @@ def questionable(recording: "Recording") -> list[str]:
     return reasons
 
 
+class _ReadOnlyDict(dict):
+    """A recording's ``signals`` or ``metadata``: a dict (JSON, ``dict(...)``, ``**`` and
+    comparisons work as on any) that refuses to be changed in place.  A changed recording is
+    a new one (:meth:`Recording.with_signals`, or :class:`Recording` with other metadata), so
+    that every column and value passes the recording's checks."""
+
+    def _refuse(self, *args: Any, **kwargs: Any) -> None:
+        raise TypeError("a Recording's signals and metadata cannot be changed in place: make a "
+                        "new recording (Recording.with_signals(...), or Recording(...) with "
+                        "the new metadata), which checks them")
+
+    __setitem__ = __delitem__ = __ior__ = _refuse
+    clear = pop = popitem = setdefault = update = _refuse
+
+    def __reduce__(self):
+        return (_ReadOnlyDict, (dict(self),))
+
+
 def _warn_if_questionable(recording: "Recording") -> None:
     """Issue one :class:`QuestionableRecordingWarning` per reason :func:`questionable` gives,
     at the user's line (a recording read inside a batch or the CLI as much as a direct one)."""
@@ -349,10 +367,17 @@ class Recording:
             _check_metadata_values(meta)
         except RecordingError as exc:
             fail(str(exc))
-        object.__setattr__(self, "signals", clean)
+        # read-only like the arrays: a column put in afterwards would skip every check above
+        object.__setattr__(self, "signals", _ReadOnlyDict(clean))
         object.__setattr__(self, "sample_rate_hz", rate)
         object.__setattr__(self, "motion_gain", kth)
-        object.__setattr__(self, "metadata", meta)
+        object.__setattr__(self, "metadata", _ReadOnlyDict(meta))
+
+    def __reduce__(self):
+        # Built again through the checks when unpickled or deep-copied (a dask worker's copy):
+        # numpy's pickles come back writable, and the checks make them read-only again.
+        return (Recording, (dict(self.signals), self.sample_rate_hz, self.motion_gain,
+                            self.task, dict(self.metadata), self.source))
 
     # -- convenience views -------------------------------------------------
     def __getitem__(self, name: str) -> np.ndarray:
