@@ -413,3 +413,22 @@ def test_figsize_keyword_is_honoured():
     fig, ax = plt.subplots()
     with pytest.raises(ValueError, match="figsize"):
         plot_marginal(post, ax=ax, figsize=(5, 4))
+
+
+def test_ga_convergence_rows_take_the_fits_units():
+    """A parameter of another lab's model is labelled with the unit its model declares (the
+    GA figure looked units up in the paper's table only: a blank unit)."""
+    from bayespilot.fit.figures import plot_ga_convergence
+    from bayespilot.fit.three_step import fit_paper
+    from bayespilot.model import FirstOrderLag, Parameter, paper_model
+    from bayespilot.simulate import simulate
+
+    model = paper_model().add_stage("visual", FirstOrderLag("T_x"),
+                                    [Parameter("T_x", 0.001, 1.0, 0.05, "s")])
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.15, seed=3,
+                   duration=20.48).recording
+    fit = fit_paper(rec, model, seed=0, repetitions=1, n_best=1, population=8, generations=2,
+                    discard=2.0)
+    fig = plot_ga_convergence([fit], parameters=("T_x",))
+    assert fig.axes[1].get_ylabel() == label("T_x", "s")
+    plt.close(fig)

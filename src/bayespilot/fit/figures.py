@@ -160,7 +160,7 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     if repetitions < 1:
         raise ValueError(f"repetitions must be >= 1, got {repetitions}")
     _check_labels(labels, len(results))
-    rows = [_NLL, *(_param_label(p) for p in parameters)]
+    rows = [_NLL, *(_param_label(p, results[0]) for p in parameters)]  # its model's units
     fig, axes = plt.subplots(len(rows), len(results),
                              figsize=(3.0 * len(results), 1.7 * len(rows) + 0.3),
                              sharex=True, squeeze=False, layout="constrained")
