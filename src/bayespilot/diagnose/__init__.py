@@ -50,7 +50,9 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from .._files import dumps, json_ready, number, numbers, read_json, write_text_atomic
-from .catalogue import CATALOGUE, NAMES, Extension, get_extension
+from .catalogue import (CATALOGUE, NAMES, Extension, _candidate_name, candidate_names,
+                        get_extension, register_extension, registered_extensions,
+                        unregister_extension)
 from .locate import EvidenceWarning
 from .._blas import one_blas_thread
 from .._caller import warn_at_caller
@@ -61,7 +63,8 @@ if TYPE_CHECKING:
     from ..recording import Recording
 
 __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension",
-           "EvidenceWarning"]
+           "register_extension", "unregister_extension", "registered_extensions",
+           "candidate_names", "EvidenceWarning"]
 
 #: Default family-wise false-alarm level of the decision.
 ALPHA = 0.01
@@ -485,9 +488,13 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1
     if isinstance(candidates, str):
         raise ValueError(f"candidates must be a list of catalogue names, got the string "
                          f"{candidates!r} (write [{candidates!r}])")
-    names = NAMES if candidates is None else tuple(candidates)
-    for n in names:
-        get_extension(n)
+    if isinstance(candidates, Extension):
+        raise ValueError(f"candidates must be a list of catalogue names or entries, got the "
+                         f"Extension {candidates.name!r} alone (write [entry])")
+    # None: the built-in catalogue, then the registered entries (exactly NAMES when none is);
+    # an Extension among them is registered (catalogue.register_extension checks it)
+    names = (candidate_names() if candidates is None
+             else tuple(_candidate_name(c) for c in candidates))
     if len(set(names)) != len(names):
         # each name is one test of the Bonferroni split: a repeat would lower the level
         raise ValueError(f"candidates names an entry twice: {list(names)}")
@@ -801,7 +808,7 @@ def _calibrated_decision(results, alpha, calibrate):
 
 @one_blas_thread
 def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA,
-             n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
+             n_bootstrap: int = 39, candidates: Sequence[str | Extension] | None = None,
              base_fit: FitResult | None = None,
              skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
              n_starts: int = 4, profile_noise: bool = False, oversample: int = 1,
@@ -824,8 +831,13 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         each simulated and refitted (about 0.5 s a replicate at N = 8192;
         0: no calibration; the decision does not depend on it except through
         the signature scores and the quantised-flat-top case).
-    candidates : sequence of str, optional
-        Catalogue names to test (default all).
+    candidates : sequence of str or Extension, optional
+        Catalogue names to test, or entries: an Extension of one's own is
+        registered (:func:`~bayespilot.diagnose.catalogue.register_extension`,
+        which checks it), a built-in one stands for its name.  Default: the
+        built-in catalogue, then the entries registered in this process
+        (:func:`~bayespilot.diagnose.catalogue.candidate_names`; with none
+        registered, :data:`NAMES`).
     base_fit : FitResult, optional
         A fit of the paper's model to this recording, to skip the base fit.
     skip_seconds : float
@@ -919,8 +931,10 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         If ``alpha`` is not in (0, 1); ``n_bootstrap`` or ``n_calibrate`` is
         not an integer >= 0; ``noise_passes`` or ``oversample`` is not an
         integer in its range; ``skip_seconds`` is not in [0, half the
-        recording); ``candidates`` is a string, empty, repeats a name or names
-        one that is not in the catalogue; or
+        recording); ``candidates`` is a string or one Extension, empty,
+        repeats a name, names one that is not in the catalogue or gives an
+        Extension that :func:`~bayespilot.diagnose.catalogue.register_extension`
+        refuses; or
         ``n_calibrate`` is asked for with ``profile_noise=True``.
 
     Warns

@@ -67,6 +67,7 @@ if TYPE_CHECKING:
     from ..campaign import CampaignSummary
     from ..recording import Recording
     from . import DiagnosisResult
+    from .catalogue import Extension
     from .pooled import PooledDiagnosisResult
 
 __all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
@@ -188,7 +189,7 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
 
 
 def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
-                      options: Mapping[str, Any]
+                      options: Mapping[str, Any], extensions: Sequence[Extension] = ()
                       ) -> tuple[DiagnosisResult | PooledDiagnosisResult, float]:
     """Diagnose one task (on a worker); returns the result object and the seconds it took.
 
@@ -215,6 +216,12 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
         modified.  With ``posterior`` a single run's chain is seeded by
         ``options["seed"]`` (default 0) and its warnings are silenced;
         :func:`~bayespilot.diagnose.shared_posterior` takes its defaults.
+    extensions : sequence of Extension
+        Catalogue entries of one's own that ``options["candidates"]`` names,
+        registered here first
+        (:func:`~bayespilot.diagnose.catalogue.register_extension`): a
+        worker is another process, which has only the built-in catalogue
+        and what it is sent.
 
     Returns
     -------
@@ -227,15 +234,19 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
     Raises
     ------
     ValueError
-        A bad option value or a recording the diagnosis refuses, as the
-        diagnosis raises it.  A ValueError or RuntimeError of the posterior
-        is not raised but recorded (above).
+        A bad option value, an entry ``register_extension`` refuses or a
+        recording the diagnosis refuses, as the diagnosis raises it.  A
+        ValueError or RuntimeError of the posterior is not raised but
+        recorded (above).
     TypeError
         An option that is not a keyword of the diagnosis, or a recording that
         is not a Recording.
     """
-    from . import diagnose, diagnose_pooled, get_extension, sample_chosen, shared_posterior
+    from . import (diagnose, diagnose_pooled, get_extension, register_extension, sample_chosen,
+                   shared_posterior)
 
+    for ext in extensions:  # (again on a worker that has them: the same name replaces)
+        register_extension(ext)
     opts = dict(options)
     want = bool(opts.pop("posterior", False))
     t0 = time.perf_counter()
@@ -270,12 +281,13 @@ def _notes(res: Any) -> list[str]:
 def _warm() -> None:
     """One short diagnosis here, so that the workers load numba's cache (campaign module docs)."""
     from ..simulate import simulate
-    from . import diagnose
+    from . import NAMES, diagnose
 
     with warnings.catch_warnings():  # (about this 20-s run of ours, not the user's)
         warnings.simplefilter("ignore", EvidenceWarning)
         diagnose(simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=0,
-                          duration=20.0).recording, seed=0, n_bootstrap=1)
+                          duration=20.0).recording, seed=0, n_bootstrap=1,
+                 candidates=NAMES)  # (the built-in entries, whatever is registered)
 
 
 def _settings(task: DiagnoseTask, options: Mapping[str, Any],
@@ -306,7 +318,8 @@ def _the_recording(path: Any) -> str:
 def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any], *,
                  by_content: bool = False) -> Any:
     """What must agree for a result file to count as done: its recordings and its settings
-    with ``defaults`` filled in (``candidates=None`` as the whole catalogue).  The recordings
+    with ``defaults`` filled in (``candidates=None`` as the whole built-in catalogue: a batch
+    run with entries of one's own registered records its candidates by name).  The recordings
     by their content's digests (``by_content``, results that record them: the same runs
     from another working folder, or moved), else as the files they resolve to
     (:func:`_the_recording`); sorted either way (a pooled task's runs are in the files'
@@ -319,7 +332,7 @@ def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any], *,
     from .catalogue import NAMES
 
     merged = {**defaults, **settings}
-    if merged.get("candidates") is None:  # None tests the whole catalogue, in its order
+    if merged.get("candidates") is None:  # None: the built-in catalogue, in its order
         merged["candidates"] = list(NAMES)
     return {"recordings": sorted(recs if by_content else (_the_recording(p) for p in recs)),
             "settings": merged}
@@ -340,7 +353,8 @@ def _differs(old: Any, new: Any) -> str:
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
                    seed: int = 0, alpha: float | None = None, n_bootstrap: int | None = None,
                    n_calibrate: int | None = None, noise_passes: int = 1,
-                   candidates: Sequence[str] | None = None, posterior: bool = False,
+                   candidates: Sequence[str | Extension] | None = None,
+                   posterior: bool = False,
                    reports: bool = False, scheduler: str | None = None,
                    workers: int | None = None,
                    progress: bool = True, connect_timeout: float = 10.0,
@@ -357,7 +371,15 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         Diagnose the runs of each subject and condition together (module docs).
     seed, alpha, n_bootstrap, n_calibrate, noise_passes, candidates
         As for :func:`~bayespilot.diagnose.diagnose` (None: its default), the
-        same for every diagnosis.
+        same for every diagnosis.  ``candidates`` may give catalogue entries
+        of one's own, registered here; every registered entry the
+        diagnoses test (with ``candidates=None``: every registered entry)
+        is sent to the workers with each task and registered there, and
+        the result files record the candidates by name (with entries
+        registered, ``candidates=None`` is recorded as the names it
+        stands for).  An entry's ``build`` travels pickled by cloudpickle:
+        one defined in the script or notebook is sent whole, one imported
+        from a module of one's own must be importable on the workers.
     posterior : bool
         Where an extension fitted by the GLS likelihood is chosen, also its
         posterior: the extended model sampled by emcee for one run
@@ -389,7 +411,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         A recording cannot be read (every such file is named); nothing is run.
     ValueError
         A bad setting, a recording the settings do not suit (too short), keys
-        that clash, ``pool`` without subjects; nothing is run.
+        that clash, ``pool`` without subjects, an entry of one's own that
+        ``register_extension`` refuses or that cannot be pickled; nothing is
+        run.
     CampaignError
         The cluster cannot be reached or started or is lost during the run
         (what finished is saved), ``out_dir`` cannot be written in (checked
@@ -419,6 +443,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     from ..io import read_recording
     from ..recording import RecordingError
     from . import SKIP_SECONDS, _check, diagnose
+    from .catalogue import Extension, _candidate_name, candidate_names, registered_extensions
 
     t0 = time.perf_counter()
     if not isinstance(posterior, bool):
@@ -445,8 +470,19 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                         ("n_calibrate", n_calibrate)):
         if value is not None:
             options[name] = value
-    if candidates is not None:
-        options["candidates"] = list(candidates)
+    if isinstance(candidates, Extension):
+        raise ValueError(f"candidates must be a list of catalogue names or entries, got the "
+                         f"Extension {candidates.name!r} alone (write [entry])")
+    if candidates is not None:  # (an entry of one's own registered here, then by its name)
+        options["candidates"] = [_candidate_name(c) if isinstance(c, Extension) else c
+                                 for c in candidates]
+    elif registered_extensions():
+        # None stands for the built-in catalogue and the registered entries: recorded by name,
+        # so that a result made without them is not taken for one made with them
+        options["candidates"] = list(candidate_names())
+    # the entries of one's own the diagnoses test, sent to the workers with each task
+    shipped = tuple(e for e in registered_extensions() if e.name in options.get("candidates", ()))
+    _picklable(shipped)
     if posterior:  # (absent when False: results made before the option still resume)
         options["posterior"] = True
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -528,7 +564,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     noted: dict[str, list[str]] = {}
     try:
         completed, errors = C.run_keyed(
-            [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths], options),
+            [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths], options, shipped),
               _settings(t, options, digests)) for t in pending], out,
             total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
             progress=progress, connect_timeout=connect_timeout,
@@ -542,6 +578,23 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     write_summary(tasks, out)
     return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
                              time.perf_counter() - t0, "diagnoses")
+
+
+def _picklable(extensions: Sequence[Extension]) -> None:
+    """Refuse, before the cluster starts, an entry that cannot be sent to the workers (dask
+    pickles a task's arguments by cloudpickle)."""
+    if not extensions:
+        return
+    import cloudpickle
+
+    for ext in extensions:
+        try:
+            cloudpickle.dumps(ext)
+        except Exception as exc:  # noqa: BLE001 - what pickle raises varies (TypeError, ...)
+            raise ValueError(f"the extension {ext.name!r} cannot be sent to the workers: "
+                             f"pickling it failed ({type(exc).__name__}: {exc}); give it a "
+                             f"build function defined in the script or an importable "
+                             f"module") from None
 
 
 def _diagnoses(tasks: Sequence[DiagnoseTask], out: Path) -> dict[str, dict | None]:

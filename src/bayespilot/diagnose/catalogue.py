@@ -48,12 +48,22 @@ The six entries and their conventions
     fitted by the censored (Tobit) likelihood of
     :mod:`bayespilot.kernels._censored`.  The limits are read from the flat
     tops, not estimated.
+
+Entries of your own
+-------------------
+:func:`register_extension` adds an entry to the catalogue for this process,
+after checking it; :func:`get_extension` finds it after the built-in ones,
+``diagnose(candidates=None)`` tests it after them (:func:`candidate_names`),
+and :func:`registered_extensions` and :func:`unregister_extension` list and
+remove such entries.  :data:`CATALOGUE` and :data:`NAMES` stay the built-in
+entries.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Callable, Mapping
+from typing import TYPE_CHECKING, Any, Callable, Mapping
 
 from ..model import (Channel, FixedFilter, LinearDrift, MotionSystem, Parameter, PilotModel,
                      Saturation, SecondOrderWashout, SoftDeadZone)
@@ -64,7 +74,9 @@ if TYPE_CHECKING:
     from ..recording import Recording
 
 __all__ = ["Extension", "CATALOGUE", "NAMES", "G", "OTOLITH_NUM", "OTOLITH_DEN",
-           "otolith_filter", "get_extension", "specific_force"]
+           "otolith_filter", "get_extension", "specific_force", "LIKELIHOODS",
+           "register_extension", "unregister_extension", "registered_extensions",
+           "candidate_names"]
 
 #: Gravity used in the specific force, m/s^2.
 G = 9.81
@@ -118,6 +130,9 @@ def specific_force(recording: Recording, h_head: float) -> np.ndarray:
 @dataclass(frozen=True)
 class Extension:
     """One entry of the catalogue.
+
+    An entry of one's own is added with :func:`register_extension`, which
+    checks it.
 
     Attributes
     ----------
@@ -279,18 +294,254 @@ CATALOGUE: tuple[Extension, ...] = (
 NAMES: tuple[str, ...] = tuple(e.name for e in CATALOGUE)
 
 
-def get_extension(name: str) -> Extension:
-    """The catalogue entry called ``name``.
+#: The likelihoods an entry is fitted and tested by: ``"gls"``, the decision likelihood
+#: (:mod:`bayespilot.diagnose.decide`), and ``"censored"``, the flat-top test and censored
+#: (Tobit) fit wired to the built-in ``control-saturation`` entry (its limits are read from
+#: the flat tops, not fitted), so that an entry of your own is always ``"gls"``.
+LIKELIHOODS: tuple[str, ...] = ("gls", "censored")
+
+#: The entries :func:`register_extension` added, by name, in the order they were first
+#: registered (this process only; :func:`~bayespilot.diagnose.batch.diagnose_batch` sends
+#: them to its workers).
+_REGISTERED: dict[str, Extension] = {}
+
+
+def _names_tuple(value: Any, what: str, name: str) -> tuple[str, ...]:
+    """``value`` (a tuple or list of distinct str) as a tuple, or a ValueError naming ``what``."""
+    if isinstance(value, str):
+        raise ValueError(f"extension {name!r}: {what} must be a tuple of str, got the string "
+                         f"{value!r} (write ({value!r},))")
+    if not isinstance(value, (tuple, list)) or not all(isinstance(v, str) for v in value):
+        raise ValueError(f"extension {name!r}: {what} must be a tuple of str, got {value!r}")
+    if len(set(value)) != len(value):
+        raise ValueError(f"extension {name!r}: {what} names one twice: {list(value)}")
+    return tuple(value)
+
+
+def _validated(ext: Extension) -> Extension:
+    """``ext`` checked as an entry of one's own (:func:`register_extension`), its sequences
+    as tuples; a ValueError saying what is wrong otherwise."""
+    import numbers
+
+    from ..model import paper_model
+    from .locate import EVIDENCE
+
+    if not isinstance(ext, Extension):
+        raise TypeError(f"an entry of the catalogue is an Extension, got {type(ext).__name__}")
+    name = ext.name
+    if not isinstance(name, str) or not name.strip() or name != name.strip():
+        raise ValueError(f"an extension's name must be a non-empty str without surrounding "
+                         f"spaces, got {name!r}")
+    if name in NAMES:
+        raise ValueError(f"{name!r} is the name of a built-in catalogue entry, which cannot be "
+                         f"replaced; give yours another name")
+    if name.lower() == "none":
+        raise ValueError("'none' is the decision's word for no extension; give the entry "
+                         "another name")
+    for what in ("physics", "signature"):
+        if not isinstance(getattr(ext, what), str):
+            raise ValueError(f"extension {name!r}: {what} must be a str (a sentence or two), "
+                             f"got {getattr(ext, what)!r}")
+    keys = _names_tuple(ext.signature_keys, "signature_keys", name)
+    unknown = [k for k in keys if k not in EVIDENCE]
+    if unknown:
+        raise ValueError(f"extension {name!r}: signature_keys {unknown} are not keys of the "
+                         f"located evidence; these are: {', '.join(EVIDENCE)}")
+    new = _names_tuple(ext.new_parameters, "new_parameters", name)
+    needs = _names_tuple(ext.needs, "needs", name)
+    if ext.likelihood not in LIKELIHOODS:
+        raise ValueError(f"extension {name!r}: likelihood must be one of "
+                         f"{', '.join(map(repr, LIKELIHOODS))}, got {ext.likelihood!r}")
+    if ext.likelihood != "gls":
+        raise ValueError(f"extension {name!r}: likelihood 'censored' is the flat-top test of "
+                         f"the built-in control-saturation entry, wired to that entry; an "
+                         f"entry of your own is fitted and tested by 'gls'")
+    for what in ("refine_threshold", "boundary_null"):
+        if not isinstance(getattr(ext, what), bool):
+            raise ValueError(f"extension {name!r}: {what} must be True or False, got "
+                             f"{getattr(ext, what)!r}")
+    if not new:
+        raise ValueError(f"extension {name!r}: new_parameters is empty; an entry adds at least "
+                         f"one free parameter (its test has as many degrees of freedom)")
+    if not callable(ext.build):
+        raise ValueError(f"extension {name!r}: build must be a function of the base model "
+                         f"returning the extended PilotModel, got {ext.build!r}")
+    base = paper_model()
+    try:
+        model = ext.build(base)
+    except Exception as exc:  # noqa: BLE001 - said with the entry's name
+        raise ValueError(f"extension {name!r}: build(paper_model()) raised "
+                         f"{type(exc).__name__}: {exc}") from exc
+    if not isinstance(model, PilotModel):
+        raise ValueError(f"extension {name!r}: build(paper_model()) returned a "
+                         f"{type(model).__name__}, not a PilotModel")
+    lost = [n for n in base.parameter_names if n not in model.parameter_names]
+    if lost:
+        raise ValueError(f"extension {name!r}: build(paper_model()) leaves the base model's "
+                         f"{', '.join(lost)} fixed or out; an extension must keep the base "
+                         f"model's free parameters free (its test counts only those it adds)")
+    added = [n for n in model.parameter_names if n not in base.parameter_names]
+    if set(added) != set(new):
+        raise ValueError(f"extension {name!r}: build(paper_model()) adds the free parameters "
+                         f"{added}, and new_parameters names {list(new)}; they must be the same "
+                         f"(the test has len(new_parameters) degrees of freedom; fix a parameter "
+                         f"that is not estimated with model.fix(...))")
+    starts = ext.starts
+    if isinstance(starts, Mapping):
+        starts = (starts,)
+    if not isinstance(starts, (tuple, list)) or not all(isinstance(s, Mapping) for s in starts):
+        raise ValueError(f"extension {name!r}: starts must be a tuple of dicts (new parameter -> "
+                         f"starting value), got {ext.starts!r}")
+    for s in starts:
+        other = [k for k in s if k not in new]
+        if other:
+            raise ValueError(f"extension {name!r}: a start gives {other}, which are not among "
+                             f"its new_parameters {list(new)} (the other parameters start at "
+                             f"the base fit)")
+        for k, v in s.items():
+            p = model.parameter(k)
+            if (isinstance(v, bool) or not isinstance(v, numbers.Real)
+                    or not p.lower <= float(v) <= p.upper):
+                raise ValueError(f"extension {name!r}: the start {k} = {v!r} is not a number "
+                                 f"within {k}'s bounds [{p.lower:g}, {p.upper:g}]")
+    return dataclasses.replace(ext, signature_keys=keys, new_parameters=new, needs=needs,
+                               starts=tuple({k: float(v) for k, v in s.items()} for s in starts))
+
+
+def register_extension(ext: Extension) -> Extension:
+    """Add an entry of your own to the catalogue, for this process.
+
+    :func:`get_extension` finds it after the built-in entries, so that
+    :func:`~bayespilot.diagnose.diagnose` and
+    :func:`~bayespilot.diagnose.diagnose_pooled` can test it (by name or as
+    the Extension itself in ``candidates``; ``candidates=None`` tests it
+    too, after the built-in entries: :func:`candidate_names`), and what
+    they return can be reported, sampled and weighed.
+    :func:`~bayespilot.diagnose.batch.diagnose_batch` sends the registered
+    entries it tests to its workers.  Registering an entry of the same name
+    again replaces it.
+
+    The entry is checked before it is added: a name that is not a built-in
+    entry's (nor ``"none"``); ``build`` a function that, applied to
+    :func:`~bayespilot.model.paper_model`, returns a PilotModel which keeps
+    the base model's free parameters free and adds exactly the free
+    parameters ``new_parameters`` names (at least one: the test's degrees of
+    freedom); ``likelihood`` ``"gls"`` (``"censored"`` is wired to the
+    built-in ``control-saturation``); ``signature_keys`` keys of the located
+    evidence (:data:`bayespilot.diagnose.locate.EVIDENCE`); ``starts`` giving
+    values within the bounds of new parameters only.  What is not checked:
+    that the extended model reduces to the base model at some value of its
+    new parameters (a nested model), which the likelihood-ratio test
+    assumes; state where in ``boundary_null``.
 
     Parameters
     ----------
-    name : str
-        A catalogue name, one of :data:`NAMES` (exactly, e.g. ``"motion-washout"``).
+    ext : Extension
+        The entry.  ``signature_keys``, ``new_parameters`` and ``needs`` may
+        be lists; they are stored as tuples.
 
     Returns
     -------
     Extension
-        The entry of :data:`CATALOGUE`.
+        The entry as registered (its sequences as tuples, ``starts`` as a
+        tuple of dicts).
+
+    Raises
+    ------
+    TypeError
+        ``ext`` is not an Extension.
+    ValueError
+        The entry fails a check above; the message says which.
+
+    Examples
+    --------
+    >>> from bayespilot.model import FirstOrderLag, Parameter
+    >>> lag = Extension(
+    ...     "visual-lag", "A first-order lag on the visual channel.",
+    ...     "The visual describing function loses phase at high frequency.",
+    ...     ("frequency.visual",),
+    ...     lambda m: m.add_stage("visual", FirstOrderLag("T_vis"),
+    ...                           [Parameter("T_vis", 1e-3, 0.5, 0.05, "s", "visual lag")]),
+    ...     ("T_vis",), ({"T_vis": 0.05},), boundary_null=True)
+    >>> register_extension(lag).name in candidate_names()
+    True
+    >>> unregister_extension("visual-lag").name
+    'visual-lag'
+    """
+    ext = _validated(ext)
+    _REGISTERED[ext.name] = ext
+    return ext
+
+
+def unregister_extension(name: str) -> Extension:
+    """Remove an entry :func:`register_extension` added.
+
+    Results made with it keep their numbers; a method of theirs that needs
+    the entry again (a report's figures, a posterior, a Bayes factor) then
+    raises until it is registered again.
+
+    Parameters
+    ----------
+    name : str
+        The entry's name.
+
+    Returns
+    -------
+    Extension
+        The entry removed.
+
+    Raises
+    ------
+    ValueError
+        ``name`` is a built-in entry's (they cannot be removed) or no entry
+        of that name is registered.
+    """
+    if name in NAMES:
+        raise ValueError(f"{name!r} is a built-in catalogue entry, which cannot be removed")
+    try:
+        return _REGISTERED.pop(name)
+    except (KeyError, TypeError):
+        raise ValueError(f"no registered extension {name!r}; registered: "
+                         f"{', '.join(_REGISTERED) or 'none'}") from None
+
+
+def registered_extensions() -> tuple[Extension, ...]:
+    """The entries :func:`register_extension` added in this process, in the order first added.
+
+    Returns
+    -------
+    tuple of Extension
+        Empty when there are none.
+    """
+    return tuple(_REGISTERED.values())
+
+
+def candidate_names() -> tuple[str, ...]:
+    """The names :func:`~bayespilot.diagnose.diagnose` tests when ``candidates=None``.
+
+    Returns
+    -------
+    tuple of str
+        The built-in :data:`NAMES`, then the registered entries' names in
+        the order they were first registered: exactly :data:`NAMES` when
+        none is registered.
+    """
+    return NAMES + tuple(_REGISTERED)
+
+
+def get_extension(name: str) -> Extension:
+    """The catalogue entry called ``name``: a built-in one, else a registered one.
+
+    Parameters
+    ----------
+    name : str
+        A catalogue name: one of :data:`NAMES` (exactly, e.g.
+        ``"motion-washout"``) or of an entry :func:`register_extension` added.
+
+    Returns
+    -------
+    Extension
+        The entry of :data:`CATALOGUE`, or the registered one.
 
     Raises
     ------
@@ -300,4 +551,37 @@ def get_extension(name: str) -> Extension:
     for e in CATALOGUE:
         if e.name == name:
             return e
-    raise ValueError(f"unknown extension {name!r}; the catalogue has {', '.join(NAMES)}")
+    try:
+        return _REGISTERED[name]
+    except (KeyError, TypeError):  # (TypeError: an unhashable name)
+        pass
+    raise ValueError(f"unknown extension {name!r}; the catalogue has "
+                     f"{', '.join(candidate_names())} (an entry of your own: "
+                     f"register_extension)")
+
+
+def _candidate_name(candidate: str | Extension) -> str:
+    """The name of one of ``diagnose``'s ``candidates``: a catalogue name as it is, an
+    Extension registered first (a built-in entry itself: its name).
+
+    Parameters
+    ----------
+    candidate : str or Extension
+        A catalogue name or an entry.
+
+    Returns
+    -------
+    str
+        The entry's name, which :func:`get_extension` finds.
+
+    Raises
+    ------
+    ValueError
+        An unknown name, or an Extension :func:`register_extension` refuses
+        (a built-in entry's name on another entry among them).
+    """
+    if isinstance(candidate, Extension):
+        if candidate.name in NAMES and get_extension(candidate.name) == candidate:
+            return candidate.name
+        return register_extension(candidate).name
+    return get_extension(candidate).name

@@ -744,7 +744,8 @@ def _pooled_null(names, fits, runs, recs):
 
 @one_blas_thread
 def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float = ALPHA,
-                    n_bootstrap: int = 39, candidates: Sequence[str] | None = None,
+                    n_bootstrap: int = 39,
+                    candidates: Sequence[str | Extension] | None = None,
                     skip_seconds: float = SKIP_SECONDS, omega_c: float | None = None,
                     n_starts: int = 4, oversample: int = 1, n_calibrate: int = N_CALIBRATE,
                     noise_passes: int = 1, refit: bool = True,
@@ -762,7 +763,9 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         draw other bootstrap replicates).  None draws one from fresh
         entropy, recorded in ``settings["seed"]``.
     alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample
-        As for :func:`~bayespilot.diagnose.diagnose`.  With ``omega_c`` above
+        As for :func:`~bayespilot.diagnose.diagnose` (``candidates``: catalogue
+        names or entries, an entry of one's own registered; default the
+        built-in catalogue, then the registered entries).  With ``omega_c`` above
         25 rad/s every extension is also started from its pooled fit on the
         25-rad/s band (:func:`_pooled_guide`).
     n_calibrate : int

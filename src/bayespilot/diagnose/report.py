@@ -414,8 +414,6 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     from matplotlib import ticker
     from scipy import stats
 
-    from .catalogue import get_extension
-
     fig, ax = _figure_and_axes(ax)
     rows = [c for c in result.ranking if c.testable]
     level = result.settings["level_per_candidate"]
@@ -426,7 +424,7 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     for i, c in enumerate(rows):
         if c.df > 0:
             # the threshold of the test that decided (decide.lr_p_value, calibrate.Calibration)
-            boundary = get_extension(c.physics).boundary_null and c.df == 1
+            boundary = _boundary_null(c)
             crit = 0.5 * stats.chi2.isf(2.0 * level if boundary else level, c.df)
             if c.calibration is not None:
                 crit *= max(1.0, c.calibration.scale)
@@ -457,6 +455,20 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     return fig
 
 
+def _boundary_null(c: Any) -> bool:
+    """Whether candidate ``c``'s test had the chi-bar-squared reference of a one-parameter
+    boundary null: its catalogue entry says so; an entry not registered here (a result file
+    of another session's own entry) is read from how its test was made (``reason``)."""
+    from .catalogue import get_extension
+
+    if c.df != 1:
+        return False
+    try:
+        return bool(get_extension(c.physics).boundary_null)
+    except ValueError:
+        return "boundary null" in (c.reason or "")
+
+
 def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = None) -> Figure:
     """Every candidate's p-value in every diagnosis of a batch, at a glance.
 
@@ -472,7 +484,9 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     Returns
     -------
     matplotlib.figure.Figure
-        One row per diagnosis, one column per catalogue entry, coloured by
+        One row per diagnosis, one column per catalogue entry (the built-in
+        ones, then any other a diagnosis tested, in the order first met: an
+        entry of one's own, registered or not), coloured by
         -log10 p up to 6 (where a p is below 1e-6, an arrow on the colour bar
         says the scale is capped there; grey: not
         testable on that recording); a dot where p is below the decision's
@@ -483,22 +497,26 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
 
     plt = _pyplot()
     n = len(diagnoses)
+    names = list(NAMES)  # then the entries of one's own the diagnoses tested
+    for _, d in diagnoses:
+        names += [c["physics"] for c in d["ranking"] if c["physics"] not in names]
     if ax is None:
-        fig, ax = _subplots(figsize=(8.5, min(max(3.6, 1.9 + 0.28 * n), 60.0)))
+        fig, ax = _subplots(figsize=(8.5 + 0.9 * (len(names) - len(NAMES)),
+                                     min(max(3.6, 1.9 + 0.28 * n), 60.0)))
     else:
         fig = ax.figure
-    z = np.full((n, len(NAMES)), np.nan)
+    z = np.full((n, len(names)), np.nan)
     for i, (_, d) in enumerate(diagnoses):
         level = d["settings"]["level_per_candidate"]
         for c in d["ranking"]:
             p = c.get("p_value")
-            if c["physics"] in NAMES and isinstance(p, (int, float)) and c.get("testable", True):
-                j = NAMES.index(c["physics"])
+            if isinstance(p, (int, float)) and c.get("testable", True):
+                j = names.index(c["physics"])
                 z[i, j] = -math.log10(max(p, 1e-16))
                 if p < level:
                     ax.plot(j, i, "k.", ms=5)
-        if d["physics"] in NAMES:
-            j = NAMES.index(d["physics"])
+        if d["physics"] in names:
+            j = names.index(d["physics"])
             ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="k", lw=2))
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")
     im = ax.imshow(np.ma.masked_invalid(z), aspect="auto", cmap=cmap, vmin=0, vmax=6,
@@ -513,8 +531,8 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     levels = [d["settings"]["level_per_candidate"] for _, d in diagnoses]
     if levels:  # the decision's level per candidate (the median, should they differ)
         cb.ax.axhline(-math.log10(float(np.median(levels))), color="w", lw=2)
-    ax.set_xticks(range(len(NAMES)))
-    ax.set_xticklabels(NAMES, rotation=30, ha="right", fontsize=8)
+    ax.set_xticks(range(len(names)))
+    ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
     ax.set_yticks(range(n))
     ax.set_yticklabels([f"{k}: {d['physics']}" for k, d in diagnoses], fontsize=7)
     ax.set_title(f"{n} {'diagnosis' if n == 1 else 'diagnoses'}: every candidate's p-value\n"
