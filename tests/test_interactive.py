@@ -437,6 +437,18 @@ def test_a_recordings_signals_and_metadata_refuse_changes_and_stay_read_only_whe
         assert back.metadata == rec.metadata and back.source == rec.source
         with pytest.raises(TypeError):
             back.signals["e"] = back.e
+    # at every depth (the forcing, the plant), and apart from the caller's own dicts
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        rec.metadata["forcing"]["base_frequency"] = 1.0
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        rec.metadata["forcing"]["target"]["n"].append(3)
+    from bayespilot.recording import Recording
+
+    plant = {"num": [4.0], "den": [1.0, 0.0, 0.0]}
+    own = Recording(dict(rec.signals), rec.sample_rate_hz, rec.motion_gain, "other",
+                    {"controlled_element": plant})
+    plant["num"][0] = 99.0
+    assert own.controlled_element[0].tolist() == [4.0]
     # still a dict wherever one is read
     assert json.loads(json.dumps(rec.metadata)) == json.loads(json.dumps(dict(rec.metadata)))
     assert set(dict(rec.signals, u=rec.u)) == set(rec.signals)

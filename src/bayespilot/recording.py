@@ -8,6 +8,7 @@ turns files into Recordings and adds the file name to any error.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
@@ -45,9 +46,13 @@ class QuestionableRecordingWarning(UserWarning):
     Issued by :func:`~bayespilot.io.read_recording` and
     :func:`~bayespilot.io.read_mat` for a record shorter than
     :data:`SHORT_RECORDING_S` (the paper's runs are 81.92 s) or sampled below
-    :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz).  The recording
-    is still returned and can be used; the estimates from it are less
-    certain.  Silence it, once you know, with
+    :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz), and by
+    :func:`~bayespilot.fit.fast.fit_fast` and
+    :func:`~bayespilot.fit.three_step.fit_paper` for a control output u with
+    an offset (its mean more than
+    :data:`~bayespilot.fit.three_step.OFFSET_RATIO` of its standard
+    deviation).  The recording is still returned and can be used; the
+    estimates from it are less certain.  Silence it, once you know, with
     ``warnings.simplefilter("ignore", QuestionableRecordingWarning)``.
     """
 
@@ -95,6 +100,54 @@ class _ReadOnlyDict(dict):
 
     def __reduce__(self):
         return (_ReadOnlyDict, (dict(self),))
+
+    # a copy is the caller's to edit (copy.deepcopy(rec.metadata), then a new Recording)
+    def __copy__(self) -> dict:
+        return dict(self)
+
+    def __deepcopy__(self, memo: dict) -> dict:
+        return {k: copy.deepcopy(v, memo) for k, v in self.items()}
+
+
+class _ReadOnlyList(list):
+    """A list in a recording's metadata (a forcing's lines, a plant's coefficients) that
+    refuses to be changed in place, as :class:`_ReadOnlyDict`."""
+
+    _refuse = _ReadOnlyDict._refuse
+    __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
+    append = extend = insert = pop = remove = clear = sort = reverse = _refuse
+
+    def __reduce__(self):
+        return (_ReadOnlyList, (list(self),))
+
+    def __copy__(self) -> list:
+        return list(self)
+
+    def __deepcopy__(self, memo: dict) -> list:
+        return [copy.deepcopy(v, memo) for v in self]
+
+
+def _frozen(value: Any) -> Any:
+    """``value`` with its dicts, lists and arrays copied read-only, at every depth: a
+    recording's metadata, which no one (the caller who built it included) can then change
+    behind its checks."""
+    if isinstance(value, Mapping):
+        return _ReadOnlyDict({k: _frozen(v) for k, v in value.items()})
+    if isinstance(value, list):
+        return _ReadOnlyList(_frozen(v) for v in value)
+    if isinstance(value, np.ndarray):
+        value = value.copy()
+        value.setflags(write=False)
+    return value
+
+
+def _thawed(value: Any) -> Any:
+    """A :func:`_frozen` value as plain dicts and lists (arrays kept)."""
+    if isinstance(value, Mapping):
+        return {k: _thawed(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_thawed(v) for v in value]
+    return value
 
 
 def _warn_if_questionable(recording: "Recording") -> None:
@@ -244,7 +297,9 @@ class Recording:
     metadata : mapping, optional
         Every other key of the recording's JSON sidecar (``controlled_element_gain``,
         ``controlled_element``, ``control_gain``, ``subject``, ``run``,
-        ``forcing``, ``notes`` and unknown keys), kept as given.
+        ``forcing``, ``notes`` and unknown keys), kept as given (a read-only
+        copy at every depth, as ``signals`` is: a changed recording is a new
+        :class:`Recording`, which checks it).
     source : str, optional
         Where the recording came from (a file stem), used in messages.
 
@@ -371,13 +426,13 @@ class Recording:
         object.__setattr__(self, "signals", _ReadOnlyDict(clean))
         object.__setattr__(self, "sample_rate_hz", rate)
         object.__setattr__(self, "motion_gain", kth)
-        object.__setattr__(self, "metadata", _ReadOnlyDict(meta))
+        object.__setattr__(self, "metadata", _frozen(meta))  # nested too: the plant, forcing
 
     def __reduce__(self):
         # Built again through the checks when unpickled or deep-copied (a dask worker's copy):
         # numpy's pickles come back writable, and the checks make them read-only again.
-        return (Recording, (dict(self.signals), self.sample_rate_hz, self.motion_gain,
-                            self.task, dict(self.metadata), self.source))
+        return (type(self), (dict(self.signals), self.sample_rate_hz, self.motion_gain,
+                             self.task, _thawed(self.metadata), self.source))
 
     # -- convenience views -------------------------------------------------
     def __getitem__(self, name: str) -> np.ndarray:
