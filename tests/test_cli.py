@@ -148,12 +148,15 @@ def test_loglik_equals_library(ft_run, ft_params, capsys):
     code, out, err = _run(capsys, "loglik", ft_run, "--params", ft_params)
     assert code == 0, err
     lines = out.splitlines()
-    assert len(lines) == 2
-    assert _loglik_value(out) == neg_log_lik(paper_model(), rec, truth)
+    # the run is not whole forcing periods: its first 2 s are left out, as the fitters do
+    assert len(lines) == 3 and lines[2] == ("(the first 2 s left out: the record is not a "
+                                            "whole number of forcing periods)")
+    lik = Likelihood(paper_model(), rec, discard=2.0)
+    assert _loglik_value(out) == lik.neg_log_lik(truth)
     vaf = float(re.match(r"VAF = " + NUMBER + " %", lines[1]).group(1))
-    assert vaf == pytest.approx(Likelihood(paper_model(), rec).vaf(truth), abs=0.006)
+    assert vaf == pytest.approx(lik.vaf(truth), abs=0.006)
 
-    # the .csv path, --no-threshold, --initial rest and --quiet
+    # the .csv path, --no-threshold, --initial rest (no wrap: nothing left out) and --quiet
     code, out, _ = _run(capsys, "loglik", f"{ft_run}.csv", "--params", ft_params,
                         "--no-threshold", "--initial", "rest", "-q")
     assert code == 0 and len(out.splitlines()) == 1
@@ -166,8 +169,8 @@ def test_loglik_no_threshold_needs_no_delta(ft_run, tmp_path, capsys):
     pfile = _write_json(tmp_path / "seven.json", seven)
     code, out, _ = _run(capsys, "loglik", ft_run, "--params", pfile, "--no-threshold")
     assert code == 0
-    assert _loglik_value(out) == neg_log_lik(paper_model(threshold=False), read_recording(ft_run),
-                                             seven)
+    assert _loglik_value(out) == Likelihood(paper_model(threshold=False), read_recording(ft_run),
+                                            discard=2.0).neg_log_lik(seven)
 
 
 # --- bad input --------------------------------------------------------------------------
@@ -457,3 +460,26 @@ def test_fit_of_a_run_without_motion_says_so_once(tmp_path, capsys):
     (line,) = [ln for ln in err.splitlines() if "warning" in ln]
     assert line.startswith("bayespilot: warning: the vestibular channel's input "
                            "(theta_ddot_m) is zero throughout the record")
+
+
+def test_a_stick_offset_is_one_warning_line(ft_run, tmp_path, capsys):
+    """The fit's offset warning (a UserWarning) was Python's two-line display naming the
+    bayespilot script, and `sample`, which prints only RuntimeWarnings, dropped it."""
+    import warnings
+
+    from bayespilot.cli import _said_to_user
+    from bayespilot.io import write_recording
+    from bayespilot.recording import QuestionableRecordingWarning
+
+    rec = read_recording(ft_run)
+    write_recording(rec.with_signals(u=rec.u + 3.0 * float(np.std(rec.u))), tmp_path / "off")
+    code, out, err = _run(capsys, "fit", tmp_path / "off", "--method", "fast", "-q")
+    lines = err.strip().splitlines()
+    assert code == 0 and lines, err
+    offset = [ln for ln in lines if "the control output u has a mean of" in ln]
+    assert len(offset) == 1 and offset[0].startswith("bayespilot: warning: ")
+    assert all(ln.startswith("bayespilot: warning: ") for ln in lines)
+    # what sample, compare and diagnose --posterior print of the warnings they record
+    said = warnings.WarningMessage("m", QuestionableRecordingWarning, "f", 1)
+    assert _said_to_user(said)
+    assert not _said_to_user(warnings.WarningMessage("m", UserWarning, "f", 1))

@@ -215,8 +215,11 @@ def test_fits_refuse_a_recording_with_nothing_to_fit(sim):
     cut = rec.with_signals(u=np.concatenate([rec.u[:300], np.full(rec.n_samples - 300, 0.5)]))
     with pytest.raises(ValueError, match=r"constant \(0.5\) after the first 4 s"):
         fit_fast(cut, seed=0, noise="ar", discard=4.0)
-    assert fit_paper(rec, seed=0, discard=None, repetitions=1, n_best=1, generations=2,
-                     population=10).settings["discard"] == 0.0
+    # None: as fit_fast, 2 s on this 30-s record cut mid-period (0 on whole periods)
+    small = dict(seed=0, repetitions=1, n_best=1, generations=2, population=10)
+    assert fit_paper(rec, discard=None, **small).settings["discard"] == 2.0
+    assert fit_paper(rec, **small).settings["discard_reason"] == fit_fast(
+        rec, seed=0, n_starts=1, profile_step=0.05).settings["discard_reason"]
 
 
 def test_cli_fit_json(sim, tmp_path, capsys):

@@ -567,7 +567,7 @@ def _warm_numba_cache(methods: Iterable[str]) -> None:
     for thr in (True, False):
         if "paper" in methods:
             fit_paper(rec, threshold=thr, seed=0, repetitions=1, n_best=1, population=4,
-                      generations=1)
+                      generations=1, discard=0.0)  # the jobs' kernels: whole records, no discard
         if "fast" in methods:
             fit_fast(rec, threshold=thr, seed=0, n_starts=1, profile_step=0.05, discard=0.0)
 

@@ -355,9 +355,11 @@ def _likelihood(model, recording, params: Mapping[str, float], initial: str = "p
     than a channel's delay needs (:func:`_too_short_for_delays`), else a
     failure (exit 1): the model is unstable at ``params``.
     """
-    from .likelihood import Likelihood, PerfectFitWarning
+    from .likelihood import Likelihood, PerfectFitWarning, _startup_default
 
-    lik = Likelihood(model, recording, initial=initial)
+    # as the fitters: a record cut mid-period has its start-up left out (and says so)
+    lik = Likelihood(model, recording, initial=initial,
+                     discard=_startup_default(recording, initial))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PerfectFitWarning)
         value = lik.neg_log_lik(params)
@@ -407,6 +409,11 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
     value, vaf = _likelihood(model, rec, params, args.initial)
     print(f"-ln L = {value!r}")
     _say(args, f"VAF = {vaf:.2f} %")
+    from .likelihood import STARTUP_REASON, _startup_default
+
+    skipped = _startup_default(rec, args.initial)
+    if skipped:
+        _say(args, f"(the first {skipped:g} s left out: {STARTUP_REASON.split(': ', 1)[-1]})")
     return EXIT_OK
 
 
@@ -626,6 +633,14 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
 
 
 # --- posteriors and model comparison (bayespilot.sample, bayespilot.compare) ----------------------
+def _said_to_user(w: warnings.WarningMessage) -> bool:
+    """Whether a warning a command recorded is printed: the computation's (RuntimeWarning and
+    its subclasses) and the recording's (QuestionableRecordingWarning: a stick offset)."""
+    from .recording import QuestionableRecordingWarning
+
+    return issubclass(w.category, (RuntimeWarning, QuestionableRecordingWarning))
+
+
 def _print_warnings(caught) -> None:
     """Warnings caught during a computation, one line each on stderr."""
     seen = set()
@@ -726,7 +741,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         except OSError as exc:  # the HDF5 backend cannot be created or opened
             raise CommandFailed(f"{args.backend}: cannot open the sampler's backend file "
                                 f"({_os_reason(exc)})") from None
-    _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
+    _print_warnings(w for w in caught if _said_to_user(w))
     print(post)  # (before the file: a write that fails still leaves the summary)
     try:
         post.to_netcdf(out)
@@ -760,7 +775,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                              progress=_progress(args))
         except RuntimeError as exc:
             raise CommandFailed(str(exc)) from None
-    _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
+    _print_warnings(w for w in caught if _said_to_user(w))
     print(result.summary())
     if args.json:
         _write_json(args.json, result.to_dict())
@@ -890,7 +905,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                     post = sample_chosen(res, recs[0], seed=args.seed, progress=_progress(args))
                 except RuntimeError as exc:
                     raise CommandFailed(str(exc)) from None
-            _print_warnings(w for w in caught if issubclass(w.category, RuntimeWarning))
+            _print_warnings(w for w in caught if _said_to_user(w))
             try:
                 post.to_netcdf(args.posterior)
             except OSError as exc:
@@ -1621,9 +1636,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise UsageError("give -q/--quiet or -v/--verbose, not both")
         # (imported once a command runs: --help and --version stay quick)
         from .diagnose.locate import EvidenceWarning
-        from .likelihood import SilentChannelWarning
+        from .fit.result import EstimateOnBoundWarning
+        from .likelihood import NotWholePeriodsWarning, SilentChannelWarning
+        from .recording import QuestionableRecordingWarning
 
-        with _warnings_of((SilentChannelWarning, EvidenceWarning), _warning_lines_once()):
+        # the package's warnings about a run, one line each (Python's display is two lines
+        # naming the bayespilot script); a command that records its own prints them itself
+        with _warnings_of((SilentChannelWarning, EvidenceWarning, NotWholePeriodsWarning,
+                           EstimateOnBoundWarning, QuestionableRecordingWarning),
+                          _warning_lines_once()):
             return args.handler(args)
     except SystemExit as exc:  # --help, --version
         return exc.code if isinstance(exc.code, int) else (0 if exc.code is None else EXIT_USAGE)

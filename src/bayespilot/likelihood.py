@@ -175,6 +175,10 @@ def _called_from_handling_startup() -> bool:
     return False
 
 
+#: Why a fitter's default left the start-up out (its ``settings["discard_reason"]``).
+STARTUP_REASON = "start-up left out: the record is not a whole number of forcing periods"
+
+
 def _startup_default(recording: Recording, initial: str) -> float:
     """The discard a fitter's default picks with the white output error: :func:`startup_discard`
     for ``initial="periodic"`` on a record known not to be whole periods, else 0 (whole

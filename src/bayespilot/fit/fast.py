@@ -34,7 +34,7 @@ import time
 import numpy as np
 from scipy.stats import qmc
 
-from ..likelihood import Likelihood, _startup_default
+from ..likelihood import STARTUP_REASON, Likelihood, _startup_default
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, ARNoise
 from ..recording import Recording
@@ -159,8 +159,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
             # 0 on whole periods, as before
             discard = _startup_default(recording, initial)
             if discard:
-                discard_reason = ("start-up left out: the record is not a whole number of "
-                                  "forcing periods")
+                discard_reason = STARTUP_REASON
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     _check_fittable(recording, model, discard)

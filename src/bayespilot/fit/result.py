@@ -272,6 +272,11 @@ class FitResult:
             lines.append(f"{k:<10} {v:>12.6g}{mark}  {self._unit(k)}{note}".rstrip())
         lines.append(f"-ln L = {self.neg_log_lik:.3f}   VAF = {self.vaf:.2f} %   "
                      f"time = {self.elapsed:.1f} s")
+        discard = self.settings.get("discard") or 0.0
+        if discard:  # (the -ln L is of the samples after it: say so)
+            why = self.settings.get("discard_reason")
+            lines.append(f"the first {discard:g} s left out of -ln L and VAF"
+                         + (f" ({why.split(': ', 1)[-1]})" if why else ""))
         if edge:
             said = []
             for k, side in edge.items():

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ..likelihood import Likelihood
+from ..likelihood import STARTUP_REASON, Likelihood, _startup_default
 from ..model import PilotModel, paper_model
 from ..recording import Recording
 from .gauss_newton import refine
@@ -155,7 +155,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
               population: int = 160, generations: int = 100, p_crossover: float = 0.7,
               p_mutation: float = 0.01, bits: int = 20, scan_step: float = 1e-4,
               iterate: bool = False, max_iterations: int = 50, initial: str = "periodic",
-              discard: float | None = 0.0,
+              discard: float | None = None,
               progress: bool = False) -> FitResult:
     """Fit a pilot model to a recording with the paper's three-step procedure.
 
@@ -192,9 +192,14 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     initial : {"periodic", "rest"}
         Initial-condition treatment of the likelihood.
     discard : float or None
-        Seconds at the start left out of Eq. 4 (see :class:`~bayespilot.likelihood.Likelihood`;
-        0, the paper's choice, by default; None is 0 too, as in
-        :func:`~bayespilot.fit.fast.fit_fast` with white output error).
+        Seconds at the start left out of Eq. 4 (see :class:`~bayespilot.likelihood.Likelihood`).
+        None (default): 0, the paper's choice, on a record of whole forcing periods (the
+        paper's 81.92 s) or one not known to be otherwise; with ``initial="periodic"`` on a
+        record known not to be whole periods
+        (:func:`~bayespilot.likelihood.whole_periods`),
+        :func:`~bayespilot.likelihood.startup_discard` (2 s), as
+        :func:`~bayespilot.fit.fast.fit_fast` does, so that the two methods fit the same
+        samples (``settings["discard_reason"]`` says why).
     progress : bool
         Show a progress bar over the GA repetitions.
 
@@ -249,7 +254,11 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
-    discard = 0.0 if discard is None else discard
+    discard_reason = None
+    if discard is None:  # 0 on whole periods; a record cut mid-period: as fit_fast
+        discard = _startup_default(recording, initial)
+        if discard:
+            discard_reason = STARTUP_REASON
     _check_fittable(recording, model, discard)
     lik = Likelihood(model, recording, initial=initial, discard=discard)
     has_delta = "delta_abs" in model.parameter_names
@@ -303,6 +312,8 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
                 "bits": bits, "scan_step": scan_step, "iterate": iterate,
                 "max_iterations": max_iterations, "initial": initial, "discard": discard,
                 "model": model.name}
+    if discard_reason is not None:
+        settings["discard_reason"] = discard_reason
     steps = {"step1": s1.to_dict(), "step1_delta_abs": delta1,
              "step2": [r.to_dict() for r in step2], "step2_best": k_best,
              "step3": scans, "iterations": iterations, "iterations_converged": converged}
