@@ -484,3 +484,25 @@ def test_an_offset_in_u_is_warned_of_before_fitting(sim):
         _check_fittable(shifted, paper_model(), 2.0)
     assert len(caught) == 1 and "after the first 2 s" in str(caught[0].message)
     assert caught[0].filename == __file__
+
+
+def test_no_bound_warning_for_a_silent_channels_parameters():
+    """A run without motion leaves the motion channel's parameters unidentified (the
+    SilentChannelWarning says so): one of them ending on a bound is not the bound warning's
+    "the units may not suit" case, and it is not warned of again; it is still marked."""
+    import warnings
+
+    from bayespilot.fit.result import EstimateOnBoundWarning
+    from bayespilot.likelihood import SilentChannelWarning
+
+    from bayespilot.fit.three_step import _warn_on_bounds
+
+    rec = simulate(task="FD", motion_gain=0.0, remnant_fraction=0.05, seed=2).recording
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fit = fit_fast(rec, seed=0, n_starts=2, profile_step=0.05)
+    kinds = {w.category for w in caught}
+    assert SilentChannelWarning in kinds and EstimateOnBoundWarning not in kinds
+    assert fit.at_bounds == {"tau_m": "upper", "delta_abs": "upper"}  # marked all the same
+    with pytest.warns(EstimateOnBoundWarning, match="tau_m"):
+        _warn_on_bounds(fit)  # (without the likelihood, the record's silence unknown)

@@ -215,16 +215,29 @@ def _warn_not_whole_periods(recording: Recording, discard: float) -> None:
                    NotWholePeriodsWarning)
 
 
+def _silent_channels(model: PilotModel, X: np.ndarray) -> list[tuple[object, list[str]]]:
+    """(channel, its own parameters) of each channel whose input row of ``X`` is all zero
+    (its own: not shared with another channel, as the neuromuscular ones are)."""
+    out = []
+    for c, ch in enumerate(model.channels):
+        if np.any(X[c] != 0.0):
+            continue
+        others = {q for k, o in enumerate(model.channels) if k != c for q in o.parameter_names}
+        out.append((ch, [q for q in dict.fromkeys(ch.parameter_names) if q not in others]))
+    return out
+
+
+def _unidentified(lik: "Likelihood") -> set[str]:
+    """The parameters a likelihood's record does not identify: a silent channel's own."""
+    return {q for _, own in _silent_channels(lik.model, lik.X) for q in own}
+
+
 def _warn_silent_channels(model: PilotModel, X: np.ndarray) -> None:
     """One warning per channel whose input row of ``X`` is all zero and that has free
     parameters of its own (shared ones, such as the neuromuscular ones, are identified by the
     other channels)."""
     free = set(model.parameter_names)
-    for c, ch in enumerate(model.channels):
-        if np.any(X[c] != 0.0):
-            continue
-        others = {q for k, o in enumerate(model.channels) if k != c for q in o.parameter_names}
-        own = [q for q in dict.fromkeys(ch.parameter_names) if q not in others]
+    for ch, own in _silent_channels(model, X):
         if any(q in free for q in own):  # (all named, so that the message is one per channel)
             # (at the user's call: a fit builds several likelihoods, said once for its line)
             warn_at_caller(f"the {ch.name} channel's input ({ch.source}) is zero throughout "

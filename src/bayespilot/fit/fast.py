@@ -194,7 +194,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         fit = FitResult(full, f, lik0.vaf(p), "fast", seed, False, settings,
                         stages, time.perf_counter() - t0, recording.source,
                         **FitResult._declared(model))
-        _warn_on_bounds(fit)
+        _warn_on_bounds(fit, lik0)
         return fit
 
     lik = Likelihood(model, recording, initial=initial, discard=discard, noise=given)
@@ -231,7 +231,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     settings.update({"profile_step": profile_step, "scan_step": scan_step})
     fit = FitResult(full, float(fun), lik.vaf(params), "fast", seed, True, settings, stages,
                     time.perf_counter() - t0, recording.source, **FitResult._declared(model))
-    _warn_on_bounds(fit)
+    _warn_on_bounds(fit, lik)
     return fit
 
 

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from ..likelihood import STARTUP_REASON, Likelihood, _startup_default
+from ..likelihood import STARTUP_REASON, Likelihood, _startup_default, _unidentified
 from ..model import PilotModel, paper_model
 from ..recording import Recording
 from .gauss_newton import refine
@@ -113,7 +113,7 @@ def _warn_unnamed_threshold(model: PilotModel) -> None:
                        "threshold named delta_abs (name it so to have it scanned)", UserWarning)
 
 
-def _warn_on_bounds(fit: FitResult) -> None:
+def _warn_on_bounds(fit: FitResult, lik: Likelihood | None = None) -> None:
     """One EstimateOnBoundWarning, at the user's line, naming the parameters other than
     delta_abs that ended on a bound of the search box (:attr:`FitResult.at_bounds`; delta_abs
     = 0 is the answer "no threshold").  Only for a fit the user's own code called: the
@@ -125,7 +125,10 @@ def _warn_on_bounds(fit: FitResult) -> None:
     from .._caller import _PACKAGE, warn_at_caller
     from .result import EstimateOnBoundWarning
 
-    edge = {k: side for k, side in fit.at_bounds.items() if k != "delta_abs"}
+    # (a silent channel's parameters, e.g. the motion channel's on a run without motion, are
+    # unidentified, not stopped by a bound: SilentChannelWarning has said so)
+    quiet = {"delta_abs"} | (_unidentified(lik) if lik is not None else set())
+    edge = {k: side for k, side in fit.at_bounds.items() if k not in quiet}
     if not edge:
         return
     # the first frame outside the fitters (and the BLAS-limit wrapper) is the fit's caller
@@ -319,5 +322,5 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
              "step3": scans, "iterations": iterations, "iterations_converged": converged}
     fit = FitResult(full, float(fun), lik.vaf(params), "paper", seed, has_delta, settings, steps,
                     time.perf_counter() - t0, recording.source, **FitResult._declared(model))
-    _warn_on_bounds(fit)
+    _warn_on_bounds(fit, lik)
     return fit
