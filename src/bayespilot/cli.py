@@ -348,8 +348,10 @@ def _too_short_for_delays(model, recording, params: Mapping[str, float]) -> str 
     return None
 
 
-def _likelihood(model, recording, params: Mapping[str, float], initial: str = "periodic"):
-    """(-ln L, VAF %) of ``model`` on ``recording``.
+def _likelihood(model, recording, params: Mapping[str, float], initial: str = "periodic",
+                discard: float | None = None):
+    """(-ln L, VAF %) of ``model`` on ``recording``, after the first ``discard`` s (None: as
+    the fitters choose, the start-up of a record cut mid-period).
 
     A non-finite -ln L is a usage error (exit 2) when the record is shorter
     than a channel's delay needs (:func:`_too_short_for_delays`), else a
@@ -357,9 +359,9 @@ def _likelihood(model, recording, params: Mapping[str, float], initial: str = "p
     """
     from .likelihood import Likelihood, PerfectFitWarning, _startup_default
 
-    # as the fitters: a record cut mid-period has its start-up left out (and says so)
-    lik = Likelihood(model, recording, initial=initial,
-                     discard=_startup_default(recording, initial))
+    if discard is None:  # as the fitters: a record cut mid-period has its start-up left out
+        discard = _startup_default(recording, initial)
+    lik = Likelihood(model, recording, initial=initial, discard=discard)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PerfectFitWarning)
         value = lik.neg_log_lik(params)
@@ -406,12 +408,12 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
         _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
     rec = _read(args.recording)
     _detail(args, f"{rec!r}\n{model.summary()}\ninitial conditions: {args.initial}")
-    value, vaf = _likelihood(model, rec, params, args.initial)
-    print(f"-ln L = {value!r}")
-    _say(args, f"VAF = {vaf:.2f} %")
     from .likelihood import STARTUP_REASON, _startup_default
 
-    skipped = _startup_default(rec, args.initial)
+    skipped = _startup_default(rec, args.initial)  # (once: said below if not 0)
+    value, vaf = _likelihood(model, rec, params, args.initial, skipped)
+    print(f"-ln L = {value!r}")
+    _say(args, f"VAF = {vaf:.2f} %")
     if skipped:
         _say(args, f"(the first {skipped:g} s left out: {STARTUP_REASON.split(': ', 1)[-1]})")
     return EXIT_OK
