@@ -607,6 +607,16 @@ def test_whole_periods_is_read_from_the_forcing_or_its_columns():
         assert whole_periods(bare) is None
 
 
+@pytest.mark.parametrize("name", ["whole_periods", "startup_discard"])
+def test_the_start_up_helpers_refuse_what_is_not_a_recording(name):
+    """A path or a dict was read as far as its first attribute (AttributeError: 'str' object
+    has no attribute 'n_samples'); now a TypeError names what it wants."""
+    import bayespilot.likelihood as L
+
+    with pytest.raises(TypeError, match="recording must be a Recording, got str"):
+        getattr(L, name)("run1.csv")
+
+
 def test_a_periodic_start_on_a_record_of_part_periods_warns_at_the_callers_line():
     """initial="periodic" wraps a 30-s record (the forcing's period is 81.92 s) across its cut:
     the first eighth of the residual at the true parameters was 0.39 std(u) without remnant

@@ -10,7 +10,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-__all__ = ["Multisine"]
+__all__ = ["Multisine", "SNAP_TOLERANCE"]
 
 
 def _is_complex(x: Any) -> bool:
@@ -171,3 +171,23 @@ class Multisine:
             One line (n = 1) of amplitude 0.
         """
         return cls(base_frequency, [1.0], [0.0], [0.0])
+
+
+#: A forcing line within this many cycles (over the record) of a whole number of cycles counts
+#: as whole periods: the diagnosis snaps a sidecar's base frequency that puts every line this
+#: close to the nearest that puts them on the record's DFT bins (a rounded value, as printed in
+#: a paper), and :func:`bayespilot.likelihood.whole_periods` reads a record so; a line off by
+#: more is not a bin.  (0.05 cycle off its bin keeps 99.6 % of its amplitude there.)
+SNAP_TOLERANCE = 0.05
+
+
+def _wraps_smoothly(x: np.ndarray) -> bool:
+    """True if ``x`` continues smoothly from its last sample to its first, as a record of whole
+    periods does: the second differences across the wrap are no larger than 3 times the
+    largest inside the record (a record cut mid-period jumps there)."""
+    x = np.asarray(x, dtype=float)
+    if x.size < 4:
+        return False
+    inside = np.max(np.abs(np.diff(x, 2)))
+    wrap = max(abs(x[1] - 2 * x[0] + x[-1]), abs(x[0] - 2 * x[-1] + x[-2]))
+    return bool(wrap <= 3.0 * inside + 1e-12 * np.max(np.abs(x)))

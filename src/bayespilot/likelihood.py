@@ -25,6 +25,7 @@ import numpy as np
 from scipy import signal
 
 from ._caller import warn_at_caller
+from .forcing import SNAP_TOLERANCE, _wraps_smoothly
 from .kernels import _coloured as C
 from .kernels import _response as R
 from .kernels import _segmented as SEG
@@ -78,7 +79,7 @@ def whole_periods(recording: Recording) -> bool | None:
         Read from its metadata's ``forcing`` (``base_frequency`` and the
         ``target`` and ``disturbance`` lines ``n``) if it has one: whole
         periods when every line with a nonzero amplitude is within
-        :data:`~bayespilot.diagnose.locate.SNAP_TOLERANCE` (0.05) cycle of a
+        :data:`~bayespilot.forcing.SNAP_TOLERANCE` (0.05) cycle of a
         whole number of cycles of the record (n_samples * dt), as
         :func:`~bayespilot.diagnose.locate.forcing_of` reads it (a rounded base
         frequency, as printed in a paper, counts).  Else from its ``f_t`` and
@@ -94,6 +95,11 @@ def whole_periods(recording: Recording) -> bool | None:
         metadata, no f_t and f_d columns, or forcing functions that are zero
         throughout).
 
+    Raises
+    ------
+    TypeError
+        If ``recording`` is not a :class:`~bayespilot.recording.Recording`.
+
     Examples
     --------
     >>> from bayespilot.simulate import simulate
@@ -102,9 +108,8 @@ def whole_periods(recording: Recording) -> bool | None:
     >>> whole_periods(simulate(task="FD", motion_gain=1.0, seed=1, duration=40).recording)
     False
     """
-    # (the diagnosis's reading of the same forcing, imported here: diagnose imports this module)
-    from .diagnose.locate import SNAP_TOLERANCE, _wraps_smoothly
-
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     T = recording.n_samples * recording.dt
     meta = recording.metadata.get("forcing")
     if isinstance(meta, Mapping):
@@ -146,7 +151,14 @@ def startup_discard(recording: Recording) -> float:
     -------
     float
         min(2, duration / 4), s.
+
+    Raises
+    ------
+    TypeError
+        If ``recording`` is not a :class:`~bayespilot.recording.Recording`.
     """
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     return min(STARTUP_DISCARD, recording.duration / 4)
 
 

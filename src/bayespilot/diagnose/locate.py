@@ -46,7 +46,7 @@ import numpy as np
 from scipy import integrate, optimize
 
 from .._files import number
-from ..forcing import Multisine
+from ..forcing import SNAP_TOLERANCE, Multisine, _wraps_smoothly
 from ..likelihood import Likelihood
 from ..model import PilotModel
 from ..recording import Recording
@@ -78,10 +78,6 @@ EVIDENCE = {
 N_SEGMENTS = 8
 #: Boundary between the low and high frequencies of the motion-channel evidence, rad/s.
 OMEGA_SPLIT = 2.0
-#: A sidecar's base frequency that puts every forcing line within this many cycles (over the
-#: record) of a whole number is snapped to the nearest that puts them on the record's DFT bins
-#: (a rounded value, as printed in a paper); a line off by more is not a bin.
-SNAP_TOLERANCE = 0.05
 #: What to give for the frequency evidence (the end of an EvidenceWarning).
 GIVE_FORCING = ("give the forcing (base_frequency, target, disturbance) in the sidecar, or f_t "
                 "and f_d columns")
@@ -168,18 +164,6 @@ def _multisine_from_signal(x: np.ndarray, dt: float) -> Multisine:
     amp = 2 * mag[k] / n
     phase = np.angle(X[k]) + np.pi / 2
     return Multisine(w0, k, amp, phase)
-
-
-def _wraps_smoothly(x: np.ndarray) -> bool:
-    """True if ``x`` continues smoothly from its last sample to its first, as a record of whole
-    periods does: the second differences across the wrap are no larger than 3 times the
-    largest inside the record (a record cut mid-period jumps there)."""
-    x = np.asarray(x, dtype=float)
-    if x.size < 4:
-        return False
-    inside = np.max(np.abs(np.diff(x, 2)))
-    wrap = max(abs(x[1] - 2 * x[0] + x[-1]), abs(x[0] - 2 * x[-1] + x[-2]))
-    return bool(wrap <= 3.0 * inside + 1e-12 * np.max(np.abs(x)))
 
 
 def forcing_of(recording: Recording) -> Forcing | None:
