@@ -108,6 +108,42 @@ def test_linear_loop_matches_scipy_ode_solver():
     assert np.max(np.abs(sim.recording.u - u_ref)) < 1e-6 * np.max(np.abs(u_ref)) + 1e-9
 
 
+def test_a_drifting_gain_keeps_its_start_value_through_the_run_in():
+    """The linear loop of the test above with K_v drifting by 1.5 over a 10-s run, after a 5-s
+    run-in, against solve_ivp with the gain K_v (1 + 1.5 (clip(t / T, 0, 1) - 1/2)).  The
+    kernel extrapolated the drift back into the run-in: over the default 41-s run-in the
+    visual gain went negative and the recorded FD run started with e at 22 rad rms."""
+    from bayespilot.model import LinearDrift, Parameter
+
+    d, T, run_in = 1.5, 10.0, 5.0
+    p = dict(presets.TABLE3["FD"], delta_abs=0.0, tau_v=0.0, tau_m=0.0, drift_v=d)
+    m = paper_model().with_modulation("visual", LinearDrift("drift_v"),
+                                      [Parameter("drift_v", -1.5, 1.5, 0.0)])
+    ft = Multisine(presets.OMEGA0, [6, 19], [0.02, 0.01], [0.3, 1.0])
+    fd = Multisine(presets.OMEGA0, [11, 46], [0.01, 0.02], [0.0, 2.0])
+    task = TrackingTask(ft, fd, motion_gain=1.0, duration=T, run_in=run_in)
+    sim = simulate(m, params=p, task=task, seed=0, oversample=10)
+    Kc, Kdu, K, T1, T2 = presets.K_C, presets.K_DU, presets.K_SCC, presets.T_SCC1, presets.T_SCC2
+    w, z = p["omega_nm"], p["zeta_nm"]
+
+    def rhs(s, x):  # s: simulation time, the record's t = s - run_in
+        th, thd, xs, z1v, z2v, z1m, z2m = x
+        u = w**2 * (z1v + p["T_vl"] * z2v) + w**2 * z1m
+        thdd = Kc * (Kdu * u + fd(np.array([s]))[0])
+        e = ft(np.array([s]))[0] - th
+        i = K * T1 / T2 * thdd + K * (1 - T1 / T2) / T2 * xs
+        K_v = p["K_v"] * (1.0 + d * (min(max((s - run_in) / T, 0.0), 1.0) - 0.5))
+        return [thd, thdd, -xs / T2 + thdd,
+                z2v, -w**2 * z1v - 2 * z * w * z2v + K_v * e,
+                z2m, -w**2 * z1m - 2 * z * w * z2m - p["K_m"] * i]
+
+    s = sim.recording.t + run_in
+    sol = integrate.solve_ivp(rhs, (0, s[-1]), np.zeros(7), t_eval=s, rtol=1e-10, atol=1e-12,
+                              method="DOP853", max_step=0.01)
+    u_ref = w**2 * (sol.y[3] + p["T_vl"] * sol.y[4]) + w**2 * sol.y[5]
+    assert np.max(np.abs(sim.recording.u - u_ref)) < 1e-5 * np.max(np.abs(u_ref))
+
+
 def test_results_are_continuous_in_tau():
     """A delay change smaller than the step changes the run by a proportionally small amount."""
     base = simulate(task="FD", motion_gain=1.0, seed=0, duration=10.0)

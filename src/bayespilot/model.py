@@ -468,7 +468,9 @@ class LinearDrift(Modulation):
     """Channel gain times 1 + rate (t/T - 1/2): a gain that drifts linearly over the run.
 
     t is the time from the start of the record and T its duration, so the gain
-    is the channel's own at mid-run.
+    is the channel's own at mid-run.  Before the record (the simulator's
+    run-in, a likelihood's lead-in from rest) the gain keeps its value at the
+    start, 1 - rate / 2.
 
     Attributes
     ----------

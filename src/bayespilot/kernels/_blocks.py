@@ -180,11 +180,32 @@ def nonlinearity_tangent(kind, x, p0, p1, dx, dp0, dp1):
 
 
 @njit
+def _run_fraction(t_frac):
+    """``t_frac`` held within the run, [0, 1]: a modulated gain keeps its start value before
+    the record (the simulator's run-in, a likelihood's lead-in from rest) instead of being
+    extrapolated back, where a drift of 1.5 over the run made the visual gain negative for
+    the first third of the simulator's 41-s run-in and the loop diverged."""
+    if t_frac < 0.0:
+        return 0.0
+    if t_frac > 1.0:
+        return 1.0
+    return t_frac
+
+
+@njit
 def modulation(kind, t_frac, p0):
-    """Gain modulation factor at run fraction ``t_frac`` in [0, 1)."""
+    """Gain modulation factor at run fraction ``t_frac`` (held within [0, 1])."""
     if kind == MOD_LINEAR:
-        return 1.0 + p0 * (t_frac - 0.5)
+        return 1.0 + p0 * (_run_fraction(t_frac) - 0.5)
     return 1.0
+
+
+@njit
+def modulation_slope(kind, t_frac):
+    """Derivative of :func:`modulation` with respect to its parameter ``p0``."""
+    if kind == MOD_LINEAR:
+        return _run_fraction(t_frac) - 0.5
+    return 0.0
 
 
 @njit

@@ -51,8 +51,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import njit
-from ._blocks import (MOD_LINEAR, NL_DEADZONE, NL_NONE, NL_SATURATION, modulation,
-                      nonlinearity, nonlinearity_tangent)
+from ._blocks import (NL_DEADZONE, NL_NONE, NL_SATURATION, modulation,
+                      modulation_slope, nonlinearity, nonlinearity_tangent)
 
 
 @njit
@@ -330,13 +330,13 @@ def modulate(v, mod_kind, mp, dmp, dv, tangent, pre=0):
 
     ``pre``: ``v`` starts ``pre`` samples before the record (a lead-in from rest, see
     ``_response.lead_in``), so its sample k is at the record's time k - pre (g
-    extrapolated before the start) and the record has v.shape[0] - pre samples."""
+    held at its start value before the start) and the record has v.shape[0] - pre samples."""
     n = v.shape[0]
     for k in range(n):
         frac = (k - pre) / (n - pre)
         g = modulation(mod_kind, frac, mp)
         if tangent:
-            dg = dmp * (frac - 0.5) if mod_kind == MOD_LINEAR else 0.0
+            dg = dmp * modulation_slope(mod_kind, frac)
             dv[k] = g * dv[k] + dg * v[k]
         v[k] = g * v[k]
 

@@ -20,8 +20,9 @@ import numpy as np
 
 from .._jit import njit
 from . import _oversample as OV
-from ._blocks import (MOD_LINEAR, MOD_NONE, NL_NONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
-                      STAGE_LOWPASS1, STAGE_LOWPASS2, STAGE_NONE, modulation, nonlinearity,
+from ._blocks import (MOD_NONE, NL_NONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIGHPASS2,
+                      STAGE_LOWPASS1, STAGE_LOWPASS2, STAGE_NONE, modulation, modulation_slope,
+                      nonlinearity,
                       nonlinearity_tangent, param_or, stable, stage_tf, tustin)
 from ._response import (_tap, _with_lead_in, any_oversampled, fine_lead_in, lead_in,
                         oversampling, periodic_state, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
@@ -150,7 +151,7 @@ def _accumulate_tangent(v, dv, src, dsrc, m, f, df, B0, B1, B2, dB0, dB1, dB2, m
         if mod_kind != MOD_NONE:
             frac = ((k + n) % n) / n if periodic else (k - pre) / (n - pre)
             g = modulation(mod_kind, frac, mp)
-            dg = dmp * (frac - 0.5) if mod_kind == MOD_LINEAR else 0.0
+            dg = dmp * modulation_slope(mod_kind, frac)
             tk = g * tk + dg * dk
             dk = g * dk
         if k >= 0:
