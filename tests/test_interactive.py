@@ -361,6 +361,24 @@ def test_results_with_arrays_compare_by_identity():
     assert d.ranking.index(d.chosen) == 0
 
 
+def test_calibrations_profiles_and_bayes_factors_compare_by_identity():
+    """Value equality of a Calibration or ProfileInterval compared their arrays and raised
+    "The truth value of an array ... is ambiguous"; an ExtensionBayesFactor holds two
+    posteriors."""
+    from bayespilot.diagnose.calibrate import Calibration
+    from bayespilot.diagnose.nested import ExtensionBayesFactor
+    from bayespilot.diagnose.profile import ProfileInterval
+
+    cal = Calibration("motion-washout", 2, 1.0, 0.5, 2.0, 0.1, 0.2, 0.3, np.array([1.0, 2.0]))
+    prof = ProfileInterval("K_v", 0.95, 1.0, 2.0, values=np.zeros(3), deviance=np.zeros(3))
+    bf = ExtensionBayesFactor("motion-washout", 1.0, 0.1, "positive", "extended", None,
+                              np.zeros(2), np.zeros(2))
+    for obj, twin in ((cal, Calibration.from_dict(cal.to_dict())), (prof, copy.deepcopy(prof)),
+                      (bf, copy.deepcopy(bf))):
+        assert obj == obj and not (obj == twin) and obj != twin
+        assert obj in [twin, obj]
+
+
 # --- 8. the top-level namespace ---------------------------------------------------------------------
 def test_top_level_namespace_is_clean_and_completes():
     names = dir(bayespilot)

@@ -60,7 +60,7 @@ from .catalogue import Extension
 __all__ = ["Calibration", "reference_mean", "calibrate_candidate"]
 
 
-@dataclass
+@dataclass(eq=False)
 class Calibration:
     """A candidate's test calibrated by the parametric bootstrap of the base model.
 

@@ -96,7 +96,7 @@ class EvidenceSummary:
     max_log_lik: float
 
 
-@dataclass
+@dataclass(eq=False)
 class ExtensionBayesFactor:
     """ln BF(extended : base) of one catalogue extension on one recording.
 

@@ -59,7 +59,7 @@ STOP = 4.0
 BETTER_TOL = 0.01
 
 
-@dataclass
+@dataclass(eq=False)
 class ProfileInterval:
     """The profile-likelihood interval of one parameter.
 
