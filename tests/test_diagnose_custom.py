@@ -233,3 +233,89 @@ def test_batch_sends_the_entry_to_its_workers(lagged, tmp_path):
         s = diagnose_batch([stem], out, seed=0, n_bootstrap=0, candidates=["visual-lag"],
                            workers=1, progress=False, warm_cache=False)
     assert (s.completed, s.skipped) == (0, 1)
+
+
+# --- from the command line: --extension FILE.py:NAME ------------------------------------------
+ENTRY_FILE = '''
+from bayespilot.diagnose import Extension
+from bayespilot.model import FirstOrderLag, Parameter
+
+
+def lag(model):
+    return model.add_stage("visual", FirstOrderLag("T_vis"),
+                           [Parameter("T_vis", 1e-3, 0.5, 0.05, "s", "visual lag")])
+
+
+LAG = Extension("visual-lag", "A first-order lag on the visual channel.",
+                "The visual describing function loses phase at high frequencies.",
+                ("frequency.visual",), lag, ("T_vis",), ({"T_vis": 0.05}, {"T_vis": 0.15}),
+                boundary_null=True)
+NOT_AN_ENTRY = 3
+WRONG = Extension("visual-lag", "", "", ("frequency.visual",), lag, ("T_other",))
+'''
+
+
+@pytest.fixture
+def entry_file(tmp_path):
+    path = tmp_path / "mylab_entries.py"
+    path.write_text(ENTRY_FILE, encoding="utf-8")
+    return path
+
+
+@pytest.mark.parametrize("spec, match", [
+    ("{f}", "give FILE.py:NAME or package.module:NAME"),
+    ("{d}/nowhere.py:LAG", "no file .*nowhere.py"),
+    ("{f}:MISSING", "defines no 'MISSING'"),
+    ("{f}:NOT_AN_ENTRY", "NOT_AN_ENTRY is int, not an Extension"),
+    ("{f}:WRONG", "T_other"),
+    ("no_such_module_xyz:LAG", "no_such_module_xyz failed to load \\(ModuleNotFoundError"),
+])
+def test_cli_extension_refuses_what_it_cannot_use_before_reading(entry_file, tmp_path, capsys,
+                                                                  spec, match):
+    """Said in one line with exit code 2, before the recording is read (it does not exist
+    here) and before any computation."""
+    import re
+
+    from bayespilot.cli import main
+
+    arg = spec.format(f=entry_file, d=tmp_path)
+    assert main(["diagnose", str(tmp_path / "absent"), "--extension", arg]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"bayespilot: error: argument --extension: {arg}: ") and "\n" not in err
+    assert re.search(match, err), err
+    assert registered_extensions() == () or match == "T_other"
+
+
+def test_cli_diagnose_tests_an_entry_from_a_file(lagged, entry_file, tmp_path, capsys):
+    """The entry is tested after the six built-in ones and named, as from Python."""
+    from bayespilot.cli import main
+    from bayespilot.io import write_recording
+
+    stem = tmp_path / "lag-run1"
+    write_recording(lagged, stem)
+    out = tmp_path / "d.json"
+    assert main(["diagnose", str(stem), "--extension", f"{entry_file}:LAG", "--bootstrap", "0",
+                 "--json", str(out)]) == 0
+    got = json.loads(out.read_text())
+    assert got["physics"] == "visual-lag"
+    assert [r["physics"] for r in got["ranking"]][0] == "visual-lag"
+    assert sorted(r["physics"] for r in got["ranking"]) == sorted(NAMES + ("visual-lag",))
+    assert got["chosen"]["params"]["T_vis"] == pytest.approx(0.15, abs=0.08)
+    assert "7 catalogue extensions" in capsys.readouterr().out
+
+
+def test_cli_batch_sends_an_entry_from_a_file_to_its_workers(lagged, entry_file, tmp_path):
+    """The worker has never seen the file: its build function travels by value (the file is
+    loaded as a module outside sys.modules)."""
+    from bayespilot.cli import main
+    from bayespilot.io import write_recording
+
+    recs = tmp_path / "recs"
+    recs.mkdir()
+    write_recording(lagged, recs / "lag-run1")
+    out = tmp_path / "out"
+    assert main(["diagnose-batch", str(recs), "--out", str(out), "--extension",
+                 f"{entry_file}:LAG", "--bootstrap", "0", "--workers", "1", "-q"]) == 0
+    got = json.loads((out / "lag-run1.json").read_text())
+    assert got["diagnosis"]["physics"] == "visual-lag"
+    assert "visual-lag" in got["settings"]["candidates"]

@@ -833,8 +833,8 @@ def _weigh(args: argparse.Namespace, res, rec) -> None:
 
 
 def _cmd_diagnose(args: argparse.Namespace) -> int:
-    from .diagnose import (NAMES, diagnose, diagnose_pooled, get_extension, sample_chosen,
-                           shared_posterior)
+    from .diagnose import (candidate_names, diagnose, diagnose_pooled, get_extension,
+                           sample_chosen, shared_posterior)
     from .diagnose.pooled import PoolingWarning, pooling_disagreements
 
     if args.bayes_factor and len(args.recording) > 1:
@@ -847,6 +847,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                              + ("(a netCDF file of the draws)" if want == ".nc" else
                                 "(several runs: the shared parameters' posterior on a grid, "
                                 "as JSON)"))
+    _load_extensions(args.extension)
     recs = [_read(r) for r in args.recording]
     for path, what in ((args.posterior, "posterior"), (args.json, "diagnosis")):
         if path:  # checked before the diagnosis: its minutes are not lost to a bad path
@@ -857,14 +858,14 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         if len(recs) == 1:
             rec = recs[0]
             _say(args, f"diagnosing {rec.source}: base fit, located evidence ({args.bootstrap} "
-                       f"bootstrap replicates), {len(NAMES)} catalogue extensions ...")
+                       f"bootstrap replicates), {len(candidate_names())} catalogue extensions ...")
             res = diagnose(rec, seed=args.seed, n_bootstrap=args.bootstrap, alpha=args.alpha,
                            n_calibrate=args.calibrate, noise_passes=args.noise_passes,
                            progress=_progress(args))
         else:
             _say(args, f"diagnosing {len(recs)} runs pooled (extension parameters shared, "
                        f"pilot parameters per run): base fits, located evidence "
-                       f"({args.bootstrap} bootstrap replicates each), {len(NAMES)} catalogue "
+                       f"({args.bootstrap} bootstrap replicates each), {len(candidate_names())} catalogue "
                        f"extensions ...")
             mixed = pooling_disagreements(recs)
             if mixed:  # said now, before the long computation
@@ -966,6 +967,7 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     if args.scheduler is not None and args.workers is not None:
         raise UsageError("give --scheduler (an existing cluster) or --workers (a local one), "
                          "not both")
+    _load_extensions(args.extension)
     paths = _recordings_in(args.recording)
     where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
     _say(args, f"diagnosing {len({_the_recording(p) for p in paths})} recording(s)"
@@ -1023,6 +1025,57 @@ def _seed_argument(p: argparse.ArgumentParser, help: str) -> None:
     p.add_argument("--seed", type=_seed, default=0, metavar="S", help=help)
 
 
+def _load_extensions(specs: Sequence[str]) -> list:
+    """The catalogue entries named by --extension, each registered for this process.
+
+    ``FILE.py:NAME`` runs the file as a module that is not put in ``sys.modules``, so that
+    cloudpickle sends its build functions to a batch's workers by value (they cannot import
+    a file they were never given); ``package.module:NAME`` imports the module, which the
+    workers must then be able to import too.  NAME is an Extension or a list or tuple of
+    them.  Any problem is bad input, said with the option's value.
+    """
+    import importlib
+    import importlib.util
+
+    from .diagnose import Extension, register_extension
+
+    out: list = []
+    for spec in specs:
+        where, sep, name = spec.rpartition(":")
+        bad = f"argument --extension: {spec}"
+        if not sep or not where or not name.isidentifier():
+            raise UsageError(f"{bad}: give FILE.py:NAME or package.module:NAME (NAME: the "
+                             "Extension, or a list of them, defined there)")
+        if where.endswith(".py") and not Path(where).is_file():
+            raise UsageError(f"{bad}: no file {where}")
+        try:
+            if where.endswith(".py"):
+                found = importlib.util.spec_from_file_location(
+                    f"_bayespilot_extension_{len(out)}_{Path(where).stem}", where)
+                module = importlib.util.module_from_spec(found)
+                found.loader.exec_module(module)
+            else:
+                module = importlib.import_module(where)
+        except Exception as exc:  # noqa: BLE001 - the user's code can raise anything
+            raise UsageError(f"{bad}: {where} failed to load ({type(exc).__name__}: {exc})") \
+                from None
+        if not hasattr(module, name):
+            raise UsageError(f"{bad}: {where} defines no {name!r}")
+        obj = getattr(module, name)
+        entries = [obj] if isinstance(obj, Extension) else obj
+        if not isinstance(entries, (list, tuple)) or not entries or not all(
+                isinstance(e, Extension) for e in entries):
+            raise UsageError(f"{bad}: {name} is {type(obj).__name__}, not an Extension "
+                             "(bayespilot.diagnose.Extension) or a list of them")
+        for e in entries:
+            try:
+                register_extension(e)
+            except (TypeError, ValueError) as exc:
+                raise UsageError(f"{bad}: {exc}") from None
+        out += entries
+    return out
+
+
 def _diagnose_arguments(p: argparse.ArgumentParser) -> None:
     """--seed, --bootstrap, --alpha, --calibrate and --noise-passes, as diagnose and
     diagnose-batch take them."""
@@ -1041,6 +1094,11 @@ def _diagnose_arguments(p: argparse.ArgumentParser) -> None:
                         "Eq. 4 fit's residual; 2: again from the GLS base fit's, which "
                         "removes the washout test's small excess on correct-model runs; "
                         "at most 5)")
+    p.add_argument("--extension", action="append", default=[], metavar="FILE.py:NAME",
+                   help="a catalogue entry of your own (repeatable): NAME, a "
+                        "bayespilot.diagnose.Extension or a list of them, in the Python file "
+                        "FILE.py or in a module on PYTHONPATH (package.module:NAME); "
+                        "registered and tested after the built-in entries")
 
 
 def _cluster_arguments(p: argparse.ArgumentParser) -> None:
@@ -1292,8 +1350,10 @@ without a report is not redone and gets none (a warning names it; delete its
 per key: the decision (physics, mismatch), the chosen extension's p_value,
 delta_neg_log_lik and params, the candidate with the smallest p-value, or
 the error; DIR/summary.png draws every candidate's p-value in every
-diagnosis. About 21 s per recording of
-81.92 s on one core (with --bootstrap 39), see docs/performance.md.
+diagnosis. --extension FILE.py:NAME adds a lab's own catalogue entries, sent
+to the workers whole (one from package.module:NAME must be importable on
+them). About 21 s per recording of 81.92 s on one core (with --bootstrap
+39), see docs/performance.md.
 
 Examples:
   bayespilot diagnose-batch recordings/ --out diagnoses
@@ -1341,9 +1401,14 @@ tell from remnant can be found in four. The JSON then also has runs (each
 run's base fit, evidence and share of each candidate's improvement); the
 report writes candidates.png, runs.png, diagnosis.json and report.html.
 
+A lab's own catalogue entries (an Extension, see docs/diagnose.md, "Your own
+catalogue entry") are tested after the built-in ones with --extension
+FILE.py:NAME, repeatable; diagnose-batch sends them to its workers.
+
 Examples:
   bayespilot diagnose out/run --json out/run-diagnosis.json
   bayespilot diagnose out/run --report out/run-diagnosis --seed 1
+  bayespilot diagnose out/run --extension mylab_entries.py:VISUAL_LAG
   bayespilot diagnose out/run --report out/run-diagnosis --posterior out/run-ext.nc
   bayespilot diagnose out/run1 out/run2 out/run3 out/run4 --report out/pooled
 """
