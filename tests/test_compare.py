@@ -244,6 +244,15 @@ def test_jeffreys_and_decide():
     ln10 = math.log(10)
     assert [jeffreys_category(v) for v in (0.5, -1.5, 3.0, -4.0, 9.0)] == [
         "barely worth mentioning", "substantial", "strong", "very strong", "decisive"]
+    # the boundaries are Jeffreys' half-decades of BF, |ln BF| = k/2 ln 10 (1.1513, 2.3026,
+    # 3.4539, 4.6052): each category ends there, the next one starts, for either sign
+    names = ["barely worth mentioning", "substantial", "strong", "very strong", "decisive"]
+    for k, b in enumerate((1.1512925465, 2.302585093, 3.4538776395, 4.605170186), start=1):
+        assert k / 2 * ln10 == pytest.approx(b, abs=1e-9)
+        for sign in (1.0, -1.0):
+            assert jeffreys_category(sign * (b - 1e-9)) == names[k - 1], (k, sign)
+            assert jeffreys_category(sign * (b + 1e-9)) == names[k], (k, sign)
+    assert jeffreys_category(0.0) == names[0] and jeffreys_category(-math.inf) == "decisive"
     assert decide(ln10 + 2.1, 1.0) == "threshold"
     assert decide(ln10 + 1.9, 1.0) == "inconclusive"
     assert decide(-ln10 - 0.5, 0.2) == "none"

@@ -19,9 +19,11 @@ from bayespilot.cli import main
 from bayespilot.diagnose import diagnose, diagnose_pooled
 from bayespilot.diagnose.batch import batch_summary_rows, diagnose_batch, plan_batch
 from bayespilot.io import read_recording, write_recording
-from bayespilot.recording import Recording, RecordingError
+from bayespilot.recording import QuestionableRecordingWarning, Recording, RecordingError
 from bayespilot.simulate import simulate
 
+#: What a 20-s record is told when read (a QuestionableRecordingWarning), not refused.
+SHORT = r"the record is 20 s long, much shorter than the 81\.92 s runs of Pool et al\. \(2012\)"
 OPTIONS = {"n_bootstrap": 0, "candidates": ["motion-washout", "time-varying-gains"]}
 
 
@@ -54,8 +56,11 @@ def lone_folder(tmp_path_factory):
 
 
 def _read_all(paths):
-    with pytest.warns(Warning):  # 20-s records are questionable; said, not refused
-        return [read_recording(p) for p in paths]
+    with pytest.warns(QuestionableRecordingWarning, match=SHORT) as said:  # said, not refused
+        recs = [read_recording(p) for p in paths]
+    assert len(said) == len(paths)  # one per recording, naming it
+    assert [str(w.message).split(": ")[0] for w in said] == [str(p) for p in paths]
+    return recs
 
 
 def test_plan_keys_and_groups(recordings, tmp_path):
@@ -283,14 +288,14 @@ def test_resume_compares_resolved_recordings_and_defaults(done_without_reports, 
     assert stored["recordings"] == [stem] and stored["settings"]["alpha"] == 0.01
     before = (out / "s7-run1.json").stat().st_mtime_ns
     for path in (f"{stem}.csv", f"{stem}.json", os.path.relpath(stem)):
-        with pytest.warns(Warning):  # the 20-s record: questionable, said
+        with pytest.warns(QuestionableRecordingWarning, match=SHORT):  # the 20-s record, said
             s = diagnose_batch([path], out, n_bootstrap=0, alpha=None, progress=False,
                                warm_cache=False)
         assert (s.total, s.completed, s.skipped) == (1, 0, 1)
     assert (out / "s7-run1.json").stat().st_mtime_ns == before
     # the whole catalogue named explicitly, in its order, is candidates=None (the CLI's)
     from bayespilot.diagnose import NAMES
-    with pytest.warns(Warning):
+    with pytest.warns(QuestionableRecordingWarning, match=SHORT):
         s = diagnose_batch([stem], out, n_bootstrap=0, candidates=list(NAMES), progress=False,
                            warm_cache=False)
     assert (s.total, s.completed, s.skipped) == (1, 0, 1)
@@ -312,11 +317,11 @@ def test_resume_compares_resolved_recordings_and_defaults(done_without_reports, 
     moved = tmp_path / "moved"
     moved.mkdir()
     (moved / "s7-run1.json").write_text(json.dumps(dict(stored, recordings=["old/s7-run1"])))
-    with pytest.warns(Warning):
+    with pytest.warns(QuestionableRecordingWarning, match=SHORT):
         s = diagnose_batch([stem], moved, n_bootstrap=0, progress=False, warm_cache=False)
     assert (s.total, s.completed, s.skipped) == (1, 0, 1)
     # one recording named twice (both files of it, as a glob gives them) is diagnosed once
-    with pytest.warns(Warning):
+    with pytest.warns(QuestionableRecordingWarning, match=SHORT):
         s = diagnose_batch([f"{stem}.csv", f"{stem}.json", stem], out, n_bootstrap=0,
                            progress=False, warm_cache=False)
     assert (s.total, s.skipped) == (1, 1)
@@ -343,8 +348,8 @@ def test_output_folder_that_cannot_be_written_in_is_refused_before_computing(rec
         return real(path)
 
     monkeypatch.setattr(B, "replacing", refused)
-    with pytest.warns(Warning), pytest.raises(CampaignError, match="ro: cannot write in the "
-                                                                   "output folder"):
+    with pytest.warns(QuestionableRecordingWarning, match=SHORT), \
+            pytest.raises(CampaignError, match="ro: cannot write in the output folder"):
         diagnose_batch(recordings[:1], out, n_bootstrap=0, progress=False)
 
 

@@ -28,6 +28,9 @@ from bayespilot.simulate import TrackingTask, simulate
 #: Length of the lab records, s (whole periods of their forcing).
 T = 30.0
 QUICK = dict(seed=0, n_bootstrap=2, candidates=["time-varying-gains"], intervals=False)
+#: The frequency-domain evidence, written out (a missing one is NaN, not left out).
+FREQUENCY = {"frequency.visual", "frequency.motion_low", "frequency.motion_high",
+             "frequency.power_target", "frequency.power_disturbance"}
 
 
 def lab_task(target_on: bool = True, disturbance_on: bool = True) -> TrackingTask:
@@ -71,7 +74,15 @@ def _diagnose(rec, **kw):
 
 
 def _no_p_values(res) -> bool:
+    assert FREQUENCY <= set(res.where), sorted(res.where)  # (not true of an empty where)
     return all(not math.isfinite(e.p_value) for e in res.where.values())
+
+
+def _frequency_keys(res) -> list[str]:
+    """The frequency keys of ``res.where``, which must be exactly :data:`FREQUENCY`."""
+    keys = [k for k in res.where if k.startswith("frequency.")]
+    assert set(keys) == FREQUENCY, keys
+    return keys
 
 
 def test_a_lab_run_with_forcing_and_plant_is_diagnosed_without_a_warning(lab_rec):
@@ -79,6 +90,7 @@ def test_a_lab_run_with_forcing_and_plant_is_diagnosed_without_a_warning(lab_rec
     assert said == [] and others == []
     assert res.settings["bootstrap"]["replicates"] == 2
     assert "skipped" not in res.settings["bootstrap"]
+    assert len(_frequency_keys(res)) == 5 and len(res.where) > 5
     assert all(math.isfinite(res.where[k].value) for k in res.where)
     assert math.isfinite(res.where["frequency.visual"].p_value)
 
@@ -157,7 +169,7 @@ def test_no_forcing_functions_skip_the_bootstrap_and_say_what_to_give(lab_rec, t
     assert "f_t and f_d columns" in said[0] and "base_frequency" in said[0]
     assert "no forcing functions" in res.settings["bootstrap"]["skipped"]
     assert _no_p_values(res)
-    assert all(math.isnan(res.where[k].value) for k in res.where if k.startswith("frequency."))
+    assert all(math.isnan(res.where[k].value) for k in _frequency_keys(res))
     # without a bootstrap asked for, only the frequency evidence is missing
     res, said, _ = _diagnose(rec, n_bootstrap=0)
     assert len(said) == 1 and "frequency evidence is missing" in said[0]
@@ -182,10 +194,9 @@ def test_a_rounded_base_frequency_is_snapped_to_the_record_bins(lab_rec):
     res, said, others = _diagnose(rounded, n_bootstrap=0)
     assert said0 == [] and others == []
     assert len(said) == 1 and "DFT bins" in said[0]
-    for k in res.where:
-        if k.startswith("frequency."):
-            assert math.isfinite(res.where[k].value)
-            assert res.where[k].value == pytest.approx(res0.where[k].value, rel=1e-6)
+    for k in _frequency_keys(res):
+        assert math.isfinite(res.where[k].value)
+        assert res.where[k].value == pytest.approx(res0.where[k].value, rel=1e-6)
     # without the f_t and f_d columns too (the signals made from the snapped multisines)
     res, _, _ = _diagnose(_with_base_frequency(lab_rec, round(exact, 4), drop=("f_t", "f_d")),
                           n_bootstrap=0)
@@ -213,7 +224,7 @@ def test_a_base_frequency_beyond_the_tolerance_says_why_the_frequency_evidence_i
     assert "frequency evidence" in said[0] and "is missing" in said[0]
     assert "disturbance line n = 131" in said[0] and "0.27 cycle" in said[0]
     assert 0.27 > SNAP_TOLERANCE
-    assert all(math.isnan(res.where[k].value) for k in res.where if k.startswith("frequency."))
+    assert all(math.isnan(res.where[k].value) for k in _frequency_keys(res))
 
 
 @pytest.mark.parametrize("on, zero, only", [((True, False), "f_d", "target only"),

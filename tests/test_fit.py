@@ -67,6 +67,12 @@ def test_scan_minimum_is_the_grid_argmin(sim):
     one = [lik.neg_log_lik(dict(sim.params, delta_abs=d)) for d in sc.grid[::40]]
     np.testing.assert_allclose(sc.neg_log_lik[::40], one, rtol=1e-12)
     assert sc.best_neg_log_lik == np.min(sc.neg_log_lik)
+    # the minimiser, from a plain loop over the grid: 0.0055 (index 11; the next best, index
+    # 12, is 0.23 higher in -ln L), the grid point of the minimum, not a neighbour
+    loop = np.array([lik.neg_log_lik(dict(sim.params, delta_abs=d)) for d in sc.grid])
+    k = int(np.argmin(loop))
+    assert k == 11 and sc.grid[k] == pytest.approx(0.0055, abs=1e-15)
+    assert sc.best == sc.grid[k] and sc.best_neg_log_lik == pytest.approx(loop[k], rel=1e-12)
     with pytest.raises(ValueError, match="not a free parameter"):
         scan_parameter(Likelihood(paper_model(threshold=False), sim.recording), sim.params)
 
@@ -110,6 +116,12 @@ def test_paper_fit_small_is_reproducible_and_serialises(sim, tmp_path):
     # Step II held delta_abs at that value; Step III scanned it
     assert all(r["params"]["delta_abs"] == steps["step1_delta_abs"] for r in steps["step2"])
     assert a.params["delta_abs"] == steps["step3"][0]["best"]
+    # ... at the minimiser of the scan's own grid, and -ln L there is the fit's, recomputed
+    scan = steps["step3"][0]
+    nll = np.array([np.inf if v is None else v for v in scan["neg_log_lik"]])
+    assert a.params["delta_abs"] == scan["grid"][int(np.argmin(nll))]
+    lik = Likelihood(paper_model(), sim.recording, discard=a.settings["discard"])
+    assert lik.neg_log_lik(a.params) == pytest.approx(a.neg_log_lik, rel=1e-12)
     assert a.neg_log_lik <= min(r["neg_log_lik"] for r in steps["step2"]) + 1e-9
     path = a.to_json(tmp_path / "fit.json")
     back = FitResult.from_json(path)
@@ -503,6 +515,9 @@ def test_no_bound_warning_for_a_silent_channels_parameters():
         fit = fit_fast(rec, seed=0, n_starts=2, profile_step=0.05)
     kinds = {w.category for w in caught}
     assert SilentChannelWarning in kinds and EstimateOnBoundWarning not in kinds
-    assert fit.at_bounds == {"tau_m": "upper", "delta_abs": "upper"}  # marked all the same
-    with pytest.warns(EstimateOnBoundWarning, match="tau_m"):
+    # marked all the same; which of the channel's parameters the optimiser leaves on a bound
+    # is arbitrary (nothing identifies them): tau_m on one machine, K_m on another
+    motion = set(fit.at_bounds) - {"delta_abs"}
+    assert motion and motion <= {"K_m", "tau_m"}, fit.at_bounds
+    with pytest.warns(EstimateOnBoundWarning, match="|".join(sorted(motion))):
         _warn_on_bounds(fit)  # (without the likelihood, the record's silence unknown)

@@ -149,6 +149,13 @@ def test_neg_log_lik_formula(fd_sim, model):
     assert lik.neg_log_lik(FD) == pytest.approx(0.5 * n * np.log(np.mean(eps**2)) + 0.5 * n,
                                                 rel=1e-13)
     assert vaf(fd_sim.recording.u, lik.response(FD)) == lik.vaf(FD)
+    # VAF = 100 (1 - var(u - u_hat) / var(u)) with u_hat from the naive twin (on the
+    # likelihood's canal output, as the theta column sets it): 75.985 %
+    u = fd_sim.recording.u
+    u_hat = _naive(fd_sim.recording, FD, "periodic", lik.warm, canal_output=lik.X[1])
+    ref = 100.0 * (1.0 - np.var(u - u_hat) / np.var(u))
+    assert ref == pytest.approx(75.985, abs=1e-3)
+    assert lik.vaf(FD) == pytest.approx(ref, rel=1e-12)
 
 
 def test_module_functions(fd_sim, model):
@@ -397,6 +404,8 @@ def test_discarded_lead_in_matches_naive_tail(fd_rec, model, discard):
         assert got == pytest.approx(ref, rel=1e-9, abs=0)
         assert lik.batch(model.free_vector(params)[None, :])[0] == got
     assert lik.vaf(FD) == vaf(rec.u[skip:], lik.response(FD)[skip:])
+    u, u_hat = rec.u[skip:], _naive(rec, FD, "periodic", lik.warm)[skip:]
+    assert lik.vaf(FD) == pytest.approx(100.0 * (1.0 - np.var(u - u_hat) / np.var(u)), rel=1e-12)
 
 
 def test_discarded_lead_in_on_general_paths(fd_sim, model):

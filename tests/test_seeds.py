@@ -8,10 +8,14 @@ import json
 
 import numpy as np
 import pytest
+from scipy.stats import qmc
 
 from bayespilot._seeds import resolve_seed
 from bayespilot.fit.fast import fit_fast
+from bayespilot.fit.genetic import genetic_algorithm
 from bayespilot.fit.three_step import fit_paper
+from bayespilot.likelihood import Likelihood
+from bayespilot.model import paper_model
 from bayespilot.simulate import simulate
 
 
@@ -43,6 +47,21 @@ def test_fits_record_the_seed_they_drew(rec):
     a = fit_fast(rec, seed=None, n_starts=2, profile_step=0.02)
     b = fit_fast(rec, seed=a.seed, n_starts=2, profile_step=0.02)
     assert isinstance(a.seed, int) and a.params == b.params and a.neg_log_lik == b.neg_log_lik
+    # the starts are the Latin hypercube of the recorded seed: -ln L (no threshold, the fit's
+    # discard) at each, drawn here with scipy; another seed draws other starts
+    lik0 = Likelihood(paper_model(threshold=False), rec, discard=a.settings["discard"])
+    lo, hi = lik0.model.bounds
+
+    def start_nll(seed):
+        x = qmc.scale(qmc.LatinHypercube(d=lo.size, seed=seed).random(2), lo, hi)
+        return [lik0.neg_log_lik(row) for row in x]
+
+    assert [r["start_neg_log_lik"] for r in a.steps["starts"]] == pytest.approx(
+        start_nll(a.seed), rel=1e-12)
+    other = fit_fast(rec, seed=a.seed + 1, n_starts=2, profile_step=0.02)
+    assert [r["start_neg_log_lik"] for r in other.steps["starts"]] == pytest.approx(
+        start_nll(a.seed + 1), rel=1e-12)
+    assert not np.allclose(start_nll(a.seed), start_nll(a.seed + 1), rtol=1e-3)
     json.dumps(a.to_dict())  # a Generator seed made it unserialisable; now refused:
     with pytest.raises(ValueError, match="seed"):
         fit_fast(rec, seed=np.random.default_rng(0), n_starts=1)
@@ -50,6 +69,16 @@ def test_fits_record_the_seed_they_drew(rec):
     p = fit_paper(rec, seed=None, **kw)
     q = fit_paper(rec, seed=p.seed, **kw)
     assert isinstance(p.seed, int) and p.params == q.params and p.steps == q.steps
+    # GA run i is seeded with child i of SeedSequence(seed): rerun here with plain
+    # genetic_algorithm on the same likelihood, it ends at the same point
+    lik = Likelihood(paper_model(), rec, discard=p.settings["discard"])
+    ga = {k: p.settings[k] for k in ("population", "generations", "p_crossover", "p_mutation",
+                                     "bits")}
+    runs = p.steps["step1"]["runs"]
+    for i, ss in enumerate(np.random.SeedSequence(p.seed).spawn(2)):
+        g = genetic_algorithm(lik.batch, *paper_model().bounds, seed=ss, **ga)
+        assert runs[i]["seed"] == {"entropy": p.seed, "spawn_key": [i]}
+        assert runs[i]["x"] == g.x.tolist() and runs[i]["fun"] == g.fun
 
 
 def test_sample_records_the_seed_it_drew(rec):
@@ -64,6 +93,18 @@ def test_sample_records_the_seed_it_drew(rec):
     assert a.settings["init_point"] == b.settings["init_point"]
     for name in a.parameter_names:
         assert np.array_equal(a.idata.posterior[name].values, b.idata.posterior[name].values)
+    # the chain starts at fit_fast's estimate with the recorded seed, bit for bit
+    init = fit_fast(rec, seed=a.seed, discard=a.settings["discard_seconds"])
+    assert a.settings["init"] == "fit_fast"
+    assert a.settings["init_point"] == {k: init.params[k] for k in a.parameter_names}
+    # and another seed another chain: another initial ball and other moves, not just the
+    # ~1e-14 rounding of another fit_fast start (the optimum is the same)
+    with pytest.warns(ConvergenceWarning):
+        c = sample(rec, seed=a.seed + 1, **kw)
+    # (the walkers' last draws: the kept draws can differ in number, with tau)
+    ka, kc = a.idata.posterior["K_v"].values[..., -1], c.idata.posterior["K_v"].values[..., -1]
+    assert ka.shape == kc.shape == (24,)
+    assert np.median(np.abs(ka - kc)) > 1e-6 * np.median(np.abs(ka))
 
 
 def test_diagnose_records_the_seed_it_drew(rec):
