@@ -616,6 +616,41 @@ def test_whole_periods_is_read_from_the_forcing_or_its_columns():
         assert whole_periods(bare) is None
 
 
+def test_either_forcing_column_tells_and_an_unknown_record_loses_its_start_up():
+    """The format makes f_t and f_d optional: a 60-s FT run (the forcing's period is 81.92 s)
+    with f_d alone read as "not known" and was fitted from 0 s, K_v -1.7 %, T_vl +2.1 %,
+    K_m -1.9 % off the remnant-free truth; f_d alone now tells, and a record with neither
+    (nor a forcing in its sidecar) has its first 2 s left out too, with the reason said:
+    every parameter within 0.3 %."""
+    from bayespilot.fit.fast import fit_fast
+    from bayespilot.likelihood import (STARTUP_REASON, STARTUP_REASON_UNKNOWN,
+                                       _startup_default, whole_periods)
+    from bayespilot.simulate import simulate
+
+    sim = simulate(task="FT", motion_gain=1.0, remnant_fraction=0.0, seed=5, duration=60.0)
+    rec = sim.recording
+    meta = {k: v for k, v in rec.metadata.items() if k != "forcing"}
+
+    def without(*cols):
+        return Recording({k: v for k, v in rec.signals.items() if k not in cols},
+                         rec.sample_rate_hz, rec.motion_gain, rec.task, meta)
+
+    assert whole_periods(without("f_t")) is False and whole_periods(without("f_d")) is False
+    whole = simulate(task="FT", motion_gain=1.0, remnant_fraction=0.0, seed=5).recording
+    assert whole_periods(Recording({k: v for k, v in whole.signals.items() if k != "f_t"},
+                                   whole.sample_rate_hz, whole.motion_gain, whole.task,
+                                   meta)) is True
+    bare = without("f_t", "f_d")
+    assert whole_periods(bare) is None and _startup_default(bare, "periodic") == 2.0
+    assert _startup_default(bare, "rest") == 0.0
+    for r, reason in ((without("f_t"), STARTUP_REASON), (bare, STARTUP_REASON_UNKNOWN)):
+        fit = fit_fast(r, seed=0)
+        assert fit.settings["discard"] == 2.0 and fit.settings["discard_reason"] == reason
+        for k in ("K_v", "T_vl", "zeta_nm", "K_m"):
+            assert fit.params[k] == pytest.approx(sim.params[k], rel=3e-3), k
+    assert "not known" in fit.summary()
+
+
 @pytest.mark.parametrize("name", ["whole_periods", "startup_discard"])
 def test_the_start_up_helpers_refuse_what_is_not_a_recording(name):
     """A path or a dict was read as far as its first attribute (AttributeError: 'str' object

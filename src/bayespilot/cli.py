@@ -351,7 +351,7 @@ def _too_short_for_delays(model, recording, params: Mapping[str, float]) -> str 
 def _likelihood(model, recording, params: Mapping[str, float], initial: str = "periodic",
                 discard: float | None = None):
     """(-ln L, VAF %) of ``model`` on ``recording``, after the first ``discard`` s (None: as
-    the fitters choose, the start-up of a record cut mid-period).
+    the fitters choose, the start-up of a record not known to be whole periods).
 
     A non-finite -ln L is a usage error (exit 2) when the record is shorter
     than a channel's delay needs (:func:`_too_short_for_delays`), else a
@@ -359,7 +359,7 @@ def _likelihood(model, recording, params: Mapping[str, float], initial: str = "p
     """
     from .likelihood import Likelihood, PerfectFitWarning, _startup_default
 
-    if discard is None:  # as the fitters: a record cut mid-period has its start-up left out
+    if discard is None:  # as the fitters: a record not known to be whole periods: start-up out
         discard = _startup_default(recording, initial)
     lik = Likelihood(model, recording, initial=initial, discard=discard)
     with warnings.catch_warnings(record=True) as caught:
@@ -408,14 +408,14 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
         _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
     rec = _read(args.recording)
     _detail(args, f"{rec!r}\n{model.summary()}\ninitial conditions: {args.initial}")
-    from .likelihood import STARTUP_REASON, _startup_default
+    from .likelihood import _startup_default, _startup_reason
 
     skipped = _startup_default(rec, args.initial)  # (once: said below if not 0)
     value, vaf = _likelihood(model, rec, params, args.initial, skipped)
     print(f"-ln L = {value!r}")
     _say(args, f"VAF = {vaf:.2f} %")
     if skipped:
-        _say(args, f"(the first {skipped:g} s left out: {STARTUP_REASON.split(': ', 1)[-1]})")
+        _say(args, f"(the first {skipped:g} s left out: {_startup_reason(rec).split(': ', 1)[-1]})")
     return EXIT_OK
 
 
@@ -432,14 +432,20 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     from .recording import RecordingError
 
     rec = _read(args.recording)
+    if args.json:  # checked before the fit: its seconds are not lost to a bad path
+        _check_writable(args.json, "fit")
     threshold = not args.no_threshold
     model = paper_model(oversample=args.oversample)
     try:
         if args.method == "paper":
             _say(args, f"fitting {rec.source} with the paper's three-step procedure "
                        f"(20 GA runs of 160 x 100, Gauss-Newton, threshold scan) ...")
-            fit = fit_paper(rec, model, threshold=threshold, seed=args.seed,
-                            iterate=args.iterate, progress=_progress(args))
+            from .fit.result import NotAtMaximumWarning
+
+            with warnings.catch_warnings():  # (said by the summary, with --iterate's hint)
+                warnings.simplefilter("ignore", NotAtMaximumWarning)
+                fit = fit_paper(rec, model, threshold=threshold, seed=args.seed,
+                                iterate=args.iterate, progress=_progress(args))
         else:
             _say(args, f"fitting {rec.source} with the fast estimator"
                        + (" (prediction error: AR noise model)" if args.noise == "ar" else "")

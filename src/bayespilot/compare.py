@@ -1318,7 +1318,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     discard : float, optional
         Seconds at the start left out of the likelihood; default 0 for
         ``"eq4"``, :data:`bayespilot.sample.COLOURED_DISCARD` for ``"coloured"``;
-        for ``"eq4"`` on a record known not to be a whole number of forcing
+        for ``"eq4"`` on a record not known to be a whole number of forcing
         periods, :func:`~bayespilot.likelihood.startup_discard` (2 s), as
         :func:`~bayespilot.fit.fast.fit_fast` does.
     nlive, dlogz, sample
@@ -1372,7 +1372,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
 
         from .likelihood import _startup_default
 
-        # eq4 on a record cut mid-period: its start-up left out, as fit_fast does
+        # eq4 on a record not known to be whole periods: its start-up left out, as fit_fast
         discard = COLOURED_DISCARD if likelihood == "coloured" else \
             _startup_default(recording, "periodic")
     if THRESHOLD not in model.parameter_names:

@@ -83,17 +83,17 @@ def whole_periods(recording: Recording) -> bool | None:
         whole number of cycles of the record (n_samples * dt), as
         :func:`~bayespilot.diagnose.locate.forcing_of` reads it (a rounded base
         frequency, as printed in a paper, counts).  Else from its ``f_t`` and
-        ``f_d`` columns: whole periods when each that is not zero throughout
-        continues smoothly from its last sample to its first (its second
-        differences across the wrap no larger than 3 times the largest inside
-        the record, as the diagnosis reads them).
+        ``f_d`` columns, either or both: whole periods when each it has that
+        is not zero throughout continues smoothly from its last sample to its
+        first (its second differences across the wrap no larger than 3 times
+        the largest inside the record, as the diagnosis reads them).
 
     Returns
     -------
     bool or None
         True or False; None when it is not known (no forcing in the
-        metadata, no f_t and f_d columns, or forcing functions that are zero
-        throughout).
+        metadata, neither an f_t nor an f_d column, or forcing functions that
+        are zero throughout).
 
     Raises
     ------
@@ -126,13 +126,13 @@ def whole_periods(recording: Recording) -> bool | None:
                 return None
             cycles = n * w0 * T / (2.0 * np.pi)
             return bool(np.all(np.abs(cycles - np.rint(cycles)) <= SNAP_TOLERANCE))
-    if "f_t" in recording and "f_d" in recording:
-        cols = [np.asarray(recording[k], dtype=float) for k in ("f_t", "f_d")]
-        cols = [x for x in cols if np.any(x != 0.0)]
-        if not cols:
-            return None
-        return all(_wraps_smoothly(x) for x in cols)
-    return None
+    # (either column alone tells: the format makes both optional, and a record cut mid-period
+    # cuts both)
+    cols = [np.asarray(recording[k], dtype=float) for k in ("f_t", "f_d") if k in recording]
+    cols = [x for x in cols if np.any(x != 0.0)]
+    if not cols:
+        return None
+    return all(_wraps_smoothly(x) for x in cols)
 
 
 def startup_discard(recording: Recording) -> float:
@@ -187,18 +187,31 @@ def _called_from_handling_startup() -> bool:
     return False
 
 
-#: Why a fitter's default left the start-up out (its ``settings["discard_reason"]``).
+#: Why a fitter's default left the start-up out (its ``settings["discard_reason"]``): a record
+#: known not to be whole periods of its forcing (:func:`whole_periods` False) ...
 STARTUP_REASON = "start-up left out: the record is not a whole number of forcing periods"
+#: ... or one of which that is not known (None): without a forcing in the sidecar or an f_t or
+#: f_d column a cut record cannot be told from a whole one, and 2 s fewer samples cost less
+#: than the 10 % biases of a cut record's start-up wrapped across its cut.
+STARTUP_REASON_UNKNOWN = ("start-up left out: whether the record is a whole number of forcing "
+                          "periods is not known (no forcing in its sidecar, no f_t or f_d "
+                          "column)")
 
 
 def _startup_default(recording: Recording, initial: str) -> float:
     """The discard a fitter's default picks with the white output error: :func:`startup_discard`
-    for ``initial="periodic"`` on a record known not to be whole periods, else 0 (whole
-    periods, as the paper's records, or not known).  The same for every caller: the
-    diagnosis, which leaves out its own start, passes ``discard=0`` explicitly."""
-    if initial != "periodic" or not _startup_matters(recording):
+    for ``initial="periodic"`` on a record not known to be whole periods, else 0 (whole
+    periods, as the paper's records).  The same for every caller: the diagnosis, which
+    leaves out its own start, passes ``discard=0`` explicitly."""
+    if (initial != "periodic" or recording.duration < STARTUP_DISCARD
+            or whole_periods(recording) is True):
         return 0.0
     return startup_discard(recording)
+
+
+def _startup_reason(recording: Recording) -> str:
+    """:data:`STARTUP_REASON` or :data:`STARTUP_REASON_UNKNOWN`, as ``recording`` is."""
+    return STARTUP_REASON if whole_periods(recording) is False else STARTUP_REASON_UNKNOWN
 
 
 def _startup_matters(recording: Recording) -> bool:

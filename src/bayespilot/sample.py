@@ -873,7 +873,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         Seconds at the start left out of the likelihood (see
         :class:`~bayespilot.likelihood.Likelihood`).  Default 0 for ``"eq4"``
         (the paper's Eq. 4) and :data:`COLOURED_DISCARD` for ``"coloured"``;
-        for ``"eq4"`` on a record known not to be a whole number of forcing
+        for ``"eq4"`` on a record not known to be a whole number of forcing
         periods, :func:`~bayespilot.likelihood.startup_discard` (2 s), as
         :func:`~bayespilot.fit.fast.fit_fast` does.
     init : FitResult or mapping, optional
@@ -954,7 +954,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         raise ValueError("noise is an ARNoise for likelihood='coloured' with ar='fixed' only, "
                          f"got {type(noise).__name__} with likelihood={likelihood!r}, ar={ar!r}")
     if discard is None:
-        # eq4 on a record cut mid-period: its start-up left out, as fit_fast does
+        # eq4 on a record not known to be whole periods: its start-up left out, as fit_fast
         discard = COLOURED_DISCARD if likelihood == "coloured" else \
             _startup_default(recording, "periodic")
     if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \

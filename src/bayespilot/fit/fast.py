@@ -34,7 +34,7 @@ import time
 import numpy as np
 from scipy.stats import qmc
 
-from ..likelihood import STARTUP_REASON, Likelihood, _startup_default
+from ..likelihood import Likelihood, _startup_default, _startup_reason
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, ARNoise
 from ..recording import Recording
@@ -83,9 +83,10 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         amplify the model's start-up transient (from 0 s, a prediction-error
         fit of an 81.92-s FD run ended at T_vl 0.007 and tau_v 0.030 against
         the truth's 0.409 and 0.279).  With the white output error and
-        ``initial="periodic"``, a record known not to be a whole number of
-        forcing periods (:func:`~bayespilot.likelihood.whole_periods`, e.g.
-        a 40-s run of the paper's 81.92-s forcing) gets
+        ``initial="periodic"``, a record not known to be a whole number of
+        forcing periods (:func:`~bayespilot.likelihood.whole_periods` False,
+        e.g. a 40-s run of the paper's 81.92-s forcing, or None: no forcing
+        in the sidecar, no f_t or f_d column) gets
         :func:`~bayespilot.likelihood.startup_discard` (2 s) too, and
         ``settings["discard_reason"]`` says why: from 0 s the periodic start
         wraps the cut, which took a remnant-free 40-s FT fit to K_v +6 %,
@@ -155,11 +156,11 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         # (at most a quarter of a short record: the likelihood keeps at least half)
         discard = 0.0 if noise is None else min(COLOURED_DISCARD, recording.duration / 4)
         if discard == 0.0:
-            # a record cut mid-period: the periodic start wraps the cut (NotWholePeriodsWarning);
-            # 0 on whole periods, as before
+            # a record cut mid-period (or not known to be whole): the periodic start wraps the cut
+            # (NotWholePeriodsWarning); 0 on whole periods, as before
             discard = _startup_default(recording, initial)
             if discard:
-                discard_reason = STARTUP_REASON
+                discard_reason = _startup_reason(recording)
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     _check_fittable(recording, model, discard)
