@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
+import re
 import subprocess
 import sys
 import warnings
@@ -251,9 +252,9 @@ def test_fit_json_to_a_directory_fails_with_one_line(run10, tmp_path, capsys):
     (tmp_path / "adir").mkdir()
     code, out, err = _run(capsys, "fit", run10, "--method", "fast", "--json", tmp_path / "adir",
                           "-q")
-    assert code == 1
+    assert code == 2  # refused before the fit, as sample, compare and diagnose refuse
     line = _one_error_line(err, out)
-    assert "adir: cannot write the fit" in line and "Errno" not in line
+    assert "adir: is a folder; give a file name for the fit" in line and "Errno" not in line
 
 
 # --- an unreachable dask scheduler -----------------------------------------------------------
@@ -440,3 +441,75 @@ def test_cli_prints_the_warning_as_one_line_and_goes_on(run10, params, capsys):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("bayespilot: warning: ")
     assert "10 s long" in lines[0]
+
+
+# --- a file or folder that is not a recording, at the CLI ------------------------------------------
+@pytest.mark.parametrize("name, folder", [("post.nc", False), ("fig.png", False),
+                                          ("lab/", True), (".", True)])
+def test_cli_says_what_is_not_a_recording(name, folder, params, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "lab").mkdir()
+    (tmp_path / "post.nc").write_bytes(b"\x89HDF\r\n\x1a\n")
+    (tmp_path / "fig.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    code, out, err = _run(capsys, "loglik", name, "--params", params)
+    assert code == 2
+    what = "a folder, not a recording" if folder else "not a recording"
+    assert _one_error_line(err, out) == (
+        f"bayespilot: error: {name}: {what} (a recording is NAME.csv with NAME.json, or a .mat "
+        f"file)")
+
+
+# --- sidecars that contradict their data or look mistyped: read, with a warning --------------------
+def _questionable_reasons(tmp_path, rec: Recording) -> list[str]:
+    write_recording(rec, tmp_path / "lab")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        read_recording(tmp_path / "lab")
+    return [str(w.message) for w in caught if w.category is QuestionableRecordingWarning]
+
+
+def _with(rec: Recording, motion_gain: float | None = None, **meta) -> Recording:
+    return Recording(rec.signals, rec.sample_rate_hz,
+                     rec.motion_gain if motion_gain is None else motion_gain, rec.task,
+                     {**rec.metadata, **meta})
+
+
+def test_motion_gain_0_with_a_moving_motion_column_warns(tmp_path):
+    rec = _with(_recording(60.0), motion_gain=0.0)
+    with pytest.warns(QuestionableRecordingWarning,
+                      match=r"lab: the motion column moves although motion_gain is 0 \(no motion, "
+                            r"in the recording format\): max \|theta_ddot_m\| = 1 rad/s\^2"):
+        read_recording(write_recording(rec, tmp_path / "lab")[0])
+    # no motion, no motion column: nothing to say
+    still = rec.with_signals(theta_ddot_m=np.zeros(rec.n_samples))
+    assert questionable(still) == [] and _questionable_reasons(tmp_path, still) == []
+
+
+@pytest.mark.parametrize("gain, effect", [(-0.69, "would move the controlled element the "
+                                                  "opposite way"),
+                                          (0.0, "would not move the controlled element")])
+def test_a_control_gain_that_is_not_positive_warns(tmp_path, gain, effect):
+    rec = _with(_recording(60.0), control_gain=gain)
+    with pytest.warns(QuestionableRecordingWarning, match=re.escape(
+            f"control_gain (K_delta_u) is {gain:g}, not positive (the paper's is 0.69): the stick "
+            f"{effect}")):
+        back = read_recording(write_recording(rec, tmp_path / "lab")[0])
+    assert back.control_gain == gain  # read as given
+
+
+def test_a_misspelled_optional_key_warns_with_the_key_it_resembles(tmp_path):
+    rec = _with(_recording(60.0), controlled_elment={"num": [4.0], "den": [1.0, 0.0, 0.0]})
+    with pytest.warns(QuestionableRecordingWarning, match=re.escape(
+            "unknown key 'controlled_elment' (did you mean 'controlled_element'?)")):
+        back = read_recording(write_recording(rec, tmp_path / "lab")[0])
+    assert "controlled_elment" in back.metadata  # kept, as the format says
+    assert _questionable_reasons(tmp_path, _with(_recording(60.0), Subject="S1")) == [
+        f"{tmp_path / 'lab'}: unknown key 'Subject' (did you mean 'subject'?): it is kept but "
+        f"ignored, as the recording format does with unknown keys"]
+
+
+def test_a_labs_own_keys_do_not_warn(tmp_path):
+    rec = _with(_recording(60.0), subject_id="S1", run_id=3, lab_run=2, forcing_file="f.mat",
+                control_mode="pitch", simulation={"seed": 1}, date="2024-05-01", subject="S1",
+                run=3, notes="x", controlled_element={"num": [1.5], "den": [1.0, 0.0]})
+    assert questionable(rec) == [] and _questionable_reasons(tmp_path, rec) == []

@@ -498,6 +498,37 @@ def test_an_offset_in_u_is_warned_of_before_fitting(sim):
     assert caught[0].filename == __file__
 
 
+def test_a_paper_fit_that_stops_short_of_the_maximum_says_so(tmp_path):
+    """FD, F_n = 0.2, seed 3: the paper's single pass ended at delta_abs 0.0386, -ln L 635
+    above the maximum the fast method finds (0.0076), without a word.  Gauss-Newton with
+    delta_abs free from the pass's result reaches that maximum; the fit keeps the paper's
+    estimate, records the check and warns, and its summary says so.  Iterated, no warning."""
+    import warnings
+
+    from bayespilot.fit.result import CHECK_GAP, NotAtMaximumWarning
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=3).recording
+    with pytest.warns(NotAtMaximumWarning, match=r"stopped 63\d\.\d short") as got:
+        fit = fit_paper(rec, seed=0)
+    assert got[0].filename == __file__
+    assert fit.params["delta_abs"] == pytest.approx(0.0386, abs=1e-4)  # the paper's, kept
+    check = fit.steps["check"]
+    fast = fit_fast(rec, seed=0)
+    assert check["neg_log_lik"] == pytest.approx(fast.neg_log_lik, abs=1.0)
+    assert check["params"]["delta_abs"] == pytest.approx(fast.params["delta_abs"], abs=5e-4)
+    assert check["gap"] == pytest.approx(fit.neg_log_lik - check["neg_log_lik"], rel=1e-12)
+    lik = Likelihood(paper_model(), rec)
+    assert lik.neg_log_lik(check["params"]) == pytest.approx(check["neg_log_lik"], rel=1e-12)
+    assert "not at a maximum" in fit.summary()
+    back = FitResult.from_json(fit.to_json(tmp_path / "fit.json"))
+    assert back.steps["check"]["gap"] == check["gap"] and "not at a maximum" in back.summary()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NotAtMaximumWarning)
+        it = fit_paper(rec, seed=0, iterate=True)
+    assert it.steps["check"]["gap"] < CHECK_GAP and "not at a maximum" not in it.summary()
+    assert fit_paper(rec, seed=0, threshold=False).steps["check"] is None
+
+
 def test_no_bound_warning_for_a_silent_channels_parameters():
     """A run without motion leaves the motion channel's parameters unidentified (the
     SilentChannelWarning says so): one of them ending on a bound is not the bound warning's

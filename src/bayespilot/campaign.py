@@ -563,11 +563,15 @@ def _warm_numba_cache(methods: Iterable[str]) -> None:
     from .fit.three_step import fit_paper
     from .simulate import simulate
 
+    from .fit.result import NotAtMaximumWarning
+
     rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.1, seed=0, duration=2.0).recording
     for thr in (True, False):
         if "paper" in methods:
-            fit_paper(rec, threshold=thr, seed=0, repetitions=1, n_best=1, population=4,
-                      generations=1, discard=0.0)  # the jobs' kernels: whole records, no discard
+            with warnings.catch_warnings():  # (a 4 x 1 GA stops short: only compiling here)
+                warnings.simplefilter("ignore", NotAtMaximumWarning)
+                fit_paper(rec, threshold=thr, seed=0, repetitions=1, n_best=1, population=4,
+                          generations=1, discard=0.0)  # the jobs' kernels: no discard
         if "fast" in methods:
             fit_fast(rec, threshold=thr, seed=0, n_starts=1, profile_step=0.05, discard=0.0)
 

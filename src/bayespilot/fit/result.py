@@ -12,7 +12,8 @@ from typing import Any
 from .._files import dumps, read_result, require_keys, write_text_atomic
 from .. import presets
 
-__all__ = ["FitResult", "EstimateOnBoundWarning", "ON_BOUND_RTOL"]
+__all__ = ["FitResult", "EstimateOnBoundWarning", "NotAtMaximumWarning", "ON_BOUND_RTOL",
+           "CHECK_GAP"]
 
 #: An estimate counts as on a bound (:attr:`FitResult.at_bounds`) within this fraction of the
 #: width of its search box (1e-5 of K_v's [0, 10]); the bounded fits stop a hair inside.
@@ -26,6 +27,19 @@ _PAPER_MODEL = re.compile(r"Pool et al\. \(2012\)(, no threshold)?(, \d+x vestib
 class EstimateOnBoundWarning(RuntimeWarning):
     """A fitted parameter ended on a bound of its search box (:attr:`FitResult.at_bounds`): the
     bound, not the data, stopped it, and the other estimates moved to make up for it."""
+
+
+class NotAtMaximumWarning(RuntimeWarning):
+    """A paper-method fit stopped short of a maximum of ln L that Gauss-Newton with delta_abs
+    free reaches from its result (``steps["check"]``, :func:`~bayespilot.fit.three_step.fit_paper`):
+    the paper's single pass of Steps II and III leaves delta_abs where the other parameters
+    were refined for Step I's value."""
+
+
+#: A paper-method fit further than this below the maximum its check reaches (in -ln L) is said
+#: to stop short (:class:`NotAtMaximumWarning`): 1.92 is chi-square(1) at 95 % over 2, how far
+#: the edge of a 95 % profile-likelihood interval lies below its maximum.
+CHECK_GAP = 1.92
 
 
 @dataclass(frozen=True, eq=False)
@@ -277,6 +291,13 @@ class FitResult:
             why = self.settings.get("discard_reason")
             lines.append(f"the first {discard:g} s left out of -ln L and VAF"
                          + (f" ({why.split(': ', 1)[-1]})" if why else ""))
+        check = self.steps.get("check") if isinstance(self.steps, dict) else None
+        if check and check.get("gap", 0.0) > CHECK_GAP:
+            lines.append(f"not at a maximum: Gauss-Newton with delta_abs free from this fit "
+                         f"reaches -ln L = {check['neg_log_lik']:.3f} (delta_abs "
+                         f"{check['params']['delta_abs']:.6g}); the paper's single pass stopped "
+                         f"{check['gap']:.1f} short (Steps II and III iterated, or the fast method, "
+                         f"reach it: iterate=True, bayespilot fit --iterate)")
         if edge:
             said = []
             for k, side in edge.items():
