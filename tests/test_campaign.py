@@ -93,6 +93,25 @@ def test_run_job_with_table4_gain_uses_it():
     assert 0.0 < res["F_n"] < 0.6 and res["remnant"] == "table4"
 
 
+def test_run_job_records_the_paper_fits_check_without_warning():
+    """A study of the paper's procedure records how far short of a maximum each single pass
+    stopped (the fit's check) instead of warning thousands of times in the workers."""
+    import warnings
+
+    from bayespilot.campaign import run_job
+    from bayespilot.fit.result import CHECK_GAP, NotAtMaximumWarning
+
+    job = Job("FD", 1.0, 0.0, 0, method="paper", duration=8.0,
+              fit_kwargs={"repetitions": 2, "n_best": 1, "population": 8, "generations": 2})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NotAtMaximumWarning)
+        res = run_job(job)
+    check = res["check"]
+    # a 2 x 8 x 2 GA on a remnant-free run stops far short
+    assert check["gap"] > CHECK_GAP and 0.0 <= check["delta_abs"] <= 0.1
+    assert res["fit"]["neg_log_lik"] - check["neg_log_lik"] == pytest.approx(check["gap"])
+
+
 # --- the campaign --------------------------------------------------------------------------
 def test_campaign_writes_skips_and_redoes(tmp_path):
     out = tmp_path / "c"
