@@ -710,3 +710,126 @@ def test_hdf5_mat_refused(tmp_path):
 def test_doctests():
     result = doctest.testmod(bio, optionflags=doctest.ELLIPSIS)
     assert result.attempted > 0 and result.failed == 0
+
+
+# ---------------------------------------------------------------------------
+# a path that names something else than a recording; common lab mistakes
+# ---------------------------------------------------------------------------
+WHAT = r" \(a recording is NAME\.csv with NAME\.json, or a \.mat file\)$"
+
+
+@pytest.mark.parametrize("name", ["post.nc", "fig.png", "data.h5", "run"])
+def test_an_existing_file_that_is_not_a_recording_is_not_file_not_found(tmp_path, name):
+    (tmp_path / name).write_bytes(b"\x89HDF\r\n")
+    with pytest.raises(RecordingError, match=re.escape(str(tmp_path / name)) + ": not a recording"
+                       + WHAT):
+        read_recording(tmp_path / name)
+
+
+def test_a_folder_is_not_a_recording(tmp_path, monkeypatch):
+    lab = tmp_path / "lab"
+    lab.mkdir()
+    for given in (str(lab) + "/", str(lab), lab):
+        with pytest.raises(RecordingError, match=re.escape(str(given)) + ": a folder, not a "
+                                                  "recording" + WHAT):
+            read_recording(given)
+    monkeypatch.chdir(lab)
+    with pytest.raises(RecordingError, match=r"^\.: a folder, not a recording" + WHAT):
+        read_recording(".")
+    with pytest.raises(RecordingError, match=r"path must name a file, got ''"):
+        read_recording("")
+
+
+def test_a_stem_that_is_also_a_folder_still_reads_its_pair(tmp_path):
+    _pair(tmp_path, GOOD_CSV)
+    (tmp_path / "run").mkdir()
+    assert read_recording(tmp_path / "run").n_samples == 3
+    with pytest.raises(RecordingError, match=r"run/: a folder, not a recording"):
+        read_recording(str(tmp_path / "run") + "/")
+
+
+@pytest.mark.parametrize("text, pattern", [
+    ("t;e;u;theta_ddot_m\n0;1;2;3\n0.1;1;2;3\n",
+     r"missing required column\(s\): t, e, u, theta_ddot_m \(the header reads "
+     r"'t;e;u;theta_ddot_m': the format is comma-separated, not separated by ';'"),
+    ("t;e;u;theta_ddot_m\n0;1,5;2;3\n0,1;1,5;2;3\n",  # decimal commas
+     r"missing required column\(s\): .*the format is comma-separated, not separated by ';', "
+     r"with '\.' as the decimal point\)$"),
+    ("t\te\tu\ttheta_ddot_m\n0\t1\t2\t3\n", r"missing required column\(s\): .*not separated by tabs"),
+    ("# lab 3, 2024-05-01\n" + GOOD_CSV,
+     r"missing required column\(s\): t, e, u, theta_ddot_m \(the first line reads "
+     r"'# lab 3, 2024-05-01': the format has no comment lines"),
+    ("# " + GOOD_CSV, r"missing required column\(s\): t \(the first line reads '# t,e,u"),
+    ("t,e,u,theta_ddotm\n0,1,2,3\n0.1,1,2,3\n",
+     r"missing required column\(s\): theta_ddot_m \(misspelled\? the header has 'theta_ddotm' "
+     r"for theta_ddot_m\)$"),
+    ("t,e,u,theta_ddot_m\n0,1,2,3\n# paused\n0.1,1,2,3\n",
+     r"line 3 has 1 field, expected 4 \(a comment line\? the format has none\)$"),
+])
+def test_csv_mistakes_get_a_hint(tmp_path, text, pattern):
+    stem = _pair(tmp_path, text)
+    with pytest.raises(RecordingError, match=re.escape(str(stem) + ".csv: ") + pattern):
+        read_recording(stem)
+
+
+@pytest.mark.parametrize("factor, hint", [(1000.0, "t in ms"), (10.0, "t counts samples")])
+def test_t_in_ms_or_samples_gets_a_hint(tmp_path, factor, hint):
+    t = np.arange(5) * 0.1 * factor
+    text = "t,e,u,theta_ddot_m\n" + "".join(f"{v!r},1,2,3\n" for v in t.tolist())
+    stem = _pair(tmp_path, text)
+    step = f"{0.1 * factor:g}"
+    with pytest.raises(RecordingError, match=re.escape(
+            f"run.csv: t has a step of {step} s, which disagrees with sample_rate_hz = 10 "
+            f"(step 0.1 s; {hint}? the format wants seconds)")):
+        read_recording(stem)
+    # no hint where the step is just wrong
+    stem = _pair(tmp_path, "t,e,u,theta_ddot_m\n0,1,2,3\n0.2,1,2,3\n0.4,1,2,3\n")
+    with pytest.raises(RecordingError, match=r"\(step 0\.1 s\)$"):
+        read_recording(stem)
+
+
+def test_every_bad_key_is_named_in_one_message(tmp_path):
+    base = {"format": FORMAT, "sample_rate_hz": 10, "motion_gain": 0, "task": "other"}
+    stem = _pair(tmp_path, GOOD_CSV, {**base, "subject": 3, "run": "x", "task": "fd"})
+    with pytest.raises(RecordingError, match=re.escape(
+            str(stem) + ".json: task must be one of 'FD', 'FT', 'other', got 'fd'; subject must be "
+            "a string, got 3; run must be an integer, got 'x'") + "$"):
+        read_recording(stem)
+
+
+def test_a_misspelled_required_key_is_pointed_out(tmp_path):
+    meta = {"format": FORMAT, "sample_rate": 10, "motion_gian": 0, "task": "other", "lab": "x"}
+    stem = _pair(tmp_path, GOOD_CSV, meta)
+    with pytest.raises(RecordingError, match=re.escape(
+            "run.json: missing required key(s): sample_rate_hz, motion_gain (misspelled? the file "
+            "has 'sample_rate' for sample_rate_hz, 'motion_gian' for motion_gain)") + "$"):
+        read_recording(stem)
+
+
+@pytest.mark.parametrize("plant, pattern", [
+    ({"controlled_element": {"num": [0], "den": [1, 0, 0]}},
+     r"controlled_element\.num is all zeros \(\[0\]\): a plant that is zero, which the stick "
+     r"could not move$"),
+    ({"controlled_element": {"num": [1, 0, 0], "den": [1, 1]}},
+     r"controlled_element is improper \(num \[1, 0, 0\] of degree 2 over den \[1, 1\] of degree "
+     r"1\): a plant's num must not be of higher degree than its den"),
+    ({"controlled_element": {"num": [0, 1, 0], "den": [0, 0, 1]}},
+     r"controlled_element is improper \(num \[0, 1, 0\] of degree 1 over den \[0, 0, 1\] of "
+     r"degree 0\)"),
+    ({"controlled_element_gain": 0}, r"controlled_element_gain is 0: a plant that is zero"),
+])
+def test_a_zero_or_improper_plant_is_refused(tmp_path, plant, pattern):
+    base = {"format": FORMAT, "sample_rate_hz": 10, "motion_gain": 0, "task": "other"}
+    stem = _pair(tmp_path, GOOD_CSV, {**base, **plant})
+    with pytest.raises(RecordingError, match=re.escape(str(stem) + ".json: ") + pattern):
+        read_recording(stem)
+    with pytest.raises(RecordingError, match=pattern):  # and in Python, as for a file
+        _rec(**plant)
+
+
+@pytest.mark.parametrize("plant", [{"num": [1.5], "den": [1, 0]}, {"num": [2, 1], "den": [1, 3]},
+                                   {"num": [0, 4], "den": [1, 0, 0]}])
+def test_proper_plants_of_any_relative_degree_are_read(tmp_path, plant):
+    base = {"format": FORMAT, "sample_rate_hz": 10, "motion_gain": 0, "task": "other"}
+    stem = _pair(tmp_path, GOOD_CSV, {**base, "controlled_element": plant})
+    assert read_recording(stem).metadata["controlled_element"] == plant

@@ -27,8 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from bayespilot.recording import OPTIONAL_SIGNALS, REQUIRED_SIGNALS, TASKS, Recording, RecordingError
-from bayespilot.recording import _check_metadata_values, _describe, _is_number, _warn_if_questionable
+from bayespilot.recording import (OPTIONAL_KEYS, OPTIONAL_SIGNALS, REQUIRED_SIGNALS, TASKS,
+                                  Recording, RecordingError)
+from bayespilot.recording import (_describe, _is_number, _metadata_problems, _near_miss,
+                                  _warn_if_questionable)
 
 __all__ = ["FORMAT", "read_recording", "read_mat", "write_recording"]
 
@@ -38,6 +40,8 @@ FORMAT = "bayespilot-recording/1"
 REQUIRED_KEYS = ("format", "sample_rate_hz", "motion_gain", "task")
 #: The struct variable of a ``.mat`` file that may hold the metadata keys.
 MAT_METADATA_STRUCT = "metadata"
+#: What a recording is, for messages about a path that names something else.
+_WHAT_A_RECORDING_IS = "a recording is NAME.csv with NAME.json, or a .mat file"
 
 PathLike = str | os.PathLike[str]
 
@@ -57,13 +61,21 @@ def _fail(where: Any, msg: str) -> RecordingError:
     return RecordingError(f"{where}: {msg}")
 
 
-def _as_path(path: Any, argname: str = "path") -> Path:
+def _as_path(path: Any, argname: str = "path", *, folder_ok: bool = False) -> Path:
+    """``path`` as a Path; ``""`` is refused, and so is ``"."`` unless ``folder_ok`` (a
+    reader, which then says that it is a folder)."""
     if isinstance(path, (str, os.PathLike)):
         p = Path(path)
-        if str(p) in ("", "."):
+        if os.fspath(path) == "" or (str(p) == "." and not folder_ok):
             raise RecordingError(f"{argname} must name a file, got {path!r}")
         return p
     raise TypeError(f"{argname} must be a str or os.PathLike, got {type(path).__name__}")
+
+
+def _shown(path: PathLike, p: Path) -> str:
+    """``path`` as the user wrote it (a folder's trailing ``/`` kept), for messages."""
+    shown = os.fspath(path)
+    return shown if isinstance(shown, str) else str(p)
 
 
 def _with_suffix_added(stem: Path, suffix: str) -> Path:
@@ -94,24 +106,28 @@ def _check_metadata(where: Any, obj: Mapping[str, Any], *, what: str = "key") ->
     """
     missing = [k for k in REQUIRED_KEYS if k not in obj]
     if missing:
-        raise _fail(where, f"missing required {what}(s): {', '.join(missing)}")
+        others = [k for k in obj if k not in _METADATA_KEYS]
+        hints = [f"{k!r} for {near}" for k in others
+                 if (near := _near_miss(k, missing)) is not None]
+        hint = f" (misspelled? the file has {', '.join(hints)})" if hints else ""
+        raise _fail(where, f"missing required {what}(s): {', '.join(missing)}{hint}")
     fmt = obj["format"]
     if fmt != FORMAT or not isinstance(fmt, str):
         raise _fail(where, f"unknown format {fmt!r} (expected {FORMAT!r})")
+    problems = []  # every bad key, in one message
     rate = obj["sample_rate_hz"]
     if not _is_number(rate) or not math.isfinite(rate) or rate <= 0:
-        raise _fail(where, f"sample_rate_hz must be a positive finite number, got {rate!r}")
+        problems.append(f"sample_rate_hz must be a positive finite number, got {rate!r}")
     kth = obj["motion_gain"]
     if not _is_number(kth) or not math.isfinite(kth) or kth < 0:
-        raise _fail(where, f"motion_gain must be a finite number >= 0, got {kth!r}")
+        problems.append(f"motion_gain must be a finite number >= 0, got {kth!r}")
     task = obj["task"]
     if not isinstance(task, str) or task not in TASKS:
-        raise _fail(where, f"task must be one of {', '.join(repr(t) for t in TASKS)}, got {task!r}")
-
-    try:  # the optional keys: the same checks as for a Recording built in Python
-        _check_metadata_values(obj)
-    except RecordingError as exc:
-        raise _fail(where, str(exc)) from None
+        problems.append(f"task must be one of {', '.join(repr(t) for t in TASKS)}, got {task!r}")
+    # the optional keys: the same checks as for a Recording built in Python
+    problems += _metadata_problems(obj)
+    if problems:
+        raise _fail(where, "; ".join(problems))
 
     rest = {k: v for k, v in obj.items() if k not in REQUIRED_KEYS}
     return float(rate), float(kth), task, rest
@@ -190,6 +206,25 @@ def _parse_column(path: Path, name: str, values: list[str], lines: list[int]) ->
     return out
 
 
+def _header_hint(header: list[str], missing: list[str]) -> str:
+    """Why a header may lack required columns: another separator, a comment line, a
+    misspelled name ('' if none of these)."""
+    line = ",".join(header)
+    shown = line if len(line) <= 60 else line[:57] + "..."
+    if line.lstrip().startswith("#"):
+        return (f" (the first line reads {shown!r}: the format has no comment lines; its first "
+                f"line is the header row of column names)")
+    for sep, name in ((";", "';'"), ("\t", "tabs")):
+        if sep in line:
+            return (f" (the header reads {shown!r}: the format is comma-separated, not "
+                    f"separated by {name}, with '.' as the decimal point)")
+    names = [h.strip() for h in header]
+    known = set(REQUIRED_SIGNALS + OPTIONAL_SIGNALS)
+    hints = [f"{h!r} for {near}" for h in names
+             if h not in known and (near := _near_miss(h, missing)) is not None]
+    return f" (misspelled? the header has {', '.join(hints)})" if hints else ""
+
+
 def _check_header(path: Path, header: list[str]) -> list[str]:
     names = [h.strip() for h in header]
     for j, h in enumerate(names):
@@ -202,7 +237,8 @@ def _check_header(path: Path, header: list[str]) -> list[str]:
         seen.add(h)
     missing = [c for c in REQUIRED_SIGNALS if c not in seen]
     if missing:
-        raise _fail(path, f"missing required column(s): {', '.join(missing)}")
+        raise _fail(path, f"missing required column(s): {', '.join(missing)}"
+                          + _header_hint(header, missing))
     return names
 
 
@@ -263,8 +299,9 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
                 raise _fail(path, f"line {blank_at} is blank (expected {ncol} fields)")
             if len(row) != ncol:
                 fields = f"{len(row)} field" + ("" if len(row) == 1 else "s")
-                raise _fail(path, f"line {reader.line_num} has {fields}, expected {ncol} "
-                                  f"(one per header column; columns must have equal length)")
+                why = ("a comment line? the format has none" if row[0].lstrip().startswith("#")
+                       else "one per header column; columns must have equal length")
+                raise _fail(path, f"line {reader.line_num} has {fields}, expected {ncol} ({why})")
             rows.append(row)
             lines.append(reader.line_num)
     except csv.Error as exc:
@@ -275,12 +312,18 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     return {name: _parse_column(path, name, list(col), lines) for name, col in zip(names, columns)}
 
 
-def _resolve(path: Path) -> tuple[str, Path, Path, Path]:
+def _resolve(path: Path, shown: str | None = None) -> tuple[str, Path, Path, Path]:
     """Return (kind, stem, first, second) for a path given to read_recording.
 
     kind is "mat" (first is the .mat file) or "pair" (first is the CSV,
-    second the JSON).
+    second the JSON).  ``shown`` is the path as given, for messages
+    (default ``str(path)``; also used by :mod:`bayespilot.diagnose.batch`).
     """
+    if shown is None:
+        shown = str(path)
+    if path.is_dir() and (str(path) in (".", "..") or shown.endswith(("/", os.sep))
+                          or os.path.basename(shown) in (".", "..")):
+        raise _fail(shown, f"a folder, not a recording ({_WHAT_A_RECORDING_IS})")
     suffix = path.suffix.lower()
     if suffix == ".mat":
         return "mat", path.with_suffix(""), path, path
@@ -294,6 +337,10 @@ def _resolve(path: Path) -> tuple[str, Path, Path, Path]:
     if not csv_path.exists() and not json_path.exists():
         if mat_path.exists():
             return "mat", path, mat_path, mat_path
+        if path.is_dir():
+            raise _fail(shown, f"a folder, not a recording ({_WHAT_A_RECORDING_IS})")
+        if path.exists():  # post.nc, fig.png, data.h5: a file, but not one of a recording
+            raise _fail(shown, f"not a recording ({_WHAT_A_RECORDING_IS})")
         raise _fail(path, f"file not found (looked for {csv_path} and {json_path})")
     return "pair", path, csv_path, json_path
 
@@ -319,26 +366,33 @@ def read_recording(path: PathLike) -> Recording:
     Raises
     ------
     RecordingError
-        With one message naming the file and the problem, if a file is
+        With one message naming the file and the problem, if ``path`` is a
+        folder or a file that is not a recording (``post.nc``); a file is
         missing, unreadable or empty; the CSV has a missing, duplicate or
-        empty column name, a row with too few or too many fields, no data
-        rows, or an empty, non-numeric, NaN or infinite value; ``t`` does not
-        start at 0, is not uniform or disagrees with ``sample_rate_hz``; the
-        JSON is not valid JSON, not an object, lacks a required key, has an
-        unknown ``format`` or a key of the wrong type (``controlled_element``
-        without numeric ``num``/``den``, or together with
-        ``controlled_element_gain``; ``forcing`` without ``base_frequency`` or
-        with ``target``/``disturbance`` arrays ``n``, ``amplitude``, ``phase``
-        of unequal length; ...).
+        empty column name (with a hint when the header is separated by ``;``
+        or tabs, is a ``#`` comment, or misspells a required name), a row
+        with too few or too many fields, no data rows, or an empty,
+        non-numeric, NaN or infinite value; ``t`` does not start at 0, is not
+        uniform or disagrees with ``sample_rate_hz`` (with a hint when ``t``
+        looks like milliseconds or sample counts); the JSON is not valid
+        JSON, not an object, lacks a required key, has an unknown ``format``
+        or a key of the wrong type or value (``controlled_element`` without
+        numeric ``num``/``den``, with a zero or improper plant, or together
+        with ``controlled_element_gain``; ``forcing`` without
+        ``base_frequency`` or with ``target``/``disturbance`` arrays ``n``,
+        ``amplitude``, ``phase`` of unequal length; ...).  Every bad key of
+        the JSON is named in the one message.
     TypeError
         If ``path`` is not a str or path.
 
     Warns
     -----
     QuestionableRecordingWarning
-        If the record is shorter than 30 s or sampled below 50 Hz (see
-        :func:`~bayespilot.recording.questionable`); the recording is still
-        returned.
+        If the record is shorter than 30 s or sampled below 50 Hz, has
+        ``motion_gain`` 0 but a moving ``theta_ddot_m``, a ``control_gain``
+        that is not positive, or a key that looks like a misspelled optional
+        key (see :func:`~bayespilot.recording.questionable`); the recording
+        is still returned.
 
     Notes
     -----
@@ -360,8 +414,8 @@ def read_recording(path: PathLike) -> Recording:
     >>> back.n_samples, back.sample_rate_hz, back.task
     (5, 100.0, 'FD')
     """
-    p = _as_path(path)
-    kind, stem, first, second = _resolve(p)
+    p = _as_path(path, folder_ok=True)
+    kind, stem, first, second = _resolve(p, _shown(path, p))
     if kind == "mat":
         return read_mat(first)
     csv_path, json_path = first, second
@@ -388,8 +442,7 @@ def read_recording(path: PathLike) -> Recording:
 # MATLAB
 # ---------------------------------------------------------------------------
 _SIGNAL_NAMES = REQUIRED_SIGNALS + OPTIONAL_SIGNALS
-_METADATA_KEYS = REQUIRED_KEYS + ("controlled_element_gain", "controlled_element", "control_gain",
-                                  "subject", "run", "forcing", "notes")
+_METADATA_KEYS = REQUIRED_KEYS + OPTIONAL_KEYS
 
 
 def _from_matlab(where: Path, name: str, value: Any) -> Any:
@@ -500,7 +553,8 @@ def read_mat(path: PathLike) -> Recording:
     Warns
     -----
     QuestionableRecordingWarning
-        If the record is shorter than 30 s or sampled below 50 Hz.
+        For the reasons :func:`read_recording` gives (a short or slowly
+        sampled record, ...; see :func:`~bayespilot.recording.questionable`).
 
     Examples
     --------
@@ -514,11 +568,11 @@ def read_mat(path: PathLike) -> Recording:
     >>> rec.sample_rate_hz, rec.motion_gain, rec.metadata["subject"]
     (50.0, 0.5, 'S3')
     """
-    p = _as_path(path)
+    p = _as_path(path, folder_ok=True)
     if not p.exists():
         raise _fail(p, "file not found")
     if p.is_dir():
-        raise _fail(p, "is a directory, not a file")
+        raise _fail(_shown(path, p), "is a directory, not a file")
     import scipy.io  # noqa: PLC0415 - keep `import bayespilot.io` cheap
 
     try:

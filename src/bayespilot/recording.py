@@ -9,6 +9,7 @@ turns files into Recordings and adds the file name to any error.
 from __future__ import annotations
 
 import copy
+import difflib
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
@@ -16,7 +17,7 @@ from typing import Any, Mapping
 import numpy as np
 
 __all__ = ["Recording", "RecordingError", "QuestionableRecordingWarning", "questionable",
-           "REQUIRED_SIGNALS", "OPTIONAL_SIGNALS", "TASKS", "SHORT_RECORDING_S",
+           "REQUIRED_SIGNALS", "OPTIONAL_SIGNALS", "OPTIONAL_KEYS", "TASKS", "SHORT_RECORDING_S",
            "LOW_SAMPLE_RATE_HZ"]
 
 #: Columns every recording must have (recording format, version 1).
@@ -25,6 +26,11 @@ REQUIRED_SIGNALS = ("t", "e", "u", "theta_ddot_m")
 OPTIONAL_SIGNALS = ("theta", "f_t", "f_d")
 #: Allowed values of the ``task`` key.
 TASKS = ("FD", "FT", "other")
+#: The optional keys of ``NAME.json`` (recording format, version 1); other keys are kept.
+OPTIONAL_KEYS = ("controlled_element_gain", "controlled_element", "control_gain", "subject",
+                 "run", "forcing", "notes")
+# every key the format defines (the required ones are bayespilot.io.REQUIRED_KEYS)
+_FORMAT_KEYS = ("format", "sample_rate_hz", "motion_gain", "task") + OPTIONAL_KEYS
 
 
 class RecordingError(ValueError):
@@ -46,7 +52,8 @@ class QuestionableRecordingWarning(UserWarning):
     Issued by :func:`~bayespilot.io.read_recording` and
     :func:`~bayespilot.io.read_mat` for a record shorter than
     :data:`SHORT_RECORDING_S` (the paper's runs are 81.92 s) or sampled below
-    :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz), and by
+    :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz), or whose metadata
+    contradicts its data or looks mistyped (see :func:`questionable`), and by
     :func:`~bayespilot.fit.fast.fit_fast` and
     :func:`~bayespilot.fit.three_step.fit_paper` for a control output u with
     an offset (its mean more than
@@ -67,9 +74,13 @@ def questionable(recording: "Recording") -> list[str]:
     Returns
     -------
     list of str
-        One sentence per problem (a record shorter than
-        :data:`SHORT_RECORDING_S`, a sample rate below
-        :data:`LOW_SAMPLE_RATE_HZ`); empty if there is none.
+        One sentence per problem; empty if there is none.  The problems are:
+        a record shorter than :data:`SHORT_RECORDING_S`; a sample rate below
+        :data:`LOW_SAMPLE_RATE_HZ`; ``motion_gain`` 0 (no motion) with a
+        ``theta_ddot_m`` column that is not all zeros; a ``control_gain``
+        that is not positive; a metadata key that looks like a misspelling of
+        an optional key of the recording format (``controlled_elment``; keys
+        that merely extend one, such as ``subject_id``, are not).
     """
     reasons = []
     if recording.duration < SHORT_RECORDING_S:
@@ -81,7 +92,48 @@ def questionable(recording: "Recording") -> list[str]:
             f"the sample rate is {recording.sample_rate_hz:g} Hz, under {LOW_SAMPLE_RATE_HZ:g} Hz "
             f"(the paper's is 100 Hz); the pilot's delays and neuromuscular dynamics "
             f"(omega_nm ~ 10 rad/s) are poorly resolved")
+    if recording.motion_gain == 0:
+        peak = float(np.max(np.abs(recording.theta_ddot_m)))
+        if peak > 0:
+            reasons.append(
+                f"the motion column moves although motion_gain is 0 (no motion, in the recording "
+                f"format): max |theta_ddot_m| = {peak:.3g} rad/s^2; the model takes theta_ddot_m "
+                f"as the motion the pilot felt, so give the run's motion_gain, or zeros in "
+                f"theta_ddot_m if there was no motion")
+    gain = recording.metadata.get("control_gain")
+    if gain is not None and float(_plain(gain)) <= 0:
+        gain = float(_plain(gain))
+        effect = ("would move the controlled element the opposite way" if gain < 0
+                  else "would not move the controlled element")
+        reasons.append(
+            f"control_gain (K_delta_u) is {gain:g}, not positive (the paper's is 0.69): the "
+            f"stick {effect}, and diagnose simulates the loop with it; check its sign")
+    for key in recording.metadata:
+        if key in _FORMAT_KEYS:
+            continue
+        near = _near_miss(key, [k for k in OPTIONAL_KEYS if k not in recording.metadata])
+        if near is not None:
+            reasons.append(f"unknown key {key!r} (did you mean {near!r}?): it is kept but "
+                           f"ignored, as the recording format does with unknown keys")
     return reasons
+
+
+def _near_miss(name: Any, known: "list[str] | tuple[str, ...]") -> str | None:
+    """The name in ``known`` that ``name`` looks like a misspelling of, or None.
+
+    A near miss differs in case only, or is close by :func:`difflib.get_close_matches`
+    (ratio >= 0.85: a letter or two left out, added or swapped); a name that extends a known
+    one by a ``_`` part (``subject_id``, ``lab_run``) is a lab's own key, not a misspelling.
+    """
+    if not isinstance(name, str) or not name or name in known:
+        return None
+    if any(name.startswith(k + "_") or name.endswith("_" + k) for k in known):
+        return None
+    low = name.lower()
+    if low in known:
+        return low
+    match = difflib.get_close_matches(low, list(known), n=1, cutoff=0.85)
+    return match[0] if match else None
 
 
 class _ReadOnlyDict(dict):
@@ -226,12 +278,74 @@ def _check_forcing(forcing: Any) -> None:
                                  f"phase: {lengths['phase']})")
 
 
+def _check_plant(ce: Any) -> None:
+    """Check a ``controlled_element`` value (plain Python): num and den, a plant that is
+    neither zero nor improper."""
+    if not isinstance(ce, Mapping):
+        raise RecordingError(f"controlled_element must be an object with arrays num and den, "
+                             f"got {_describe(ce)}")
+    for part in ("num", "den"):
+        if part not in ce:
+            raise RecordingError(f"controlled_element has no {part!r} array")
+        _check_number_list(f"controlled_element.{part}", ce[part])
+        if not ce[part]:
+            raise RecordingError(f"controlled_element.{part} is empty")
+    if not any(ce["den"]):
+        raise RecordingError("controlled_element.den is all zeros")
+    if not any(ce["num"]):
+        raise RecordingError(f"controlled_element.num is all zeros ({ce['num']}): a plant that "
+                             f"is zero, which the stick could not move")
+    num = np.trim_zeros(np.asarray(ce["num"], float), "f")
+    den = np.trim_zeros(np.asarray(ce["den"], float), "f")
+    if num.size > den.size:
+        raise RecordingError(
+            f"controlled_element is improper (num {ce['num']} of degree {num.size - 1} over den "
+            f"{ce['den']} of degree {den.size - 1}): a plant's num must not be of higher degree "
+            f"than its den (coefficients in powers of s, highest first)")
+
+
+def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
+    """One message per optional metadata key whose value the recording format refuses (see
+    :func:`_check_metadata_values`), in the order of :data:`OPTIONAL_KEYS`."""
+    obj = {k: _plain(meta[k]) for k in OPTIONAL_KEYS if k in meta}
+    problems: list[str] = []
+    for key in ("controlled_element_gain", "control_gain"):
+        if key in obj:
+            v = obj[key]
+            if not _is_number(v) or not math.isfinite(v):
+                problems.append(f"{key} must be a finite number, got {v!r}")
+            elif key == "controlled_element_gain" and v == 0:
+                problems.append("controlled_element_gain is 0: a plant that is zero, which the "
+                                "stick could not move")
+    if "controlled_element" in obj:
+        if "controlled_element_gain" in obj:
+            problems.append("give either controlled_element or controlled_element_gain, not both")
+        try:
+            _check_plant(obj["controlled_element"])
+        except RecordingError as exc:
+            problems.append(str(exc))
+    for key in ("subject", "notes"):
+        if key in obj and not isinstance(obj[key], str):
+            problems.append(f"{key} must be a string, got {obj[key]!r}")
+    if "run" in obj:
+        v = obj["run"]
+        if not isinstance(v, int) or isinstance(v, bool):
+            problems.append(f"run must be an integer, got {v!r}")
+    if "forcing" in obj:
+        try:
+            _check_forcing(obj["forcing"])
+        except RecordingError as exc:
+            problems.append(str(exc))
+    return problems
+
+
 def _check_metadata_values(meta: Mapping[str, Any]) -> None:
     """Check the optional metadata keys whose values the recording format fixes.
 
-    ``controlled_element_gain`` and ``control_gain`` (finite numbers),
-    ``controlled_element`` (``num`` and ``den``: non-empty arrays of finite
-    numbers, ``den`` not all zeros; not together with
+    ``controlled_element_gain`` (a finite number, not 0) and ``control_gain``
+    (a finite number), ``controlled_element`` (``num`` and ``den``:
+    non-empty arrays of finite numbers, neither all zeros, ``num`` not of
+    higher degree than ``den``; not together with
     ``controlled_element_gain``), ``subject`` and ``notes`` (strings),
     ``run`` (an integer) and ``forcing``.  Other keys are not looked at.
     numpy scalars and arrays and tuples count as the numbers and arrays they
@@ -241,41 +355,21 @@ def _check_metadata_values(meta: Mapping[str, Any]) -> None:
     Raises
     ------
     RecordingError
-        Naming the key and the problem (no file or source prefix).
+        Naming every bad key and its problem, ``"; "``-separated, in one
+        message (no file or source prefix).
     """
-    obj = {k: _plain(meta[k]) for k in ("controlled_element_gain", "control_gain",
-                                        "controlled_element", "subject", "notes", "run",
-                                        "forcing") if k in meta}
-    for key in ("controlled_element_gain", "control_gain"):
-        if key in obj:
-            v = obj[key]
-            if not _is_number(v) or not math.isfinite(v):
-                raise RecordingError(f"{key} must be a finite number, got {v!r}")
-    if "controlled_element" in obj:
-        if "controlled_element_gain" in obj:
-            raise RecordingError("give either controlled_element or controlled_element_gain, "
-                                 "not both")
-        ce = obj["controlled_element"]
-        if not isinstance(ce, Mapping):
-            raise RecordingError(f"controlled_element must be an object with arrays num and den, "
-                                 f"got {_describe(ce)}")
-        for part in ("num", "den"):
-            if part not in ce:
-                raise RecordingError(f"controlled_element has no {part!r} array")
-            _check_number_list(f"controlled_element.{part}", ce[part])
-            if not ce[part]:
-                raise RecordingError(f"controlled_element.{part} is empty")
-        if not any(ce["den"]):
-            raise RecordingError("controlled_element.den is all zeros")
-    for key in ("subject", "notes"):
-        if key in obj and not isinstance(obj[key], str):
-            raise RecordingError(f"{key} must be a string, got {obj[key]!r}")
-    if "run" in obj:
-        v = obj["run"]
-        if not isinstance(v, int) or isinstance(v, bool):
-            raise RecordingError(f"run must be an integer, got {v!r}")
-    if "forcing" in obj:
-        _check_forcing(obj["forcing"])
+    problems = _metadata_problems(meta)
+    if problems:
+        raise RecordingError("; ".join(problems))
+
+
+def _time_unit_hint(step: float, dt: float) -> str:
+    """A hint when ``t``'s mean step says it is not in seconds: "; t in ms? ..."."""
+    if abs(step / (1000.0 * dt) - 1.0) < 1e-2:
+        return "; t in ms? the format wants seconds"
+    if abs(step - 1.0) < 1e-6 and abs(dt - 1.0) > 1e-2:
+        return "; t counts samples? the format wants seconds"
+    return ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -310,12 +404,14 @@ class Recording:
         finite or of another length, ``t`` does not start at 0, is not uniform
         or disagrees with ``sample_rate_hz``, or a metadata value is out of
         range (the checks :func:`~bayespilot.io.read_recording` makes of a
-        JSON sidecar: ``controlled_element_gain`` and ``control_gain`` finite
-        numbers, ``controlled_element`` with non-empty numeric ``num`` and
-        ``den``, ``den`` not all zeros, and not together with
+        JSON sidecar: ``controlled_element_gain`` (not 0) and ``control_gain``
+        finite numbers, ``controlled_element`` with non-empty numeric ``num``
+        and ``den``, neither all zeros, ``num`` not of higher degree than
+        ``den`` (an improper plant), and not together with
         ``controlled_element_gain``; ``subject``/``notes`` strings, ``run`` an
         integer, a well-formed ``forcing``; numpy values count as the numbers
-        and arrays they hold; other keys are not checked).
+        and arrays they hold; other keys are not checked; every bad key is
+        named in the one message).
 
     Notes
     -----
@@ -409,11 +505,12 @@ class Recording:
                   0.25 * dt)
         if np.any(np.abs(t - (t[0] + np.arange(t.size) * step)) > tol):
             k = int(np.argmax(np.abs(steps - step)))
-            fail(f"t is not uniformly spaced (step {float(steps[k])!r} s at sample {k + 1})")
+            fail(f"t is not uniformly spaced (step {float(steps[k])!r} s at sample {k + 1}"
+                 f"{_time_unit_hint(step, dt)})")
         if abs(step - dt) > 1e-4 * dt:
             fail(
                 f"t has a step of {step:.6g} s, which disagrees with "
-                f"sample_rate_hz = {rate:g} (step {dt:.6g} s)"
+                f"sample_rate_hz = {rate:g} (step {dt:.6g} s{_time_unit_hint(step, dt)})"
             )
         if not isinstance(self.metadata, Mapping):
             fail(f"metadata must be a mapping of key to value, got {type(self.metadata).__name__}")
