@@ -3,6 +3,7 @@ against scipy.stats, the catalogue's physics, and decisions on simulated recordi
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -775,6 +776,13 @@ def test_a_diagnosis_read_back_from_its_json_is_the_same(washout_case, control_r
     assert back_bf.to_dict() == bf.to_dict()  # (results compare by identity)
     assert (back_bf.extended, back_bf.base) == (bf.extended, bf.base)  # summaries by value
     assert back_bf.elapsed == 12.5 and back_bf.log_bayes_factor == 4.0
+    # its line reads as a decision ("favours inconclusive" before)
+    for favours, verdict in (("motion-washout", "very strong, favours motion-washout"),
+                             ("none", "very strong, favours the base model"),
+                             ("inconclusive", "very strong, inconclusive beyond its error")):
+        line = dataclasses.replace(bf, favours=favours).summary_line()
+        assert line.startswith("Bayes factor (motion-washout : base, nested sampling): ln BF = "
+                               f"+4.00 +- 0.70 ({verdict})"), line
     # a diagnose-batch file (settings, then the diagnosis) is read as its diagnosis
     (tmp_path / "b.json").write_text(json.dumps({"key": "s1_FD", "seed": 0,
                                                  "diagnosis": res.to_dict()}))

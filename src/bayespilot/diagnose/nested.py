@@ -190,9 +190,13 @@ class ExtensionBayesFactor:
         """One line for a diagnosis summary."""
         sch = "" if self.schwarz is None else f"; Schwarz approximation {self.schwarz:+.1f}"
         notes = "".join(f"; {n}" for n in self.settings.get("notes", ()))
+        # (favours is a decision: the extension, "none" or "inconclusive", not a direction)
+        verdict = {"none": "favours the base model",
+                   "inconclusive": "inconclusive beyond its error"}.get(
+                       self.favours, f"favours {self.favours}")
         return (f"Bayes factor ({self.physics} : base, nested sampling): ln BF = "
                 f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} "
-                f"({self.category}, favours {self.favours}{sch}){notes}")
+                f"({self.category}, {verdict}{sch}){notes}")
 
 
 @one_blas_thread
