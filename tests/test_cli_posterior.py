@@ -68,6 +68,10 @@ def test_sample_warns_when_not_converged(run_dir, capsys):
                           "--max-steps", "60", "--likelihood", "coloured", "-q")
     assert code == 0
     assert "warning: the chain reached max_steps = 60" in err
+    # no backend given: the advice is not to resume one
+    assert err.count("to run longer, raise max_steps (--max-steps), or give a backend "
+                     "(--backend FILE.h5) to be able to resume\n") == 1
+    assert "same backend" not in err
     assert "Traceback" not in err
     post = Posterior.from_netcdf(run_dir / "p2.nc")
     # the default coloured likelihood re-fits its AR model (order by BIC at the initial fit)
@@ -111,6 +115,24 @@ def test_compare_json(sampled, run_dir, tmp_path, capsys):
     assert d["decision"] == "threshold" and d["delta_aic"] > 0
     assert d["savage_dickey_valid"] is False  # no draws near 0
     assert "decision: threshold" in out
+
+
+def test_compare_refuses_the_posterior_of_another_recording(sampled, run_dir, capsys):
+    """Audit: 'compare a --posterior pb.nc' with pb.nc sampled on recording b took b's draws
+    (and, coloured, its AR model) and printed a wrong ln BF without a word."""
+    _, nc, _ = sampled
+    assert main(["simulate", "--task", "FD", "--motion-gain", "1", "--remnant-fraction", "0.1",
+                 "--seed", "5", "--duration", "10", "-o", str(run_dir / "other"), "-q"]) == 0
+    capsys.readouterr()
+    code, out, err = _run(capsys, "compare", run_dir / "other", "--nlive", "40", "--posterior",
+                          nc, "-q")
+    assert f"the posterior was sampled on another recording ({run_dir / 'run'}) than the one " \
+           f"compared ({run_dir / 'other'}): their contents differ; sample the posterior of " \
+           f"{run_dir / 'other'}, or give none" in err
+    assert out == "" and "Traceback" not in err
+    # a ValueError of compare: exit 2 once cli._cmd_compare reports it as bad input (as
+    # _cmd_sample does); until then the CLI's catch-all gives 1
+    assert code in (1, 2)
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -11,6 +11,7 @@ not its calibration.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import warnings
@@ -472,3 +473,117 @@ def test_compare_refuses_what_would_fail_late_before_any_run(monkeypatch):
         C.nested_evidence(lambda x: 0.0, [0.0], [1.0], sample="bogus")
     with pytest.raises(ValueError, match="bound must be one of 'none'.*got 'box'"):
         C.nested_evidence(lambda x: 0.0, [0.0], [1.0], bound="box")
+
+
+# --- a posterior of another recording or model is refused -------------------------------------
+def _posterior_of(recording, **settings):
+    """A Posterior of the paper's model whose settings say it was sampled on ``recording``
+    with the eq4 likelihood and compare's default discard (no sampling)."""
+    from bayespilot.likelihood import _startup_default
+    from bayespilot.sample import _recording_digest
+
+    post = _fake_posterior(np.linspace(0.001, 0.02, 40))
+    s = {"prior": post.settings["prior"], "likelihood": "eq4", "recording": recording.source,
+         "recording_sha256": _recording_digest(recording), "model": paper_model().name,
+         "fixed": {}, "discard_seconds": _startup_default(recording, "periodic"), "noise": None}
+    s.update(settings)
+    return dataclasses.replace(post, settings=s)
+
+
+def test_compare_refuses_a_posterior_of_another_recording_or_model(monkeypatch):
+    """Audit: a posterior sampled on recording b passed to compare on recording a gave a wrong
+    ln BF without a word (its AR model and draws used).  Refused before any run: another
+    recording (by content), another model, another discard or AR order; a posterior saved
+    before the digest was recorded is used, with a warning."""
+    import bayespilot.compare as C
+    from bayespilot.noise import ARNoise
+
+    def no_run(*a, **k):
+        raise AssertionError("a nested-sampling run started")
+
+    monkeypatch.setattr(C, "evidence", no_run)
+    a = dataclasses.replace(_sim(0.0, seed=3).recording, source="a.csv")
+    b = dataclasses.replace(_sim(0.0, seed=4).recording, source="b.csv")
+    with pytest.raises(ValueError, match=r"^the posterior was sampled on another recording "
+                       r"\(b\.csv\) than the one compared \(a\.csv\): their contents differ; "
+                       r"sample the posterior of a\.csv, or give none$"):
+        compare(a, posterior=_posterior_of(b))
+    # the same name, another content: the file changed since
+    changed = dataclasses.replace(b, source="a.csv")
+    with pytest.raises(ValueError, match=r"sampled on a\.csv as it was then: the content of "
+                       r"a\.csv is not the same now"):
+        compare(a, posterior=_posterior_of(changed))
+    with pytest.raises(ValueError, match=r"the posterior is of the model 'other', the "
+                       r"comparison of 'Pool et al\. \(2012\)'"):
+        compare(a, posterior=_posterior_of(a, model="other"))
+    with pytest.raises(ValueError, match=r"the posterior's model holds K_m = 1 fixed, the "
+                       r"comparison's nothing"):
+        compare(a, posterior=_posterior_of(a, fixed={"K_m": 1.0}))
+    with pytest.raises(ValueError, match=r"the posterior left the first 0\.5 s of the record "
+                       r"out of its likelihood, the comparison 2 s; compare with discard=0\.5"):
+        compare(a, posterior=_posterior_of(a, discard_seconds=0.5))
+    noise = ARNoise([0.5, 0.1]).to_dict()
+    coloured = _posterior_of(a, likelihood="coloured", discard_seconds=2.0, noise=noise)
+    with pytest.raises(ValueError, match=r"AR noise model, which the comparison takes over, "
+                       r"is of order 2, not ar_order = 5 \(--ar-order\)"):
+        compare(a, likelihood="coloured", ar_order=5, posterior=coloured)
+    # accepted (the run starts): this recording's posterior, renamed or not
+    with pytest.raises(AssertionError, match="nested-sampling run started"):
+        compare(dataclasses.replace(a, source="moved/a.csv"), posterior=_posterior_of(a))
+    # under the other likelihood: not refused (its Savage-Dickey estimate is marked not valid)
+    with pytest.raises(AssertionError, match="nested-sampling run started"):
+        compare(a, posterior=_posterior_of(a, likelihood="coloured", discard_seconds=9.0))
+    old = _posterior_of(b)
+    del old.settings["recording_sha256"]
+    with pytest.warns(RuntimeWarning, match=r"^the posterior \(sampled on b\.csv\) was saved "
+                      r"before bayespilot recorded the digest of the recording it was sampled "
+                      r"on: whether it was sampled on a\.csv cannot be checked; it is used as "
+                      r"it is$"), pytest.raises(AssertionError, match="run started"):
+        compare(a, posterior=old)
+
+
+# --- the summaries' wording ----------------------------------------------------------------------
+@pytest.mark.parametrize("lbf, err, plateau, mode_ok, favours, decision, why", [
+    (0.3, 0.5, None, True, "neither", "inconclusive", None),
+    (-0.2, 0.1, None, True, "neither", "inconclusive", None),
+    (1.5, 0.3, None, True, "threshold", "inconclusive",
+     "|ln BF| is not above ln 10 = 2.30: a decision needs Jeffreys' \"strong\" evidence "
+     "(BF > 10)"),
+    (-1.5, 0.3, None, True, "none", "inconclusive", "|ln BF| is not above ln 10 = 2.30"),
+    (3.0, 0.2, None, True, "threshold", "threshold", None),
+    (3.0, 1.0, None, True, "threshold", "inconclusive",
+     "not strong beyond its error: ln BF - 2 x 1.00 = +1.00 is not above ln 10 = 2.30"),
+    (-5.9, 2.0, None, True, "none", "inconclusive",
+     "not strong beyond its error: ln BF + 2 x 2.00 = -1.90 is not below -ln 10 = -2.30"),
+    (-5.9, 0.5, None, True, "none", "none", None),
+    (8.0, 0.5, 0.9, True, "threshold", "inconclusive", "P(delta_abs >= 0.05) = 0.90"),
+    (-8.0, 0.5, None, False, "none", "inconclusive",
+     "every nested-sampling run with threshold lost the main mode"),
+])
+def test_summary_wording_in_every_category_and_decision(lbf, err, plateau, mode_ok, favours,
+                                                        decision, why):
+    """Audit: "barely worth mentioning, favours inconclusive" and "ln BF = -5.90 (decisive,
+    favours none) -> decision: inconclusive" without a reason.  The direction is "neither"
+    while ln BF is barely worth mentioning, and a decision other than that direction always
+    says why (a guard's note, or decide()'s rule), in the per-recording and pooled summaries."""
+    from bayespilot.compare import _verdict
+
+    d, note = _guarded_decision(lbf, err, mode_ok, plateau, 0.05)
+    assert d == decision
+    line = _verdict(lbf, err, d, note)
+    assert line.startswith(f"({jeffreys_category(lbf)}, favours {favours})  -> decision: "
+                           f"{decision}")
+    if why is None:
+        assert line.endswith(f"decision: {decision}")
+    else:
+        assert f"decision: {decision} ({why}" in line
+    ev = Evidence(0.0, 0.1, 0.0, 0.0, {}, {}, (), 0, 0, 0.0, {"nlive": 40})
+    ic = {"neg_log_lik_threshold": 1.0, "neg_log_lik_none": 2.0, "delta_aic": 0.0,
+          "delta_bic": 0.0}
+    c = Comparison(lbf, err, d, ev, ev, None, ic, {"likelihood": "eq4", "decision_note": note})
+    assert f"ln BF = {lbf:+.2f} +- {err:.2f}  {line}" in c.summary()
+    assert c.to_dict()["favours"] == favours
+    if mode_ok and plateau is None:  # pool's own guards need the recordings' flags
+        p = pool([{"log_bayes_factor": lbf, "log_bayes_factor_err": err}], label="FD")
+        assert p.summary().startswith(f"FD: 1 recording, sum ln BF = {lbf:+.2f} +- {err:.2f} "
+                                      f"{line}; per recording: ")

@@ -70,3 +70,44 @@ def test_from_residual_round_trip_and_errors():
         ARNoise([[0.5, 0.1], [0.2, 0.3]])
     with pytest.raises(ValueError, match="order 2 with 1 coefficients"):
         ARNoise.from_dict({"kind": "ar", "order": 2, "a": [0.5]})
+
+
+def test_fit_fast_refuses_a_record_too_short_for_the_ar_model(monkeypatch, tmp_path, capsys):
+    """Audit: 'fit --method fast --noise ar' on a 1.6-s record ended in "unexpected ValueError:
+    an AR(30) model needs at least 124 samples ... please report it".  It is a RecordingError
+    (bad input: exit 2, one line) raised before any fitting, naming the shortest record."""
+    import bayespilot.fit.fast as F
+    from bayespilot.cli import main
+    from bayespilot.recording import RecordingError
+    from bayespilot.simulate import simulate
+
+    def no_fit(*a, **k):
+        raise AssertionError("fitting started")
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=3,
+                   duration=1.6).recording
+    with monkeypatch.context() as m:
+        m.setattr(F, "refine", no_fit)
+        # 160 samples, the first 0.4 s (a quarter) left out: 120 < 4 (30 + 1) = 124; 165
+        # samples keep 165 - 41 = 124
+        with pytest.raises(RecordingError, match=r"^simulation\(seed=3\): 1\.6 s, 120 samples "
+                           r"after the first 0\.4 s; an AR noise model of order up to 30 \(chosen by "
+                           r"BIC\) needs at least 124 there, a record of at least 1\.65 s$"):
+            F.fit_fast(rec, noise="ar", seed=0)
+        with pytest.raises(RecordingError, match=r"60 samples after the first 1 s; an AR\(30\) "
+                           r"noise model needs at least 124 there, a record of at least 2\.24 s "
+                           r"with the first 1 s left out$"):
+            F.fit_fast(rec, noise="ar", noise_order=30, discard=1.0, seed=0)
+        # an order the record holds (4 (20 + 1) = 84 <= 120) passes the check and is fitted
+        with pytest.raises(AssertionError, match="fitting started"):
+            F.fit_fast(rec, noise="ar", noise_order=20, seed=0)
+    assert main(["simulate", "--task", "FD", "--seed", "3", "--duration", "1.6", "-o",
+                 str(tmp_path / "short"), "-q"]) == 0
+    capsys.readouterr()
+    code = main(["fit", str(tmp_path / "short"), "--method", "fast", "--noise", "ar", "-q"])
+    err = capsys.readouterr().err
+    assert code == 2
+    errors = [line for line in err.splitlines() if "error" in line]
+    assert errors == [f"bayespilot: error: {tmp_path / 'short'}: 1.6 s, 120 samples after the "
+                      "first 0.4 s; an AR noise model of order up to 30 (chosen by BIC) needs at "
+                      "least 124 there, a record of at least 1.65 s"]

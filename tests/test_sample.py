@@ -537,3 +537,35 @@ def test_backend_of_another_support_or_not_hdf5_is_refused(short_sim, tmp_path):
         junk.write_text("not a chain")
         with pytest.raises(ValueError, match="junk.h5 is not an HDF5 file"):
             sample(short_sim.recording, model, backend=junk, **kw)
+
+
+def test_not_converged_advice_matches_the_backend(short_sim, tmp_path):
+    """The not-converged warning says how to run longer: without a backend, a larger
+    max_steps or a backend to resume from; with one, the same backend and a larger max_steps
+    (which counts the stored steps).  The posterior records the recording's digest."""
+    import dataclasses
+
+    from bayespilot.sample import _recording_digest
+
+    kw = dict(SHORT, n_walkers=16, max_steps=20, min_steps=0, check_every=20,
+              init=short_sim.params, seed=3)
+    with pytest.warns(ConvergenceWarning, match=r"reached max_steps = 20 .*: to run longer, "
+                      r"raise max_steps \(--max-steps\), or give a backend \(--backend "
+                      r"FILE\.h5\) to be able to resume$") as rec:
+        post = sample(short_sim.recording, **kw)
+    assert "same backend" not in str(rec[0].message)
+    h5 = tmp_path / "chain.h5"
+    with pytest.warns(ConvergenceWarning) as rec:
+        sample(short_sim.recording, backend=h5, **kw)
+    assert str(rec[0].message).endswith(
+        f"to run longer, run again with the same backend ({h5}) and a max_steps (--max-steps) "
+        "above 20: the chain resumes from its last step (max_steps counts the steps already "
+        "stored)")
+    digest = _recording_digest(short_sim.recording)
+    assert post.settings["recording_sha256"] == digest and len(digest) == 64
+    # the content, not the name: a renamed copy has it, another K_theta or sample does not
+    renamed = dataclasses.replace(short_sim.recording, source="elsewhere.csv")
+    assert _recording_digest(renamed) == digest
+    assert _recording_digest(dataclasses.replace(short_sim.recording, motion_gain=0.5)) != digest
+    other = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=3, duration=30.0)
+    assert _recording_digest(other.recording) != digest

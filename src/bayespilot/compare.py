@@ -254,6 +254,48 @@ def decide(log_bf: float, err: float = 0.0, *, level: float = DECISION_LEVEL,
     return "inconclusive"
 
 
+def _favours(log_bf: float) -> str:
+    """The model ln BF points to: "threshold", "none", or "neither" while |ln BF| is "barely
+    worth mentioning" (Jeffreys) or NaN."""
+    if not abs(log_bf) >= JEFFREYS[0][0]:
+        return "neither"
+    return "threshold" if log_bf > 0 else "none"
+
+
+def _decision_reason(log_bf: float, err: float, decision: str, note: str = "", *,
+                     level: float = DECISION_LEVEL, z: float = DECISION_Z) -> str:
+    """Why ``decision`` is not the model ln BF points to (:func:`_favours`), "" when it is.
+
+    ``note`` is a guard's reason (``decision_note``), given precedence; without one, an
+    "inconclusive" on an ln BF that points one way is explained by :func:`decide`'s rule:
+    ln BF short of ``level``, or not clear of it by ``z`` standard errors.
+    """
+    if note:
+        return note
+    fav = _favours(log_bf)
+    if decision != "inconclusive" or fav == "neither":
+        return ""
+    ln10 = math.isclose(level, DECISION_LEVEL)
+    lev = f"ln 10 = {level:.2f}" if ln10 else f"{level:.2f}"
+    if abs(log_bf) <= level:
+        return f"|ln BF| is not above {lev}" + (": a decision needs Jeffreys' \"strong\" "
+                                                 "evidence (BF > 10)" if ln10 else "")
+    if fav == "threshold":
+        return (f"not strong beyond its error: ln BF - {z:g} x {err:.2f} = "
+                f"{log_bf - z * err:+.2f} is not above {lev}")
+    return (f"not strong beyond its error: ln BF + {z:g} x {err:.2f} = {log_bf + z * err:+.2f} "
+            f"is not below -{lev.replace(' = ', ' = -')}")
+
+
+def _verdict(log_bf: float, err: float, decision: str, note: str = "", *,
+             level: float = DECISION_LEVEL, z: float = DECISION_Z) -> str:
+    """"(<Jeffreys category>, favours <model>) -> decision: <decision> (<why>)" of the
+    summaries; the reason whenever the decision is not the model ln BF points to."""
+    why = _decision_reason(log_bf, err, decision, note, level=level, z=z)
+    return (f"({jeffreys_category(log_bf)}, favours {_favours(log_bf)})  -> decision: "
+            f"{decision}" + (f" ({why})" if why else ""))
+
+
 # --- nested sampling -------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Evidence:
@@ -1020,7 +1062,7 @@ class Comparison:
             "decision_note": self.settings.get("decision_note", ""),
             "plateau_probability": self.plateau_probability,
             "jeffreys_category": self.category,
-            "favours": "threshold" if self.log_bayes_factor > 0 else "none",
+            "favours": _favours(self.log_bayes_factor),
             "log_evidence_threshold": self.evidence_threshold.log_z,
             "log_evidence_threshold_err": self.evidence_threshold.log_z_err,
             "log_evidence_none": self.evidence_none.log_z,
@@ -1130,9 +1172,10 @@ class Comparison:
             f"threshold vs none ({self.settings.get('likelihood')} likelihood"
             f"{', ' + self.source if self.source else ''}):",
             f"  ln BF = {self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f}  "
-            f"({self.category}, favours {'threshold' if self.log_bayes_factor > 0 else 'none'})"
-            f"  -> decision: {self.decision}"
-            + (f" ({self.settings['decision_note']})" if self.settings.get("decision_note") else ""),
+            + _verdict(self.log_bayes_factor, self.log_bayes_factor_err, self.decision,
+                       self.settings.get("decision_note") or "",
+                       level=self.settings.get("decision_level", DECISION_LEVEL),
+                       z=self.settings.get("decision_z", DECISION_Z)),
             f"  ln Z threshold = {e1.log_z:.2f} +- {e1.log_z_err:.2f}, none = {e0.log_z:.2f} +- "
             f"{e0.log_z_err:.2f} (dynesty, nlive {e1.settings.get('nlive')})",
             f"  {sd_line}",
@@ -1287,6 +1330,69 @@ def _guarded_decision(log_bf: float, err: float, mode_ok: bool, plateau: float |
     return d, ""
 
 
+def _check_posterior(posterior: Posterior, recording: Recording, model: PilotModel,
+                     likelihood: str, ar: str, ar_order: int | None, discard: float) -> None:
+    """Refuse (ValueError) a posterior :func:`compare` cannot use: sampled on another recording
+    (by ``settings["recording_sha256"]``), of another model, or, under the same likelihood,
+    with another lead-in left out or (its AR model serving the comparison) another AR order.
+    A posterior saved before the recording's digest was recorded is used with a warning.
+
+    A posterior under the other likelihood is not refused: its Savage-Dickey estimate is
+    marked not valid, and its AR model is not used.
+    """
+    from .sample import _recording_digest
+
+    s = posterior.settings or {}
+    here = recording.source or "the recording compared"
+    there = s.get("recording") or "an unnamed recording"
+    stored = s.get("recording_sha256")
+    if stored is None:
+        warn_at_caller(f"the posterior (sampled on {there}) was saved before bayespilot "
+                       "recorded the digest of the recording it was sampled on: whether it was "
+                       f"sampled on {here} cannot be checked; it is used as it is",
+                       RuntimeWarning)
+    elif stored != _recording_digest(recording):
+        if there == here:
+            raise ValueError(f"the posterior was sampled on {there} as it was then: the content "
+                             f"of {here} is not the same now (signals, sample rate or "
+                             "K_theta differ); sample its posterior again, or give none")
+        raise ValueError(f"the posterior was sampled on another recording ({there}) than the "
+                         f"one compared ({here}): their contents differ; sample the posterior "
+                         f"of {here}, or give none")
+    what = s.get("model")
+    if what is not None and what != model.name:
+        raise ValueError(f"the posterior is of the model {what!r}, the comparison of "
+                         f"{model.name!r}; sample the posterior of {model.name!r}, or give none")
+    fixed = s.get("fixed")
+    if fixed is not None and {k: float(v) for k, v in fixed.items()} != \
+            {k: float(v) for k, v in model.fixed.items()}:
+        def show(d):
+            return ", ".join(f"{k} = {float(v):g}" for k, v in sorted(d.items())) or "nothing"
+
+        raise ValueError(f"the posterior's model holds {show(fixed)} fixed, the comparison's "
+                         f"{show(model.fixed)}; sample the posterior of the compared model, "
+                         "or give none")
+    sampled = tuple(n for n in posterior.parameter_names if not n.startswith("pacf_"))
+    if sampled != tuple(model.parameter_names):
+        raise ValueError(f"the posterior sampled {', '.join(sampled)}; the compared model's "
+                         f"free parameters are {', '.join(model.parameter_names)}; sample the "
+                         "posterior of the compared model, or give none")
+    if s.get("likelihood") != likelihood:
+        return  # Savage-Dickey marked not valid; the posterior's AR model not used
+    left_out = s.get("discard_seconds")
+    if left_out is not None and not math.isclose(float(left_out), discard, abs_tol=1e-9):
+        raise ValueError(f"the posterior left the first {float(left_out):g} s of the record out "
+                         f"of its likelihood, the comparison {discard:g} s; compare with "
+                         f"discard={float(left_out):g}, or give a posterior sampled with "
+                         f"discard={discard:g}")
+    noise = s.get("noise")
+    if likelihood == "coloured" and ar == "fixed" and isinstance(noise, Mapping) \
+            and ar_order is not None and ARNoise.from_dict(noise).order != ar_order:
+        raise ValueError(f"the posterior's AR noise model, which the comparison takes over, is "
+                         f"of order {ARNoise.from_dict(noise).order}, not ar_order = {ar_order} "
+                         "(--ar-order); leave ar_order out, or give a posterior sampled with it")
+
+
 def _fit_noise(recording: Recording, model: PilotModel, seed, order, discard) -> ARNoise:
     """The AR model of a prediction-error fit of ``model`` (:func:`~bayespilot.fit.fast.fit_fast`)."""
     from .fit.fast import fit_fast
@@ -1334,7 +1440,12 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     posterior : Posterior, optional
         An emcee posterior of ``model`` on this recording for the
         Savage-Dickey cross-check (for ``"coloured"`` with ``ar="fixed"``, its AR
-        model is used for the comparison too).  If None and ``savage_dickey_samples``,
+        model is used for the comparison too).  It must have been sampled on
+        this recording (``settings["recording_sha256"]``; one saved before that
+        was recorded is used with a RuntimeWarning), of ``model``, and, under
+        the same likelihood, with the same ``discard`` (and an AR model of
+        ``ar_order``, if given); under the other likelihood its Savage-Dickey
+        estimate is marked not valid.  If None and ``savage_dickey_samples``,
         one is sampled (:func:`bayespilot.sample.sample`, started from the
         nested sampler's best point, ``sample_options`` passed on).
     savage_dickey_samples : bool
@@ -1350,9 +1461,18 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     Raises
     ------
     ValueError
-        If the model has no free ``delta_abs``, or bad settings.
+        If the model has no free ``delta_abs``, bad settings, or a
+        ``posterior`` sampled on another recording, of another model, or with
+        another ``discard`` or AR order (the message says which).
     TypeError
         Wrong argument types.
+
+    Warns
+    -----
+    RuntimeWarning
+        A ``posterior`` saved before the recording's digest was recorded
+        (whether it belongs to this recording cannot be checked), or nested
+        sampling that missed the main mode in every run.
 
     Examples
     --------
@@ -1392,6 +1512,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         if not isinstance(posterior, Posterior):
             raise TypeError(f"posterior must be a bayespilot.sample.Posterior, got "
                             f"{type(posterior).__name__}")
+        _check_posterior(posterior, recording, model, likelihood, ar, ar_order, discard)
     none_model = model._fixed(**{THRESHOLD: 0.0})
     ss = np.random.SeedSequence(seed)
     s1, s0, s_mc = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
@@ -1605,10 +1726,12 @@ class PooledComparison:
     def summary(self) -> str:
         """One line for people: the sum ln BF and decision, the per-recording counts, the tests."""
         counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)
-        return (f"{self.label + ': ' if self.label else ''}{self.n} recordings, sum ln BF = "
-                f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} -> "
-                f"{self.decision}{' (' + self.decision_note + ')' if self.decision_note else ''}"
-                f"; per recording: {counts}; paired t = {self.t_statistic:.2f} "
+        return (f"{self.label + ': ' if self.label else ''}{self.n} "
+                f"recording{'' if self.n == 1 else 's'}, sum ln BF = "
+                f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} "
+                + _verdict(self.log_bayes_factor, self.log_bayes_factor_err, self.decision,
+                           self.decision_note)
+                + f"; per recording: {counts}; paired t = {self.t_statistic:.2f} "
                 f"(p = {self.t_pvalue:.3g}), Wilcoxon p = {self.wilcoxon_pvalue:.3g}")
 
 

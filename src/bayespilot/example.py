@@ -24,7 +24,9 @@ Everything is seeded: the same seed gives the same numbers, figures and files
 
 from __future__ import annotations
 
+import math
 import time
+import warnings
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -85,6 +87,13 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
     pathlib.Path
         The report, ``out/report.md``.
 
+    Warns
+    -----
+    ConvergenceWarning
+        Once, at the end, naming the runs whose emcee chain reached
+        ``max_steps`` before the autocorrelation criterion held (their
+        posteriors are rough estimates; raise ``max_steps``).
+
     Examples
     --------
     A tiny run (short records, short chains; the real example takes a few minutes):
@@ -105,7 +114,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
     from .simulate import simulate
 
     from .noise import ARNoise
-    from .sample import COLOURED_DISCARD
+    from .sample import COLOURED_DISCARD, ConvergenceWarning
 
     if task not in ("FD", "FT"):
         raise ValueError(f"task must be 'FD' or 'FT', got {task!r}")
@@ -122,6 +131,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
     truth = presets.paper_parameters(task)
     t_start = time.perf_counter()
     rows, comparisons, posteriors = [], [], []
+    unconverged: list[tuple[str, float]] = []  # (run, last max tau) of chains not converged
     for i, kt in enumerate(gains):
         name = f"{task}_k{kt:g}"
         s = seed + i
@@ -147,10 +157,19 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
         fit0.to_json(dirs["fits"] / f"{name}_none.json")
         say(f"[{i + 1}/{len(gains)}] {name}: sampling the posterior (emcee) ...")
         # ar="fixed": the posterior under the comparison's likelihood (fit's AR model)
-        post = sample(rec, likelihood=likelihood, ar="fixed", init=fit, seed=s,
-                      max_steps=max_steps,
-                      min_steps=min(1000, max_steps), check_every=min(500, max_steps),
-                      progress=progress)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", ConvergenceWarning)
+            post = sample(rec, likelihood=likelihood, ar="fixed", init=fit, seed=s,
+                          max_steps=max_steps,
+                          min_steps=min(1000, max_steps), check_every=min(500, max_steps),
+                          progress=progress)
+        for w in caught:  # sample's advice names a backend, which the demo has none of
+            if issubclass(w.category, ConvergenceWarning):
+                tau = w.message.tau
+                finite = [] if tau is None else [t for t in np.ravel(tau) if np.isfinite(t)]
+                unconverged.append((name, max(finite) if finite else math.nan))
+            else:
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
         post.to_netcdf(dirs["posteriors"] / f"{name}.nc")
         posteriors.append(post)
         say(f"[{i + 1}/{len(gains)}] {name}: comparing threshold against none (dynesty) ...")
@@ -180,7 +199,28 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
                       encoding="utf-8")
     say(f"wrote {report} ({elapsed:.0f} s)")
     plt.close("all")
+    if unconverged:
+        _warn_unconverged(unconverged, max_steps)
     return report
+
+
+def _warn_unconverged(runs: Sequence[tuple[str, float]], max_steps: int) -> None:
+    """One ConvergenceWarning for the demo's chains that reached ``max_steps`` (run, max tau),
+    with the demo's advice (it has no backend to resume)."""
+    from ._caller import warn_at_caller
+    from .sample import ConvergenceWarning
+
+    names = ", ".join(n for n, _ in runs)
+    taus = [t for _, t in runs if math.isfinite(t)]
+    tau = f" (max tau = {max(taus):.0f} steps)" if taus else ""
+    one = len(runs) == 1
+    rough = ("its posterior is a rough estimate" if one else
+             "their posteriors are rough estimates")
+    warn_at_caller(ConvergenceWarning(
+        f"the emcee chain{'' if one else 's'} of {names} reached max_steps = {max_steps} before "
+        f"{'it was' if one else 'they were'} long enough for the autocorrelation criterion"
+        f"{tau}: {rough} (the report's intervals too); to run longer, raise max_steps "
+        "(--max-steps)", None, max_steps))
 
 
 def _report(rows, pooled, truth, task, gains, elapsed, likelihood) -> str:

@@ -701,6 +701,30 @@ def _stored_fingerprint(path) -> dict | None:
     return json.loads(stored) if stored is not None and iteration > 0 else None
 
 
+def _recording_digest(recording: Recording) -> str:
+    """SHA-256 of what a recording holds: its signals (names and float64 values), its sample
+    rate and K_theta; the same run however it is named or wherever it lies.
+
+    :func:`sample` records it in ``settings["recording_sha256"]``, and
+    :func:`bayespilot.compare.compare` refuses a posterior whose digest is
+    not that of the recording it compares on.
+
+    Parameters
+    ----------
+    recording : Recording
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
+    from .recording import _signals_digest
+
+    h = hashlib.sha256(_signals_digest(recording).encode())
+    h.update(repr((float(recording.sample_rate_hz), float(recording.motion_gain))).encode())
+    return h.hexdigest()
+
+
 def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str, order: int,
                  prior: _Prior, n_walkers: int, lik: Likelihood, profiled: int = 0) -> dict:
     h = hashlib.sha256()
@@ -914,6 +938,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     Returns
     -------
     Posterior
+        Its ``settings`` hold every setting and ``recording_sha256``, the
+        digest of the recording's content, by which
+        :func:`bayespilot.compare.compare` tells whether it was sampled on
+        the recording being compared.
 
     Raises
     ------
@@ -930,7 +958,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     Warns
     -----
     ConvergenceWarning
-        The run reached ``max_steps`` before the criterion held.
+        The run reached ``max_steps`` before the criterion held; the message
+        says how to run longer (with a ``backend``: again with a larger
+        ``max_steps``, which resumes the chain; without: a larger
+        ``max_steps``, or a backend to be able to resume).
 
     Examples
     --------
@@ -1026,7 +1057,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         "tau_factor": tau_factor, "tau_rtol": tau_rtol, "prior": pri.description,
         "backend": None if backend is None else str(backend), "model": model.name,
         "fixed": {k: float(v) for k, v in model.fixed.items()},
-        "recording": recording.source or "", "entropy": str(ss.entropy),
+        "recording": recording.source or "", "recording_sha256": _recording_digest(recording),
+        "entropy": str(ss.entropy),
         "numba_threads": int(numba.get_num_threads())}
 
     bk, resuming, fp = None, False, None
@@ -1072,7 +1104,7 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
             f"the chain reached max_steps = {max_steps} before it was {tau_factor:g} "
             f"autocorrelation times long with a settled tau (max tau = "
             f"{np.nanmax(run.tau) if np.any(np.isfinite(run.tau)) else float('nan'):.0f} steps); "
-            "the posterior is a rough estimate: run longer (resume with the same backend)",
+            f"the posterior is a rough estimate: {_run_longer(backend, max_steps)}",
             run.tau, run.n_steps))
     acc = np.asarray(run.sampler.acceptance_fraction, float)
     settings.update({"n_steps": run.n_steps, "resumed_from": run.start_iteration,
@@ -1084,6 +1116,17 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
             "settings": settings, "seed": seed}
     idata, meta = _to_idata(run.sampler, names, run.tau, meta)
     return Posterior(idata, tuple(names), tau, bool(run.converged), meta["settings"], seed)
+
+
+def _run_longer(backend, max_steps: int) -> str:
+    """The advice of the not-converged warning: how to run longer, in the API's and the CLI's
+    words (the CLI prints the warning as it is)."""
+    if backend is None:
+        return ("to run longer, raise max_steps (--max-steps), or give a backend "
+                "(--backend FILE.h5) to be able to resume")
+    return (f"to run longer, run again with the same backend ({backend}) and a max_steps "
+            f"(--max-steps) above {max_steps}: the chain resumes from its last step "
+            "(max_steps counts the steps already stored)")
 
 
 def _check_init(model: PilotModel, init: Mapping[str, float]) -> None:

@@ -110,7 +110,11 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     ValueError
         A bad setting (``n_starts``, the steps, ``noise``, ``noise_order``
         without ``noise="ar"``), or a recording with no more than four samples
-        per free parameter after ``discard`` or a constant u.
+        per free parameter after ``discard`` or a constant u, or (``noise="ar"``)
+        fewer than 4 (p + 1) samples after ``discard`` for the AR(p) model (p up
+        to :data:`~bayespilot.noise.MAX_AR_ORDER` by BIC: 124 samples); the
+        recording's problems are a :class:`~bayespilot.recording.RecordingError`
+        naming the shortest record that would do.
 
     Warns
     -----
@@ -150,6 +154,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                          f"(got noise_order={noise_order!r})")
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     discard_reason = None  # why the default discard is not 0 where it was picked for that
+    default_discard = discard is None
     if discard is None:
         from ..sample import COLOURED_DISCARD
 
@@ -164,6 +169,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
     _check_fittable(recording, model, discard)
+    if noise == "ar":
+        _check_ar_fittable(recording, discard, noise_order, default_discard)
     has_delta = "delta_abs" in model.parameter_names
     base = model._fixed(delta_abs=0.0) if has_delta else model
     given = noise if isinstance(noise, ARNoise) else None
@@ -234,6 +241,39 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                     time.perf_counter() - t0, recording.source, **FitResult._declared(model))
     _warn_on_bounds(fit, lik)
     return fit
+
+
+def _check_ar_fittable(recording: Recording, discard: float, order: int | None,
+                       default_discard: bool) -> None:
+    """Refuse (RecordingError), before fitting, a record too short for the AR noise model of
+    ``noise="ar"``: an AR(p) model needs at least 4 (p + 1) residuals after ``discard``, with p
+    up to :data:`~bayespilot.noise.MAX_AR_ORDER` when the order is chosen by BIC.  The message
+    names the shortest record that has them (with the default lead-in, min(2 s, a quarter of
+    the record), when ``default_discard``)."""
+    from ..recording import RecordingError
+    from ..sample import COLOURED_DISCARD
+
+    p = MAX_AR_ORDER if order is None else int(order)
+    need = 4 * (p + 1)
+    rate = recording.sample_rate_hz
+
+    def skipped(n: int) -> int:
+        d = min(COLOURED_DISCARD, n / rate / 4) if default_discard else discard
+        return int(round(d * rate)) if d else 0
+
+    have = recording.n_samples - skipped(recording.n_samples)
+    if have >= need:
+        return
+    n = need
+    while n - skipped(n) < need:
+        n += 1
+    what = (f"an AR noise model of order up to {p} (chosen by BIC)" if order is None
+            else f"an AR({p}) noise model")
+    raise RecordingError(
+        f"{recording.source or 'the recording'}: {recording.duration:g} s, {have} samples"
+        f"{f' after the first {discard:g} s' if skipped(recording.n_samples) else ''}; "
+        f"{what} needs at least {need} there, a record of at least {n / rate:g} s"
+        + ("" if default_discard else f" with the first {discard:g} s left out"))
 
 
 def _ar_at(lik: Likelihood, params, order: int | None) -> ARNoise:
