@@ -275,7 +275,7 @@ def test_help_exits_0_with_example(command, capsys):
 def test_help_documents_every_option(capsys):
     for command, options in {"simulate": ["--task", "--motion-gain", "--remnant-fraction",
                                           "--remnant-gain", "--seed", "--duration", "--params",
-                                          "--output"],
+                                          "--sample-rate", "--output"],
                              "loglik": ["--params", "--no-threshold", "--initial"],
                              "demo": ["--out", "--seed"]}.items():
         _, out, _ = _run(capsys, command, "--help")

@@ -379,3 +379,108 @@ def test_summary_json_cells_are_standard_json():
         raise ValueError(token)
 
     assert json.loads(cell, parse_constant=refuse) == {"w_soft": [0.2, None, None]}
+
+
+def test_summary_covers_every_diagnosis_in_the_folder_made_with_these_settings(
+        done_without_reports, tmp_path, capsys):
+    """A rerun on a subset of the recordings into the same folder: summary.csv kept only this
+    run's keys while the others' <key>.json stayed.  It now covers every diagnosis there made
+    with these settings (an earlier run's result or error file), sorted by key, and names the
+    ones made with other settings, left out."""
+    import shutil
+    import warnings
+
+    from bayespilot.diagnose.batch import SummaryScopeWarning
+
+    folder, stem, done = done_without_reports
+    out = tmp_path / "out"
+    out.mkdir()
+    shutil.copy(done / "s7-run1.json", out / "s7-run1.json")
+    mine = json.loads((done / "s7-run1.json").read_text())
+    assert mine["condition"] == {"subject": "s7", "task": "FD", "motion_gain": 1.0}
+
+    def put(name, **changes):
+        (out / name).write_text(json.dumps({**mine, **changes}))
+
+    put("s8-run1.json", key="s8-run1", recordings=["elsewhere/s8-run1"],
+        recording_digests=["0" * 64],
+        condition={"subject": "s8", "task": "FT", "motion_gain": 0.5})
+    old = {k: v for k, v in mine.items() if k != "condition"}  # made before it was recorded
+    (out / "s5-run1.json").write_text(json.dumps(dict(old, key="s5-run1")))
+    put("other.json", key="other", settings=dict(mine["settings"], alpha=0.05))
+    (out / "s6-run1.error.json").write_text(json.dumps(
+        {"key": "s6-run1", "recordings": ["gone/s6-run1"], "settings": mine["settings"],
+         "error": "RuntimeError", "message": "worker lost"}))
+    (out / "notes.json").write_text(json.dumps({"a": 1}))  # not a batch's file: passed over
+
+    scope = (f"{out} holds 1 diagnosis made with other settings (other), left out of "
+             f"summary.csv: it covers the diagnoses made with this batch's settings")
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        s = diagnose_batch([stem], out, n_bootstrap=0, progress=False, warm_cache=False)
+    assert (s.total, s.completed, s.skipped) == (1, 0, 1)
+    assert [str(w.message) for w in said if w.category is SummaryScopeWarning] == [scope]
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [(r["key"], r["subject"], r["task"], r["motion_gain"]) for r in rows] == [
+        ("s5-run1", "", "", ""), ("s6-run1", "", "", ""), ("s7-run1", "s7", "FD", "1.0"),
+        ("s8-run1", "s8", "FT", "0.5")]
+    assert rows[1]["error"] == "RuntimeError: worker lost" and rows[1]["physics"] == ""
+    physics = mine["diagnosis"]["physics"]
+    assert [r["physics"] for r in rows if r["key"] != "s6-run1"] == [physics] * 3
+
+    # the command says which rows an earlier run made, and warns of the one left out
+    capsys.readouterr()
+    code = main(["diagnose-batch", str(folder), "--out", str(out), "--bootstrap", "0",
+                 "--workers", "1"])
+    stdout, err = capsys.readouterr()
+    assert code == 0, err
+    assert f"bayespilot: warning: {scope}" in err.splitlines()
+    lines = stdout.splitlines()
+    head = next(i for i, ln in enumerate(lines) if ln.startswith("key,n_runs,"))
+    assert [ln.split(",")[0] for ln in lines[head + 1:-1]] == ["s5-run1", "s6-run1", "s7-run1",
+                                                               "s8-run1"]
+    assert lines[-1] == (f"wrote {out / 'summary.csv'} (with 3 diagnoses an earlier run made "
+                         f"in {out} with these settings) and one <key>.json per diagnosis")
+
+
+def test_cli_a_diagnosis_from_other_settings_is_a_usage_error(done_without_reports, capsys):
+    """A key's result made with other settings is bad input (exit 2, the same one line); it
+    exited 1 as a failure of the run."""
+    from bayespilot.diagnose.batch import ResultConflictError
+
+    folder, stem, out = done_without_reports
+    capsys.readouterr()
+    code = main(["diagnose-batch", str(folder), "--out", str(out), "--bootstrap", "0",
+                 "--seed", "5", "--workers", "1", "-q"])
+    stdout, err = capsys.readouterr()
+    assert code == 2 and stdout == ""
+    assert [ln for ln in err.splitlines() if "warning" not in ln] == [
+        f"bayespilot: error: {out / 's7-run1.json'} holds a diagnosis of s7-run1 from other "
+        f"settings: seed 0 there, 5 here; use another output folder or delete it"]
+    assert issubclass(ResultConflictError, CampaignError)  # (Python callers catch it as before)
+    with pytest.warns(QuestionableRecordingWarning, match=SHORT), \
+            pytest.raises(ValueError, match="from other settings: seed 0 there, 5 here"):
+        diagnose_batch([stem], out, n_bootstrap=0, seed=5, progress=False)
+
+
+def test_pooling_one_recording_under_two_names_is_refused_up_front(lone_folder, tmp_path,
+                                                                     capsys):
+    """Two files with the same signals in one condition: refused when the recordings are read,
+    naming both (it failed on the worker, exit 1, with a raw 'ValueError:' and the advice to
+    run the same command again)."""
+    import shutil
+
+    folder = tmp_path / "recs"
+    shutil.copytree(lone_folder, folder)
+    for ext in (".csv", ".json"):
+        shutil.copy(folder / f"s9-run1{ext}", folder / f"s9-copy{ext}")
+    code = main(["diagnose-batch", str(folder), "--out", str(tmp_path / "o"), "--pool",
+                 "--workers", "1", "-q"])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2
+    assert err[-1] == (f"bayespilot: error: the same recording under two names in one pooled "
+                       f"condition: {folder / 's9-copy'} and {folder / 's9-run1'} hold the same "
+                       f"signals (pooling them would count one run's evidence twice); give "
+                       f"each run once")
+    assert all(ln.startswith("bayespilot: warning: ") for ln in err[:-1])  # (the 20-s records)
+    assert not (tmp_path / "o").exists()

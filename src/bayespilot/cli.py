@@ -152,8 +152,40 @@ def _detail(args: argparse.Namespace, text: str) -> None:
         print(text, file=sys.stderr)
 
 
-def _read_params(path: str, model, *, require: Sequence[str] = ()) -> dict[str, float]:
-    """Pilot parameters by name from a JSON object, checked against ``model``'s names and bounds."""
+#: What a fit's result file has besides ``params`` (FitResult.from_dict requires them): a
+#: JSON object with them is read as 'bayespilot fit --json' wrote it, its ``params`` taken.
+_FIT_KEYS = ("params", "neg_log_lik", "vaf", "method")
+
+
+def _read_params(path: str, model, *, require: Sequence[str] = (),
+                 detail=None) -> dict[str, float]:
+    """Pilot parameters by name from a JSON file, checked against ``model``'s names and bounds.
+
+    Parameters
+    ----------
+    path : str
+        A JSON object of parameter values by name, or a fit's result
+        (``bayespilot fit --json``, :meth:`FitResult.to_json
+        <bayespilot.fit.result.FitResult.to_json>`: an object with ``params``,
+        ``neg_log_lik``, ``vaf`` and ``method``), whose ``params`` are taken.
+    model : PilotModel
+        The names and bounds the values are checked against.
+    require : sequence of str
+        Names that must be given.
+    detail : callable, optional
+        Called with one line saying where the values came from (a fit's file).
+
+    Returns
+    -------
+    dict of str to float
+
+    Raises
+    ------
+    UsageError
+        The file cannot be read, is not JSON, or holds an unknown name, a value
+        that is not a finite number or is outside its bounds, or lacks a
+        ``require``-d name.
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding="utf-8-sig")
@@ -179,11 +211,25 @@ def _read_params(path: str, model, *, require: Sequence[str] = ()) -> dict[str, 
     names = model.all_names
     if not isinstance(obj, dict):
         raise UsageError(f"{p}: must hold a JSON object of parameter values by name "
-                         f"({', '.join(names)}), e.g. {{\"K_v\": 1.057}}")
+                         f"({', '.join(names)}), e.g. {{\"K_v\": 1.057}}, or a fit's "
+                         f"result ('bayespilot fit --json')")
+    what = "parameter"
+    if isinstance(obj.get("params"), dict) and all(k in obj for k in _FIT_KEYS):
+        # a fit's result (FitResult.to_json): its estimates, checked below as any file's
+        if detail is not None:
+            thr = "with" if obj.get("threshold", True) else "without"
+            detail(f"{p}: a fit's result ({obj.get('method')} method, {thr} threshold"
+                   + (f", of {obj['source']}" if obj.get("source") else "")
+                   + "): its params are taken")
+        obj, what = obj["params"], "fit's parameter"
     unknown = [k for k in obj if k not in names]
     if unknown:
-        raise UsageError(f"{p}: unknown parameter name(s) {', '.join(map(repr, unknown))}; "
-                         f"valid names are {', '.join(names)}")
+        hint = ""
+        if "params" in unknown:  # a result file of another kind, or a fit's cut short
+            hint = (f" (a fit's result, as 'bayespilot fit --json' writes it, is read by its "
+                    f"params when it has {', '.join(_FIT_KEYS)})")
+        raise UsageError(f"{p}: unknown {what} name(s) {', '.join(map(repr, unknown))}; "
+                         f"valid names are {', '.join(names)}{hint}")
     values: dict[str, float] = {}
     for name, v in obj.items():
         ok = isinstance(v, (int, float)) and not isinstance(v, bool)
@@ -251,14 +297,35 @@ def _warning_line(message) -> None:
     tqdm.write(f"{PROG}: warning: {message}", file=sys.stderr)
 
 
+#: The library's advice in a warning that a command-line user cannot follow, and what the
+#: command says instead (SilentChannelWarning: the command line has no option to fix a
+#: parameter or to drop a channel).
+_LIBRARY_ADVICE = {
+    ": fix them (model.fix) or use a model without the channel":
+        ": the record says nothing about them, and the values given for them are not "
+        "estimates",
+}
+
+
+def _in_cli_words(message) -> str:
+    """A warning's text with the library's advice (:data:`_LIBRARY_ADVICE`) replaced by the
+    command's."""
+    text = str(message)
+    for library, cli in _LIBRARY_ADVICE.items():
+        text = text.replace(library, cli)
+    return text
+
+
 def _warning_lines_once():
-    """A handle for :func:`_warnings_of`: each message a :func:`_warning_line`, once."""
+    """A handle for :func:`_warnings_of`: each message a :func:`_warning_line` (in the
+    command's words, :func:`_in_cli_words`), once."""
     said: set[str] = set()
 
     def say(message) -> None:
-        if str(message) not in said:
-            said.add(str(message))
-            _warning_line(message)
+        text = _in_cli_words(message)
+        if text not in said:
+            said.add(text)
+            _warning_line(text)
 
     return say
 
@@ -286,20 +353,33 @@ def _warnings_of(category, handle):
 
 def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: str, motion_gain: float,
                         seed: int, remnant_fraction: float | None = None,
-                        remnant_gain: float | None = None, duration: float | None = None):
+                        remnant_gain: float | None = None, duration: float | None = None,
+                        sample_rate_hz: float | None = None):
     """Simulate one run with the paper's model and write it; returns (simulation, csv, json).
 
-    The JSON sidecar gets a ``simulation`` key with the true parameters,
-    the remnant gain and fraction, T_n and the seed, so the truth travels
-    with the file.
+    The paper's task ``task`` (FD or FT) at ``motion_gain``, recorded at
+    ``sample_rate_hz`` (None: the paper's 100 Hz); a rate whose Nyquist
+    frequency is not above every forcing line is a usage error.  The JSON
+    sidecar gets a ``simulation`` key with the true parameters, the remnant
+    gain and fraction, T_n and the seed, so the truth travels with the file.
     """
     from .io import write_recording
     from .model import paper_model
     from .recording import Recording, RecordingError
-    from .simulate import simulate
+    from .simulate import TrackingTask, simulate
 
     try:
-        sim = simulate(paper_model(), params, task=task, motion_gain=motion_gain,
+        tracking = TrackingTask.paper(task, motion_gain, **(
+            {} if sample_rate_hz is None else {"sample_rate_hz": float(sample_rate_hz)}))
+    except ValueError as exc:  # a rate too low for the forcing (its Nyquist frequency)
+        if sample_rate_hz is None:
+            raise UsageError(str(exc)) from None
+        # (the library's advice in the option's words: the CLI cannot leave a line out)
+        said = str(exc).replace("raise sample_rate_hz above", "give --sample-rate above")
+        raise UsageError(f"argument --sample-rate: {said.replace(' or leave the line out', '')}"
+                         ) from None
+    try:
+        sim = simulate(paper_model(), params, task=tracking,
                        remnant_fraction=remnant_fraction, remnant_gain=remnant_gain, seed=seed,
                        duration=duration)
     except RuntimeError as exc:
@@ -381,20 +461,23 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from . import presets
     from .model import paper_model
 
-    if args.duration is not None and args.duration * presets.SAMPLE_RATE_HZ < 2:
+    rate = args.sample_rate
+    if args.duration is not None and args.duration * rate < 2:
         raise UsageError(f"argument --duration: {args.duration:g} s is shorter than 2 samples "
-                         f"at {presets.SAMPLE_RATE_HZ:g} Hz")
+                         f"at {rate:g} Hz")
     params = presets.paper_parameters(args.task)
     if args.params is not None:
-        params.update(_read_params(args.params, paper_model()))
+        params.update(_read_params(args.params, paper_model(),
+                                   detail=lambda text: _detail(args, text)))
     _detail(args, "parameters: " + ", ".join(f"{k}={v:g}" for k, v in params.items()))
     sim, csv_path, json_path = _simulate_and_write(
         args.output, params, task=args.task, motion_gain=args.motion_gain, seed=args.seed,
         remnant_fraction=None if args.remnant_gain is not None else args.remnant_fraction,
-        remnant_gain=args.remnant_gain, duration=args.duration)
+        remnant_gain=args.remnant_gain, duration=args.duration, sample_rate_hz=rate)
     rec = sim.recording
     _say(args, f"wrote {csv_path} and {json_path}: task {rec.task}, K_theta = {rec.motion_gain:g}, "
-               f"{rec.duration:g} s, seed {args.seed}, K_n = {sim.remnant_gain:.4g}, "
+               f"{rec.duration:g} s at {rec.sample_rate_hz:g} Hz, seed {args.seed}, "
+               f"K_n = {sim.remnant_gain:.4g}, "
                f"F_n = {sim.remnant_fraction:.3f}")
     return EXIT_OK
 
@@ -403,7 +486,8 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
     from .model import paper_model
 
     model = paper_model(threshold=not args.no_threshold, oversample=args.oversample)
-    params = _read_params(args.params, model, require=model.parameter_names)
+    params = _read_params(args.params, model, require=model.parameter_names,
+                          detail=lambda text: _detail(args, text))
     if args.no_threshold and "delta_abs" in params:
         _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
     rec = _read(args.recording)
@@ -456,6 +540,10 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     if not math.isfinite(fit.neg_log_lik):
         raise CommandFailed("the fit did not reach a finite -ln L")
+    silent = _unidentified_by(rec, model)  # (a run without motion: the motion channel's)
+    unknown = [k for k in fit.params if k in silent and k not in fit.fixed]
+    if unknown:  # marked in the summary and kept in the JSON's settings
+        fit.settings["unidentified"] = unknown
     print(fit.summary())
     if args.json:
         try:
@@ -464,6 +552,17 @@ def _cmd_fit(args: argparse.Namespace) -> int:
             raise CommandFailed(f"{args.json}: cannot write the fit ({_os_reason(exc)})") from None
         _say(args, f"wrote {args.json}")
     return EXIT_OK
+
+
+def _unidentified_by(recording, model) -> set[str]:
+    """The parameters of ``model`` that ``recording`` does not identify: those of a channel
+    whose input is zero throughout (the motion channel's on a run without motion), as the
+    likelihood's SilentChannelWarning names them."""
+    from .likelihood import Likelihood, _unidentified
+
+    with warnings.catch_warnings():  # (what this likelihood would warn of, the fit has said)
+        warnings.simplefilter("ignore")
+        return _unidentified(Likelihood(model, recording))
 
 
 #: The options of the full demo (dest -> flag); --quick runs a fixed check and refuses them.
@@ -653,7 +752,7 @@ def _print_warnings(caught) -> None:
     """Warnings caught during a computation, one line each on stderr."""
     seen = set()
     for w in caught:
-        text = str(w.message)
+        text = _in_cli_words(w.message)
         if text not in seen:
             seen.add(text)
             print(f"{PROG}: warning: {text}", file=sys.stderr)
@@ -670,11 +769,14 @@ def _read_posterior(path: str):
         raise UsageError(f"{p}: is a directory, not a posterior (.nc) file")
     try:
         return Posterior.from_netcdf(p)
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
+    except ValueError as exc:  # (the library names its method: said in the command's words)
+        said = str(exc)
+        for library in ("written by Posterior.to_netcdf", "written by bayespilot.sample"):
+            said = said.replace(library, f"written by '{PROG} sample' (or Posterior.to_netcdf)")
+        raise UsageError(said) from None
     except Exception as exc:  # netCDF4/h5netcdf/xarray raise many types for a file that is not netCDF
-        raise UsageError(f"{p}: is not a netCDF posterior written by 'bayespilot sample' "
-                         f"({type(exc).__name__})") from None
+        raise UsageError(f"{p}: is not a netCDF posterior written by '{PROG} sample' (or "
+                         f"Posterior.to_netcdf): reading it raised {type(exc).__name__}") from None
 
 
 def _write_json(path: str, obj) -> None:
@@ -783,6 +885,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                              progress=_progress(args))
         except RuntimeError as exc:
             raise CommandFailed(str(exc)) from None
+        except ValueError as exc:  # e.g. a --posterior of another recording: bad input
+            raise UsageError(str(exc)) from None
     _print_warnings(w for w in caught if _said_to_user(w))
     print(result.summary())
     if args.json:
@@ -966,8 +1070,11 @@ def _recordings_in(args_paths: Sequence[str]) -> list[str]:
 
 
 def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
+    import csv
+
     from .campaign import CampaignError
-    from .diagnose.batch import MissingReportWarning, _the_recording, diagnose_batch
+    from .diagnose.batch import (MissingReportWarning, ResultConflictError, SummaryScopeWarning,
+                                 _the_recording, diagnose_batch)
     from .diagnose.locate import EvidenceWarning
 
     if args.scheduler is not None and args.workers is not None:
@@ -989,7 +1096,7 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
         # (the evidence's gaps: one line per kind of gap, after the diagnoses, from their
         # results; the workers keep them quiet)
         with _questionable_said(), _warnings_of(MissingReportWarning, said), \
-                _warnings_of(EvidenceWarning, _warning_line):
+                _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line):
             summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
                                      alpha=args.alpha, n_bootstrap=args.bootstrap,
                                      n_calibrate=args.calibrate,
@@ -998,13 +1105,19 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
                                      scheduler=args.scheduler, workers=args.workers,
                                      progress=_progress(args),
                                      connect_timeout=args.connect_timeout)
+    except ResultConflictError as exc:  # DIR holds a key's diagnosis from other settings
+        raise UsageError(str(exc)) from None
     except CampaignError as exc:
         raise CommandFailed(str(exc)) from None
     except ValueError as exc:  # an unreadable recording, a setting it does not suit
         raise UsageError(str(exc)) from None
     _say(args, str(summary))
     with open(Path(args.out) / "summary.csv", encoding="utf-8") as fh:
-        print(fh.read(), end="")
+        table = fh.read()
+    print(table, end="")
+    # (the summary covers every diagnosis in DIR made with these settings: say so when an
+    # earlier run's are in it)
+    earlier = len(list(csv.DictReader(table.splitlines(keepends=True)))) - summary.total
     if not args.reports:
         reports = ""
     elif unreported:
@@ -1012,8 +1125,10 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
                    "without one (see the warning)")
     else:
         reports = " with its report in <key>/"
-    _say(args, f"wrote {Path(args.out) / 'summary.csv'} and one <key>.json per diagnosis"
-               f"{reports}")
+    scope = (f" (with {earlier} diagnos{'is' if earlier == 1 else 'es'} an earlier run made "
+             f"in {args.out} with these settings)" if earlier > 0 else "")
+    _say(args, f"wrote {Path(args.out) / 'summary.csv'}{scope} and one <key>.json per "
+               f"diagnosis{reports}")
     if summary.failed:
         raise CommandFailed(f"{summary.failed} of {summary.total} diagnoses failed (messages in "
                             f"{args.out}/<key>.error.json); run the same command again to "
@@ -1178,15 +1293,22 @@ recording format. The JSON sidecar also records the true parameters, K_n,
 F_n, T_n and the seed under the key "simulation". The same seed gives the same
 files, bit for bit.
 
+--sample-rate sets the recording's rate (default 100 Hz, the paper's); the
+loop is integrated at 1 kHz or finer whatever the rate, and the remnant gain
+K_n means the same remnant at any rate.
+
 Parameter file (--params): a JSON object with some of
 K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs;
 the others keep their Table 3 values for the task. Values must lie within the
 bounds of Table 1. For example:
   {"K_m": 0.3, "delta_abs": 0.02}
+A fit's JSON ('bayespilot fit --json') is taken too: its "params", all eight.
 
 Examples:
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
   bayespilot simulate --task FD --motion-gain 0.5 --params mine.json --duration 40 -o out/short
+  bayespilot simulate --task FD --sample-rate 50 -o out/run50
+  bayespilot simulate --task FD --params out/run-fit.json --seed 4 -o out/refit
 """
 
 LOGLIK_EPILOG = """\
@@ -1199,10 +1321,13 @@ K_v, T_vl, tau_v, K_m, tau_m, omega_nm, zeta_nm, delta_abs
 (with --no-threshold, delta_abs may be left out; it is fixed at 0). E.g.
   {"K_v": 1.057, "T_vl": 0.409, "tau_v": 0.279, "K_m": 0.532, "tau_m": 0.203,
    "omega_nm": 12.0, "zeta_nm": 0.22, "delta_abs": 0.0075}
+A fit's JSON ('bayespilot fit --json') is taken too: its "params" (with
+--no-threshold its delta_abs is ignored; -v says so).
 
 Examples:
   bayespilot loglik out/run --params params.json
   bayespilot loglik out/run.csv --params params.json --no-threshold --initial rest
+  bayespilot loglik out/run --params out/run-fit.json
 """
 
 FIT_EPILOG = """\
@@ -1349,11 +1474,16 @@ DIR/<key>.json as it finishes (key: the recording's stem, or
 <subject>_<task>_k<K_theta> with --pool); one that fails leaves
 DIR/<key>.error.json and the others go on; running the same command again
 skips the finished ones and retries the failed (the same recordings: a stem,
-its .csv or its .json; the same settings, defaults filled in). --reports
-writes the reports of the diagnoses a run makes: one finished before
-without a report is not redone and gets none (a warning names it; delete its
-<key>.json to redo it with its report). DIR/summary.csv has one row
-per key: the decision (physics, mismatch), the chosen extension's p_value,
+its .csv or its .json; the same settings, defaults filled in); a <key>.json
+made from other recordings or settings is refused (exit 2). With --pool, one
+recording under two names (a copy) in a condition is refused before anything
+runs. --reports writes the reports of the diagnoses a run makes: one
+finished before without a report is not redone and gets none (a warning
+names it; delete its <key>.json to redo it with its report).
+DIR/summary.csv has one row per diagnosis in DIR made with these settings,
+sorted by key: this run's, and those an earlier run on other recordings left
+in DIR (a warning names any made with other settings, left out): the
+decision (physics, mismatch), the chosen extension's p_value,
 delta_neg_log_lik and params, the candidate with the smallest p-value, or
 the error; DIR/summary.png draws every candidate's p-value in every
 diagnosis. --extension FILE.py:NAME adds a lab's own catalogue entries, sent
@@ -1460,8 +1590,13 @@ def build_parser() -> argparse.ArgumentParser:
     _seed_argument(p, "seed of the remnant noise, an integer >= 0 (default 0)")
     p.add_argument("--duration", type=_positive, default=None, metavar="S",
                    help="measurement time in seconds (default 81.92, the paper's T0)")
+    p.add_argument("--sample-rate", type=_positive, default=100.0, metavar="HZ",
+                   help="sample rate of the recording in Hz (default 100, the paper's; e.g. 50 "
+                        "or 120 as other labs record); above twice the forcing's highest "
+                        "line, 2.6 Hz")
     p.add_argument("--params", metavar="FILE.json",
-                   help="JSON object overriding some Table 3 parameters by name (see below)")
+                   help="JSON object overriding some Table 3 parameters by name, or a fit's "
+                        "JSON ('bayespilot fit --json': its params) (see below)")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_simulate)
 
@@ -1470,7 +1605,8 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Evaluate the negative log-likelihood of Eq. 4.")
     _recording_argument(p)
     p.add_argument("--params", required=True, metavar="FILE.json",
-                   help="JSON object with the pilot parameters by name (see below)")
+                   help="JSON object with the pilot parameters by name, or a fit's JSON "
+                        "('bayespilot fit --json': its params) (see below)")
     p.add_argument("--no-threshold", action="store_true",
                    help="use the model without threshold (delta_abs fixed at 0)")
     p.add_argument("--initial", choices=("periodic", "rest"), default="periodic",

@@ -37,7 +37,12 @@ diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`) and
 chosen extension's p-value, -ln L improvement and parameters, with
 ``posterior=True`` its posterior's medians and 90 % intervals, the candidate
 with the smallest p-value and that p-value (the nearest miss when the answer
-is ``none``), or the error).
+is ``none``), or the error).  ``summary.csv`` and ``summary.png`` cover every
+diagnosis in ``out_dir`` made with the batch's settings, sorted by key: this
+call's, and those an earlier call on other recordings left there (a batch run
+again on a subset, or on new recordings, into the same folder keeps the
+others' rows).  Result files made with other settings (under other keys) are
+left out, and a :class:`SummaryScopeWarning` names them.
 
 Keys: a recording alone is keyed by its file stem (by ``<folder>_<stem>`` when
 two recordings share a stem); a pooled condition by
@@ -60,6 +65,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 from .._files import json_ready, replacing, write_csv_atomic
+from ..campaign import CampaignError
 from ..recording import _signals_digest
 from .locate import EvidenceWarning
 
@@ -71,13 +77,26 @@ if TYPE_CHECKING:
     from .pooled import PooledDiagnosisResult
 
 __all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
-           "batch_summary_rows", "SUMMARY_FIELDS", "MissingReportWarning"]
+           "batch_summary_rows", "SUMMARY_FIELDS", "MissingReportWarning",
+           "SummaryScopeWarning", "ResultConflictError"]
 
 
 class MissingReportWarning(UserWarning):
     """``reports=True``, and diagnoses finished before (not redone) have no report in
     ``out_dir/<key>/``: a report needs the diagnosis's traces, which the result file does not
     keep.  The message names them and says how to get them."""
+
+
+class SummaryScopeWarning(UserWarning):
+    """``out_dir`` holds diagnoses made with other settings (under other keys): ``summary.csv``
+    covers those made with the batch's settings and leaves them out.  The message names
+    them."""
+
+
+class ResultConflictError(CampaignError, ValueError):
+    """``out_dir`` holds a result of one of the batch's keys made from other recordings or
+    settings: bad input (the message says what differs), not a failure of the run.  A
+    :class:`~bayespilot.campaign.CampaignError` (as it was) and a ValueError."""
 
 
 #: Columns of ``summary.csv``.
@@ -96,15 +115,18 @@ class DiagnoseTask:
     paths : tuple of str
         The recordings, as given.
     subject : str or None
-    task : str
-    motion_gain : float
+    task : str or None
+        None only for a diagnosis an earlier batch left in the folder whose result file
+        does not record it (made before its condition was recorded).
+    motion_gain : float or None
+        As ``task``.
     """
 
     key: str
     paths: tuple[str, ...]
     subject: str | None
-    task: str
-    motion_gain: float
+    task: str | None
+    motion_gain: float | None
 
     @property
     def pooled(self) -> bool:
@@ -299,6 +321,9 @@ def _settings(task: DiagnoseTask, options: Mapping[str, Any],
     if digests is not None:
         d["recording_digests"] = [digests[p] for p in task.paths]
     d["settings"] = dict(options)
+    # (not compared on resume: the summary's columns of a diagnosis an earlier batch left)
+    d["condition"] = {"subject": task.subject, "task": task.task,
+                      "motion_gain": task.motion_gain}
     return json.loads(json.dumps(d))
 
 
@@ -324,18 +349,61 @@ def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any], *,
     from another working folder, or moved), else as the files they resolve to
     (:func:`_the_recording`); sorted either way (a pooled task's runs are in the files'
     order, which results made before that was so may not have)."""
-    recs, settings = stored.get("recordings"), stored.get("settings")
+    recs = stored.get("recordings")
     if by_content:
         recs = stored.get("recording_digests")
-    if not isinstance(recs, list) or not isinstance(settings, dict):
+    merged = _settings_view(stored, defaults)
+    if not isinstance(recs, list) or merged is None:
+        return None
+    return {"recordings": sorted(recs if by_content else (_the_recording(p) for p in recs)),
+            "settings": merged}
+
+
+def _settings_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
+    """A result (or error) file's settings with ``defaults`` filled in and
+    ``candidates=None`` as the built-in catalogue (:func:`_resume_view`); None if it records
+    none."""
+    settings = stored.get("settings")
+    if not isinstance(settings, dict):
         return None
     from .catalogue import NAMES
 
     merged = {**defaults, **settings}
     if merged.get("candidates") is None:  # None: the built-in catalogue, in its order
         merged["candidates"] = list(NAMES)
-    return {"recordings": sorted(recs if by_content else (_the_recording(p) for p in recs)),
-            "settings": merged}
+    return merged
+
+
+def _earlier_tasks(tasks: Sequence[DiagnoseTask], out: Path, settings: Any,
+                   defaults: Mapping[str, Any]) -> tuple[list[DiagnoseTask], list[str]]:
+    """The diagnoses in ``out`` that are not ``tasks``': as tasks, those whose result file (or,
+    for one that failed, error file) records ``settings`` (a :func:`_settings_view`), sorted
+    by key; and the keys of those made with other settings.  Other JSON files are not
+    results of a batch and are passed over."""
+    from .. import campaign as C
+
+    mine = {t.key for t in tasks}
+    keys = sorted({f.name[:-len(".error.json")] if f.name.endswith(".error.json") else f.stem
+                   for f in out.glob("*.json")} - mine)
+    same, other = [], []
+    for key in keys:
+        stored = C._read_json(out / f"{key}.json")
+        if not (isinstance(stored, dict) and stored.get("key") == key
+                and "diagnosis" in stored):
+            stored = C._read_json(out / f"{key}.error.json")
+            if not (isinstance(stored, dict) and stored.get("key") == key
+                    and isinstance(stored.get("recordings"), list)):
+                continue
+        view = _settings_view(stored, defaults)
+        if view is None:
+            continue
+        if view != settings:
+            other.append(key)
+            continue
+        cond = stored.get("condition") if isinstance(stored.get("condition"), dict) else {}
+        same.append(DiagnoseTask(key, tuple(str(p) for p in stored.get("recordings") or ()),
+                                 cond.get("subject"), cond.get("task"), cond.get("motion_gain")))
+    return same, other
 
 
 def _differs(old: Any, new: Any) -> str:
@@ -411,22 +479,29 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         A recording cannot be read (every such file is named); nothing is run.
     ValueError
         A bad setting, a recording the settings do not suit (too short), keys
-        that clash, ``pool`` without subjects, an entry of one's own that
-        ``register_extension`` refuses or that cannot be pickled; nothing is
-        run.
+        that clash, ``pool`` without subjects, the same recording (the same
+        signals) under two names in one pooled condition, an entry of one's
+        own that ``register_extension`` refuses or that cannot be pickled;
+        nothing is run.
+    ResultConflictError
+        ``out_dir`` holds a result of the same key made from other recordings
+        or settings (the message says which); nothing is run.  The recordings
+        are compared by their content (module docs), the settings with the
+        diagnosis's defaults filled in (``alpha=None`` and ``alpha=0.01`` are
+        one).  A CampaignError and a ValueError.
     CampaignError
         The cluster cannot be reached or started or is lost during the run
         (what finished is saved), ``out_dir`` cannot be written in (checked
-        before computing) or a result cannot be written, or ``out_dir``
-        holds a result of the same key made from other recordings or
-        settings (the message says which).  The recordings are compared by
-        their content (module docs), the settings with the diagnosis's
-        defaults filled in (``alpha=None`` and ``alpha=0.01`` are one).
+        before computing) or a result cannot be written.
 
     Warns
     -----
     MissingReportWarning
         ``reports`` and finished diagnoses without a report (above).
+    SummaryScopeWarning
+        ``out_dir`` holds diagnoses made with other settings, left out of
+        ``summary.csv`` (which covers every diagnosis there made with these
+        settings: this call's and earlier calls', module docs).
     EvidenceWarning
         Once per gap in the diagnoses' evidence (no forcing, a record not
         whole periods, ...), naming how many diagnoses and which have it;
@@ -499,6 +574,17 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     tasks = plan_batch(paths, recs, pool=pool)
     by_path = dict(zip(paths, recs))
     digests = {p: _signals_digest(r) for p, r in by_path.items()}
+    twice = []  # one run under two names (a copy) in a pooled condition: refused now, not
+    for t in tasks:  # by the diagnosis on a worker
+        seen: dict[str, str] = {}
+        for p in t.paths:
+            if digests[p] in seen:
+                twice.append(f"{seen[digests[p]]} and {p}")
+            seen.setdefault(digests[p], p)
+    if twice:
+        raise ValueError(f"the same recording under two names in one pooled condition: "
+                         f"{'; '.join(twice)} hold the same signals (pooling them would count "
+                         f"one run's evidence twice); give each run once")
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -524,9 +610,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         was = _resume_view(old, implied, by_content=by_content)
         now = _resume_view(_settings(t, options, digests), implied, by_content=by_content)
         if was != now:
-            raise C.CampaignError(f"{out / (t.key + '.json')} holds a diagnosis of {t.key} "
-                                  f"from {_differs(was, now)}; use another output folder or "
-                                  f"delete it")
+            raise ResultConflictError(f"{out / (t.key + '.json')} holds a diagnosis of {t.key} "
+                                      f"from {_differs(was, now)}; use another output folder "
+                                      f"or delete it")
         skipped += 1
         if reports and not (out / t.key / "report.html").is_file():
             unreported.append(t.key)
@@ -575,7 +661,15 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             n = len(keys)
             warnings.warn(f"{n} diagnos{'is' if n == 1 else 'es'} ({', '.join(keys[:3])}"
                           f"{' ...' if n > 3 else ''}): {note}", EvidenceWarning, stacklevel=2)
-    write_summary(tasks, out)
+    settings = _settings_view({"settings": json.loads(json.dumps(dict(options)))}, implied)
+    earlier, other = _earlier_tasks(tasks, out, settings, implied)
+    if other:
+        n = len(other)
+        warnings.warn(f"{out} holds {n} diagnos{'is' if n == 1 else 'es'} made with other "
+                      f"settings ({', '.join(other[:5])}{' ...' if n > 5 else ''}), left out "
+                      f"of summary.csv: it covers the diagnoses made with this batch's "
+                      f"settings", SummaryScopeWarning, stacklevel=2)
+    write_summary(sorted([*tasks, *earlier], key=lambda t: t.key), out)
     return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
                              time.perf_counter() - t0, "diagnoses")
 

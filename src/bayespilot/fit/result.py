@@ -270,11 +270,16 @@ class FitResult:
         """A readable table of the estimates and the fit.
 
         Each parameter with the unit its model declares (the paper's for a result saved
-        before units were recorded); ``(fixed)`` beside those not estimated, and ``*``
-        beside an estimate on a bound of the search box (:attr:`at_bounds`), named under
-        the table.
+        before units were recorded); ``(fixed)`` beside those not estimated, ``(not
+        identified)`` beside those ``settings["unidentified"]`` lists (a channel silent
+        throughout the record, e.g. the motion channel's on a run without motion: where the
+        fit stopped, not estimates; ``bayespilot fit`` records them), and ``*`` beside an
+        estimate on a bound of the search box (:attr:`at_bounds`; not for those not
+        identified), named under the table.
         """
-        fixed, edge = set(self.fixed), self.at_bounds
+        unknown = [k for k in self.settings.get("unidentified") or () if k in self.params]
+        fixed = set(self.fixed)
+        edge = {k: side for k, side in self.at_bounds.items() if k not in unknown}
         lines = [f"bayespilot fit ({self.method} method, "
                  f"{'with' if self.threshold else 'without'} threshold, seed {self.seed})"]
         if self.source:
@@ -282,7 +287,7 @@ class FitResult:
         lines.append(f"{'parameter':<10} {'estimate':>12}   unit")
         for k, v in self.params.items():
             mark = "*" if k in edge else " "
-            note = "  (fixed)" if k in fixed else ""
+            note = "  (fixed)" if k in fixed else "  (not identified)" if k in unknown else ""
             lines.append(f"{k:<10} {v:>12.6g}{mark}  {self._unit(k)}{note}".rstrip())
         lines.append(f"-ln L = {self.neg_log_lik:.3f}   VAF = {self.vaf:.2f} %   "
                      f"time = {self.elapsed:.1f} s")
@@ -291,6 +296,11 @@ class FitResult:
             why = self.settings.get("discard_reason")
             lines.append(f"the first {discard:g} s left out of -ln L and VAF"
                          + (f" ({why.split(': ', 1)[-1]})" if why else ""))
+        if unknown:
+            lines.append(f"not identified: {', '.join(unknown)}: their channel's input is zero "
+                         f"throughout the record (e.g. a run without motion), so the record says "
+                         f"nothing about them; their values are where the fit stopped, not "
+                         f"estimates")
         check = self.steps.get("check") if isinstance(self.steps, dict) else None
         if check and check.get("gap", 0.0) > CHECK_GAP:
             lines.append(f"not at a maximum: Gauss-Newton with delta_abs free from this fit "
