@@ -130,9 +130,7 @@ def test_compare_refuses_the_posterior_of_another_recording(sampled, run_dir, ca
            f"compared ({run_dir / 'other'}): their contents differ; sample the posterior of " \
            f"{run_dir / 'other'}, or give none" in err
     assert out == "" and "Traceback" not in err
-    # a ValueError of compare: exit 2 once cli._cmd_compare reports it as bad input (as
-    # _cmd_sample does); until then the CLI's catch-all gives 1
-    assert code in (1, 2)
+    assert code == 2  # bad input (compare's ValueError), as sample's
 
 
 @pytest.mark.parametrize("argv, message", [

@@ -550,5 +550,9 @@ def test_no_bound_warning_for_a_silent_channels_parameters():
     # is arbitrary (nothing identifies them): tau_m on one machine, K_m on another
     motion = set(fit.at_bounds) - {"delta_abs"}
     assert motion and motion <= {"K_m", "tau_m"}, fit.at_bounds
+    # the fitter records them as not identified (not only the command line), and its summary
+    # marks them instead of the bound
+    assert fit.settings["unidentified"] == ["K_m", "tau_m", "delta_abs"]
+    assert fit.summary().count("(not identified)") == 3 and "on a bound" not in fit.summary()
     with pytest.warns(EstimateOnBoundWarning, match="|".join(sorted(motion))):
         _warn_on_bounds(fit)  # (without the likelihood, the record's silence unknown)

@@ -540,10 +540,6 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     if not math.isfinite(fit.neg_log_lik):
         raise CommandFailed("the fit did not reach a finite -ln L")
-    silent = _unidentified_by(rec, model)  # (a run without motion: the motion channel's)
-    unknown = [k for k in fit.params if k in silent and k not in fit.fixed]
-    if unknown:  # marked in the summary and kept in the JSON's settings
-        fit.settings["unidentified"] = unknown
     print(fit.summary())
     if args.json:
         try:
@@ -552,17 +548,6 @@ def _cmd_fit(args: argparse.Namespace) -> int:
             raise CommandFailed(f"{args.json}: cannot write the fit ({_os_reason(exc)})") from None
         _say(args, f"wrote {args.json}")
     return EXIT_OK
-
-
-def _unidentified_by(recording, model) -> set[str]:
-    """The parameters of ``model`` that ``recording`` does not identify: those of a channel
-    whose input is zero throughout (the motion channel's on a run without motion), as the
-    likelihood's SilentChannelWarning names them."""
-    from .likelihood import Likelihood, _unidentified
-
-    with warnings.catch_warnings():  # (what this likelihood would warn of, the fit has said)
-        warnings.simplefilter("ignore")
-        return _unidentified(Likelihood(model, recording))
 
 
 #: The options of the full demo (dest -> flag); --quick runs a fixed check and refuses them.

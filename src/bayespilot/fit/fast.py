@@ -41,7 +41,7 @@ from ..recording import Recording
 from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
-from .three_step import _check_fittable, _model_for, _warn_on_bounds
+from .three_step import _check_fittable, _model_for, _unidentified_settings, _warn_on_bounds
 from .._blas import one_blas_thread
 from .._seeds import resolve_seed
 
@@ -199,6 +199,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
             p, f, given = _final_ar(base, recording, initial, discard, p, noise_order)
             settings["noise"] = given.to_dict()
         full = model.as_dict(model.full_vector(p), full=True)
+        _unidentified_settings(settings, lik0)
         fit = FitResult(full, f, lik0.vaf(p), "fast", seed, False, settings,
                         stages, time.perf_counter() - t0, recording.source,
                         **FitResult._declared(model))
@@ -237,6 +238,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                    "scan": sc.to_dict()})
     full = model.as_dict(model.full_vector(params), full=True)
     settings.update({"profile_step": profile_step, "scan_step": scan_step})
+    _unidentified_settings(settings, lik)
     fit = FitResult(full, float(fun), lik.vaf(params), "fast", seed, True, settings, stages,
                     time.perf_counter() - t0, recording.source, **FitResult._declared(model))
     _warn_on_bounds(fit, lik)

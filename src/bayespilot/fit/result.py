@@ -273,7 +273,7 @@ class FitResult:
         before units were recorded); ``(fixed)`` beside those not estimated, ``(not
         identified)`` beside those ``settings["unidentified"]`` lists (a channel silent
         throughout the record, e.g. the motion channel's on a run without motion: where the
-        fit stopped, not estimates; ``bayespilot fit`` records them), and ``*`` beside an
+        fit stopped, not estimates; the fitters record them), and ``*`` beside an
         estimate on a bound of the search box (:attr:`at_bounds`; not for those not
         identified), named under the table.
         """

@@ -318,6 +318,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
                 "model": model.name}
     if discard_reason is not None:
         settings["discard_reason"] = discard_reason
+    _unidentified_settings(settings, lik)
     steps = {"step1": s1.to_dict(), "step1_delta_abs": delta1,
              "step2": [r.to_dict() for r in step2], "step2_best": k_best,
              "step3": scans, "iterations": iterations, "iterations_converged": converged,
@@ -337,6 +338,16 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
                        f"Steps II and III toward it, the fast method finds it directly",
                        NotAtMaximumWarning)
     return fit
+
+
+def _unidentified_settings(settings: dict, lik: Likelihood) -> None:
+    """Record in ``settings["unidentified"]`` (in the model's order) the free parameters the
+    record does not identify, a silent channel's own (the motion channel's on a run without
+    motion: the SilentChannelWarning's); the result's summary marks them.  Nothing if none."""
+    silent = _unidentified(lik)
+    names = [k for k in lik.model.parameter_names if k in silent]
+    if names:
+        settings["unidentified"] = names
 
 
 def _check_maximum(lik: Likelihood, params: dict[str, float], fun: float) -> dict | None:
