@@ -483,3 +483,18 @@ def test_a_stick_offset_is_one_warning_line(ft_run, tmp_path, capsys):
     said = warnings.WarningMessage("m", QuestionableRecordingWarning, "f", 1)
     assert _said_to_user(said)
     assert not _said_to_user(warnings.WarningMessage("m", UserWarning, "f", 1))
+
+
+def test_output_piped_to_a_reader_that_goes_away_is_not_an_error(tmp_path):
+    """`bayespilot fit run | head`: the reader closes the pipe before the summary is written.
+    That ended in 'unexpected BrokenPipeError ... please report it', exit 1; now quietly 0."""
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-m", "bayespilot.cli", "simulate", "-o",
+                             str(tmp_path / "run"), "--duration", "5", "--seed", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL)
+    proc.stdout.close()  # the reader is gone before anything is written
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 0, err
+    assert "BrokenPipeError" not in err and "unexpected" not in err

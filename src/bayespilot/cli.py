@@ -1851,6 +1851,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (bayespilot fit ... | head): not an error
+        # (stdout is closed: point it at devnull so that the interpreter's flush at exit does
+        # not raise again, as the Python docs advise for SIGPIPE)
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
     except Exception as exc:  # a bug: say so in one line; the traceback with -v
         if verbose:
             traceback.print_exc()
