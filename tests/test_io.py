@@ -486,6 +486,18 @@ def test_write_refuses_mat_path(tmp_path):
         write_recording(_rec(), tmp_path / "r.mat")
 
 
+def test_write_refuses_a_folder_for_a_stem(tmp_path):
+    """``write_recording(rec, "out/")`` wrote out.csv and out.json beside the folder."""
+    (tmp_path / "out").mkdir()
+    with pytest.raises(RecordingError, match=r"out/: a folder; give the recording's stem in it "
+                                             r"\(.*out/NAME, written as NAME\.csv and NAME\.json\)"):
+        write_recording(_rec(), f"{tmp_path}/out/")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # nothing written
+    # a stem that is also a folder's name is a stem: out.csv and out.json beside the folder
+    csv_path, _ = write_recording(_rec(), tmp_path / "out")
+    assert csv_path == tmp_path / "out.csv"
+
+
 # ---------------------------------------------------------------------------
 # atomic writes
 # ---------------------------------------------------------------------------

@@ -714,7 +714,8 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
         reads it back: a column name that is empty, has surrounding blanks or
         a line break; metadata that is not JSON (a non-finite number, an
         object of another type), reuses a required key, or that the reader
-        would refuse; or ``path`` ends in ``.mat``.
+        would refuse; or ``path`` ends in ``.mat`` or in a path separator (a
+        folder, not a stem).
     TypeError
         If ``recording`` is not a Recording or ``path`` not a str or path.
     OSError
@@ -749,6 +750,10 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     p = _as_path(path)
+    shown = _shown(path, p)
+    if shown.endswith(("/", os.sep)):  # ("out/" wrote out.csv and out.json beside the folder)
+        raise RecordingError(f"{shown}: a folder; give the recording's stem in it "
+                             f"({shown}NAME, written as NAME.csv and NAME.json)")
     suffix = p.suffix.lower()
     if suffix == ".mat":
         raise _fail(p, "write_recording writes the CSV + JSON pair; give a stem, .csv or .json path")
