@@ -1,6 +1,7 @@
 """Maximum-likelihood fitting: exact Jacobians, Steps II and III, the three-step driver, the fast estimator."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -206,6 +207,148 @@ def test_fit_rejects_bad_settings(sim):
         fit_fast(sim.recording, n_starts=0)
     with pytest.raises(ValueError, match="noise_order is the order of the AR model"):
         fit_fast(sim.recording, noise_order=3)  # was ignored
+
+
+def test_fits_take_only_a_bool_for_threshold(sim):
+    """threshold="no" was taken for its truth value: a fit WITH a threshold.  Refused by both
+    fitters as fit_paper refuses such an iterate, before any fitting."""
+    for fit in (fit_fast, fit_paper):
+        for bad in ("no", "False", 0, None):
+            with pytest.raises(ValueError, match=f"threshold must be True or False, got "
+                                                 f"{re.escape(repr(bad))}"):
+                fit(sim.recording, threshold=bad, seed=0)
+    f = fit_fast(sim.recording, threshold=np.bool_(False), seed=0, n_starts=1)
+    assert f.threshold is False and f.params["delta_abs"] == 0.0
+
+
+def test_fits_check_discard_and_the_grid_steps_before_fitting(sim):
+    """discard beyond the record got a RecordingError about 0 samples, not the likelihood's
+    range error that discard=-1 gets; a scan_step or profile_step beyond delta_abs's range
+    (0.1) was accepted and scanned delta_abs = 0 only (fit_paper reported 0.0)."""
+    half = r"discard must be a number of seconds in \[0, 15\] \(half the record\), got "
+    for fit in (fit_fast, fit_paper):
+        for bad in (100, -1, 15.5, float("nan"), True, "2"):
+            with pytest.raises(ValueError, match=half + re.escape(repr(bad))):
+                fit(sim.recording, discard=bad, seed=0)
+        with pytest.raises(ValueError, match=r"scan_step must not exceed the range of "
+                                             r"delta_abs's bounds \(\[0, 0.1\]: 0.1\), got 1.0"):
+            fit(sim.recording, scan_step=1.0, seed=0)
+        for bad in (0, -1e-4, float("nan"), "1e-4"):
+            with pytest.raises(ValueError, match=f"scan_step must be a positive number, got "
+                                                 f"{re.escape(repr(bad))}"):
+                fit(sim.recording, scan_step=bad, seed=0)
+    with pytest.raises(ValueError, match=r"profile_step must not exceed the range of delta_abs's "
+                                         r"bounds \(\[0, 0.1\]: 0.1\), got 0.25"):
+        fit_fast(sim.recording, profile_step=0.25, seed=0)
+    with pytest.raises(ValueError, match=r"scan_step must not exceed profile_step \(0.01\), "
+                                         r"got 0.02: the final scan refines"):
+        fit_fast(sim.recording, profile_step=0.01, scan_step=0.02, seed=0)
+    # a custom model's bounds: the range is its own
+    import dataclasses
+
+    m = paper_model()
+    narrow = dataclasses.replace(m, parameters=tuple(
+        dataclasses.replace(p, upper=0.02, default=0.01) if p.name == "delta_abs" else p
+        for p in m.parameters))
+    with pytest.raises(ValueError, match=r"\(\[0, 0.02\]: 0.02\), got 0.03"):
+        fit_fast(sim.recording, narrow, profile_step=0.03, seed=0)
+    # the whole range is still a step
+    f = fit_fast(sim.recording, seed=0, n_starts=1, profile_step=0.1, scan_step=0.1)
+    assert f.steps["profile_grid"] == [0.0, 0.1]
+
+
+def _small_fit(**kw):
+    d = dict(params={"K_v": 1.5, "delta_abs": 0.01}, neg_log_lik=-100.0, vaf=90.0,
+             method="fast", seed=0, threshold=True,
+             settings={"n_starts": 1, "noise": None, "unidentified": ["K_m"]},
+             steps={"scan": {"grid": [0.0, 0.01], "best": 0.01}, "starts": [{"x": [1.0]}]},
+             elapsed=1.0, source="run", bounds={"K_v": (0.0, 10.0), "delta_abs": (0.0, 0.1)},
+             units={"K_v": "-", "delta_abs": "IPUT"})
+    d.update(kw)
+    return FitResult(**d)
+
+
+def test_a_fit_result_cannot_be_changed_in_place(tmp_path):
+    """fit.params["K_v"] = 999 changed the fit: to_json saved 999 and from_json then reported
+    K_v beyond its bound.  Its dicts (and the lists in them) refuse, at every depth, through
+    every way a fit is made again (JSON, pickle, deepcopy, dataclasses.replace); copies of
+    them are the caller's to edit."""
+    import copy
+    import dataclasses
+    import pickle
+
+    said = r"cannot be changed in place: copy them \(dict\(fit.params\), fit.to_dict\(\)\)"
+    src = {"n_starts": 1, "noise": None, "unidentified": ["K_m"]}
+    fit = _small_fit(settings=src)
+    src["n_starts"] = 2
+    src["unidentified"].append("tau_m")  # the caller's dict, not the fit's
+    assert fit.settings == {"n_starts": 1, "noise": None, "unidentified": ["K_m"]}
+    path = tmp_path / "f.json"
+    fit.to_json(path)
+    back = FitResult.from_json(path)
+    again = dataclasses.replace(fit, params={"K_v": 2.0, "delta_abs": 0.0})
+    assert again.params == {"K_v": 2.0, "delta_abs": 0.0} and fit.params["K_v"] == 1.5
+    for f in (fit, back, pickle.loads(pickle.dumps(fit)), copy.deepcopy(fit), copy.copy(fit),
+              again, FitResult.from_dict(fit.to_dict())):
+        for change in (lambda: f.params.__setitem__("K_v", 999.0),
+                       lambda: f.params.update(K_v=999.0),
+                       lambda: f.params.pop("K_v"),
+                       lambda: f.settings.setdefault("extra", 1),
+                       lambda: f.settings["unidentified"].append("K_v"),
+                       lambda: f.steps["scan"].__setitem__("best", 0.05),
+                       lambda: f.steps["scan"]["grid"].__setitem__(0, 1.0),
+                       lambda: f.steps["starts"][0]["x"].append(2.0),
+                       lambda: f.bounds.__setitem__("K_v", (0.0, 100.0)),
+                       lambda: f.units.clear()):
+            with pytest.raises(TypeError, match=said):
+                change()
+        assert f.params == {"K_v": 1.5, "delta_abs": 0.01} or f is again
+        assert f.steps["scan"] == {"grid": [0.0, 0.01], "best": 0.01}
+        assert f.bounds["K_v"] == (0.0, 10.0) and f.units["K_v"] == "-"
+    assert json.loads(path.read_text())["params"]["K_v"] == 1.5 and back.at_bounds == {}
+    # copies are plain and editable, at every depth, and leave the fit alone
+    mine = dict(fit.params)
+    mine["K_v"] = 999.0
+    d = fit.to_dict()
+    d["params"]["K_v"] = 3.0
+    d["settings"]["unidentified"].append("K_v")
+    d["steps"]["scan"]["grid"][0] = 1.0
+    d["bounds"]["K_v"][1] = 100.0
+    d["units"]["K_v"] = "deg"
+    deep = copy.deepcopy(fit.steps)
+    deep["starts"][0]["x"].append(2.0)
+    assert type(deep["starts"]) is list and type(deep["starts"][0]) is dict
+    assert fit.params["K_v"] == 1.5 and fit.settings["unidentified"] == ["K_m"]
+    assert fit.steps["scan"]["grid"] == [0.0, 0.01] and fit.steps["starts"][0]["x"] == [1.0]
+    assert fit.to_dict() == FitResult.from_dict(fit.to_dict()).to_dict() == json.loads(
+        path.read_text())
+    # the read-only dicts are still dicts: JSON, ** and comparison as before
+    assert isinstance(fit.params, dict) and dict(**fit.params) == fit.params
+    assert json.loads(json.dumps(fit.steps)) == {"scan": {"grid": [0.0, 0.01], "best": 0.01},
+                                                 "starts": [{"x": [1.0]}]}
+
+
+def test_from_dict_names_a_value_that_is_not_a_number(tmp_path):
+    """A bad number raised "could not convert string to float: 'abc'" without saying where."""
+    good = _small_fit().to_dict()
+    for key, value, said in (
+            ("params", {"K_v": "abc"}, r"params\['K_v'\] is 'abc', not a number \(or null\)"),
+            ("neg_log_lik", "x", r"neg_log_lik is 'x', not a number"),
+            ("vaf", [1], r"vaf is \[1\], not a number"),
+            ("elapsed_seconds", {}, r"elapsed_seconds is \{\}, not a number"),
+            ("bounds", {"K_v": [0, "ten"]}, r"bounds\['K_v'\]\[1\] is 'ten', not a number"),
+            ("bounds", {"K_v": 10}, r"bounds\['K_v'\] is 10, not \[lower, upper\]"),
+            ("params", None, r"params is null, not an object of name: value"),
+            ("units", ["-"], r"units is a list, not an object of name: value")):
+        d = dict(good, **{key: value})
+        with pytest.raises(ValueError, match="^not a fit result: " + said):
+            FitResult.from_dict(d)
+        path = tmp_path / "bad.json"
+        path.write_text(json.dumps(d))
+        with pytest.raises(ValueError, match=re.escape(f"{path}: not a fit result: ") + said):
+            FitResult.from_json(path)
+    # null is NaN, as written for a non-finite number
+    assert np.isnan(FitResult.from_dict(dict(good, vaf=None)).vaf)
 
 
 def test_fits_refuse_a_recording_with_nothing_to_fit(sim):

@@ -409,6 +409,15 @@ def test_a_fit_and_a_likelihood_have_one_line_reprs_and_the_fits_dict_is_a_copy(
     d["settings"]["n_starts"] = 123
     d["steps"]["added"] = 1
     assert fit.settings["n_starts"] == 1 and "added" not in fit.steps
+    # ... and its own dicts refuse in-place changes (fit.params["K_v"] = 999 was saved by
+    # to_json and then reported beyond its bound by from_json)
+    with pytest.raises(TypeError, match=r"a FitResult's params, settings, steps, bounds and "
+                                        r"units cannot be changed in place: copy them "
+                                        r"\(dict\(fit.params\), fit.to_dict\(\)\)"):
+        fit.params["K_v"] = 999.0
+    with pytest.raises(TypeError, match="cannot be changed in place"):
+        fit.steps["profile_grid"].append(0.2)
+    assert fit.to_dict()["params"]["K_v"] == fit.params["K_v"] != 999.0
     lik = Likelihood(paper_model(), rec)
     assert repr(lik) == ("<Likelihood: Pool et al. (2012), 8 free parameters, N = 8192 at 100 Hz, "
                          f"initial='periodic', discard 0 s, white noise, {rec.source}>")

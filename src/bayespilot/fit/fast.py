@@ -41,7 +41,8 @@ from ..recording import Recording
 from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
-from .three_step import _check_fittable, _model_for, _unidentified_settings, _warn_on_bounds
+from .three_step import (_check_bool, _check_discard, _check_fittable, _check_steps, _model_for,
+                         _unidentified_settings, _warn_on_bounds)
 from .._blas import one_blas_thread
 from .._seeds import resolve_seed
 
@@ -62,7 +63,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     model : PilotModel, optional
     threshold : bool
         False fits the model without threshold (delta_abs = 0); a ``model``
-        without ``delta_abs`` has none either way.
+        without ``delta_abs`` has none either way.  True or False only (a
+        string such as ``"no"`` is refused, not taken for its truth value).
     seed : int, optional
         Seeds the Latin-hypercube starts; the same seed gives the same fit.
         None draws one from fresh entropy; the seed used is
@@ -70,9 +72,12 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     n_starts : int
         Starting points of the threshold-free fit.
     profile_step : float
-        Coarse grid step of the delta_abs profile, IPUT.
+        Coarse grid step of the delta_abs profile, IPUT: positive and at most
+        the range of delta_abs's bounds (0.1 in Table 1).
     scan_step : float
-        Final scan resolution, IPUT.
+        Final scan resolution, IPUT: positive and at most ``profile_step``
+        (the scan spans one profile step either side of the profile's best
+        point).
     initial : {"periodic", "rest"}
     discard : float, optional
         Seconds at the start left out of the likelihood
@@ -108,7 +113,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     TypeError
         ``recording`` is not a Recording, or ``model`` not a PilotModel.
     ValueError
-        A bad setting (``n_starts``, the steps, ``noise``, ``noise_order``
+        A bad setting (``threshold`` not a bool, ``n_starts``, the steps,
+        ``discard`` outside [0, half the record], ``noise``, ``noise_order``
         without ``noise="ar"``), or a recording with no more than four samples
         per free parameter after ``discard`` or a constant u, or (``noise="ar"``)
         fewer than 4 (p + 1) samples after ``discard`` for the AR(p) model (p up
@@ -139,8 +145,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     if not isinstance(n_starts, (int, np.integer)) or n_starts < 1:
         raise ValueError(f"n_starts must be a positive integer, got {n_starts!r}")
-    if not (profile_step > 0 and scan_step > 0):
-        raise ValueError("profile_step and scan_step must be positive")
+    threshold = _check_bool("threshold", threshold)
     if not (noise is None or noise == "ar" or isinstance(noise, ARNoise)):
         raise ValueError(f"noise must be None, 'ar' or an ARNoise, got {noise!r}")
     if noise_order is not None and (isinstance(noise_order, bool)
@@ -168,6 +173,12 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
                 discard_reason = _startup_reason(recording)
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
+    _check_steps(model, profile_step=profile_step, scan_step=scan_step)
+    if scan_step > profile_step:
+        raise ValueError(f"scan_step must not exceed profile_step ({profile_step!r}), got "
+                         f"{scan_step!r}: the final scan refines the profile's best point "
+                         f"within one profile step either side")
+    discard = _check_discard(recording, discard)
     _check_fittable(recording, model, discard)
     if noise == "ar":
         _check_ar_fittable(recording, discard, noise_order, default_discard)

@@ -5,12 +5,15 @@ from __future__ import annotations
 import copy
 import math
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
-from .._files import dumps, read_result, require_keys, write_text_atomic
+import numpy as np
+
+from .._files import WrongKind, dumps, read_result, require_keys, write_text_atomic
 from .. import presets
+from ..recording import _ReadOnlyDict, _ReadOnlyList, _thawed
 
 __all__ = ["FitResult", "EstimateOnBoundWarning", "NotAtMaximumWarning", "ON_BOUND_RTOL",
            "CHECK_GAP"]
@@ -42,9 +45,61 @@ class NotAtMaximumWarning(RuntimeWarning):
 CHECK_GAP = 1.92
 
 
+def _refuse(*args: Any, **kwargs: Any) -> None:
+    raise TypeError("a FitResult's params, settings, steps, bounds and units cannot be changed "
+                    "in place: copy them (dict(fit.params), fit.to_dict()) and edit the copy, or "
+                    "make a new result (dataclasses.replace(fit, params=...))")
+
+
+class _FitDict(_ReadOnlyDict):
+    """A dict of a :class:`FitResult` (its ``params``, ``settings``, ...) that refuses to be
+    changed in place, as a recording's metadata (:class:`~bayespilot.recording._ReadOnlyDict`),
+    with a fit's message.  A copy (``dict(...)``, ``copy.deepcopy``) is a plain dict."""
+
+    __setitem__ = __delitem__ = __ior__ = _refuse
+    clear = pop = popitem = setdefault = update = _refuse
+
+    def __reduce__(self):
+        return (_FitDict, (dict(self),))
+
+
+class _FitList(_ReadOnlyList):
+    """A list inside a :class:`FitResult` (a GA history, a scan's grid), read-only as
+    :class:`_FitDict`."""
+
+    __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
+    append = extend = insert = pop = remove = clear = sort = reverse = _refuse
+
+    def __reduce__(self):
+        return (_FitList, (list(self),))
+
+
+def _fit_frozen(value: Any) -> Any:
+    """``value`` with its dicts, lists and arrays copied read-only, at every depth (as
+    :func:`~bayespilot.recording._frozen`, with a fit's message)."""
+    if isinstance(value, Mapping):
+        return _FitDict({k: _fit_frozen(v) for k, v in value.items()})
+    if isinstance(value, list):
+        return _FitList(_fit_frozen(v) for v in value)
+    if isinstance(value, np.ndarray):
+        value = value.copy()
+        value.setflags(write=False)
+    return value
+
+
+#: The fields of a FitResult held read-only (:meth:`FitResult.__post_init__`).
+_READ_ONLY = ("params", "settings", "steps", "bounds", "units")
+
+
 @dataclass(frozen=True, eq=False)
 class FitResult:
     """A fitted pilot model.
+
+    ``params``, ``settings``, ``steps``, ``bounds`` and ``units`` are read-only copies of
+    what the result was made with (at every depth): ``fit.params["K_v"] = 1`` is a
+    TypeError, since a changed estimate would no longer be the fit its -ln L, VAF and file
+    describe.  Edit a copy (``dict(fit.params)``, :meth:`to_dict`), or make a new result
+    (``dataclasses.replace(fit, params=...)``).
 
     Attributes
     ----------
@@ -91,6 +146,17 @@ class FitResult:
     source: str | None = None
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        # read-only copies: an estimate edited in place was saved by to_json, and from_json
+        # then reported it beyond its bound
+        for name in _READ_ONLY:
+            object.__setattr__(self, name, _fit_frozen(getattr(self, name)))
+
+    def __reduce__(self):
+        # Built again through __init__ when unpickled or deep-copied, so that the copy is
+        # read-only too (a deep copy of the dicts alone would be plain, editable ones).
+        return (type(self), tuple(_thawed(getattr(self, f.name)) for f in fields(self)))
 
     @classmethod
     def _declared(cls, model) -> dict[str, Any]:
@@ -230,19 +296,41 @@ class FitResult:
         ------
         ValueError
             ``d`` lacks what a fit's dict has (``params``, ``neg_log_lik``,
-            ``vaf``, ``method``): another kind of file.
+            ``vaf``, ``method``): another kind of file; or a number in it
+            (an estimate, a bound, -ln L, ...) is not one (the message names
+            its key).
         """
         require_keys(d, ("params", "neg_log_lik", "vaf", "method"), "a fit result")
 
-        def num(v):  # (a non-finite number was written as null, _files.dumps)
-            return math.nan if v is None else float(v)
+        def num(v, key):  # (a non-finite number was written as null, _files.dumps)
+            try:
+                return math.nan if v is None else float(v)
+            except (TypeError, ValueError):
+                raise WrongKind(f"not a fit result: {key} is {v!r}, not a number "
+                                "(or null)") from None
 
-        return cls({k: num(v) for k, v in d["params"].items()}, num(d["neg_log_lik"]),
-                   num(d["vaf"]), d["method"], d.get("seed"), bool(d.get("threshold", True)),
-                   d.get("settings", {}), d.get("steps", {}), num(d.get("elapsed_seconds")),
-                   d.get("source"),
-                   {k: (num(lo), num(hi)) for k, (lo, hi) in (d.get("bounds") or {}).items()},
-                   {k: str(u) for k, u in (d.get("units") or {}).items()})
+        def mapping(key):
+            v = d.get(key)
+            if v is None and key != "params":
+                return {}
+            if not isinstance(v, Mapping):
+                what = "null" if v is None else f"a {type(v).__name__}"
+                raise WrongKind(f"not a fit result: {key} is {what}, not an object of "
+                                "name: value")
+            return v
+
+        def pair(k, b):
+            if not isinstance(b, (list, tuple)) or len(b) != 2:
+                raise WrongKind(f"not a fit result: bounds[{k!r}] is {b!r}, not [lower, upper]")
+            return num(b[0], f"bounds[{k!r}][0]"), num(b[1], f"bounds[{k!r}][1]")
+
+        params = {k: num(v, f"params[{k!r}]") for k, v in mapping("params").items()}
+        return cls(params, num(d["neg_log_lik"], "neg_log_lik"), num(d["vaf"], "vaf"),
+                   d["method"], d.get("seed"), bool(d.get("threshold", True)),
+                   d.get("settings", {}), d.get("steps", {}),
+                   num(d.get("elapsed_seconds"), "elapsed_seconds"), d.get("source"),
+                   {k: pair(k, b) for k, b in mapping("bounds").items()},
+                   {k: str(u) for k, u in mapping("units").items()})
 
     @classmethod
     def from_json(cls, path: str | Path) -> "FitResult":

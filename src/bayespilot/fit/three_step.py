@@ -16,6 +16,7 @@ at 0 (Step III is then empty).
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -41,6 +42,44 @@ def _model_for(model: PilotModel | None, threshold: bool) -> PilotModel:
     if not threshold and "delta_abs" in model.parameter_names:
         return model._fixed(delta_abs=0.0)
     return model
+
+
+def _check_bool(name: str, value: Any) -> bool:
+    """``value`` as a bool, or a ValueError naming ``name``: True or False only (numpy's too),
+    since a string such as ``"no"`` or ``"False"`` has the truth value True."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
+def _check_discard(recording: Recording, discard: Any) -> float:
+    """``discard`` as a float, or the ValueError :class:`~bayespilot.likelihood.Likelihood`
+    gives (the same message), before :func:`_check_fittable` counts the samples after it
+    (which reported a discard beyond the record as a record too short)."""
+    if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
+        raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
+                         f"(half the record), got {discard!r}")
+    return float(discard)
+
+
+def _check_steps(model: PilotModel, **steps: Any) -> None:
+    """Refuse (ValueError, naming the setting and its value) a delta_abs grid step that is not
+    a positive number, or that exceeds the range of delta_abs's bounds: a grid over [lower,
+    upper] in such steps holds at most its ends (over twice the range, the single point
+    ``lower``: delta_abs = 0, "no threshold", whatever the data say), so that the scan and
+    the fast method's profile say nothing about the threshold.  Only the positivity
+    check for a model without delta_abs."""
+    declared = {p.name: p for p in model.parameters}
+    par = declared.get("delta_abs")
+    for name, v in steps.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not v > 0:
+            raise ValueError(f"{name} must be a positive number, got {v!r}")
+        if par is not None and v > par.upper - par.lower:
+            raise ValueError(f"{name} must not exceed the range of delta_abs's bounds "
+                             f"([{par.lower:g}, {par.upper:g}]: {par.upper - par.lower:g}), got "
+                             f"{v!r}: a grid over them in such steps has no point inside them")
 
 
 def _check_fittable(recording: Recording, model: PilotModel, discard: float) -> None:
@@ -168,7 +207,8 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     model : PilotModel, optional
         Default :func:`~bayespilot.model.paper_model`.
     threshold : bool
-        False fits the model without threshold (delta_abs = 0).
+        False fits the model without threshold (delta_abs = 0).  True or
+        False only, as ``iterate``.
     seed : int, optional
         Seeds the genetic algorithm; the same seed gives the same fit.
         None draws one from fresh entropy; the seed used is
@@ -178,7 +218,9 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     population, generations, p_crossover, p_mutation, bits
         The GA settings (the paper's by default).
     scan_step : float
-        Step III resolution in IPUT.
+        Step III resolution in IPUT: positive, and at most the range of
+        delta_abs's bounds (0.1 in Table 1), or the scan's grid would hold
+        no value inside them.
     iterate : bool
         True or False (nothing else: a string such as ``"False"`` is refused,
         not taken for its truth value).  True repeats Steps II and III until
@@ -215,10 +257,11 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         ``recording`` is not a Recording, or ``model`` not a PilotModel.
     ValueError
         ``repetitions``, ``n_best`` or ``max_iterations`` not a positive
-        integer, ``n_best > repetitions``, ``scan_step`` not positive,
-        ``iterate`` not a bool, a setting the likelihood refuses, or a
-        recording with no more than four samples per free parameter or a
-        constant u.
+        integer, ``n_best > repetitions``, ``scan_step`` not positive or
+        beyond the range of delta_abs's bounds, ``threshold`` or ``iterate``
+        not a bool, ``discard`` outside [0, half the record], a setting the
+        likelihood refuses, or a recording with no more than four samples per
+        free parameter or a constant u.
 
     Warns
     -----
@@ -246,21 +289,20 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     for name, v in (("repetitions", repetitions), ("n_best", n_best), ("max_iterations", max_iterations)):
         if not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name} must be a positive integer, got {v!r}")
-    if not isinstance(iterate, (bool, np.bool_)):
-        raise ValueError(f"iterate must be True or False, got {iterate!r}")
-    iterate = bool(iterate)
+    iterate = _check_bool("iterate", iterate)
+    threshold = _check_bool("threshold", threshold)
     if n_best > repetitions:
         raise ValueError(f"n_best ({n_best}) cannot exceed repetitions ({repetitions})")
-    if not (scan_step > 0):
-        raise ValueError(f"scan_step must be positive, got {scan_step!r}")
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the result
     t0 = time.perf_counter()
     model = _model_for(model, threshold)
+    _check_steps(model, scan_step=scan_step)
     discard_reason = None
     if discard is None:  # 0 on whole periods; otherwise as fit_fast
         discard = _startup_default(recording, initial)
         if discard:
             discard_reason = _startup_reason(recording)
+    discard = _check_discard(recording, discard)
     _check_fittable(recording, model, discard)
     lik = Likelihood(model, recording, initial=initial, discard=discard)
     has_delta = "delta_abs" in model.parameter_names
