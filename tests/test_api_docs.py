@@ -307,3 +307,30 @@ def test_parameters_sections_match_the_signatures():
     offenders = _api_doc_problems()
     assert not offenders, f"{len(offenders)} docstrings do not match their signatures:\n" + "\n".join(
         f"  {q}: {'; '.join(p)}" for q, p in sorted(offenders.items()))
+
+
+def test_public_submodules_load_on_attribute_access_and_not_before():
+    """Audit: ``import bayespilot; bayespilot.diagnose`` raised AttributeError (only sample
+    and compare were loaded on use).  Every public submodule is an attribute, imported on
+    first use, listed by dir(); ``import bayespilot`` imports none of them, and
+    ``bayespilot.sample`` / ``bayespilot.compare`` are still the callable modules."""
+    import subprocess
+    import sys
+
+    public = ("io", "recording", "model", "simulate", "likelihood", "fit", "sample", "compare",
+              "diagnose", "plots", "campaign", "presets", "forcing", "noise")
+    code = ("import sys, bayespilot\n"
+            "print(sorted(m for m in sys.modules if m.startswith('bayespilot')))\n"
+            "print(bayespilot.diagnose.__name__, 'bayespilot.plots' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.splitlines()
+    assert out == ["['bayespilot']", "bayespilot.diagnose False"]
+    for name in public:
+        mod = getattr(bayespilot, name)
+        assert mod is importlib.import_module(f"bayespilot.{name}")
+        assert name in dir(bayespilot)
+    assert callable(bayespilot.sample) and callable(bayespilot.compare)
+    assert bayespilot.sample.sample.__module__ == "bayespilot.sample"
+    assert set(bayespilot.__all__) == {"sample", "compare"}
+    with pytest.raises(AttributeError, match="module 'bayespilot' has no attribute 'kernelz'"):
+        bayespilot.kernelz  # noqa: B018

@@ -67,10 +67,11 @@ def test_sample_warns_when_not_converged(run_dir, capsys):
     code, out, err = _run(capsys, "sample", run_dir / "run", "-o", run_dir / "p2.nc",
                           "--max-steps", "60", "--likelihood", "coloured", "-q")
     assert code == 0
-    assert "warning: the chain reached max_steps = 60" in err
+    # named by the recording, as the other warnings are
+    assert f"warning: {run_dir / 'run'}: the chain reached max_steps = 60" in err
     # no backend given: the advice is not to resume one
-    assert err.count("to run longer, raise max_steps (--max-steps), or give a backend "
-                     "(--backend FILE.h5) to be able to resume\n") == 1
+    assert err.count("to run longer, raise max_steps (bayespilot sample --max-steps), or give a "
+                     "backend (bayespilot sample --backend FILE.h5) to be able to resume\n") == 1
     assert "same backend" not in err
     assert "Traceback" not in err
     post = Posterior.from_netcdf(run_dir / "p2.nc")

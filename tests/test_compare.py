@@ -587,3 +587,89 @@ def test_summary_wording_in_every_category_and_decision(lbf, err, plateau, mode_
         p = pool([{"log_bayes_factor": lbf, "log_bayes_factor_err": err}], label="FD")
         assert p.summary().startswith(f"FD: 1 recording, sum ln BF = {lbf:+.2f} +- {err:.2f} "
                                       f"{line}; per recording: ")
+
+
+# --- warnings of the Savage-Dickey sampling; pooling each recording once ------------------------
+def test_compare_says_when_its_savage_dickey_posterior_did_not_converge(monkeypatch):
+    """Audit: compare recorded every warning of its inner sample() and kept only the text of
+    the ConvergenceWarning in settings: a chain stopped at max_steps gave no warning and the
+    summary did not say the check was rough.  It is warned again at the caller's line, named
+    by the recording, worded for compare; the summary says it; the lost-mode warning names
+    the recording too."""
+    import bayespilot.compare as C
+    from bayespilot.sample import ConvergenceWarning
+
+    robust = C.robust_evidence
+
+    def lost(*a, **k):  # every threshold run "missed the main mode"
+        ev1, reruns, _ = robust(*a, **k)
+        return ev1, reruns, False
+
+    monkeypatch.setattr(C, "robust_evidence", lost)
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=11,
+                   duration=10.0).recording
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        c = compare(rec, nlive=20, dlogz=3, seed=0,
+                    sample_options={"max_steps": 60, "min_steps": 0})
+    conv = [w for w in caught if issubclass(w.category, ConvergenceWarning)]
+    assert len(conv) == 1 and conv[0].filename == __file__
+    assert str(conv[0].message) == (
+        "simulation(seed=11): the posterior sampled for the Savage-Dickey check did not "
+        f"converge (the chain reached max_steps = 60 before it was long enough; max tau = "
+        f"{np.nanmax(conv[0].message.tau):.0f} steps): the Savage-Dickey ln BF is a rough "
+        "check; to run longer, raise sample_options['max_steps'], or give a converged "
+        "posterior (posterior=, or bayespilot compare --posterior POST.nc from bayespilot "
+        "sample)")
+    assert conv[0].message.n_steps == 60
+    assert c.settings["posterior"]["warnings"] == [str(conv[0].message)]
+    assert c.settings["posterior"]["converged"] is False
+    assert ("\n  Savage-Dickey posterior: not converged after 60 steps, so the check above is "
+            "rough\n") in c.summary()
+    lost_mode = [w for w in caught if "missed the main mode" in str(w.message)]
+    assert len(lost_mode) == 1 and lost_mode[0].category is RuntimeWarning
+    assert str(lost_mode[0].message).startswith("simulation(seed=11): the nested sampler's best")
+    # the summary of one read back says it too; a converged posterior adds no line
+    assert "not converged" in Comparison.from_dict(json.loads(c.to_json())).summary()
+    ok = dataclasses.replace(c, settings=dict(c.settings, posterior=dict(
+        c.settings["posterior"], converged=True)))
+    assert "Savage-Dickey posterior" not in ok.summary()
+    assert c.settings["recording_sha256"] and c.settings["recording"] == "simulation(seed=11)"
+
+
+def _comparison_of(digest, source, lbf=3.0):
+    ev = Evidence(0.0, 0.1, 0.0, 0.0, {}, {}, (), 0, 0, 0.0, {"nlive": 40})
+    ic = {"neg_log_lik_threshold": 1.0, "neg_log_lik_none": 2.0, "delta_aic": 0.0,
+          "delta_bic": 0.0}
+    return Comparison(lbf, 0.5, "threshold", ev, ev, None, ic,
+                      {"likelihood": "eq4", "recording_sha256": digest}, source=source)
+
+
+def test_pool_counts_each_recording_once_and_says_when_there_is_no_test():
+    """Audit: pool([c, c]) counted one comparison as 2 recordings (ln BF doubled), and
+    pool([c]) printed "t = nan (p = nan)" without a word."""
+    a, b = _comparison_of("a" * 64, "out/fd0"), _comparison_of("b" * 64, "out/fd1")
+    assert pool([a, b]).n == 2
+    with pytest.raises(ValueError, match=r"^results\[0\] and results\[2\] are the same "
+                                         r"Comparison \(of out/fd0\): a pool counts each "
+                                         r"recording once; give each comparison once$"):
+        pool([a, b, a])
+    # the same recording compared twice (another seed; its dict; a copy under another name)
+    again = _comparison_of("a" * 64, "copy/fd0.csv", lbf=4.0)
+    with pytest.raises(ValueError, match=r"^results\[0\] \(out/fd0\) and results\[2\] "
+                                         r"\(copy/fd0.csv\) are comparisons of the same "
+                                         r"recording \(recording_sha256 aaaaaaaaaaaa\.\.\.\): "
+                                         r"a pool counts each recording once; keep one of them$"):
+        pool([a, b, again])
+    with pytest.raises(ValueError, match=r"results\[0\] \(out/fd0\) and results\[1\] \(out/fd0\)"
+                                         r" are comparisons of the same recording"):
+        pool([a, a.to_dict()])
+    # dicts without a digest (saved before compare recorded it) are taken as they are
+    assert pool([{"log_bayes_factor": 1.0}] * 2).n == 2
+    one = pool([a]).summary()
+    assert one.endswith("; no paired test (one recording: no spread across recordings to test)")
+    assert "nan" not in one
+    same = pool([{"log_bayes_factor": 1.0}, {"log_bayes_factor": 1.0}]).summary()
+    assert "no paired t-test (every recording has the same ln BF: no spread), Wilcoxon p = " in same
+    zero = pool([{"log_bayes_factor": 0.0}, {"log_bayes_factor": 0.0}]).summary()
+    assert zero.endswith("; no paired test (every recording has ln BF = 0)")

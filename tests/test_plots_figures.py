@@ -432,3 +432,46 @@ def test_ga_convergence_rows_take_the_fits_units():
     fig = plot_ga_convergence([fit], parameters=("T_x",))
     assert fig.axes[1].get_ylabel() == label("T_x", "s")
     plt.close(fig)
+
+
+# --- arguments a user gets wrong -----------------------------------------------------------------
+def test_a_single_name_is_one_parameter_in_every_plot_taking_names():
+    """Audit: plot_chains(post, names="delta_abs") said "unknown parameter 'd'" (its letters)."""
+    post = _posterior()
+    fig = plot_chains(post, names="delta_abs")
+    assert len(fig.axes) == 2 and fig.axes[0].get_ylabel() == label("delta_abs", "IPUT")
+    fig = plot_pair(post, names="delta_abs")
+    assert len(fig.axes) == 1
+    for f in (plot_chains, plot_pair):
+        with pytest.raises(TypeError, match=r"^names must be parameter names \(str\), got 3$"):
+            f(post, names=["delta_abs", 3])
+        with pytest.raises(TypeError, match=r"^names must be a parameter name or a sequence of "
+                                            r"them, got int$"):
+            f(post, names=3)
+
+
+def test_threshold_histograms_say_what_they_take():
+    """Audit: plot_threshold_histograms([fit]) said "'FitResult' object is not subscriptable",
+    and with fit.to_dict() raised KeyError 'remnant_fraction'."""
+    from bayespilot.fit.result import FitResult
+
+    takes = (r"campaign result dicts, as bayespilot\.campaign\.load_results\(out_dir\) reads "
+             r"them \(or bayespilot\.campaign\.run_job returns them\)")
+    fit = FitResult.__new__(FitResult)  # the type is what matters here
+    with pytest.raises(TypeError, match=rf"^results must be {takes}; results\[0\] is a "
+                                        r"FitResult$"):
+        plot_threshold_histograms([fit])
+    with pytest.raises(TypeError, match=rf"^results must be a list of {takes}; got FitResult$"):
+        plot_threshold_histograms(fit)
+    with pytest.raises(TypeError, match=rf"^results must be a list of {takes}; got str 'out/' "
+                                        r"\(read the folder with load_results\)$"):
+        plot_threshold_histograms("out/")
+    fit_dict = {"method": "fast", "threshold": True, "params": {"delta_abs": 0.01}}
+    with pytest.raises(ValueError, match=rf"^results must be {takes}; results\[1\] is a dict "
+                                         r"that lacks 'task', 'remnant_fraction', 'motion_gain', "
+                                         r"'true_params', 'fit' \(a fit's to_dict\(\) is not a "
+                                         r"campaign result\)$"):
+        plot_threshold_histograms(_results([0.006]) + [fit_dict])
+    # a generator of results is still taken
+    fig = plot_threshold_histograms(r for r in _results([0.006, 0.008, 0.02]))
+    assert len(fig.axes) == 1

@@ -10,6 +10,7 @@ solves with numpy.linalg).
 from __future__ import annotations
 
 import math
+import re
 import warnings
 
 import numpy as np
@@ -549,8 +550,13 @@ def test_not_converged_advice_matches_the_backend(short_sim, tmp_path):
 
     kw = dict(SHORT, n_walkers=16, max_steps=20, min_steps=0, check_every=20,
               init=short_sim.params, seed=3)
-    with pytest.warns(ConvergenceWarning, match=r"reached max_steps = 20 .*: to run longer, "
-                      r"raise max_steps \(--max-steps\), or give a backend \(--backend "
+    # named by the recording (in a loop over recordings, which one), advice in the API's words
+    # and the command's
+    source = short_sim.recording.source
+    assert source
+    with pytest.warns(ConvergenceWarning, match=rf"^{re.escape(source)}: the chain reached "
+                      r"max_steps = 20 .*: to run longer, raise max_steps \(bayespilot sample "
+                      r"--max-steps\), or give a backend \(bayespilot sample --backend "
                       r"FILE\.h5\) to be able to resume$") as rec:
         post = sample(short_sim.recording, **kw)
     assert "same backend" not in str(rec[0].message)
@@ -558,9 +564,12 @@ def test_not_converged_advice_matches_the_backend(short_sim, tmp_path):
     with pytest.warns(ConvergenceWarning) as rec:
         sample(short_sim.recording, backend=h5, **kw)
     assert str(rec[0].message).endswith(
-        f"to run longer, run again with the same backend ({h5}) and a max_steps (--max-steps) "
-        "above 20: the chain resumes from its last step (max_steps counts the steps already "
-        "stored)")
+        f"to run longer, run again with the same backend ({h5}) and a max_steps (bayespilot "
+        "sample --max-steps) above 20: the chain resumes from its last step (max_steps counts "
+        "the steps already stored)")
+    # a recording without a source: no prefix
+    with pytest.warns(ConvergenceWarning, match=r"^the chain reached max_steps = 20 "):
+        sample(dataclasses.replace(short_sim.recording, source=None), **kw)
     digest = _recording_digest(short_sim.recording)
     assert post.settings["recording_sha256"] == digest and len(digest) == 64
     # the content, not the name: a renamed copy has it, another K_theta or sample does not

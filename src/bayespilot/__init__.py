@@ -15,14 +15,18 @@ except _metadata.PackageNotFoundError:  # running from a source tree that is not
 #: :func:`__getattr__`); ``__version__`` besides.
 __all__ = ["sample", "compare"]
 
-_LAZY = ("sample", "compare")
+#: The public submodules, each imported on first use as an attribute
+#: (``bayespilot.diagnose``), so that ``import bayespilot`` imports none of them.
+_LAZY = ("sample", "compare", "io", "recording", "model", "simulate", "likelihood", "fit",
+         "diagnose", "plots", "campaign", "presets", "forcing", "noise")
 
 
 def __getattr__(name: str):
-    """``bayespilot.sample(...)`` and ``bayespilot.compare(...)`` without importing them up front.
+    """The public submodules (:data:`_LAZY`) without importing them up front.
 
-    The submodules are imported on first use (keeping ``import bayespilot``
-    cheap); each is also callable, so ``bayespilot.sample(recording)`` runs
+    A submodule is imported on first use (keeping ``import bayespilot``
+    cheap), e.g. ``bayespilot.diagnose.diagnose(...)``.  ``sample`` and
+    ``compare`` are also callable, so ``bayespilot.sample(recording)`` runs
     :func:`bayespilot.sample.sample` and ``bayespilot.compare(recording)``
     runs :func:`bayespilot.compare.compare`.
     """
@@ -34,5 +38,5 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    """The module's names with the lazily imported entry points, for tab completion."""
+    """The module's names with the lazily imported submodules, for tab completion."""
     return sorted(set(globals()) | set(_LAZY))

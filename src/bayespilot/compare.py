@@ -108,7 +108,7 @@ from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
-from .sample import likelihood_options
+from .sample import _recording_digest, likelihood_options
 from .recording import Recording
 from ._blas import one_blas_thread
 from ._caller import warn_at_caller
@@ -1168,6 +1168,12 @@ class Comparison:
         else:
             lb = "" if sd.lower_bound is None else f"; ln BF > {sd.lower_bound:.1f}"
             sd_line = f"Savage-Dickey: not valid ({sd.reason}{lb})"
+        post = self.settings.get("posterior") if isinstance(self.settings, Mapping) else None
+        if sd is not None and isinstance(post, Mapping) and post.get("converged") is False:
+            steps = post.get("n_steps")
+            sd_line += ("\n  Savage-Dickey posterior: not converged"
+                        f"{'' if steps is None else f' after {steps} steps'}, so the check "
+                        "above is rough")
         return "\n".join([
             f"threshold vs none ({self.settings.get('likelihood')} likelihood"
             f"{', ' + self.source if self.source else ''}):",
@@ -1472,7 +1478,13 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     RuntimeWarning
         A ``posterior`` saved before the recording's digest was recorded
         (whether it belongs to this recording cannot be checked), or nested
-        sampling that missed the main mode in every run.
+        sampling that missed the main mode in every run (named by the
+        recording's ``source``).
+    bayespilot.sample.ConvergenceWarning
+        The posterior sampled for the Savage-Dickey check reached its
+        ``max_steps`` before it converged: the check is rough (the summary
+        says so too).  Other warnings of that sampling are warned again
+        as they were, each once, at the line that called :func:`compare`.
 
     Examples
     --------
@@ -1561,8 +1573,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
             posterior = run_sample(recording, model, **lik_opts, init=init, seed=s_mc, **opts)
-        post_info["warnings"] = [str(w.message) for w in caught
-                                 if issubclass(w.category, ConvergenceWarning)]
+        post_info["warnings"] = _reissue(caught, recording.source, opts["max_steps"])
     if posterior is not None:
         sd = savage_dickey_from_posterior(posterior, model)
         if posterior.settings.get("likelihood") != likelihood:
@@ -1579,9 +1590,12 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
                 "sample": sample, "model": model.name, "decision_level": DECISION_LEVEL,
                 "decision_z": DECISION_Z, "runs": runs, "n_samples": recording.n_samples,
                 "posterior": post_info or None, "entropy": str(ss.entropy),
-                "threshold_runs": reruns, "mode_check": bool(mode_ok)}
+                "threshold_runs": reruns, "mode_check": bool(mode_ok),
+                "recording": recording.source or "",
+                "recording_sha256": _recording_digest(recording)}
     if not mode_ok:
-        warn_at_caller(f"the nested sampler's best ln L with threshold ({ev1.max_log_lik:.1f}) is "
+        where = f"{recording.source}: " if recording.source else ""
+        warn_at_caller(f"{where}the nested sampler's best ln L with threshold ({ev1.max_log_lik:.1f}) is "
                        f"below that without ({ev0.max_log_lik:.1f}) in all {len(reruns)} runs: "
                        "they missed the main mode, so ln BF is too low; rerun with more nlive",
                        RuntimeWarning)
@@ -1593,6 +1607,44 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
                     plateau_active_fraction=PLATEAU_ACTIVE_FRACTION, decision_note=why)
     return Comparison(float(log_bf), float(err), decision, ev1, ev0, sd, ic, settings,
                       seed, time.perf_counter() - t0, recording.source, plateau)
+
+
+def _reissue(caught, source: str | None, max_steps: int) -> list[str]:
+    """The warnings recorded while :func:`compare` sampled the Savage-Dickey posterior,
+    warned again at the user's line, each once; their texts, for ``settings["posterior"]``.
+
+    A :class:`~bayespilot.sample.ConvergenceWarning` is worded for the comparison: the
+    chain is the Savage-Dickey check's, and the comparison has no ``max_steps`` of its own
+    (``sample_options`` has, and a converged ``posterior`` can be given instead).
+    """
+    from .sample import ConvergenceWarning
+
+    texts: list[str] = []
+    seen: set[tuple[type, str]] = set()
+    for w in caught:
+        message = w.message
+        if issubclass(w.category, ConvergenceWarning):
+            tau = getattr(message, "tau", None)
+            finite = [] if tau is None else [t for t in np.ravel(tau) if np.isfinite(t)]
+            where = f"{source}: " if source else ""
+            message = ConvergenceWarning(
+                f"{where}the posterior sampled for the Savage-Dickey check did not converge "
+                f"(the chain reached max_steps = {max_steps} before it was long enough; max "
+                f"tau = {max(finite) if finite else math.nan:.0f} steps): the Savage-Dickey "
+                "ln BF is a rough check; to run longer, raise sample_options['max_steps'], "
+                "or give a converged posterior (posterior=, or bayespilot compare "
+                "--posterior POST.nc from bayespilot sample)",
+                tau, getattr(message, "n_steps", 0))
+        key = (type(message) if isinstance(message, Warning) else w.category, str(message))
+        if key in seen:
+            continue
+        seen.add(key)
+        texts.append(str(message))
+        if isinstance(message, Warning):
+            warn_at_caller(message)
+        else:
+            warn_at_caller(str(message), w.category)
+    return texts
 
 
 # --- pooling -------------------------------------------------------------------------------------
@@ -1731,8 +1783,18 @@ class PooledComparison:
                 f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} "
                 + _verdict(self.log_bayes_factor, self.log_bayes_factor_err, self.decision,
                            self.decision_note)
-                + f"; per recording: {counts}; paired t = {self.t_statistic:.2f} "
-                f"(p = {self.t_pvalue:.3g}), Wilcoxon p = {self.wilcoxon_pvalue:.3g}")
+                + f"; per recording: {counts}; " + self._tests())
+
+    def _tests(self) -> str:
+        """The paired tests for :meth:`summary`, or why there are none."""
+        if self.n < 2:
+            return "no paired test (one recording: no spread across recordings to test)"
+        if math.isnan(self.t_pvalue) and math.isnan(self.wilcoxon_pvalue):
+            return "no paired test (every recording has ln BF = 0)"
+        t = (f"paired t = {self.t_statistic:.2f} (p = {self.t_pvalue:.3g})"
+             if not math.isnan(self.t_pvalue) else
+             "no paired t-test (every recording has the same ln BF: no spread)")
+        return f"{t}, Wilcoxon p = {self.wilcoxon_pvalue:.3g}"
 
 
 def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") -> PooledComparison:
@@ -1748,6 +1810,22 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
     -------
     PooledComparison
 
+    Raises
+    ------
+    ValueError
+        ``results`` is empty, holds one Comparison twice, or two comparisons
+        of the same recording (by ``settings["recording_sha256"]``, recorded
+        by :func:`compare`): each recording counts once.
+    TypeError
+        A result is neither a Comparison nor a mapping with
+        ``log_bayes_factor``.
+
+    Notes
+    -----
+    One recording has no spread across recordings: its t and Wilcoxon tests
+    are NaN, and :meth:`PooledComparison.summary` says "no paired test"
+    instead of printing them.
+
     Examples
     --------
     >>> r = [{"log_bayes_factor": v, "log_bayes_factor_err": 0.5} for v in (5.0, 7.0, 6.0)]
@@ -1760,11 +1838,13 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
     if isinstance(results, (Comparison, Mapping)) or not len(results):
         raise ValueError("results must be a non-empty sequence of comparisons")
     lbf, err, dec, on_plateau, lost_mode = [], [], [], [], []
-    for r in results:
+    first_of: dict[Any, int] = {}  # a Comparison (by identity) or a recording's digest: index
+    for i, r in enumerate(results):
         d = r.to_dict() if isinstance(r, Comparison) else r
         if not isinstance(d, Mapping) or "log_bayes_factor" not in d:
             raise TypeError("each result must be a Comparison or a mapping with "
                             "'log_bayes_factor' and 'log_bayes_factor_err'")
+        _check_once(i, r, d, first_of, results)
         lbf.append(float(d["log_bayes_factor"]))
         err.append(float(d.get("log_bayes_factor_err", 0.0)))
         dec.append(d.get("decision") or decide(lbf[-1], err[-1]))
@@ -1800,6 +1880,33 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
                                           "for 'none'")
     return PooledComparison(int(x.size), total, total_err, decision, counts,
                             float(x.mean()), t, p, w, wp, label, note)
+
+
+def _check_once(i: int, r: Any, d: Mapping[str, Any], first_of: dict[Any, int],
+                results: Sequence[Any]) -> None:
+    """Refuse (ValueError) ``results[i]`` if an earlier result is the same Comparison object
+    or a comparison of the same recording (by ``settings["recording_sha256"]``): a pool
+    counts each recording once.  Records ``r`` in ``first_of``."""
+    def name(k: int) -> str:
+        other = results[k]
+        src = other.source if isinstance(other, Comparison) else other.get("source")
+        return f"results[{k}]" + (f" ({src})" if src else "")
+
+    if isinstance(r, Comparison):
+        if ("object", id(r)) in first_of:
+            raise ValueError(f"results[{first_of['object', id(r)]}] and results[{i}] are the "
+                             f"same Comparison{f' (of {r.source})' if r.source else ''}: a pool "
+                             "counts each recording once; give each comparison once")
+        first_of["object", id(r)] = i
+    settings = d.get("settings")
+    digest = settings.get("recording_sha256") if isinstance(settings, Mapping) else None
+    if digest:
+        if ("recording", digest) in first_of:
+            j = first_of["recording", digest]
+            raise ValueError(f"{name(j)} and {name(i)} are comparisons of the same recording "
+                             f"(recording_sha256 {digest[:12]}...): a pool counts each "
+                             "recording once; keep one of them")
+        first_of["recording", digest] = i
 
 
 class _CallableModule(types.ModuleType):

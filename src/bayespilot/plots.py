@@ -319,8 +319,12 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
 
     Raises
     ------
+    TypeError
+        If ``results`` is not a sequence of dicts (a FitResult, a folder's
+        name: read it with :func:`bayespilot.campaign.load_results`).
     ValueError
-        If no fit with threshold at the requested ``fractions`` is in
+        If a dict in ``results`` is not a campaign result (a fit's
+        ``to_dict()``), no fit with threshold at the requested ``fractions`` is in
         ``results``, several methods are present and ``method`` is not given,
         ``ax`` has the wrong number of axes, or ``figsize`` is given with
         ``ax`` or is not two positive numbers.
@@ -345,6 +349,7 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
         raise ValueError(f"bins must be a positive integer, got {bins!r}")
     if not (isinstance(upper, (int, float)) and math.isfinite(upper) and upper > 0):
         raise ValueError(f"upper must be a positive number, got {upper!r}")
+    results = _campaign_results(results)
     wanted = [float(f) for f in fractions]
     sel = [r for r in results if bool(r["threshold"])
            and any(abs(float(r["remnant_fraction"]) - f) < 1e-9 for f in wanted)]
@@ -472,6 +477,38 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     return fig
 
 
+#: What every campaign result needs for :func:`plot_threshold_histograms`.
+_CAMPAIGN_KEYS = ("task", "remnant_fraction", "motion_gain", "threshold", "method",
+                  "true_params", "fit")
+_CAMPAIGN_TAKES = ("campaign result dicts, as bayespilot.campaign.load_results(out_dir) reads "
+                   "them (or bayespilot.campaign.run_job returns them)")
+
+
+def _campaign_results(results: Any) -> list[Mapping[str, Any]]:
+    """``results`` as a list, refused with what it takes unless it is campaign result dicts:
+    a TypeError for a single result or what is not a dict (a FitResult), a ValueError for a
+    dict that is not a campaign result (a fit's ``to_dict()``)."""
+    if isinstance(results, (str, bytes, os.PathLike, Mapping)) or not hasattr(results,
+                                                                             "__iter__"):
+        raise TypeError(f"results must be a list of {_CAMPAIGN_TAKES}; got "
+                        f"{type(results).__name__}"
+                        + (f" {str(results)!r} (read the folder with load_results)"
+                           if isinstance(results, (str, os.PathLike)) else ""))
+    out = list(results)
+    for i, r in enumerate(out):
+        if not isinstance(r, Mapping):
+            raise TypeError(f"results must be {_CAMPAIGN_TAKES}; results[{i}] is a "
+                            f"{type(r).__name__}")
+        missing = [k for k in _CAMPAIGN_KEYS if k not in r]
+        if missing or not isinstance(r["fit"], Mapping) \
+                or not isinstance(r["fit"].get("params"), Mapping):
+            what = (f"lacks {', '.join(repr(k) for k in missing)}" if missing
+                    else "has no 'fit' with 'params'")
+            raise ValueError(f"results must be {_CAMPAIGN_TAKES}; results[{i}] is a dict that "
+                             f"{what} (a fit's to_dict() is not a campaign result)")
+    return out
+
+
 def _clear_bars(fig, edges: np.ndarray, boxes) -> None:
     """Raise each panel's y limit until its statistics text is above the bars under it."""
     if not boxes:
@@ -500,6 +537,22 @@ def _posterior_or_raise(posterior):
     if not isinstance(posterior, Posterior):
         raise TypeError(f"posterior must be a bayespilot.sample.Posterior, got {type(posterior).__name__}")
     return posterior
+
+
+def _names(names: Any) -> tuple[str, ...]:
+    """``names`` of a posterior plot as a tuple: a str is one name (``"delta_abs"``, not its
+    letters); anything else must be a sequence of str."""
+    if isinstance(names, str):
+        return (names,)
+    try:
+        out = tuple(names)
+    except TypeError:
+        raise TypeError(f"names must be a parameter name or a sequence of them, got "
+                        f"{type(names).__name__}") from None
+    bad = [n for n in out if not isinstance(n, str)]
+    if bad:
+        raise TypeError(f"names must be parameter names (str), got {bad[0]!r}")
+    return out
 
 
 def _run_note(posterior, n_draws: int) -> str:
@@ -587,8 +640,8 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     Parameters
     ----------
     posterior : bayespilot.sample.Posterior
-    names : sequence of str
-        Sampled parameters to show (at least one).
+    names : str or sequence of str
+        Sampled parameters to show (at least one; a str is one name).
     truth : mapping of str to float, optional
         True values, drawn as dashed lines / crosses where given.
     ax : 2-D array of matplotlib Axes, optional
@@ -606,7 +659,8 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     Raises
     ------
     TypeError
-        If ``posterior`` is not a Posterior.
+        If ``posterior`` is not a Posterior, or ``names`` is neither a str nor
+        a sequence of str.
     ValueError
         If a name was not sampled, ``names`` is empty, ``ax`` has the wrong
         shape, or ``figsize`` is given with ``ax`` or is not two positive
@@ -616,7 +670,7 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     from matplotlib.ticker import MaxNLocator
 
     posterior = _posterior_or_raise(posterior)
-    names = tuple(names)
+    names = _names(names)
     if not names:
         raise ValueError("names must hold at least one parameter")
     draws = [posterior.draws(n) for n in names]
@@ -717,8 +771,8 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     Parameters
     ----------
     posterior : bayespilot.sample.Posterior
-    names : sequence of str, optional
-        Parameters to show (default: all sampled).
+    names : str or sequence of str, optional
+        Parameters to show (default: all sampled; a str is one name).
     ax : sequence of matplotlib Axes, optional
         len(names) + 1 axes (the last for the log posterior).  Default: a new figure.
     model : bayespilot.model.PilotModel, optional
@@ -734,13 +788,14 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     Raises
     ------
     TypeError
-        If ``posterior`` is not a Posterior.
+        If ``posterior`` is not a Posterior, or ``names`` is neither a str nor
+        a sequence of str.
     ValueError
         If a name was not sampled, ``ax`` has the wrong number of axes, or
         ``figsize`` is given with ``ax`` or is not two positive numbers.
     """
     posterior = _posterior_or_raise(posterior)
-    names = posterior.parameter_names if names is None else tuple(names)
+    names = posterior.parameter_names if names is None else _names(names)
     for n in names:
         posterior.draws(n)  # validates the name
     post = posterior.idata.posterior

@@ -959,7 +959,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     -----
     ConvergenceWarning
         The run reached ``max_steps`` before the criterion held; the message
-        says how to run longer (with a ``backend``: again with a larger
+        names the recording (its ``source``, when it has one) and says how to
+        run longer (with a ``backend``: again with a larger
         ``max_steps``, which resumes the chain; without: a larger
         ``max_steps``, or a backend to be able to resume).
 
@@ -1100,8 +1101,9 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
                      min_steps=min_steps, check_every=check_every, tau_factor=tau_factor,
                      tau_rtol=tau_rtol, random_state=rs, progress=progress, backend=bk)
     if not run.converged:
+        where = f"{recording.source}: " if recording.source else ""
         warn_at_caller(ConvergenceWarning(
-            f"the chain reached max_steps = {max_steps} before it was {tau_factor:g} "
+            f"{where}the chain reached max_steps = {max_steps} before it was {tau_factor:g} "
             f"autocorrelation times long with a settled tau (max tau = "
             f"{np.nanmax(run.tau) if np.any(np.isfinite(run.tau)) else float('nan'):.0f} steps); "
             f"the posterior is a rough estimate: {_run_longer(backend, max_steps)}",
@@ -1119,14 +1121,14 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
 
 
 def _run_longer(backend, max_steps: int) -> str:
-    """The advice of the not-converged warning: how to run longer, in the API's and the CLI's
-    words (the CLI prints the warning as it is)."""
+    """The advice of the not-converged warning: how to run longer, in the API's words with
+    the command's beside them (the CLI prints the warning as it is)."""
     if backend is None:
-        return ("to run longer, raise max_steps (--max-steps), or give a backend "
-                "(--backend FILE.h5) to be able to resume")
+        return ("to run longer, raise max_steps (bayespilot sample --max-steps), or give a "
+                "backend (bayespilot sample --backend FILE.h5) to be able to resume")
     return (f"to run longer, run again with the same backend ({backend}) and a max_steps "
-            f"(--max-steps) above {max_steps}: the chain resumes from its last step "
-            "(max_steps counts the steps already stored)")
+            f"(bayespilot sample --max-steps) above {max_steps}: the chain resumes from its "
+            "last step (max_steps counts the steps already stored)")
 
 
 def _check_init(model: PilotModel, init: Mapping[str, float]) -> None:
