@@ -621,6 +621,12 @@ def test_compare_says_when_its_savage_dickey_posterior_did_not_converge(monkeypa
         "check; to run longer, raise sample_options['max_steps'], or give a converged "
         "posterior (posterior=, or bayespilot compare --posterior POST.nc from bayespilot "
         "sample)")
+    # the command line, which sets no sample_options, says only what it can do
+    from bayespilot.cli import _in_cli_words
+
+    assert _in_cli_words(conv[0].message).endswith(
+        "the Savage-Dickey ln BF is a rough check; give a converged posterior (--posterior "
+        "POST.nc, from bayespilot sample)")
     assert conv[0].message.n_steps == 60
     assert c.settings["posterior"]["warnings"] == [str(conv[0].message)]
     assert c.settings["posterior"]["converged"] is False

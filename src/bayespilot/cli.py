@@ -304,6 +304,10 @@ _LIBRARY_ADVICE = {
     ": fix them (model.fix) or use a model without the channel":
         ": the record says nothing about them, and the values given for them are not "
         "estimates",
+    # (compare's Savage-Dickey posterior: the command line sets no sample_options)
+    "to run longer, raise sample_options['max_steps'], or give a converged posterior "
+    "(posterior=, or bayespilot compare --posterior POST.nc from bayespilot sample)":
+        "give a converged posterior (--posterior POST.nc, from bayespilot sample)",
 }
 
 

@@ -220,7 +220,7 @@ def _warn_unconverged(runs: Sequence[tuple[str, float]], max_steps: int) -> None
         f"the emcee chain{'' if one else 's'} of {names} reached max_steps = {max_steps} before "
         f"{'it was' if one else 'they were'} long enough for the autocorrelation criterion"
         f"{tau}: {rough} (the report's intervals too); to run longer, raise max_steps "
-        "(--max-steps)", None, max_steps))
+        "(bayespilot demo --max-steps)", None, max_steps))
 
 
 def _report(rows, pooled, truth, task, gains, elapsed, likelihood) -> str:
