@@ -8,7 +8,6 @@ called directly.
 from __future__ import annotations
 
 import json
-import re
 
 import numpy as np
 import pytest
@@ -18,19 +17,7 @@ from bayespilot.cli import main
 from bayespilot.fit.result import FitResult
 from bayespilot.io import read_recording, write_recording
 from bayespilot.simulate import TrackingTask, simulate
-
-
-def _run(capsys, *argv):
-    """main(argv) -> (exit code, stdout, stderr)."""
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def _loglik_value(out: str) -> float:
-    m = re.match(r"-ln L = (\S+)$", out.splitlines()[0])
-    assert m, out
-    return float(m.group(1))
+from test_cli import _loglik_value, _run  # (the command-line tests' helpers)
 
 
 @pytest.fixture(scope="module")

@@ -179,14 +179,17 @@ class _ReadOnlyList(list):
         return [copy.deepcopy(v, memo) for v in self]
 
 
-def _frozen(value: Any) -> Any:
+def _frozen(value: Any, mapping: type = None, sequence: type = None) -> Any:
     """``value`` with its dicts, lists and arrays copied read-only, at every depth: a
     recording's metadata, which no one (the caller who built it included) can then change
-    behind its checks."""
+    behind its checks.  ``mapping`` and ``sequence``: the read-only types to use (default
+    :class:`_ReadOnlyDict` and :class:`_ReadOnlyList`; a fit's carry its own message)."""
+    mapping = _ReadOnlyDict if mapping is None else mapping
+    sequence = _ReadOnlyList if sequence is None else sequence
     if isinstance(value, Mapping):
-        return _ReadOnlyDict({k: _frozen(v) for k, v in value.items()})
+        return mapping({k: _frozen(v, mapping, sequence) for k, v in value.items()})
     if isinstance(value, list):
-        return _ReadOnlyList(_frozen(v) for v in value)
+        return sequence(_frozen(v, mapping, sequence) for v in value)
     if isinstance(value, np.ndarray):
         value = value.copy()
         value.setflags(write=False)

@@ -9,11 +9,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
-
 from .._files import WrongKind, dumps, read_result, require_keys, write_text_atomic
 from .. import presets
-from ..recording import _ReadOnlyDict, _ReadOnlyList, _thawed
+from ..recording import _frozen, _ReadOnlyDict, _ReadOnlyList, _thawed
 
 __all__ = ["FitResult", "EstimateOnBoundWarning", "NotAtMaximumWarning", "ON_BOUND_RTOL",
            "CHECK_GAP"]
@@ -72,19 +70,6 @@ class _FitList(_ReadOnlyList):
 
     def __reduce__(self):
         return (_FitList, (list(self),))
-
-
-def _fit_frozen(value: Any) -> Any:
-    """``value`` with its dicts, lists and arrays copied read-only, at every depth (as
-    :func:`~bayespilot.recording._frozen`, with a fit's message)."""
-    if isinstance(value, Mapping):
-        return _FitDict({k: _fit_frozen(v) for k, v in value.items()})
-    if isinstance(value, list):
-        return _FitList(_fit_frozen(v) for v in value)
-    if isinstance(value, np.ndarray):
-        value = value.copy()
-        value.setflags(write=False)
-    return value
 
 
 #: The fields of a FitResult held read-only (:meth:`FitResult.__post_init__`).
@@ -151,7 +136,7 @@ class FitResult:
         # read-only copies: an estimate edited in place was saved by to_json, and from_json
         # then reported it beyond its bound
         for name in _READ_ONLY:
-            object.__setattr__(self, name, _fit_frozen(getattr(self, name)))
+            object.__setattr__(self, name, _frozen(getattr(self, name), _FitDict, _FitList))
 
     def __reduce__(self):
         # Built again through __init__ when unpickled or deep-copied, so that the copy is
