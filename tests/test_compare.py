@@ -679,3 +679,26 @@ def test_pool_counts_each_recording_once_and_says_when_there_is_no_test():
     assert "no paired t-test (every recording has the same ln BF: no spread), Wilcoxon p = " in same
     zero = pool([{"log_bayes_factor": 0.0}, {"log_bayes_factor": 0.0}]).summary()
     assert zero.endswith("; no paired test (every recording has ln BF = 0)")
+
+
+def test_evidence_leaves_out_by_default_what_compare_does(monkeypatch):
+    """evidence() defaulted to discard 0 for both likelihoods while compare() leaves out the
+    sampler's lead-in (coloured) or a cut record's 2-s start-up (eq4): the two weighed
+    different samples of one record.  Now one default (the nested sampling itself replaced
+    here: only what it is given is checked)."""
+    import bayespilot.compare as C
+
+    class _Ev:
+        def __init__(self):
+            self.settings = {}
+
+    monkeypatch.setattr(C, "nested_evidence", lambda *a, **k: _Ev())
+    cut = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1,
+                   duration=10.0).recording
+    whole = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1).recording
+    assert C.evidence(cut).settings["discard_seconds"] == 2.0
+    assert C.evidence(whole).settings["discard_seconds"] == 0.0
+    assert C.evidence(whole, likelihood="coloured", ar="sampled").settings[
+        "discard_seconds"] == C.COLOURED_DISCARD == 2.0
+    assert C.evidence(cut, discard=0.5).settings["discard_seconds"] == 0.5
+    assert C._default_discard(cut, "eq4") == 2.0  # what compare() uses

@@ -108,7 +108,7 @@ from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
-from .sample import _recording_digest, likelihood_options
+from .sample import COLOURED_DISCARD, _recording_digest, likelihood_options
 from .recording import Recording
 from ._blas import one_blas_thread
 from ._caller import warn_at_caller
@@ -582,9 +582,19 @@ class _NegLogLik:
 
 
 @one_blas_thread
+def _default_discard(recording: Recording, likelihood: str) -> float:
+    """The seconds :func:`compare` and :func:`evidence` leave out by default: the sampler's
+    lead-in for ``"coloured"``; for ``"eq4"`` the start-up of a record not known to be whole
+    periods, as :func:`~bayespilot.fit.fast.fit_fast` does (0 on whole periods)."""
+    from .likelihood import _startup_default
+
+    return COLOURED_DISCARD if likelihood == "coloured" else \
+        _startup_default(recording, "periodic")
+
+
 def evidence(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
              ar: str = "fixed", ar_order: int | None = None, noise: ARNoise | None = None,
-             discard: float = 0.0, nlive: int = 200, dlogz: float = 0.5,
+             discard: float | None = None, nlive: int = 200, dlogz: float = 0.5,
              sample: str = "rwalk", seed: int | None = None,
              progress: bool = False) -> Evidence:
     """ln Z of ``model`` on ``recording`` with priors uniform on the model bounds (dynesty).
@@ -606,8 +616,13 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
     noise : ARNoise, optional
         For ``"coloured"`` with ``ar="fixed"``: the AR model.  Default: estimated
         from a prediction-error fit of ``model`` (:func:`~bayespilot.fit.fast.fit_fast`).
-    discard : float
-        Seconds at the start left out of the likelihood.
+    discard : float, optional
+        Seconds at the start left out of the likelihood.  Default as
+        :func:`compare`'s: :data:`bayespilot.sample.COLOURED_DISCARD` for
+        ``"coloured"``; for ``"eq4"`` 0 on a record of whole forcing periods,
+        else :func:`~bayespilot.likelihood.startup_discard` (2 s).  (It was 0
+        for both, so that ``evidence`` and ``compare`` weighed different
+        samples of one record.)
     nlive, dlogz, sample, seed, progress
         See :func:`nested_evidence`.
 
@@ -618,6 +633,8 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     model, order = likelihood_options(model, likelihood, ar, ar_order, EVIDENCE_AR_MODES)
+    if discard is None:
+        discard = _default_discard(recording, likelihood)
     if noise is not None and not (likelihood == "coloured" and ar == "fixed"):
         raise ValueError(f"noise is the AR model of likelihood='coloured' with ar='fixed' only; "
                          f"with likelihood={likelihood!r}, ar={ar!r} it would be ignored")
@@ -1500,13 +1517,7 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     model, order = likelihood_options(model, likelihood, ar, ar_order, EVIDENCE_AR_MODES)
     if discard is None:
-        from .sample import COLOURED_DISCARD
-
-        from .likelihood import _startup_default
-
-        # eq4 on a record not known to be whole periods: its start-up left out, as fit_fast
-        discard = COLOURED_DISCARD if likelihood == "coloured" else \
-            _startup_default(recording, "periodic")
+        discard = _default_discard(recording, likelihood)
     if THRESHOLD not in model.parameter_names:
         raise ValueError(f"the model has no free {THRESHOLD!r} to compare against 0 "
                          f"(free: {', '.join(model.parameter_names)})")
