@@ -687,6 +687,7 @@ def test_evidence_leaves_out_by_default_what_compare_does(monkeypatch):
     different samples of one record.  Now one default (the nested sampling itself replaced
     here: only what it is given is checked)."""
     import bayespilot.compare as C
+    from bayespilot.sample import COLOURED_DISCARD
 
     class _Ev:
         def __init__(self):
@@ -699,6 +700,6 @@ def test_evidence_leaves_out_by_default_what_compare_does(monkeypatch):
     assert C.evidence(cut).settings["discard_seconds"] == 2.0
     assert C.evidence(whole).settings["discard_seconds"] == 0.0
     assert C.evidence(whole, likelihood="coloured", ar="sampled").settings[
-        "discard_seconds"] == C.COLOURED_DISCARD == 2.0
+        "discard_seconds"] == COLOURED_DISCARD == 2.0
     assert C.evidence(cut, discard=0.5).settings["discard_seconds"] == 0.5
     assert C._default_discard(cut, "eq4") == 2.0  # what compare() uses

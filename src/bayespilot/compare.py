@@ -108,7 +108,7 @@ from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
-from .sample import COLOURED_DISCARD, _recording_digest, likelihood_options
+from .sample import _default_discard, _recording_digest, likelihood_options
 from .recording import Recording
 from ._blas import one_blas_thread
 from ._caller import warn_at_caller
@@ -582,16 +582,6 @@ class _NegLogLik:
 
 
 @one_blas_thread
-def _default_discard(recording: Recording, likelihood: str) -> float:
-    """The seconds :func:`compare` and :func:`evidence` leave out by default: the sampler's
-    lead-in for ``"coloured"``; for ``"eq4"`` the start-up of a record not known to be whole
-    periods, as :func:`~bayespilot.fit.fast.fit_fast` does (0 on whole periods)."""
-    from .likelihood import _startup_default
-
-    return COLOURED_DISCARD if likelihood == "coloured" else \
-        _startup_default(recording, "periodic")
-
-
 def evidence(recording: Recording, model: PilotModel | None = None, *, likelihood: str = "eq4",
              ar: str = "fixed", ar_order: int | None = None, noise: ARNoise | None = None,
              discard: float | None = None, nlive: int = 200, dlogz: float = 0.5,

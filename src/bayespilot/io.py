@@ -752,8 +752,8 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
     p = _as_path(path)
     shown = _shown(path, p)
     if shown.endswith(("/", os.sep)):  # ("out/" wrote out.csv and out.json beside the folder)
-        raise RecordingError(f"{shown}: a folder; give the recording's stem in it "
-                             f"({shown}NAME, written as NAME.csv and NAME.json)")
+        raise _fail(shown, f"a folder; give the recording's stem in it ({shown}NAME, written "
+                           f"as NAME.csv and NAME.json)")
     suffix = p.suffix.lower()
     if suffix == ".mat":
         raise _fail(p, "write_recording writes the CSV + JSON pair; give a stem, .csv or .json path")

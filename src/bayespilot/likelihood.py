@@ -162,6 +162,17 @@ def startup_discard(recording: Recording) -> float:
     return min(STARTUP_DISCARD, recording.duration / 4)
 
 
+def _checked_discard(recording: Recording, discard: object) -> float:
+    """``discard`` as a float, or a ValueError: a number of seconds in [0, half the record],
+    what :class:`Likelihood` takes (the fitters and the sampler check it first, before they
+    count the samples after it)."""
+    if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
+        raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
+                         f"(half the record), got {discard!r}")
+    return float(discard)
+
+
 #: Where in bayespilot a :class:`Likelihood` is built on records whose start-up is handled
 #: otherwise, so that :class:`NotWholePeriodsWarning` would only be noise, as (path under the
 #: package, function name or None for any): the diagnosis leaves its first ``skip_seconds``
@@ -438,10 +449,7 @@ class Likelihood:
             raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
         if not (math.isfinite(warmup) and warmup >= 0):
             raise ValueError(f"warmup must be a finite number of seconds >= 0, got {warmup!r}")
-        if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
-                or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
-            raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
-                             f"(half the record), got {discard!r}")
+        _checked_discard(recording, discard)
         if noise is not None and not isinstance(noise, ARNoise):
             raise TypeError(f"noise must be None or an ARNoise, got {type(noise).__name__}")
         self.model = model

@@ -142,16 +142,19 @@ class _ReadOnlyDict(dict):
     a new one (:meth:`Recording.with_signals`, or :class:`Recording` with other metadata), so
     that every column and value passes the recording's checks."""
 
+    #: What a change in place is told (a subclass, e.g. a fit's, says its own).
+    _REFUSAL = ("a Recording's signals and metadata cannot be changed in place: make a new "
+                "recording (Recording.with_signals(...), or Recording(...) with the new "
+                "metadata), which checks them")
+
     def _refuse(self, *args: Any, **kwargs: Any) -> None:
-        raise TypeError("a Recording's signals and metadata cannot be changed in place: make a "
-                        "new recording (Recording.with_signals(...), or Recording(...) with "
-                        "the new metadata), which checks them")
+        raise TypeError(self._REFUSAL)
 
     __setitem__ = __delitem__ = __ior__ = _refuse
     clear = pop = popitem = setdefault = update = _refuse
 
     def __reduce__(self):
-        return (_ReadOnlyDict, (dict(self),))
+        return (type(self), (dict(self),))
 
     # a copy is the caller's to edit (copy.deepcopy(rec.metadata), then a new Recording)
     def __copy__(self) -> dict:
@@ -165,12 +168,13 @@ class _ReadOnlyList(list):
     """A list in a recording's metadata (a forcing's lines, a plant's coefficients) that
     refuses to be changed in place, as :class:`_ReadOnlyDict`."""
 
+    _REFUSAL = _ReadOnlyDict._REFUSAL
     _refuse = _ReadOnlyDict._refuse
     __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
     append = extend = insert = pop = remove = clear = sort = reverse = _refuse
 
     def __reduce__(self):
-        return (_ReadOnlyList, (list(self),))
+        return (type(self), (list(self),))
 
     def __copy__(self) -> list:
         return list(self)
@@ -179,13 +183,11 @@ class _ReadOnlyList(list):
         return [copy.deepcopy(v, memo) for v in self]
 
 
-def _frozen(value: Any, mapping: type = None, sequence: type = None) -> Any:
+def _frozen(value: Any, mapping: type = _ReadOnlyDict, sequence: type = _ReadOnlyList) -> Any:
     """``value`` with its dicts, lists and arrays copied read-only, at every depth: a
     recording's metadata, which no one (the caller who built it included) can then change
-    behind its checks.  ``mapping`` and ``sequence``: the read-only types to use (default
-    :class:`_ReadOnlyDict` and :class:`_ReadOnlyList`; a fit's carry its own message)."""
-    mapping = _ReadOnlyDict if mapping is None else mapping
-    sequence = _ReadOnlyList if sequence is None else sequence
+    behind its checks.  ``mapping`` and ``sequence``: the read-only types to use (a fit's
+    carry its own message)."""
     if isinstance(value, Mapping):
         return mapping({k: _frozen(v, mapping, sequence) for k, v in value.items()})
     if isinstance(value, list):

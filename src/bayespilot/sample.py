@@ -65,7 +65,7 @@ import numpy as np
 from . import _files
 from .fit.result import FitResult
 from .kernels import _coloured as C
-from .likelihood import Likelihood, _startup_default
+from .likelihood import Likelihood, _checked_discard, _startup_default
 from .model import PilotModel, paper_model
 from .noise import MAX_AR_ORDER, ARNoise
 from .recording import Recording
@@ -92,6 +92,15 @@ _BACKEND_GROUP = "mcmc"
 _FINGERPRINT_ATTR = "bayespilot_fingerprint"
 _TAU_ATTR = "bayespilot_last_tau"
 _META_ATTR = "bayespilot_posterior"
+
+
+def _default_discard(recording: Recording, likelihood: str) -> float:
+    """The seconds :func:`sample`, :func:`bayespilot.compare.compare` and
+    :func:`bayespilot.compare.evidence` leave out by default: :data:`COLOURED_DISCARD` for
+    ``"coloured"``; for ``"eq4"`` the start-up of a record not known to be whole periods, as
+    :func:`~bayespilot.fit.fast.fit_fast` does (0 on whole periods)."""
+    return COLOURED_DISCARD if likelihood == "coloured" else \
+        _startup_default(recording, "periodic")
 
 
 class ConvergenceWarning(RuntimeWarning):
@@ -985,15 +994,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     if noise is not None and not (fixed_ar and isinstance(noise, ARNoise)):
         raise ValueError("noise is an ARNoise for likelihood='coloured' with ar='fixed' only, "
                          f"got {type(noise).__name__} with likelihood={likelihood!r}, ar={ar!r}")
-    if discard is None:
-        # eq4 on a record not known to be whole periods: its start-up left out, as fit_fast
-        discard = COLOURED_DISCARD if likelihood == "coloured" else \
-            _startup_default(recording, "periodic")
-    if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
-            or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
-        raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
-                         f"(half the record), got {discard!r}")
-    discard = float(discard)
+    discard = _checked_discard(recording, _default_discard(recording, likelihood)
+                               if discard is None else discard)
     max_steps = _check_int("max_steps", max_steps, 1)
     min_steps = _check_int("min_steps", min_steps, 0)
     check_every = _check_int("check_every", check_every, 1)

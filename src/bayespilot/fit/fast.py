@@ -34,14 +34,14 @@ import time
 import numpy as np
 from scipy.stats import qmc
 
-from ..likelihood import Likelihood, _startup_default, _startup_reason
+from ..likelihood import Likelihood, _checked_discard, _startup_default, _startup_reason
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, ARNoise
 from ..recording import Recording
 from .gauss_newton import refine
 from .result import FitResult
 from .scan import scan_parameter
-from .three_step import (_check_bool, _check_discard, _check_fittable, _check_steps, _model_for,
+from .three_step import (_check_bool, _check_fittable, _check_steps, _model_for,
                          _unidentified_settings, _warn_on_bounds)
 from .._blas import one_blas_thread
 from .._seeds import resolve_seed
@@ -161,10 +161,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     discard_reason = None  # why the default discard is not 0 where it was picked for that
     default_discard = discard is None
     if discard is None:
-        from ..sample import COLOURED_DISCARD
-
-        # (at most a quarter of a short record: the likelihood keeps at least half)
-        discard = 0.0 if noise is None else min(COLOURED_DISCARD, recording.duration / 4)
+        discard = 0.0 if noise is None else _ar_default_discard(recording.duration)
         if discard == 0.0:
             # a record cut mid-period (or not known to be whole): the periodic start wraps the cut
             # (NotWholePeriodsWarning); 0 on whole periods, as before
@@ -178,7 +175,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         raise ValueError(f"scan_step must not exceed profile_step ({profile_step!r}), got "
                          f"{scan_step!r}: the final scan refines the profile's best point "
                          f"within one profile step either side")
-    discard = _check_discard(recording, discard)
+    discard = _checked_discard(recording, discard)
     _check_fittable(recording, model, discard)
     if noise == "ar":
         _check_ar_fittable(recording, discard, noise_order, default_discard)
@@ -256,6 +253,15 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     return fit
 
 
+def _ar_default_discard(duration: float) -> float:
+    """The default lead-in left out with an AR noise model: the sampler's
+    (:data:`~bayespilot.sample.COLOURED_DISCARD`), at most a quarter of a short record (the
+    likelihood keeps at least half)."""
+    from ..sample import COLOURED_DISCARD
+
+    return min(COLOURED_DISCARD, duration / 4)
+
+
 def _check_ar_fittable(recording: Recording, discard: float, order: int | None,
                        default_discard: bool) -> None:
     """Refuse (RecordingError), before fitting, a record too short for the AR noise model of
@@ -264,14 +270,13 @@ def _check_ar_fittable(recording: Recording, discard: float, order: int | None,
     names the shortest record that has them (with the default lead-in, min(2 s, a quarter of
     the record), when ``default_discard``)."""
     from ..recording import RecordingError
-    from ..sample import COLOURED_DISCARD
 
     p = MAX_AR_ORDER if order is None else int(order)
     need = 4 * (p + 1)
     rate = recording.sample_rate_hz
 
     def skipped(n: int) -> int:
-        d = min(COLOURED_DISCARD, n / rate / 4) if default_discard else discard
+        d = _ar_default_discard(n / rate) if default_discard else discard
         return int(round(d * rate)) if d else 0
 
     have = recording.n_samples - skipped(recording.n_samples)

@@ -43,33 +43,21 @@ class NotAtMaximumWarning(RuntimeWarning):
 CHECK_GAP = 1.92
 
 
-def _refuse(*args: Any, **kwargs: Any) -> None:
-    raise TypeError("a FitResult's params, settings, steps, bounds and units cannot be changed "
-                    "in place: copy them (dict(fit.params), fit.to_dict()) and edit the copy, or "
-                    "make a new result (dataclasses.replace(fit, params=...))")
-
-
 class _FitDict(_ReadOnlyDict):
     """A dict of a :class:`FitResult` (its ``params``, ``settings``, ...) that refuses to be
     changed in place, as a recording's metadata (:class:`~bayespilot.recording._ReadOnlyDict`),
     with a fit's message.  A copy (``dict(...)``, ``copy.deepcopy``) is a plain dict."""
 
-    __setitem__ = __delitem__ = __ior__ = _refuse
-    clear = pop = popitem = setdefault = update = _refuse
-
-    def __reduce__(self):
-        return (_FitDict, (dict(self),))
+    _REFUSAL = ("a FitResult's params, settings, steps, bounds and units cannot be changed in "
+                "place: copy them (dict(fit.params), fit.to_dict()) and edit the copy, or make "
+                "a new result (dataclasses.replace(fit, params=...))")
 
 
 class _FitList(_ReadOnlyList):
     """A list inside a :class:`FitResult` (a GA history, a scan's grid), read-only as
     :class:`_FitDict`."""
 
-    __setitem__ = __delitem__ = __iadd__ = __imul__ = _refuse
-    append = extend = insert = pop = remove = clear = sort = reverse = _refuse
-
-    def __reduce__(self):
-        return (_FitList, (list(self),))
+    _REFUSAL = _FitDict._REFUSAL
 
 
 #: The fields of a FitResult held read-only (:meth:`FitResult.__post_init__`).

@@ -16,13 +16,13 @@ at 0 (Step III is then empty).
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any
 
 import numpy as np
 
-from ..likelihood import Likelihood, _startup_default, _startup_reason, _unidentified
+from ..likelihood import (Likelihood, _checked_discard, _startup_default, _startup_reason,
+                          _unidentified)
 from ..model import PilotModel, paper_model
 from ..recording import Recording
 from .gauss_newton import refine
@@ -50,17 +50,6 @@ def _check_bool(name: str, value: Any) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name} must be True or False, got {value!r}")
     return bool(value)
-
-
-def _check_discard(recording: Recording, discard: Any) -> float:
-    """``discard`` as a float, or the ValueError :class:`~bayespilot.likelihood.Likelihood`
-    gives (the same message), before :func:`_check_fittable` counts the samples after it
-    (which reported a discard beyond the record as a record too short)."""
-    if isinstance(discard, bool) or not isinstance(discard, (int, float, np.integer, np.floating)) \
-            or not (math.isfinite(discard) and 0 <= discard <= recording.duration / 2):
-        raise ValueError(f"discard must be a number of seconds in [0, {recording.duration / 2:g}] "
-                         f"(half the record), got {discard!r}")
-    return float(discard)
 
 
 def _check_steps(model: PilotModel, **steps: Any) -> None:
@@ -302,7 +291,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         discard = _startup_default(recording, initial)
         if discard:
             discard_reason = _startup_reason(recording)
-    discard = _check_discard(recording, discard)
+    discard = _checked_discard(recording, discard)
     _check_fittable(recording, model, discard)
     lik = Likelihood(model, recording, initial=initial, discard=discard)
     has_delta = "delta_abs" in model.parameter_names
