@@ -13,18 +13,22 @@ through the same routine as the batch, so single and batch still agree to
 the bit.)
 
 The cache is keyed on the CPU features numba compiles for, so a kernel cached
-on one machine is never loaded on a CPU it was not built for.  numba checks
-only the source file of the function it caches: after editing
-``kernels/_simd.py`` (whose intrinsics are compiled into ``_segmented``'s
-kernels), delete ``src/bayespilot/kernels/__pycache__`` or touch
-``_segmented.py``; the same after editing ``kernels/_oversample.py`` or
-``kernels/_blocks.py`` alone (compiled into ``_response``'s and
-``_sensitivity``'s kernels: seen to keep a stale callee).
+on one machine is never loaded on a CPU it was not built for.  numba itself
+checks only the source file of the function it caches, so a kernel kept its
+stale callee after ``kernels/_blocks.py``, ``_oversample.py`` or ``_simd.py``
+alone was edited (their code is compiled into ``_response``'s,
+``_sensitivity``'s and ``_segmented``'s kernels; a lab adding a block edits
+exactly those files).  Our cache key therefore also holds a digest of every
+source file in the kernel's folder (``_FolderCache``): an edit to any of them
+recompiles the kernels that might inline it.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
+from pathlib import Path
 
 # numba's OpenMP threading layer spin-waits between parallel regions by
 # default; on a shared machine (dask workers, a second process) that made
@@ -34,8 +38,42 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
+from numba.core.caching import FunctionCache  # noqa: E402
 
 JIT_OPTIONS = {"cache": True, "error_model": "numpy", "nogil": True}
+
+
+@functools.lru_cache(maxsize=None)
+def _folder_digest(folder: str) -> str:
+    """sha256 of the names and contents of every ``.py`` file in ``folder``."""
+    h = hashlib.sha256()
+    for path in sorted(Path(folder).glob("*.py")):
+        h.update(path.name.encode())
+        h.update(b"\0")
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+class _FolderCache(FunctionCache):
+    """numba's on-disk cache, its key extended by the digest of the sources
+    beside the function's file.  numba keys an entry on the function's own
+    bytecode and invalidates it on its own file's time stamp only, so a jitted
+    callee from another file, compiled into the caller, went stale unseen
+    (written here because numba has no option for it; see the module text)."""
+
+    def __init__(self, py_func):
+        super().__init__(py_func)
+        self._folder = _folder_digest(str(Path(py_func.__code__.co_filename).resolve().parent))
+
+    def _index_key(self, sig, codegen):
+        return (*super()._index_key(sig, codegen), self._folder)
+
+
+def _with_folder_cache(dispatcher):
+    if getattr(dispatcher, "_cache", None) is not None and isinstance(
+            dispatcher._cache, FunctionCache):
+        dispatcher._cache = _FolderCache(dispatcher.py_func)
+    return dispatcher
 
 
 def njit(*args, **kwargs):
@@ -43,8 +81,9 @@ def njit(*args, **kwargs):
     opts = dict(JIT_OPTIONS)
     opts.update(kwargs)
     if args and callable(args[0]):
-        return numba.njit(**opts)(args[0])
-    return numba.njit(*args, **opts)
+        return _with_folder_cache(numba.njit(**opts)(args[0]))
+    decorate = numba.njit(*args, **opts)
+    return lambda func: _with_folder_cache(decorate(func))
 
 
 def pjit(*args, **kwargs):

@@ -1,0 +1,49 @@
+"""The kernels' on-disk cache sees an edit to a callee in another file."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+CALLER = textwrap.dedent("""
+    from bayespilot._jit import njit
+    from .callee import scale
+
+    @njit
+    def run(x):
+        return scale(x) + 1.0
+""")
+CALLEE = textwrap.dedent("""
+    from bayespilot._jit import njit
+
+    @njit
+    def scale(x):
+        return {factor} * x
+""")
+RUN = "import sys; sys.path.insert(0, {root!r}); from kern.caller import run; print(run(2.0))"
+
+
+def _call(root) -> float:
+    env = dict(os.environ, NUMBA_NUM_THREADS="1")
+    env.pop("NUMBA_CACHE_DIR", None)  # the cache beside the sources, as installed
+    out = subprocess.run([sys.executable, "-c", RUN.format(root=str(root))], env=env,
+                         capture_output=True, text=True, check=True, timeout=300)
+    return float(out.stdout.split()[-1])
+
+
+def test_editing_a_callee_in_another_file_recompiles_its_caller(tmp_path):
+    # numba keys a cached kernel on its own file only: a caller compiled with
+    # the old callee inlined was loaded after the callee's file was edited (a
+    # lab's new block in kernels/_blocks.py ran as the old code).  The 2.0 ->
+    # 3.0 edit keeps the callee's bytecode and its file's size.
+    pkg = tmp_path / "kern"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "caller.py").write_text(CALLER)
+    (pkg / "callee.py").write_text(CALLEE.format(factor="2.0"))
+    assert _call(tmp_path) == 5.0
+    assert list((pkg / "__pycache__").glob("caller.run-*.nbi")), "the caller was not cached"
+    (pkg / "callee.py").write_text(CALLEE.format(factor="3.0"))
+    assert _call(tmp_path) == 7.0
