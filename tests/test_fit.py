@@ -699,3 +699,76 @@ def test_no_bound_warning_for_a_silent_channels_parameters():
     assert fit.summary().count("(not identified)") == 3 and "on a bound" not in fit.summary()
     with pytest.warns(EstimateOnBoundWarning, match="|".join(sorted(motion))):
         _warn_on_bounds(fit)  # (without the likelihood, the record's silence unknown)
+
+
+def test_a_labs_own_threshold_block_is_a_threshold_by_its_declaration(sim):
+    """A lab's nonlinearity names its thresholds (``Nonlinearity.thresholds``): the model then
+    has a threshold, the fitters warn that it is not scanned and the fit reads "with
+    threshold".  An audit's asymmetric dead zone was "without threshold" and unwarned, since
+    only the DeadZone and SoftDeadZone classes were recognised."""
+    import warnings
+    from dataclasses import dataclass
+
+    from bayespilot.kernels import _blocks as B
+    from bayespilot.model import Nonlinearity
+    from bayespilot.fit.three_step import _warn_unnamed_threshold
+
+    @dataclass(frozen=True)
+    class LabDeadZone(Nonlinearity):  # the kernels' dead zone under a lab's class
+        half_width: str = "delta_lab"
+        kind = B.NL_DEADZONE
+
+        @property
+        def parameters(self):
+            return (self.half_width,)
+
+        @property
+        def thresholds(self):
+            return (self.half_width,)
+
+    @dataclass(frozen=True)
+    class Unmarked(LabDeadZone):  # the same block, its threshold not declared
+        @property
+        def thresholds(self):
+            return ()
+
+    par = [Parameter("delta_lab", 0.0, 0.1, 0.0075)]
+    lab = paper_model().with_nonlinearity("vestibular", LabDeadZone(), par)
+    unmarked = paper_model().with_nonlinearity("vestibular", Unmarked(), par)
+    assert lab.has_threshold and not unmarked.has_threshold
+    assert not lab.fix(delta_lab=0.0).has_threshold and lab.fix(delta_lab=0.01).has_threshold
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _warn_unnamed_threshold(lab)
+        _warn_unnamed_threshold(unmarked)
+    assert [str(w.message).split(" is fitted")[0] for w in caught] == ["the threshold delta_lab"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        fit = fit_fast(sim.recording, lab, n_starts=2, seed=0)
+        plain = fit_fast(sim.recording, unmarked, n_starts=2, seed=0)
+    assert fit.threshold and "with threshold" in fit.summary()
+    assert not plain.threshold and "without threshold" in plain.summary()
+    assert fit.neg_log_lik == plain.neg_log_lik  # the same computation either way
+
+
+def test_the_fast_fit_finds_a_threshold_ridge_narrower_than_its_grids():
+    """Noise-free FD with the motion halved: the likelihood's ridge in delta_abs (truth half
+    the paper's, 0.00375, with K_m doubled) is narrower than the profile and scan grids, which
+    ended at 0.0046 and K_m 1.108, 15256 in -ln L above the truth (an audit).  The last,
+    joint step reaches the truth's -ln L."""
+    from bayespilot.presets import paper_parameters
+    from bayespilot.recording import Recording
+
+    truth = paper_parameters("FD")
+    rec = simulate(params=truth, task="FD", motion_gain=1.0, seed=0, duration=60.0).recording
+    half = Recording(dict(rec.signals, theta_ddot_m=rec.signals["theta_ddot_m"] * 0.5),
+                     rec.sample_rate_hz, 0.5, rec.task, rec.metadata, "half")
+    fit = fit_fast(half, seed=0)
+    joint = fit.steps["joint"]
+    assert joint["gap"] > 1000
+    assert fit.params["delta_abs"] == pytest.approx(0.00375, rel=0.01)
+    assert fit.params["K_m"] == pytest.approx(2 * truth["K_m"], rel=0.01)
+    lik = Likelihood(paper_model(), half, discard=fit.settings["discard"])
+    equivalent = dict(truth, K_m=2 * truth["K_m"], delta_abs=truth["delta_abs"] / 2)
+    assert fit.neg_log_lik <= lik.neg_log_lik(equivalent) + 1e-6
+    assert fit.neg_log_lik == pytest.approx(joint["neg_log_lik"], rel=1e-12)

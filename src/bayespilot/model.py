@@ -187,9 +187,19 @@ class Nonlinearity:
         The block's ``NL_*`` code (a class attribute).
     parameters : tuple of str
         Names of the block's parameters, in the kernel's order (p0, p1).
+    thresholds : tuple of str
+        The names among ``parameters`` that are thresholds (half-widths of
+        an input range the block passes nothing through): empty here; a dead
+        zone's ``delta``.  A model with one free is :attr:`PilotModel.has_threshold`
+        and its fits read "with threshold".
     """
 
     __slots__ = ()
+
+    @property
+    def thresholds(self) -> tuple[str, ...]:
+        """The names among ``parameters`` that are thresholds (none by default)."""
+        return ()
 
 
 class Modulation:
@@ -414,6 +424,11 @@ class DeadZone(Nonlinearity):
         """The parameter names, ``(delta,)``."""
         return (self.delta,)
 
+    @property
+    def thresholds(self) -> tuple[str, ...]:
+        """``(delta,)``: the dead zone's half-width is a threshold."""
+        return (self.delta,)
+
 
 @dataclass(frozen=True)
 class SoftDeadZone(Nonlinearity):
@@ -440,6 +455,11 @@ class SoftDeadZone(Nonlinearity):
     def parameters(self) -> tuple[str, ...]:
         """The parameter names, ``(delta, width)``."""
         return (self.delta, self.width)
+
+    @property
+    def thresholds(self) -> tuple[str, ...]:
+        """``(delta,)``: the half-width is a threshold, the corner width is not."""
+        return (self.delta,)
 
 
 @dataclass(frozen=True)
@@ -1165,11 +1185,12 @@ class PilotModel:
 
     @property
     def has_threshold(self) -> bool:
-        """True if some channel has a threshold that is estimated (not fixed at 0)."""
+        """True if some channel has a threshold (:attr:`Nonlinearity.thresholds`) that is
+        estimated or fixed at a nonzero value."""
         for c in self.channels:
             nl = c.nonlinearity
-            if isinstance(nl, (DeadZone, SoftDeadZone)) and not (
-                    nl.delta in self.fixed and self.fixed[nl.delta] == 0.0):
+            if nl is not None and any(self.fixed.get(name, None) != 0.0
+                                      for name in nl.thresholds):
                 return True
         return False
 
