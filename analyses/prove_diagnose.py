@@ -1574,12 +1574,15 @@ def platform_band() -> None:
 
 
 def bayes_factor_repeat(ids: list[int], seeds: int = 4,
-                        shard: tuple[int, int] = (0, 1)) -> None:
+                        shard: tuple[int, int] = (0, 1), tag: str = "") -> None:
     """Is the Bayes factor's stated error its scatter?  ``bayes_factor`` on each case of
     ``ids`` again with nested-sampling seeds 1, 2, ... ``seeds`` (the check used 0), same
     diagnosis, same noise model; per case the mean and sd of ln BF over the seeds (the
     check's seed 0 included) beside the mean stated error.  Resumable, ``--shard K/N``
     splits the (case, seed) pairs; ``analyses/results/diagnose_bayes_factor/repeat*.jsonl``.
+    With ``--tag SUFFIX`` a new measurement in ``diagnose_bayes_factor<SUFFIX>/`` that runs
+    seed 0 too (the stored check's seed 0 and seeds 1-4 were run before 2026-11-28, when
+    the nested runs of seed s were seeded s + k and neighbouring seeds shared most runs).
     """
     import warnings
 
@@ -1589,11 +1592,11 @@ def bayes_factor_repeat(ids: list[int], seeds: int = 4,
     from bayespilot.recording import Recording
 
     numba.set_num_threads(1)
-    out_dir = DEFAULT_OUT.with_name("diagnose_bayes_factor")
+    out_dir = DEFAULT_OUT.with_name("diagnose_bayes_factor" + tag)
     path, every = _shard_files(out_dir, "repeat", shard)
     done = {(r["id"], r["seed"]) for f in every() for line in f.read_text().splitlines()
             if line.strip() for r in [json.loads(line)]}
-    pairs = [(i, s) for i in ids for s in range(1, seeds + 1)]
+    pairs = [(i, s) for i in ids for s in range(0 if tag else 1, seeds + 1)]
     todo = [p for j, p in enumerate(pairs) if j % shard[1] == shard[0] and p not in done]
     by_id = {c["id"]: c for c in cases()}
     res_of: dict = {}
@@ -1613,6 +1616,7 @@ def bayes_factor_repeat(ids: list[int], seeds: int = 4,
                "best_gain": max(r["max_log_lik"] for r in bf.settings["runs_extended"])
                - max(r["max_log_lik"] for r in bf.settings["runs_base"]),
                "elapsed_seconds": bf.elapsed}
+        path.parent.mkdir(parents=True, exist_ok=True)
         with open(path, "a") as f:
             f.write(json.dumps(row) + "\n")
         print(json.dumps(row), flush=True)
@@ -2856,7 +2860,7 @@ def main(argv=None) -> int:
         return 0
     if args.bayes_factor_repeat:
         bayes_factor_repeat([int(x) for x in args.bayes_factor_repeat.split(",")], args.seeds,
-                            (k, n))
+                            (k, n), args.tag)
         return 0
     if args.shared_posterior_check:
         if args.entry is not None and args.entry != "motion-washout":

@@ -828,3 +828,41 @@ def test_summary_tells_an_infinite_bic_from_one_not_computed():
 
     assert [_bic(types.SimpleNamespace(delta_bic=v)) for v in
             (12.34, math.inf, -math.inf, math.nan)] == ["12.3", "inf", "-", "-"]
+
+
+def test_nested_runs_of_neighbouring_seeds_share_no_stream(monkeypatch):
+    """Each nested-sampling run of bayes_factor has its own stream: with seed + k the runs of
+    seed 1 and seed 2 were two thirds the same (an audit), so the scatter over seeds 0-4 that
+    ERR_SCALE was measured from was understated."""
+    from bayespilot import compare as C
+    from bayespilot.diagnose import nested
+    from bayespilot.noise import ARNoise
+
+    seeds = []
+
+    class Ev:
+        log_z, log_z_err, max_log_lik = 0.0, 0.1, 0.0
+
+    def run_all(run, n_runs, reference):
+        for k in range(n_runs):
+            run(k)
+        return Ev(), [], True
+
+    monkeypatch.setattr(C, "evidence", lambda *a, seed, **kw: seeds.append(seed))
+    monkeypatch.setattr(C, "robust_evidence", run_all)
+    monkeypatch.setattr(C, "log_likelihood_at", lambda *a, **kw: 0.0)
+    base = paper_model()
+    ext = get_extension("motion-washout").build(base)
+    rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=21,
+                   duration=10.0).recording
+    noise = ARNoise([0.5])
+    per_seed = []
+    for s in (1, 2):
+        seeds.clear()
+        nested.nested_bayes_factor(rec, base, ext, noise=noise, seed=s, runs=3)
+        assert len(seeds) == 6 and len(set(seeds)) == 6
+        per_seed.append(set(seeds))
+    assert not per_seed[0] & per_seed[1]
+    seeds.clear()
+    nested.nested_bayes_factor(rec, base, ext, noise=noise, seed=1, runs=3)
+    assert set(seeds) == per_seed[0]  # and a seed repeats its runs

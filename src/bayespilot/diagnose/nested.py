@@ -54,7 +54,7 @@ import numpy as np
 
 from .._blas import one_blas_thread
 from .._files import number
-from .._seeds import resolve_seed
+from .._seeds import resolve_seed, spawn_seeds
 from ..model import PilotModel
 from ..noise import ARNoise
 from ..recording import Recording
@@ -227,8 +227,8 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
         A label for the result.
     nlive, runs, sample : int, int, str
         Live points and sampling method of each dynesty run; independent runs
-        per model (the base model's seeds are ``seed + k``, the extended
-        model's ``seed + 1000 + k``).
+        per model, each with its own stream (:func:`bayespilot._seeds.spawn_seeds`;
+        the runs of ``seed`` and ``seed + 1`` share none).
     seed : int or None
         The same seed gives the same Bayes factor; None draws one from fresh
         entropy (recorded in ``settings["seed"]``).
@@ -247,7 +247,7 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
     ValueError
         ``runs`` is not an integer >= 1.
     """
-    from ..compare import (decide, evidence, jeffreys_category, log_likelihood_at,
+    from ..compare import (MAX_RERUNS, decide, evidence, jeffreys_category, log_likelihood_at,
                            robust_evidence)
     from ..sample import COLOURED_DISCARD
 
@@ -271,13 +271,16 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
                                                                   noise=noise, discard=discard)
 
     ref_base = at(base_model, base_params)
+    # independent streams per run and per model (seed + k shared all but one run between
+    # consecutive seeds, and so understated the scatter that ERR_SCALE was measured from)
+    base_seeds, ext_seeds = (spawn_seeds(s, runs + MAX_RERUNS) for s in spawn_seeds(s0, 2))
     ev0, rec0, ok0 = robust_evidence(
-        lambda k: evidence(recording, base_model, seed=s0 + k, **opts), runs,
+        lambda k: evidence(recording, base_model, seed=base_seeds[k], **opts), runs,
         ref_base)
     # the extended model nests the base model: it reaches at least the base model's best
     ref_ext = max(at(extended_model, extended_params), ev0.max_log_lik)
     ev1, rec1, ok1 = robust_evidence(
-        lambda k: evidence(recording, extended_model, seed=s0 + 1000 + k, **opts), runs,
+        lambda k: evidence(recording, extended_model, seed=ext_seeds[k], **opts), runs,
         ref_ext)
     lbf = float(ev1.log_z - ev0.log_z)
     err_stated = float(math.hypot(ev1.log_z_err, ev0.log_z_err))
