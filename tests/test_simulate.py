@@ -397,3 +397,22 @@ def test_a_forcing_line_at_or_above_nyquist_is_refused():
     assert task(1229, fs=100.0).sample_rate_hz == 100.0
     with pytest.raises(ValueError, match="Nyquist"):  # the paper's lines reach 2.6 Hz
         TrackingTask.paper("FD", sample_rate_hz=5.0)
+
+
+def test_a_simulation_writes_its_truth_with_the_recording(tmp_path):
+    """Simulation.write keeps the truth in the sidecar, as `bayespilot simulate` does
+    (write_recording(sim.recording) leaves it out, and a posterior then has no truth)."""
+    from bayespilot.io import read_recording
+    from bayespilot.sample import _true_parameters
+
+    sim = simulate(task="FT", motion_gain=0.75, remnant_fraction=0.2, seed=5, duration=20.0)
+    csv_path, json_path = sim.write(tmp_path / "run")
+    assert (csv_path.name, json_path.name) == ("run.csv", "run.json")
+    rec = read_recording(tmp_path / "run")
+    truth = rec.metadata["simulation"]
+    assert truth["parameters"] == sim.params and truth["seed"] == 5
+    assert truth["remnant_fraction"] == pytest.approx(0.2, abs=1e-3)
+    assert truth["remnant_gain"] == sim.remnant_gain and truth["T_n"] == sim.settings["T_n"]
+    np.testing.assert_array_equal(rec.u, sim.recording.u)
+    assert _true_parameters(rec, list(sim.params)) == sim.params
+    assert "simulation" not in sim.recording.metadata  # the simulation's own is untouched

@@ -367,9 +367,8 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
     sidecar gets a ``simulation`` key with the true parameters, the remnant
     gain and fraction, T_n and the seed, so the truth travels with the file.
     """
-    from .io import write_recording
     from .model import paper_model
-    from .recording import Recording, RecordingError
+    from .recording import RecordingError
     from .simulate import TrackingTask, simulate
 
     try:
@@ -390,14 +389,8 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
         raise CommandFailed(str(exc)) from None
     except ValueError as exc:  # e.g. a remnant fraction this loop cannot reach
         raise UsageError(str(exc)) from None
-    rec = sim.recording
-    meta = dict(rec.metadata)
-    meta["simulation"] = {"parameters": dict(sim.params), "seed": seed,
-                          "remnant_gain": sim.remnant_gain,
-                          "remnant_fraction": sim.remnant_fraction, "T_n": sim.settings["T_n"]}
-    rec = Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta, rec.source)
     try:
-        csv_path, json_path = write_recording(rec, out)
+        csv_path, json_path = sim.write(out)
     except RecordingError as exc:  # e.g. an output path ending in .mat
         raise UsageError(str(exc)) from None
     except OSError as exc:

@@ -22,7 +22,9 @@ shrink as 1/sqrt(rate) at other rates).
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
@@ -242,6 +244,47 @@ class Simulation:
     remnant_fraction: float
     seed: int | None
     settings: dict[str, Any] = field(default_factory=dict)
+
+    def recording_with_truth(self) -> Recording:
+        """The recording with the truth in its metadata, under ``"simulation"``.
+
+        ``metadata["simulation"]`` holds ``parameters`` (the true parameters),
+        ``seed``, ``remnant_gain``, ``remnant_fraction`` and ``T_n``: what
+        ``bayespilot simulate`` writes, so that a posterior of the recording
+        shows the truth (``Posterior.truth``) and the file keeps it.  The
+        diagnosis never reads it.
+
+        Returns
+        -------
+        Recording
+        """
+        meta = dict(self.recording.metadata)
+        meta["simulation"] = {"parameters": {k: float(v) for k, v in self.params.items()},
+                              "seed": self.seed, "remnant_gain": float(self.remnant_gain),
+                              "remnant_fraction": float(self.remnant_fraction),
+                              "T_n": self.settings.get("T_n")}
+        rec = self.recording
+        return Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta,
+                         rec.source)
+
+    def write(self, path: str | os.PathLike) -> tuple[Path, Path]:
+        """Write :meth:`recording_with_truth` as ``path.csv`` + ``path.json``
+        (:func:`bayespilot.io.write_recording`; ``write_recording(sim.recording, ...)``
+        leaves the truth out).
+
+        Parameters
+        ----------
+        path : str or path-like
+            The files' common path, without or with ``.csv``.
+
+        Returns
+        -------
+        (Path, Path)
+            The CSV and the JSON sidecar written.
+        """
+        from .io import write_recording
+
+        return write_recording(self.recording_with_truth(), path)
 
 
 def remnant(n_samples: int, dt: float, gain: float, T_n: float, rng: np.random.Generator,
