@@ -382,5 +382,3 @@ def _unidentified_settings(settings: dict, lik: Likelihood) -> None:
     names = [k for k in lik.model.parameter_names if k in silent]
     if names:
         settings["unidentified"] = names
-
-
