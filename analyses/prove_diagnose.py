@@ -1616,10 +1616,7 @@ def bayes_factor_repeat(ids: list[int], seeds: int = 4,
                "best_gain": max(r["max_log_lik"] for r in bf.settings["runs_extended"])
                - max(r["max_log_lik"] for r in bf.settings["runs_base"]),
                "elapsed_seconds": bf.elapsed}
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "a") as f:
-            f.write(json.dumps(row) + "\n")
-        print(json.dumps(row), flush=True)
+        _append_row(path, row)
     first = {json.loads(line)["id"]: json.loads(line)
              for f in sorted(out_dir.glob("bf*.jsonl")) for line in f.read_text().splitlines()
              if line.strip()}

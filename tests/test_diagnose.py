@@ -15,9 +15,9 @@ from bayespilot.diagnose import DiagnosisResult, diagnose, get_extension, NAMES
 from bayespilot.diagnose.catalogue import G, OTOLITH_DEN, OTOLITH_NUM, specific_force
 from bayespilot.diagnose.decide import fit_ar, flat_tops
 from bayespilot.diagnose.locate import describing_function, forcing_of, remnant_like
-from bayespilot.kernels._censored import censored_neg_log_lik
 from bayespilot.fit.fast import fit_fast
 from bayespilot.fit.result import FitResult
+from bayespilot.kernels._censored import censored_neg_log_lik
 from bayespilot.likelihood import Likelihood
 from bayespilot.model import paper_model
 from bayespilot.simulate import remnant, simulate
@@ -735,9 +735,9 @@ def test_after_a_rebase_the_plotted_base_residual_is_the_tested_base_fits():
     fit = fit_fast(rec, paper_model(), seed=0, n_starts=2, profile_step=0.005, discard=0.0)
     short = {"K_v": 0.754392, "T_vl": 0.242974, "tau_v": 0.224094, "K_m": 0.486554,
              "tau_m": 0.22092, "omega_nm": 11.1284, "zeta_nm": 0.247576, "delta_abs": 0.0093}
-    stuck = FitResult.from_dict(dict(
-        fit.to_dict(), params=short,
-        neg_log_lik=Likelihood(paper_model(), rec).neg_log_lik(short)))
+    lik = Likelihood(paper_model(), rec, discard=0.0)  # as diagnose's base fit
+    stuck = FitResult.from_dict(dict(fit.to_dict(), params=short, steps={},
+                                     neg_log_lik=lik.neg_log_lik(short), vaf=lik.vaf(short)))
     res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, base_fit=stuck)
     assert res.settings["rebased"] and res.settings["rebased"][0]["refitted"]
     eps = Likelihood(paper_model(), rec).residual(res.base["gls_params"])
@@ -843,8 +843,8 @@ def test_nested_runs_of_neighbouring_seeds_share_no_stream(monkeypatch):
     class Ev:
         log_z, log_z_err, max_log_lik = 0.0, 0.1, 0.0
 
-    def run_all(run, n_runs, reference):
-        for k in range(n_runs):
+    def run_all(run, n_runs, reference):  # every run, and two reruns (attempts n_runs, +1)
+        for k in range(n_runs + 2):
             run(k)
         return Ev(), [], True
 
@@ -860,7 +860,7 @@ def test_nested_runs_of_neighbouring_seeds_share_no_stream(monkeypatch):
     for s in (1, 2):
         seeds.clear()
         nested.nested_bayes_factor(rec, base, ext, noise=noise, seed=s, runs=3)
-        assert len(seeds) == 6 and len(set(seeds)) == 6
+        assert len(seeds) == 10 and len(set(seeds)) == 10
         per_seed.append(set(seeds))
     assert not per_seed[0] & per_seed[1]
     seeds.clear()

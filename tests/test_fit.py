@@ -702,9 +702,9 @@ def test_no_bound_warning_for_a_silent_channels_parameters():
 
 
 def test_a_labs_own_threshold_block_is_a_threshold_by_its_declaration(sim):
-    """A lab's nonlinearity names its thresholds (``Nonlinearity.thresholds``): the model then
-    has a threshold, the fitters warn that it is not scanned and the fit reads "with
-    threshold".  An audit's asymmetric dead zone was "without threshold" and unwarned, since
+    """A lab's nonlinearity names its thresholds (``Nonlinearity.thresholds``), in a channel or
+    on the output: the model then has a threshold, fit_fast warns that it is not scanned and
+    the fit reads "with threshold".  An audit's asymmetric dead zone was "without threshold" and unwarned, since
     only the DeadZone and SoftDeadZone classes were recognised."""
     import warnings
     from dataclasses import dataclass
@@ -737,15 +737,21 @@ def test_a_labs_own_threshold_block_is_a_threshold_by_its_declaration(sim):
     unmarked = paper_model().with_nonlinearity("vestibular", Unmarked(), par)
     assert lab.has_threshold and not unmarked.has_threshold
     assert not lab.fix(delta_lab=0.0).has_threshold and lab.fix(delta_lab=0.01).has_threshold
+    # on the model's output too (the threshold-free paper model plus a dead zone on u)
+    on_u = paper_model(threshold=False).with_output(
+        LabDeadZone("u_dead"), [Parameter("u_dead", 0.0, 0.1, 0.001)])
+    assert on_u.has_threshold and not paper_model(threshold=False).has_threshold
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        _warn_unnamed_threshold(lab)
         _warn_unnamed_threshold(unmarked)
-    assert [str(w.message).split(" is fitted")[0] for w in caught] == ["the threshold delta_lab"]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
+        _warn_unnamed_threshold(on_u)
+    assert [str(w.message).split(" is fitted")[0] for w in caught] == ["the threshold u_dead"]
+    with pytest.warns(UserWarning, match="the threshold delta_lab is fitted as an ordinary"):
         fit = fit_fast(sim.recording, lab, n_starts=2, seed=0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
         plain = fit_fast(sim.recording, unmarked, n_starts=2, seed=0)
+    assert not [w for w in caught if "fitted as an ordinary" in str(w.message)]
     assert fit.threshold and "with threshold" in fit.summary()
     assert not plain.threshold and "without threshold" in plain.summary()
     assert fit.neg_log_lik == plain.neg_log_lik  # the same computation either way

@@ -47,3 +47,15 @@ def test_editing_a_callee_in_another_file_recompiles_its_caller(tmp_path):
     assert list((pkg / "__pycache__").glob("caller.run-*.nbi")), "the caller was not cached"
     (pkg / "callee.py").write_text(CALLEE.format(factor="3.0"))
     assert _call(tmp_path) == 7.0
+
+
+def test_the_package_kernels_carry_the_folder_keyed_cache():
+    import pytest
+
+    from bayespilot._jit import _FolderCache, njit
+    from bayespilot.kernels import _blocks, _response
+
+    assert isinstance(_response.periodic_state._cache, _FolderCache)
+    assert isinstance(_blocks.stage_tf._cache, _FolderCache)
+    with pytest.raises(TypeError, match="no signature"):
+        njit("f8(f8)")

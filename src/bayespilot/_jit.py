@@ -18,9 +18,10 @@ checks only the source file of the function it caches, so a kernel kept its
 stale callee after ``kernels/_blocks.py``, ``_oversample.py`` or ``_simd.py``
 alone was edited (their code is compiled into ``_response``'s,
 ``_sensitivity``'s and ``_segmented``'s kernels; a lab adding a block edits
-exactly those files).  Our cache key therefore also holds a digest of every
-source file in the kernel's folder (``_FolderCache``): an edit to any of them
-recompiles the kernels that might inline it.
+exactly those files).  Our cache's source stamp therefore also holds a
+digest of every source file in the kernel's folder and of this file
+(``_FolderCache``): an edit to any of them recompiles every kernel in the
+folder at its first call.
 """
 
 from __future__ import annotations
@@ -45,9 +46,10 @@ JIT_OPTIONS = {"cache": True, "error_model": "numpy", "nogil": True}
 
 @functools.lru_cache(maxsize=None)
 def _folder_digest(folder: str) -> str:
-    """sha256 of the names and contents of every ``.py`` file in ``folder``."""
+    """sha256 of the names and contents of every ``.py`` file in ``folder`` and of this
+    file (``JIT_OPTIONS``)."""
     h = hashlib.sha256()
-    for path in sorted(Path(folder).glob("*.py")):
+    for path in [*sorted(Path(folder).glob("*.py")), Path(__file__)]:
         h.update(path.name.encode())
         h.update(b"\0")
         h.update(path.read_bytes())
@@ -55,35 +57,45 @@ def _folder_digest(folder: str) -> str:
 
 
 class _FolderCache(FunctionCache):
-    """numba's on-disk cache, its key extended by the digest of the sources
-    beside the function's file.  numba keys an entry on the function's own
-    bytecode and invalidates it on its own file's time stamp only, so a jitted
-    callee from another file, compiled into the caller, went stale unseen
-    (written here because numba has no option for it; see the module text)."""
+    """numba's on-disk cache, its source stamp extended by the digest of the sources beside
+    the function's file.  numba invalidates a kernel's cache on its own file only, so a jitted
+    callee from another file, compiled into the caller, went stale unseen (written here
+    because numba has no option for it; see the module text).  An edit anywhere in the folder
+    makes every kernel's index stale, which numba then rewrites."""
 
     def __init__(self, py_func):
         super().__init__(py_func)
-        self._folder = _folder_digest(str(Path(py_func.__code__.co_filename).resolve().parent))
-
-    def _index_key(self, sig, codegen):
-        return (*super()._index_key(sig, codegen), self._folder)
+        digest = _folder_digest(str(Path(py_func.__code__.co_filename).resolve().parent))
+        cache_file = self._cache_file
+        cache_file._source_stamp = (cache_file._source_stamp, digest)
 
 
 def _with_folder_cache(dispatcher):
-    if getattr(dispatcher, "_cache", None) is not None and isinstance(
-            dispatcher._cache, FunctionCache):
-        dispatcher._cache = _FolderCache(dispatcher.py_func)
+    cache = getattr(dispatcher, "_cache", None)
+    if isinstance(cache, FunctionCache):
+        try:
+            dispatcher._cache = _FolderCache(dispatcher.py_func)
+        except AttributeError:  # numba's private cache layout changed: its own cache then
+            import warnings
+
+            warnings.warn("bayespilot: numba's cache internals changed; after editing a file in "
+                          "bayespilot/kernels, delete its __pycache__ folder", RuntimeWarning)
     return dispatcher
 
 
 def njit(*args, **kwargs):
-    """``numba.njit`` with the package defaults; keyword arguments override them."""
+    """``numba.njit`` with the package defaults; keyword arguments override them.
+
+    No signature: numba would compile it at once, with its own cache, before
+    ``_FolderCache`` is attached."""
     opts = dict(JIT_OPTIONS)
     opts.update(kwargs)
     if args and callable(args[0]):
         return _with_folder_cache(numba.njit(**opts)(args[0]))
-    decorate = numba.njit(*args, **opts)
-    return lambda func: _with_folder_cache(decorate(func))
+    if args:
+        raise TypeError("bayespilot's njit takes no signature (kernels compile lazily, so that "
+                        "their disk cache is keyed on the kernels' sources)")
+    return lambda func: _with_folder_cache(numba.njit(**opts)(func))
 
 
 def pjit(*args, **kwargs):

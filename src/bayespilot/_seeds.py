@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["resolve_seed", "spawn_seeds"]
+__all__ = ["resolve_seed", "spawn_seeds", "stream_seed"]
 
 
 def resolve_seed(seed: int | None, name: str = "seed") -> int:
@@ -78,4 +78,28 @@ def spawn_seeds(seed: int, n: int) -> list[int]:
     >>> spawn_seeds(1, 3) == a
     True
     """
-    return [int(s.generate_state(1)[0] >> 1) for s in np.random.SeedSequence(seed).spawn(n)]
+    return [stream_seed(seed, k) for k in range(n)]
+
+
+def stream_seed(seed: int, k: int) -> int:
+    """The ``k``-th of :func:`spawn_seeds` (``seed``, n) for any n > ``k``, made alone: for
+    runs whose number is not known in advance.
+
+    Parameters
+    ----------
+    seed : int
+        The call's seed (>= 0).
+    k : int
+        Which stream (>= 0).
+
+    Returns
+    -------
+    int
+        A 31-bit seed.
+
+    Examples
+    --------
+    >>> stream_seed(1, 2) == spawn_seeds(1, 3)[2]
+    True
+    """
+    return int(np.random.SeedSequence(seed, spawn_key=(k,)).generate_state(1)[0] >> 1)

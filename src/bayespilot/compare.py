@@ -939,7 +939,9 @@ def robust_evidence(run: Callable[[int], Evidence], n_runs: int,
     ----------
     run : callable
         ``run(attempt) -> Evidence``: one nested-sampling run with its own
-        seed (e.g. :func:`evidence` with ``seed=s0 + attempt``).
+        seed (e.g. :func:`evidence` with ``seed=s1 + attempt`` for an ``s1``
+        spawned from the call's seed, as :func:`compare` does, or
+        ``bayespilot._seeds.stream_seed(s1, attempt)``).
     n_runs : int
         Runs to combine.
     reference_max_log_lik : float

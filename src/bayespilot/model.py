@@ -1185,10 +1185,9 @@ class PilotModel:
 
     @property
     def has_threshold(self) -> bool:
-        """True if some channel has a threshold (:attr:`Nonlinearity.thresholds`) that is
-        estimated or fixed at a nonzero value."""
-        for c in self.channels:
-            nl = c.nonlinearity
+        """True if a channel's or the output's nonlinearity has a threshold
+        (:attr:`Nonlinearity.thresholds`) that is estimated or fixed at a nonzero value."""
+        for nl in [c.nonlinearity for c in self.channels] + [self.output]:
             if nl is not None and any(self.fixed.get(name, None) != 0.0
                                       for name in nl.thresholds):
                 return True

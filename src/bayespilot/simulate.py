@@ -260,12 +260,11 @@ class Simulation:
         """
         meta = dict(self.recording.metadata)
         meta["simulation"] = {"parameters": {k: float(v) for k, v in self.params.items()},
-                              "seed": self.seed, "remnant_gain": float(self.remnant_gain),
+                              "seed": None if self.seed is None else int(self.seed),
+                              "remnant_gain": float(self.remnant_gain),
                               "remnant_fraction": float(self.remnant_fraction),
                               "T_n": self.settings.get("T_n")}
-        rec = self.recording
-        return Recording(rec.signals, rec.sample_rate_hz, rec.motion_gain, rec.task, meta,
-                         rec.source)
+        return replace(self.recording, metadata=meta)
 
     def write(self, path: str | os.PathLike) -> tuple[Path, Path]:
         """Write :meth:`recording_with_truth` as ``path.csv`` + ``path.json``

@@ -439,10 +439,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         Diagnose the runs of each subject and condition together (module docs).
     seed, alpha, n_bootstrap, n_calibrate, noise_passes, candidates
         As for :func:`~bayespilot.diagnose.diagnose` (None: its default), the
-        same for every diagnosis (so every recording's bootstrap draws the same
-        normal sequences: each p-value is calibrated, but those of two
-        recordings are not independent draws).  ``candidates`` may give catalogue entries
-        of one's own, registered here; every registered entry the
+        same for every diagnosis (so every recording's bootstrap draws the
+        same normal sequences: each p-value is calibrated, but those of two
+        recordings are not independent draws).  ``candidates`` may give
+        catalogue entries of one's own, registered here; every registered entry the
         diagnoses test (with ``candidates=None``: every registered entry)
         is sent to the workers with each task and registered there, and
         the result files record the candidates by name (with entries

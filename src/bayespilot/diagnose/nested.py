@@ -54,7 +54,7 @@ import numpy as np
 
 from .._blas import one_blas_thread
 from .._files import number
-from .._seeds import resolve_seed, spawn_seeds
+from .._seeds import resolve_seed, spawn_seeds, stream_seed
 from ..model import PilotModel
 from ..noise import ARNoise
 from ..recording import Recording
@@ -247,7 +247,7 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
     ValueError
         ``runs`` is not an integer >= 1.
     """
-    from ..compare import (MAX_RERUNS, decide, evidence, jeffreys_category, log_likelihood_at,
+    from ..compare import (decide, evidence, jeffreys_category, log_likelihood_at,
                            robust_evidence)
     from ..sample import COLOURED_DISCARD
 
@@ -273,14 +273,14 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
     ref_base = at(base_model, base_params)
     # independent streams per run and per model (seed + k shared all but one run between
     # consecutive seeds, and so understated the scatter that ERR_SCALE was measured from)
-    base_seeds, ext_seeds = (spawn_seeds(s, runs + MAX_RERUNS) for s in spawn_seeds(s0, 2))
+    s_base, s_ext = spawn_seeds(s0, 2)
     ev0, rec0, ok0 = robust_evidence(
-        lambda k: evidence(recording, base_model, seed=base_seeds[k], **opts), runs,
+        lambda k: evidence(recording, base_model, seed=stream_seed(s_base, k), **opts), runs,
         ref_base)
     # the extended model nests the base model: it reaches at least the base model's best
     ref_ext = max(at(extended_model, extended_params), ev0.max_log_lik)
     ev1, rec1, ok1 = robust_evidence(
-        lambda k: evidence(recording, extended_model, seed=ext_seeds[k], **opts), runs,
+        lambda k: evidence(recording, extended_model, seed=stream_seed(s_ext, k), **opts), runs,
         ref_ext)
     lbf = float(ev1.log_z - ev0.log_z)
     err_stated = float(math.hypot(ev1.log_z_err, ev0.log_z_err))

@@ -19,13 +19,17 @@ reads as looking ahead.
    ``steps["joint"]`` records it.
 
 Because the profile contains delta_abs = 0 (the model without threshold) and
-the final answer is the best point seen, a fit with threshold is never worse
-than the fit without one.
+the final answer is the best point of steps 2-3 (or step 4's end, when taken),
+a fit with threshold is never worse than the fit without one.  Step 4's end is
+taken only beyond ``CHECK_GAP``, the drop of -ln L at the edge of a 95 %
+profile interval: closer than that the two points are inside each other's
+interval, and the estimate stays the grids' (which keeps it from hanging on a
+Gauss-Newton step across the dead zone's kink).
 
 With ``noise="ar"`` the fit is a prediction-error fit (:mod:`bayespilot.noise`):
 after the multi-start of step 1 on Eq. 4, an AR model of that fit's residual
 (order by BIC) whitens the residual, step 1 is repeated from the same starts
-and from the Eq. 4 optimum on the whitened likelihood, steps 2-3 follow on
+and from the Eq. 4 optimum on the whitened likelihood, steps 2-4 follow on
 it, and the AR model is re-estimated once at the end and the parameters
 refined with it.  In closed loop this removes the bias of the output-error
 fit (measured in ``docs/posteriors.md``); it costs about twice the time.
