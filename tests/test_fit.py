@@ -778,3 +778,17 @@ def test_the_fast_fit_finds_a_threshold_ridge_narrower_than_its_grids():
     equivalent = dict(truth, K_m=2 * truth["K_m"], delta_abs=truth["delta_abs"] / 2)
     assert fit.neg_log_lik <= lik.neg_log_lik(equivalent) + 1e-6
     assert fit.neg_log_lik == pytest.approx(joint["neg_log_lik"], rel=1e-12)
+
+
+def test_joint_refine_refuses_what_is_not_a_fit(sim):
+    from bayespilot.fit.gauss_newton import joint_refine
+
+    with pytest.raises(TypeError, match="must be a Likelihood"):
+        joint_refine("lik", dict(sim.params), 0.0)
+    lik = Likelihood(paper_model(), sim.recording, discard=2.0)
+    with pytest.raises(ValueError, match="params lacks T_vl, tau_v"):
+        joint_refine(lik, {"K_v": 1.0}, 0.0)
+    got = joint_refine(lik, dict(sim.params), lik.neg_log_lik(sim.params))
+    # from the truth the joint maximum is no worse, and its gap is the drop to it
+    assert got["gap"] == pytest.approx(lik.neg_log_lik(sim.params) - got["neg_log_lik"])
+    assert got["neg_log_lik"] == pytest.approx(lik.neg_log_lik(got["params"]), rel=1e-12)

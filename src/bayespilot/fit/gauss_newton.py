@@ -166,6 +166,14 @@ def joint_refine(likelihood: Likelihood, params: Mapping[str, float], neg_log_li
         ``{"neg_log_lik", "params", "gap"}``, ``gap`` = max(0, ``neg_log_lik`` - the end's);
         None if the refinement raised or ended at a non-finite -ln L.
 
+    Raises
+    ------
+    TypeError
+        ``likelihood`` is not a Likelihood.
+    ValueError
+        ``params`` lacks a free parameter of the likelihood's model (refine would start it
+        at its default without a word).
+
     Notes
     -----
     The fitters hold delta_abs in Gauss-Newton and place it by a scan with the other
@@ -174,6 +182,12 @@ def joint_refine(likelihood: Likelihood, params: Mapping[str, float], neg_log_li
     the gap (its estimate is the paper's); ``fit_fast`` takes the end point when the gap
     exceeds :data:`~bayespilot.fit.result.CHECK_GAP`.  About 0.05 s.
     """
+    if not isinstance(likelihood, Likelihood):
+        raise TypeError(f"likelihood must be a Likelihood, got {type(likelihood).__name__}")
+    missing = [n for n in likelihood.model.parameter_names if n not in params]
+    if missing:
+        raise ValueError(f"params lacks {', '.join(missing)}: give the fit's estimate of every "
+                         "free parameter")
     try:
         r = refine(likelihood, params, hold=(), bounded=True)
     except (ValueError, FloatingPointError, np.linalg.LinAlgError):
