@@ -279,6 +279,15 @@ def test_information_criteria_by_hand():
         information_criteria(-1.0, -1.0, 9, 0, 10)
 
 
+def test_comparison_from_dict_without_the_bayes_factor_error_names_it():
+    """A comparison's dict without ``log_bayes_factor_err`` was a KeyError from from_dict,
+    whose docstring promised a ValueError: it is one now, naming the key."""
+    d = {"log_bayes_factor": 1.0, "decision": "none", "evidence_threshold": {},
+         "evidence_none": {}, "information_criteria": {}}
+    with pytest.raises(ValueError, match="not a comparison: no log_bayes_factor_err "):
+        Comparison.from_dict(d)
+
+
 def test_guarded_decision():
     """A lost mode cannot support "none"; a plateau-borne "threshold" is inconclusive."""
     assert _guarded_decision(-8.0, 0.5, True, None) == ("none", "")

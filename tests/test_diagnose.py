@@ -255,6 +255,52 @@ def test_diagnose_rejects_bad_input():
         diagnose(rec, base_fit={"K_v": 1.0})
 
 
+def test_bad_omega_c_is_refused_before_the_base_fit(monkeypatch):
+    """A bad omega_c was refused by the noise model only, after the base fit (an audit: a
+    ValueError seconds into the diagnosis); it is refused with the other settings, before any
+    fit, by diagnose and diagnose_pooled alike.  math.inf and a cut-off below 0.45 of the
+    sampling frequency pass the check."""
+    import bayespilot.fit.fast as fast
+    from bayespilot.diagnose import _check, diagnose_pooled
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("the base fit ran before the settings were checked")
+
+    monkeypatch.setattr(fast, "fit_fast", no_fit)
+    rec = simulate(task="FD", seed=0, duration=20.0).recording
+    other = simulate(task="FD", seed=1, duration=20.0).recording
+    for bad in (-1.0, 0.0, math.nan, "25", True):
+        with pytest.raises(ValueError, match="omega_c must be a positive number of rad/s"):
+            diagnose(rec, omega_c=bad, n_bootstrap=0)
+        with pytest.raises(ValueError, match="omega_c must be a positive number"):
+            diagnose_pooled([rec, other], omega_c=bad, n_bootstrap=0)
+    # 100 Hz: the low-pass needs omega_c below 2 pi 0.45 100 = 282.7 rad/s
+    with pytest.raises(ValueError, match=r"omega_c = 300 rad/s is too close to the Nyquist "
+                                         r"frequency .* 100 Hz.* 282\.7 rad/s"):
+        diagnose(rec, omega_c=300.0, n_bootstrap=0)
+    for good in (None, 25, 282.0, math.inf):
+        assert _check(rec, 0.01, 0, 5.0, None, omega_c=good)
+    with pytest.raises(TypeError, match="Recording"):
+        diagnose_pooled([rec, rec.u])
+
+
+def test_from_dict_without_mismatch_or_base_names_the_key():
+    """A diagnosis dict without ``mismatch`` or ``base`` was a KeyError from from_dict, whose
+    docstring promised a ValueError: it is one now, naming the missing key."""
+    from bayespilot.diagnose import PooledDiagnosisResult
+
+    d = {"physics": "none", "ranking": [], "where": {}, "mismatch": False, "base": {}}
+    for key in ("mismatch", "base"):
+        cut = {k: v for k, v in d.items() if k != key}
+        with pytest.raises(ValueError, match=f"not a complete single-run diagnosis result: "
+                                             f"no {key}$"):
+            DiagnosisResult.from_dict(cut)
+    with pytest.raises(ValueError, match="x.json holds not a complete pooled diagnosis result: "
+                                         "no mismatch"):
+        PooledDiagnosisResult.from_dict({"physics": "none", "ranking": [], "where": {},
+                                         "pooled": True}, source_file="x.json")
+
+
 @pytest.fixture(scope="module")
 def control_result():
     rec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=21,

@@ -439,6 +439,23 @@ def test_cli_fit_prediction_error(sim, tmp_path, capsys):
     assert "--method fast" in capsys.readouterr().err
 
 
+def test_summary_labels_the_whitened_neg_log_lik():
+    """A fit with a noise model (settings["noise"]) has the -ln L of its whitened residual, not
+    comparable with Eq. 4's: its summary says so on the -ln L line (an audit: the line read as
+    Eq. 4's); a fit without one keeps the plain label."""
+    from bayespilot.presets import paper_parameters
+
+    params = dict(paper_parameters("FD"))
+    noise = {"kind": "ar", "order": 1, "a": [0.5]}
+    pem = FitResult(params, -123.456, 80.0, "fast", 0, True, {"noise": noise, "discard": 2.0})
+    white = FitResult(params, -123.456, 80.0, "fast", 0, True, {"noise": None})
+    (line,) = [ln for ln in pem.summary().splitlines() if "VAF = " in ln]
+    assert line.startswith("-ln L (AR-whitened residual) = -123.456   VAF = 80.00 %")
+    (line,) = [ln for ln in white.summary().splitlines() if "VAF = " in ln]
+    assert line.startswith("-ln L = -123.456   VAF = 80.00 %")
+    assert "whitened" not in white.summary()
+
+
 def test_paper_fit_takes_only_a_bool_for_iterate(sim):
     """iterate="False" (what --fit-option iterate=False used to pass) is refused, not taken
     for its truth value (True: the iterated procedure)."""

@@ -412,6 +412,23 @@ def test_fixed_ar_settings_raise(short_sim):
                init=short_sim.params, **SHORT)
 
 
+def test_profiled_ar_refuses_order_zero_before_fitting(short_sim, monkeypatch):
+    """ar="profiled" with ar_order=0 was sampled as AR(1) without a word (an audit): it is
+    refused, saying why, before the initial fit; ar="fixed" still takes order 0 (white)."""
+    import bayespilot.fit.fast as fast
+    from bayespilot.sample import likelihood_options
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("fit_fast ran before the settings were checked")
+
+    monkeypatch.setattr(fast, "fit_fast", no_fit)
+    with pytest.raises(ValueError, match=r"ar_order=0 with ar='profiled'.*order >= 1"
+                                         r".*ar_order=None.*likelihood='eq4'"):
+        sample(short_sim.recording, likelihood="coloured", ar="profiled", ar_order=0, **SHORT)
+    assert likelihood_options(None, "coloured", "fixed", 0)[1] == 0
+    assert likelihood_options(None, "coloured", "profiled", 1)[1] == 0
+
+
 # --- (i) the coloured likelihood with the AR model profiled out ----------------------------------
 def naive_ar_fit(eps, p):
     """Least-squares AR(p) coefficients of eps (numpy lstsq, no mean removed: the output

@@ -525,8 +525,13 @@ def log_likelihood_at(model: PilotModel, recording: Recording, params: Mapping[s
         to the model's bounds.
     noise : ARNoise, optional
         The fixed AR model of ``likelihood="coloured", ar="fixed"``; None: Eq. 4.
-    discard : float
-        Seconds at the start left out.
+    discard : float, default 0
+        Seconds at the start left out.  The default is 0, not :func:`evidence`'s
+        (:data:`bayespilot.sample.COLOURED_DISCARD`, 2 s, for ``"coloured"``;
+        :func:`~bayespilot.likelihood.startup_discard` for ``"eq4"`` on a record
+        not known to be a whole number of forcing periods): to evaluate the
+        likelihood an :func:`evidence` or :func:`compare` integrated, pass the
+        ``discard`` it used (``settings["discard_seconds"]``).
 
     Returns
     -------
@@ -829,7 +834,7 @@ def savage_dickey_from_posterior(posterior: Posterior, model: PilotModel | None 
 
 # --- information criteria ---------------------------------------------------------------------
 def information_criteria(neg_log_lik_threshold: float, neg_log_lik_none: float, k_threshold: int,
-                         k_none: int, n: int) -> dict[str, float]:
+                         k_none: int, n: int) -> dict[str, float | int]:
     """AIC and BIC of both models from their maximum-likelihood -ln L.
 
     ``k_*`` count every estimated parameter, the output-error variance
@@ -855,9 +860,10 @@ def information_criteria(neg_log_lik_threshold: float, neg_log_lik_none: float, 
     -------
     dict
         The inputs (``neg_log_lik_threshold``, ``neg_log_lik_none``,
-        ``k_threshold``, ``k_none``, ``n``; the counts as int) and
-        ``aic_threshold``, ``aic_none``, ``bic_threshold``, ``bic_none``,
-        ``delta_aic``, ``delta_bic`` and ``log_bayes_factor_bic``.
+        ``k_threshold``, ``k_none``, ``n``; the counts as int, the rest
+        float) and ``aic_threshold``, ``aic_none``, ``bic_threshold``,
+        ``bic_none``, ``delta_aic``, ``delta_bic`` and
+        ``log_bayes_factor_bic``.
 
     Raises
     ------
@@ -1125,10 +1131,14 @@ class Comparison:
         Raises
         ------
         ValueError
-            ``d`` lacks what a comparison's dict has: another kind of file.
+            ``d`` lacks what a comparison's dict has (``log_bayes_factor``,
+            ``log_bayes_factor_err``, ``decision``, the two evidences,
+            ``information_criteria``; the message names what is missing):
+            another kind of file.
         """
-        require_keys(d, ("log_bayes_factor", "decision", "evidence_threshold", "evidence_none",
-                         "information_criteria"), "a comparison")
+        require_keys(d, ("log_bayes_factor", "log_bayes_factor_err", "decision",
+                         "evidence_threshold", "evidence_none", "information_criteria"),
+                     "a comparison")
         sd = d.get("savage_dickey")
         def num(v):
             return math.nan if v is None else float(v)
@@ -1432,10 +1442,16 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         The model with a free ``delta_abs`` (default: the paper's).  The model
         without threshold is ``model.fix(delta_abs=0)``.
     likelihood : {"eq4", "coloured"}
-    ar, ar_order
-        For ``"coloured"``: as in :func:`bayespilot.sample.sample` (with
-        ``ar="fixed"`` one AR model, from a prediction-error fit of the model
-        with threshold, serves both models).
+    ar : {"fixed", "sampled"}, default "fixed"
+        For ``"coloured"``: the AR model held fixed (one, from a
+        prediction-error fit of the model with threshold, serves both
+        models) or sampled with the pilot parameters, as in
+        :func:`bayespilot.sample.sample`.  ``"profiled"`` (the default of
+        :func:`~bayespilot.sample.sample`) is refused: the evidence needs a
+        density to integrate.
+    ar_order : int, optional
+        For ``"coloured"``: the order of the AR model, as in
+        :func:`bayespilot.sample.sample`.
     discard : float, optional
         Seconds at the start left out of the likelihood; default 0 for
         ``"eq4"``, :data:`bayespilot.sample.COLOURED_DISCARD` for ``"coloured"``;
@@ -1454,15 +1470,24 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         result (``seed``) and repeats the comparison.
     posterior : Posterior, optional
         An emcee posterior of ``model`` on this recording for the
-        Savage-Dickey cross-check (for ``"coloured"`` with ``ar="fixed"``, its AR
-        model is used for the comparison too).  It must have been sampled on
+        Savage-Dickey cross-check.  For ``"coloured"`` with ``ar="fixed"`` its
+        AR model is used for the comparison too, but only if it was sampled
+        with ``likelihood="coloured", ar="fixed"`` (it holds one,
+        ``settings["noise"]``); a posterior sampled with ``ar="profiled"``
+        (:func:`~bayespilot.sample.sample`'s default) or ``"sampled"`` has
+        none, and the comparison fits its own.  It must have been sampled on
         this recording (``settings["recording_sha256"]``; one saved before that
         was recorded is used with a RuntimeWarning), of ``model``, and, under
         the same likelihood, with the same ``discard`` (and an AR model of
         ``ar_order``, if given); under the other likelihood its Savage-Dickey
         estimate is marked not valid.  If None and ``savage_dickey_samples``,
-        one is sampled (:func:`bayespilot.sample.sample`, started from the
-        nested sampler's best point, ``sample_options`` passed on).
+        one is sampled (:func:`bayespilot.sample.sample`, under the
+        comparison's likelihood, ``sample_options`` passed on), started from
+        the maximum-likelihood point with threshold
+        (``information_criteria["ml_threshold"]``): the nested sampler's
+        best point polished by bounded Gauss-Newton and a scan of delta_abs
+        (left as it is with ``ar="sampled"``), or the maximum without
+        threshold at delta_abs = 0 when that is higher.
     savage_dickey_samples : bool
         False: no Savage-Dickey unless ``posterior`` is given.
     sample_options : mapping, optional

@@ -405,9 +405,14 @@ class Recording:
     Raises
     ------
     RecordingError
-        If a required signal is missing, a signal is complex, not numeric, not
-        finite or of another length, ``t`` does not start at 0, is not uniform
-        or disagrees with ``sample_rate_hz``, or a metadata value is out of
+        If ``signals`` or ``metadata`` is not a mapping; a required signal is
+        missing, a signal is complex, not numeric (text or booleans included),
+        not one-dimensional, not finite or of another length; there are fewer
+        than 2 samples; ``sample_rate_hz`` is not a positive finite number or
+        ``motion_gain`` not a finite number >= 0 (a bool or a string is not a
+        number); ``task`` is not ``"FD"``, ``"FT"`` or ``"other"``; ``t``
+        does not start at 0, is not uniform or disagrees with
+        ``sample_rate_hz``; or a metadata value is out of
         range (the checks :func:`~bayespilot.io.read_recording` makes of a
         JSON sidecar: ``controlled_element_gain`` (not 0) and ``control_gain``
         finite numbers, ``controlled_element`` with non-empty numeric ``num``

@@ -834,6 +834,11 @@ def likelihood_options(model: PilotModel | None, likelihood: str, ar: str,
         _check_int("ar_order", ar_order, 1 if sampled else 0)
         if not sampled and ar_order > MAX_AR_ORDER:
             raise ValueError(f"ar_order must be at most {MAX_AR_ORDER}, got {ar_order}")
+        if likelihood == "coloured" and ar == "profiled" and ar_order == 0:
+            raise ValueError("ar_order=0 with ar='profiled': a profiled AR model needs an order "
+                             ">= 1 (its coefficients are what is re-fitted at every parameter "
+                             "vector); use ar_order=None for the order chosen by BIC, or "
+                             "likelihood='eq4' for white output error")
     return model, ((2 if ar_order is None else int(ar_order)) if sampled else 0)
 
 
@@ -898,7 +903,8 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     ar_order : int, optional
         p of the AR model (``"coloured"`` only).  Default: chosen by BIC (up to
         :data:`~bayespilot.noise.MAX_AR_ORDER`) for ``ar="fixed"`` and
-        ``"profiled"`` (at the initial fit), 2 for ``ar="sampled"``.
+        ``"profiled"`` (at the initial fit; at least 1 for ``"profiled"``),
+        2 for ``ar="sampled"``.  0 (white) is refused with ``ar="profiled"``.
     noise : ARNoise, optional
         ``"coloured"`` with ``ar="fixed"`` only: use this AR model rather than
         estimating one (e.g. to judge several runs by one noise model).
@@ -911,7 +917,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         :func:`~bayespilot.fit.fast.fit_fast` does.
     init : FitResult or mapping, optional
         Centre of the initial ball.  Default: :func:`~bayespilot.fit.fast.fit_fast`
-        with ``seed`` (a prediction-error fit, ``noise="ar"``, for ``"coloured"``).
+        with ``seed``: a prediction-error fit (``noise="ar"``, or with the
+        given ``noise``) for ``"coloured"`` with ``ar="fixed"`` or
+        ``"profiled"``; the white Eq. 4 fit for ``"eq4"`` and for
+        ``ar="sampled"``.
         For ``ar="fixed"`` the AR model is the one of a ``FitResult`` that has
         one (``settings["noise"]``), else estimated from the residual at
         ``init``; for ``ar="sampled"`` the partial autocorrelations start at
@@ -955,12 +964,13 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     Raises
     ------
     ValueError
-        Bad settings, a prior for an unknown parameter or with no
-        probability inside that parameter's bounds, a backend file of
-        another run, or a mapping ``init`` with a parameter the model does
-        not have or one outside its bounds (a FitResult's estimates are moved
-        onto the bounds instead: the paper's unbounded Gauss-Newton step can
-        leave one just outside).
+        Bad settings (among them ``ar_order=0`` with ``ar="profiled"``: a
+        profiled AR model has an order of at least 1), a prior for an
+        unknown parameter or with no probability inside that parameter's
+        bounds, a backend file of another run, or a mapping ``init`` with a
+        parameter the model does not have or one outside its bounds (a
+        FitResult's estimates are moved onto the bounds instead: the paper's
+        unbounded Gauss-Newton step can leave one just outside).
     TypeError
         ``recording``/``model``/``init``/``prior`` of the wrong type.
 

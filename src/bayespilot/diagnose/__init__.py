@@ -14,9 +14,16 @@
 3. **Name**: fit every entry of the catalogue
    (:mod:`bayespilot.diagnose.catalogue`) and test it against the base model
    (likelihood-ratio test on the decision likelihood; flat tops and the
-   censored likelihood for control saturation).  Candidates are ranked by
-   BIC and by how well the located evidence shows their signature; the
-   answer is ``"none"`` when no test passes the family-wise level ``alpha``.
+   censored likelihood for control saturation).  The answer is ``"none"``
+   when no test passes the family-wise level ``alpha`` (Bonferroni over the
+   candidates tested).  Among the candidates that pass, the one with the
+   largest ``log_bayes_factor`` (the Schwarz approximation of ln BF, delta
+   BIC / 2) is chosen, unless others come within 2 of its delta BIC: then,
+   of these, the one whose signature the located evidence shows most
+   strongly (``signature_score``; the larger delta BIC breaks a tie).  Exact
+   flat tops (p = 0, an infinite delta BIC) decide.  The ranking is by
+   ``log_bayes_factor``, the candidates that pass before the others and
+   those not testable last, with the chosen one first.
    Optionally (``n_calibrate``) the chosen candidate's test is first
    calibrated by a parametric bootstrap of the base model
    (:mod:`bayespilot.diagnose.calibrate`); a candidate that fails its
@@ -175,6 +182,11 @@ def _kind_check(d: Mapping[str, Any], pooled: bool, source_file: str | None) -> 
                          f"diagnosis: read it with "
                          f"{'PooledDiagnosisResult' if d.get('pooled') else 'DiagnosisResult'}"
                          f".from_json")
+    # (read unconditionally by from_dict: a KeyError without this)
+    missing = [k for k in ("mismatch",) + (() if pooled else ("base",)) if k not in d]
+    if missing:
+        raise ValueError(f"{where} not a complete {'pooled' if pooled else 'single-run'} "
+                         f"diagnosis result: no {', '.join(missing)}")
 
 
 def _bic(c) -> str:
@@ -238,7 +250,8 @@ class DiagnosisResult(_JSONSummary):
         The located evidence with bootstrap p-values.
     base : dict
         The base model's fit: ``params``, ``neg_log_lik`` (Eq. 4), ``vaf``,
-        ``gls_neg_log_lik`` and ``gls_params`` (decision likelihood).
+        ``gls_neg_log_lik``, ``gls_params`` and ``gls_stderr`` (the GLS
+        estimates' standard errors; decision likelihood).
     chosen : CandidateResult or None
         The chosen extension's fit (parameters, standard errors).
     settings : dict
@@ -400,7 +413,8 @@ class DiagnosisResult(_JSONSummary):
         ------
         ValueError
             ``d`` is not a diagnosis's, or is a pooled one's
-            (:meth:`PooledDiagnosisResult.from_dict`).
+            (:meth:`PooledDiagnosisResult.from_dict`), or lacks ``mismatch`` or
+            ``base`` (the message names it).
         """
         from .locate import Evidence
         from .nested import ExtensionBayesFactor
@@ -457,7 +471,7 @@ class DiagnosisResult(_JSONSummary):
 
 
 def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1,
-           n_calibrate=0, noise_passes=1):
+           n_calibrate=0, noise_passes=1, omega_c=None):
     from ..model import MAX_OVERSAMPLE
     from ..recording import Recording
 
@@ -485,6 +499,20 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1
             or not 1 <= oversample <= MAX_OVERSAMPLE:
         raise ValueError(f"oversample must be an integer in [1, {MAX_OVERSAMPLE}], "
                          f"got {oversample!r}")
+    if omega_c is not None:
+        # (the noise model refuses these too, but only after the base fit)
+        if isinstance(omega_c, bool) or not isinstance(omega_c, (int, float, np.integer,
+                                                                 np.floating)) \
+                or not omega_c > 0:
+            raise ValueError(f"omega_c must be a positive number of rad/s (math.inf: the "
+                             f"whole band), got {omega_c!r}")
+        limit = 2 * math.pi * 0.45 * recording.sample_rate_hz
+        if math.isfinite(omega_c) and not omega_c < limit:
+            raise ValueError(f"{_where(recording)}omega_c = {omega_c:g} rad/s is too close "
+                             f"to the Nyquist frequency of a recording sampled at "
+                             f"{recording.sample_rate_hz:g} Hz: the low-pass needs it below 0.45 "
+                             f"of the sampling frequency, {limit:.4g} rad/s (math.inf keeps "
+                             f"the whole band)")
     if isinstance(candidates, str):
         raise ValueError(f"candidates must be a list of catalogue names, got the string "
                          f"{candidates!r} (write [{candidates!r}])")
@@ -926,12 +954,15 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     Raises
     ------
     TypeError
-        If ``recording`` is not a Recording.
+        If ``recording`` is not a Recording, or ``base_fit`` (given) is not a
+        :class:`~bayespilot.fit.result.FitResult`.
     ValueError
         If ``alpha`` is not in (0, 1); ``n_bootstrap`` or ``n_calibrate`` is
         not an integer >= 0; ``noise_passes`` or ``oversample`` is not an
         integer in its range; ``skip_seconds`` is not in [0, half the
-        recording); ``candidates`` is a string or one Extension, empty,
+        recording); ``omega_c`` (given) is not a positive number, or is
+        finite and not below 0.45 of the sampling frequency (in rad/s);
+        ``candidates`` is a string or one Extension, empty,
         repeats a name, names one that is not in the catalogue or gives an
         Extension that :func:`~bayespilot.diagnose.catalogue.register_extension`
         refuses; or
@@ -969,7 +1000,7 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     from . import locate as L
 
     names = _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample,
-                   n_calibrate, noise_passes)
+                   n_calibrate, noise_passes, omega_c)
     if base_fit is not None:
         from ..fit.result import FitResult
 

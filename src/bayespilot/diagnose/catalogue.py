@@ -6,7 +6,8 @@ model's extension point (``add_stage``, ``add_channel``,
 ``with_nonlinearity``, ``with_modulation``, ``with_output``), the new
 parameters with their bounds, a short physics description, and the signature
 it should leave in the located evidence (keys of
-:func:`bayespilot.diagnose.locate.locate`).
+:data:`bayespilot.diagnose.locate.EVIDENCE`, which
+:func:`~bayespilot.diagnose.locate.statistics` measures).
 
 The six entries and their conventions
 -------------------------------------

@@ -791,8 +791,14 @@ class CandidateResult:
         2 delta_neg_log_lik (GLS) or the flat-top count (saturation).
     df : int
     p_value : float
-        Calibrated p-value (chi2(df) on the GLS likelihood; the flat-top test
-        for saturation).
+        The test's p-value.  On the GLS likelihood the asymptotic one
+        (:func:`lr_p_value`: chi2(df), or the chi-bar-squared mixture for a
+        one-parameter boundary null), unless the test was calibrated (with
+        ``n_calibrate > 0``, the test of each candidate chosen in turn;
+        ``calibration`` is then not None): then the calibrated one,
+        ``calibration.p_value`` (the reference's at the statistic over
+        max(1, scale)).  For saturation the flat-top test's (never
+        calibrated).
     delta_bic : float
         BIC(base) - BIC(extension); > 0 favours the extension.
     log_bayes_factor : float

@@ -130,9 +130,12 @@ class PooledDiagnosisResult(_JSONSummary):
     elapsed : float
         Wall time, s.
     arrays : dict
-        Not in the JSON: ``noise`` (each run's noise model), ``base_model`` and
+        Not in the JSON: ``noise`` (each run's noise model), ``base_model``,
         ``fits`` (each GLS candidate's pooled fit, the parameters per run),
-        which :func:`~bayespilot.diagnose.shared_posterior` starts from.
+        which :func:`~bayespilot.diagnose.shared_posterior` starts from, and
+        ``final_fits`` (the chosen extension's refit after the test,
+        :func:`pooled_final_fit`, the parameters per run; None without a
+        refit), whose delta_abs it also reads.
     posterior : SharedPosterior or None
         Set by :func:`~bayespilot.diagnose.shared_posterior`.
     """
@@ -230,7 +233,8 @@ class PooledDiagnosisResult(_JSONSummary):
         ------
         ValueError
             ``d`` is not a diagnosis's, or is a single run's
-            (:meth:`DiagnosisResult.from_dict`).
+            (:meth:`DiagnosisResult.from_dict`), or lacks ``mismatch`` (the
+            message names it).
         """
         from .locate import Evidence
         from .posterior import SharedPosterior
@@ -791,9 +795,12 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
 
     Raises
     ------
+    TypeError
+        One of ``recordings`` is not a Recording.
     ValueError
         Fewer than two recordings, one recording given twice (the same
-        signals, under whatever path), or a bad setting (named).
+        signals, under whatever path), or a bad setting (named; as for
+        :func:`~bayespilot.diagnose.diagnose`, ``omega_c`` among them).
 
     Warns
     -----
@@ -814,7 +821,7 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     names = None
     for rec in recs:
         names = _check(rec, alpha, n_bootstrap, skip_seconds, candidates, oversample,
-                       n_calibrate, noise_passes)
+                       n_calibrate, noise_passes, omega_c)
     _refuse_repeats(recs)
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     mixed = pooling_disagreements(recs)

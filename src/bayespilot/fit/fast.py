@@ -140,6 +140,9 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         The mean of u over the fitted samples is more than
         :data:`~bayespilot.fit.three_step.OFFSET_RATIO` of its standard
         deviation (a stick offset; u is taken as zero-mean about the trim).
+    UserWarning
+        The model has a free dead-zone threshold not named ``delta_abs``: it
+        is fitted as an ordinary parameter, without the threshold profile.
 
     Examples
     --------

@@ -80,7 +80,11 @@ class FitResult:
         Every parameter of the model by name (fixed ones included, e.g.
         ``delta_abs = 0`` without threshold).
     neg_log_lik : float
-        Final -ln L (Eq. 4, output-error variance profiled out).
+        Final -ln L (Eq. 4, output-error variance profiled out).  With a noise
+        model (:func:`~bayespilot.fit.fast.fit_fast` with ``noise="ar"`` or an
+        :class:`~bayespilot.noise.ARNoise`; ``settings["noise"]``) it is Eq. 4
+        of the residual whitened by that model, not comparable with the -ln L
+        of a fit without one.
     vaf : float
         Variance accounted for, percent.
     method : {"paper", "fast"}
@@ -88,7 +92,10 @@ class FitResult:
         The seed used (drawn from fresh entropy when ``seed=None`` was
         given); None in results saved before it was recorded.
     threshold : bool
-        Whether delta_abs was estimated.
+        Whether the model has a threshold (delta_abs, or another
+        nonlinearity's), estimated or held fixed at a nonzero value
+        (:attr:`~bayespilot.model.PilotModel.has_threshold`); False when it is
+        fixed at 0.
     settings : dict
         Every setting of the procedure.
     steps : dict
@@ -336,7 +343,9 @@ class FitResult:
         throughout the record, e.g. the motion channel's on a run without motion: where the
         fit stopped, not estimates; the fitters record them), and ``*`` beside an
         estimate on a bound of the search box (:attr:`at_bounds`; not for those not
-        identified), named under the table.
+        identified), named under the table.  The -ln L of a fit with a noise model
+        (``settings["noise"]``) is labelled ``-ln L (AR-whitened residual)``: it is not
+        comparable with Eq. 4's of a fit without one.
         """
         unknown = [k for k in self.settings.get("unidentified") or () if k in self.params]
         fixed = set(self.fixed)
@@ -350,7 +359,9 @@ class FitResult:
             mark = "*" if k in edge else " "
             note = "  (fixed)" if k in fixed else "  (not identified)" if k in unknown else ""
             lines.append(f"{k:<10} {v:>12.6g}{mark}  {self._unit(k)}{note}".rstrip())
-        lines.append(f"-ln L = {self.neg_log_lik:.3f}   VAF = {self.vaf:.2f} %   "
+        # (a fit with a noise model: Eq. 4 of the whitened residual, not comparable with Eq. 4's)
+        label = "-ln L (AR-whitened residual)" if self.settings.get("noise") else "-ln L"
+        lines.append(f"{label} = {self.neg_log_lik:.3f}   VAF = {self.vaf:.2f} %   "
                      f"time = {self.elapsed:.1f} s")
         discard = self.settings.get("discard") or 0.0
         if discard:  # (the -ln L is of the samples after it: say so)

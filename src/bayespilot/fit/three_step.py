@@ -261,6 +261,20 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         The mean of u over the fitted samples is more than
         :data:`~bayespilot.fit.three_step.OFFSET_RATIO` of its standard
         deviation (a stick offset; u is taken as zero-mean about the trim).
+    NotAtMaximumWarning
+        With delta_abs estimated, the result is more than
+        :data:`~bayespilot.fit.result.CHECK_GAP` in -ln L above the maximum
+        that Gauss-Newton with delta_abs free reaches from it
+        (``steps["check"]``): the paper's single pass of Steps II and III
+        stopped short (``iterate=True``, or :func:`~bayespilot.fit.fast.fit_fast`,
+        reaches it).
+    RuntimeWarning
+        With ``iterate``, Steps II and III still changed delta_abs or -ln L
+        after ``max_iterations`` passes (``steps["iterations_converged"]`` is
+        False).
+    UserWarning
+        The model has a free dead-zone threshold not named ``delta_abs``: it
+        is fitted as an ordinary parameter, without the threshold scan.
 
     Examples
     --------
