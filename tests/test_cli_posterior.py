@@ -139,6 +139,8 @@ def test_compare_refuses_the_posterior_of_another_recording(sampled, run_dir, ca
     (["sample", "{d}/run", "-o", "{d}/x.txt"], "must end in .nc"),
     (["sample", "{d}/run", "-o", "{d}/x.nc", "--likelihood", "white"], "invalid choice"),
     (["sample", "{d}/run", "-o", "{d}/x.nc", "--max-steps", "0"], "must be >= 1"),
+    (["sample", "{d}/run", "-o", "{d}/x.nc", "--likelihood", "coloured", "--ar-order", "0"],
+     "argument --ar-order: 0 with --ar profiled"),
     (["compare", "{d}/missing"], "not found"),
     (["compare", "{d}/run", "--posterior", "{d}/params.json"], "not a netCDF"),
     (["compare", "{d}/run", "--nlive", "5"], "must be >= 20"),

@@ -812,6 +812,11 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix != ".nc":
         raise UsageError(f"argument -o/--output: {out} must end in .nc (a netCDF file)")
+    if args.likelihood == "coloured" and args.ar == "profiled" and args.ar_order == 0:
+        # (sample() refuses it too, in its keywords' words: said here in the options')
+        raise UsageError("argument --ar-order: 0 with --ar profiled: a profiled AR model needs "
+                         "an order >= 1; leave --ar-order out for the order chosen by BIC, or "
+                         "give --likelihood eq4 for white output error")
     rec = _read(args.recording)
     _check_writable(out, "posterior")  # hours of sampling are not lost to an unwritable file
     if args.json:
