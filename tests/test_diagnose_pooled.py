@@ -507,3 +507,11 @@ def test_a_pooled_diagnosis_read_back_from_its_json_is_the_same(washout_runs, wa
     (tmp_path / "s.json").write_text(json.dumps(dict(res.to_dict(), pooled=False)))
     with pytest.raises(ValueError, match="a single-run diagnosis: read it with DiagnosisResult"):
         PooledDiagnosisResult.from_json(tmp_path / "s.json")
+
+
+def test_a_pooled_result_missing_a_runs_part_names_it():
+    """A damaged pooled result file: a run without its base fit is named (it was a KeyError)."""
+    d = {"pooled": True, "physics": "none", "mismatch": False, "ranking": [], "where": {},
+         "runs": [{"base": {"params": {}}, "where": {}}, {"where": {}}]}
+    with pytest.raises(ValueError, match="run 2 has no base"):
+        PooledDiagnosisResult.from_dict(d)

@@ -233,15 +233,20 @@ class PooledDiagnosisResult(_JSONSummary):
         ------
         ValueError
             ``d`` is not a diagnosis's, or is a single run's
-            (:meth:`DiagnosisResult.from_dict`), or lacks ``mismatch`` (the
-            message names it).
+            (:meth:`DiagnosisResult.from_dict`), or lacks ``mismatch`` or a
+            run's ``base`` or ``where`` (the message names it).
         """
         from .locate import Evidence
         from .posterior import SharedPosterior
 
         ranking, chosen = _ranking_and_chosen(d, True, source_file)
         runs = []
-        for r in d.get("runs", ()):
+        for i, r in enumerate(d.get("runs", ()), start=1):
+            lost = [k for k in ("base", "where") if k not in r]
+            if lost:  # (a KeyError below without this)
+                raise ValueError(f"{source_file + ' holds' if source_file else 'this dict is'} "
+                                 f"not a complete pooled diagnosis result: run {i} has no "
+                                 f"{' and '.join(lost)}")
             run = dict(r, base=_base_from(r["base"]),
                        where={k: Evidence.from_dict(e) for k, e in r["where"].items()},
                        delta_neg_log_lik=numbers(r.get("delta_neg_log_lik")))
