@@ -598,6 +598,37 @@ def test_canal_start_without_theta_is_that_with_theta(fd_sim, fd_rec):
     assert np.max(np.abs(with_theta - tiled)) > 1.0 * np.std(with_theta)
 
 
+
+def _with_theta(rec: Recording, theta: np.ndarray) -> Recording:
+    return Recording(dict(rec.signals, theta=theta), rec.sample_rate_hz, rec.motion_gain,
+                     rec.task, rec.metadata)
+
+
+def test_canal_start_from_a_noisy_theta_is_the_clean_ones(fd_sim, fd_rec):
+    """A noisy pitch sensor (2e-4 rad rms, 0.011 deg) made the three-point difference of
+    theta at t = 0 several times the pitch rate (0.060 rad/s where it was 0.019 on an audit's
+    run; the fast fit's K_m 20 % low); theta is checked against theta_ddot_m over the first
+    second and the least-squares rate taken.  A clean theta keeps the three-point rate
+    exactly (the results of clean recordings do not move), and a theta of the other sign,
+    which theta_ddot_m contradicts, gives way to the rate of theta_ddot_m alone."""
+    from bayespilot.likelihood import _pitch_rate_at_start
+
+    rec = fd_sim.recording
+    th = np.asarray(rec["theta"])
+    three_point = rec.motion_gain * (-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * rec.dt)
+    assert _pitch_rate_at_start(rec) == three_point
+    noisy = _with_theta(rec, th + make_rng(3).normal(0.0, 2e-4, th.size))
+    th_n = np.asarray(noisy["theta"])
+    naive_rate = rec.motion_gain * (-3.0 * th_n[0] + 4.0 * th_n[1] - th_n[2]) / (2.0 * rec.dt)
+    error = abs(_pitch_rate_at_start(noisy) - three_point)
+    assert error < 2e-4  # rad/s; the pitch rate's rms is about 0.03
+    assert abs(naive_rate - three_point) > 20 * error  # what the difference alone gave
+    canal = Likelihood(paper_model(), rec).X[1]
+    assert np.max(np.abs(Likelihood(paper_model(), noisy).X[1] - canal)) < 0.01 * np.std(canal)
+    flipped = _with_theta(rec, -th)
+    assert _pitch_rate_at_start(flipped) == _pitch_rate_at_start(fd_rec)
+    assert abs(_pitch_rate_at_start(flipped) - three_point) < 1e-3  # (not -three_point)
+
 # --- records that are not whole periods of the forcing ----------------------------------------
 def test_whole_periods_is_read_from_the_forcing_or_its_columns():
     """From the sidecar's forcing (lines against the record length), else from f_t and f_d
