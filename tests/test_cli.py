@@ -109,6 +109,25 @@ def test_simulate_same_seed_same_files(tmp_path, capsys):
     assert (tmp_path / "a.csv").read_bytes() != (tmp_path / "c.csv").read_bytes()
 
 
+def test_simulate_writes_the_subject_that_a_pooled_batch_groups_by(tmp_path, capsys):
+    """diagnose-batch --pool groups runs by the sidecar's subject, which simulate could not
+    write: a newcomer following the docs had to edit the JSON by hand."""
+    from bayespilot.diagnose.batch import plan_batch
+
+    stems = [tmp_path / f"s1-run{k}" for k in (1, 2)]
+    for k, stem in enumerate(stems):
+        assert _run(capsys, "simulate", "--duration", "10", "--seed", k, "--subject", "S1",
+                    "-q", "-o", stem)[0] == 0
+    recs = [read_recording(s) for s in stems]
+    assert [r.metadata["subject"] for r in recs] == ["S1", "S1"]
+    (task,) = plan_batch([str(s) for s in stems], recs, pool=True)
+    assert task.key == "S1_FD_k1" and len(task.paths) == 2
+    for bad in ("", " S1", "a/b"):
+        code, _, err = _run(capsys, "simulate", "--subject", bad, "-o", tmp_path / "x")
+        assert code == 2 and "argument --subject" in err
+    assert not (tmp_path / "x.csv").exists()
+
+
 def test_simulate_without_remnant(tmp_path, capsys):
     code, out, _ = _run(capsys, "simulate", "--remnant-fraction", "0", "--duration", "10",
                         "-o", tmp_path / "r")

@@ -355,17 +355,27 @@ def _warnings_of(category, handle):
         yield
 
 
+def _subject_name(text: str) -> str:
+    """--subject: a non-empty name without surrounding blanks or a slash (diagnose-batch
+    names its files after it)."""
+    if not text.strip() or text != text.strip() or "/" in text or "\\" in text:
+        raise argparse.ArgumentTypeError(f"a subject must be a non-empty name without leading "
+                                         f"or trailing blanks or a slash, got {text!r}")
+    return text
+
+
 def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: str, motion_gain: float,
                         seed: int, remnant_fraction: float | None = None,
                         remnant_gain: float | None = None, duration: float | None = None,
-                        sample_rate_hz: float | None = None):
+                        sample_rate_hz: float | None = None, subject: str | None = None):
     """Simulate one run with the paper's model and write it; returns (simulation, csv, json).
 
     The paper's task ``task`` (FD or FT) at ``motion_gain``, recorded at
     ``sample_rate_hz`` (None: the paper's 100 Hz); a rate whose Nyquist
     frequency is not above every forcing line is a usage error.  The JSON
     sidecar gets a ``simulation`` key with the true parameters, the remnant
-    gain and fraction, T_n and the seed, so the truth travels with the file.
+    gain and fraction, T_n and the seed, so the truth travels with the file;
+    ``subject`` (optional) goes into it as the format's ``subject`` key.
     """
     from .model import paper_model
     from .recording import RecordingError
@@ -389,6 +399,12 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
         raise CommandFailed(str(exc)) from None
     except ValueError as exc:  # e.g. a remnant fraction this loop cannot reach
         raise UsageError(str(exc)) from None
+    if subject is not None:  # (what diagnose-batch --pool groups the runs by)
+        from dataclasses import replace
+
+        sim = replace(sim, recording=replace(sim.recording,
+                                             metadata=dict(sim.recording.metadata,
+                                                           subject=subject)))
     try:
         csv_path, json_path = sim.write(out)
     except RecordingError as exc:  # e.g. an output path ending in .mat
@@ -470,7 +486,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     sim, csv_path, json_path = _simulate_and_write(
         args.output, params, task=args.task, motion_gain=args.motion_gain, seed=args.seed,
         remnant_fraction=None if args.remnant_gain is not None else args.remnant_fraction,
-        remnant_gain=args.remnant_gain, duration=args.duration, sample_rate_hz=rate)
+        remnant_gain=args.remnant_gain, duration=args.duration, sample_rate_hz=rate,
+        subject=args.subject)
     rec = sim.recording
     _say(args, f"wrote {csv_path} and {json_path}: task {rec.task}, K_theta = {rec.motion_gain:g}, "
                f"{rec.duration:g} s at {rec.sample_rate_hz:g} Hz, seed {args.seed}, "
@@ -1584,6 +1601,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--params", metavar="FILE.json",
                    help="JSON object overriding some Table 3 parameters by name, or a fit's "
                         "JSON ('bayespilot fit --json': its params) (see below)")
+    p.add_argument("--subject", type=_subject_name, default=None, metavar="S",
+                   help="the sidecar's subject (what 'diagnose-batch --pool' groups runs by; "
+                        "default: none)")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_simulate)
 
