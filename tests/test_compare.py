@@ -525,6 +525,9 @@ def test_compare_refuses_a_posterior_of_another_recording_or_model(monkeypatch):
     with pytest.raises(ValueError, match=r"the posterior is of the model 'other', the "
                        r"comparison of 'Pool et al\. \(2012\)'"):
         compare(a, posterior=_posterior_of(a, model="other"))
+    with pytest.raises(ValueError, match=r"or give none \(the sample command's --oversample "
+                       r"is part of the model"):  # (a console audit: the CLI's docs ran into it)
+        compare(a, posterior=_posterior_of(a, model="Pool et al. (2012), 8x vestibular"))
     with pytest.raises(ValueError, match=r"the posterior's model holds K_m = 1 fixed, the "
                        r"comparison's nothing"):
         compare(a, posterior=_posterior_of(a, fixed={"K_m": 1.0}))

@@ -1311,7 +1311,7 @@ A fit's JSON ('bayespilot fit --json') is taken too: its "params", all eight.
 Examples:
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
   bayespilot simulate --task FD --motion-gain 0.5 --params mine.json --duration 40 -o out/short
-  bayespilot simulate --task FD --sample-rate 50 -o out/run50
+  bayespilot simulate --task FD --remnant-fraction 0.2 --sample-rate 50 -o out/run50
   bayespilot simulate --task FD --params out/run-fit.json --seed 4 -o out/refit
 """
 
@@ -1465,7 +1465,7 @@ paper: --dpi then only sets the resolution of the pair plot's point clouds).
 Examples:
   bayespilot plot out/run-post.nc -o out/run-plots
   bayespilot plot out/run-post.nc -o out/run-plots --format pdf
-  bayespilot plot out/run-post.nc -o out/run-plots --dpi 300
+  bayespilot plot out/run-post.nc -o out/run-plots --format svg --dpi 300
 """
 
 DIAGNOSE_BATCH_EPILOG = """\

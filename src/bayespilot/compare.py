@@ -93,6 +93,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import re
 import sys
 import time
 import types
@@ -1386,8 +1387,11 @@ def _check_posterior(posterior: Posterior, recording: Recording, model: PilotMod
                          f"of {here}, or give none")
     what = s.get("model")
     if what is not None and what != model.name:
+        hint = (" (the sample command's --oversample is part of the model: give the "
+                "comparison the same)" if re.search(r", \d+x ", f"{what} {model.name}") else "")
         raise ValueError(f"the posterior is of the model {what!r}, the comparison of "
-                         f"{model.name!r}; sample the posterior of {model.name!r}, or give none")
+                         f"{model.name!r}; sample the posterior of {model.name!r}, or give "
+                         f"none{hint}")
     fixed = s.get("fixed")
     if fixed is not None and {k: float(v) for k, v in fixed.items()} != \
             {k: float(v) for k, v in model.fixed.items()}:
