@@ -513,3 +513,184 @@ def test_a_labs_own_keys_do_not_warn(tmp_path):
                 control_mode="pitch", simulation={"seed": 1}, date="2024-05-01", subject="S1",
                 run=3, notes="x", controlled_element={"num": [1.5], "den": [1.0, 0.0]})
     assert questionable(rec) == [] and _questionable_reasons(tmp_path, rec) == []
+
+
+# --- columns that contradict each other: signs, an offset in e, spikes in u -----------------------
+_NEW_CHECKS = ("looks inverted", "e has an offset", "of u jump away")
+
+
+def _new_reasons(rec: Recording) -> list[str]:
+    """The reasons of questionable() from the column checks (not a short record's, say)."""
+    return [r for r in questionable(rec) if any(k in r for k in _NEW_CHECKS)]
+
+
+def _lab_task(rate: float = 50.0):
+    """The other lab's task of docs/model.md: K/(s (s + 2)), K_delta_u 1, 40.96 s."""
+    from bayespilot.forcing import Multisine
+    from bayespilot.simulate import TrackingTask
+
+    T = 40.96
+    w0 = 2 * np.pi / T
+    rng = np.random.default_rng(1)
+    ft = Multisine(w0, [3, 7, 13, 23, 37, 61], [0.03, 0.02, 0.012, 0.006, 0.004, 0.003],
+                   rng.uniform(0, 2 * np.pi, 6))
+    fd = Multisine(w0, [4, 8, 14, 24, 38, 62], [0.004, 0.006, 0.01, 0.015, 0.02, 0.025],
+                   rng.uniform(0, 2 * np.pi, 6))
+    return TrackingTask(ft, fd, motion_gain=1.0, controlled_element=([8.0], [1.0, 2.0, 0.0]),
+                        control_gain=1.0, sample_rate_hz=rate, duration=T, run_in=T / 2)
+
+
+_LAB_PILOT = dict(K_v=0.8, T_vl=0.3, tau_v=0.25, K_m=0.4, tau_m=0.2, omega_nm=11.0,
+                  zeta_nm=0.25, delta_abs=0.004)
+
+
+@pytest.fixture(scope="module")
+def clean_runs():
+    """Clean simulated runs: the paper's FD and FT tasks at 50 to 1000 Hz, with and without
+    remnant, short and not whole periods, no motion, a washout in the pilot, another lab's
+    plant (whose e does not average out: mean 0.21 of std(e) over its 40.96 s)."""
+    import dataclasses
+
+    from bayespilot import diagnose
+    from bayespilot.model import paper_model
+    from bayespilot.simulate import TrackingTask, simulate
+
+    def paper(task, rate, **kw):
+        return dataclasses.replace(TrackingTask.paper(task, kw.pop("motion_gain", 1.0)),
+                                   sample_rate_hz=rate)
+
+    washout = diagnose.get_extension("motion-washout").build(paper_model())
+    return {
+        "FD 100 Hz 30 s F_n 0.15": simulate(task="FD", remnant_fraction=0.15, seed=1,
+                                            duration=30.0).recording,
+        "FT 100 Hz 23.7 s F_n 0.3": simulate(task="FT", remnant_fraction=0.3, seed=2,
+                                             duration=23.7).recording,
+        "FD 50 Hz 20 s no remnant": simulate(task=paper("FD", 50.0), seed=3,
+                                             duration=20.0).recording,
+        "FT 1000 Hz 10 s": simulate(task=paper("FT", 1000.0), remnant_gain=0.1, seed=4,
+                                    duration=10.0).recording,
+        "FD no motion": simulate(task="FD", motion_gain=0.0, remnant_fraction=0.05, seed=5,
+                                 duration=30.0).recording,
+        "FD washout pilot": simulate(washout, task="FD", remnant_fraction=0.15, seed=6,
+                                     duration=30.0).recording,
+        "other lab": simulate(params=_LAB_PILOT, task=_lab_task(), remnant_gain=0.17,
+                              seed=2).recording,
+    }
+
+
+def _logged_through(rec: Recording, num, den) -> Recording:
+    """rec with theta_ddot_m as a lab logs it after a filter (a washout), discretised."""
+    from scipy import signal
+
+    b, a = signal.bilinear(num, den, fs=rec.sample_rate_hz)
+    return rec.with_signals(theta_ddot_m=signal.lfilter(b, a, rec.theta_ddot_m))
+
+
+def _variants(rec: Recording) -> dict[str, Recording]:
+    """Clean variants a lab makes: u clipped at the stops, u quantised by an 8-bit converter,
+    the motion logged after a washout (omega_w 1 rad/s)."""
+    sd = float(np.std(rec.u))
+    q = 1.0 / 2 ** 8
+    return {"clipped u": rec.with_signals(u=np.clip(rec.u, -sd, sd)),
+            "8-bit u": rec.with_signals(u=np.round(rec.u / q) * q),
+            "washout-logged motion": _logged_through(rec, [1, 0, 0], [1, 1.4, 1.0])}
+
+
+def test_clean_recordings_raise_none_of_the_column_checks(clean_runs, tmp_path):
+    for name, rec in clean_runs.items():
+        assert _new_reasons(rec) == [], name
+        for what, variant in _variants(rec).items():
+            assert _new_reasons(variant) == [], f"{name}, {what}"
+    # and the shipped ones: tests/data/valid, the example's washout run
+    root = Path(__file__).parent.parent
+    for stem in (Path(__file__).parent / "data" / "valid" / "tiny",
+                 root / "analyses" / "results" / "diagnose" / "example" / "washout_run"):
+        if stem.with_suffix(".csv").exists():
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", QuestionableRecordingWarning)
+                assert _new_reasons(read_recording(stem)) == [], stem
+
+
+@pytest.mark.parametrize("run", ["FD 100 Hz 30 s F_n 0.15", "FT 100 Hz 23.7 s F_n 0.3",
+                                 "other lab"])
+@pytest.mark.parametrize("column, identity", [
+    ("e", "e = f_t - theta"),
+    ("u", "theta = G(s) (K_delta_u u + f_d)"),
+    ("theta_ddot_m", "theta_ddot_m = K_theta theta''"),
+])
+def test_a_column_of_the_wrong_sign_is_named(clean_runs, run, column, identity):
+    rec = clean_runs[run]
+    flipped = rec.with_signals(**{column: -rec[column]})
+    reasons = _new_reasons(flipped)
+    assert len(reasons) == 1, reasons
+    culprit = {"theta_ddot_m": "theta_ddot_m or of theta"}.get(column, column)
+    assert reasons[0].startswith(f"the sign of {culprit} looks inverted: {identity}")
+    assert re.search(r"\) = [+-][01]\.\d\d, but holds with \S+( \(or \S+\))? turned round "
+                     r"\(correlation \+(0\.9\d|1\.00)\)", reasons[0]), reasons[0]
+
+
+def test_a_flipped_theta_is_named_by_every_identity_it_is_in(clean_runs):
+    rec = clean_runs["FD 100 Hz 30 s F_n 0.15"]
+    reasons = _new_reasons(rec.with_signals(theta=-rec["theta"]))
+    assert [r.split(":")[0] for r in reasons] == [
+        "the sign of theta looks inverted", "the sign of theta_ddot_m or of theta looks inverted",
+        "the sign of theta looks inverted"]
+    # a motion system whose sign convention turned theta and its acceleration round together
+    both = rec.with_signals(theta=-rec["theta"], theta_ddot_m=-rec.theta_ddot_m)
+    assert [r.split(":")[0] for r in _new_reasons(both)] == [
+        "the sign of theta looks inverted"] * 2
+
+
+def test_the_sign_checks_need_their_columns(clean_runs):
+    rec = clean_runs["FD 100 Hz 30 s F_n 0.15"]
+    bare = Recording({k: rec[k] for k in ("t", "e", "u", "theta_ddot_m")}, rec.sample_rate_hz,
+                     rec.motion_gain, rec.task, rec.metadata)
+    assert _new_reasons(bare.with_signals(e=-rec.e, u=-rec.u)) == []
+    # no motion: theta_ddot_m all zeros says nothing of a sign
+    still = clean_runs["FD no motion"]
+    assert not np.any(still.theta_ddot_m) and _new_reasons(still) == []
+
+
+def test_a_flipped_column_warns_when_read_and_at_the_cli(clean_runs, params, tmp_path, capsys):
+    rec = clean_runs["FD 100 Hz 30 s F_n 0.15"]
+    write_recording(rec.with_signals(e=-rec.e), tmp_path / "lab")
+    with pytest.warns(QuestionableRecordingWarning, match=re.escape(
+            f"{tmp_path / 'lab'}: the sign of e looks inverted: e = f_t - theta (the format's "
+            f"definition of e) fails, corr(e, f_t - theta) = -1.00, but holds with e turned "
+            f"round (correlation +1.00)")):
+        read_recording(tmp_path / "lab")
+    code, out, err = _run(capsys, "loglik", tmp_path / "lab", "--params", params, "-q")
+    assert code == 0
+    assert any(line.startswith("bayespilot: warning: ") and "sign of e looks inverted" in line
+               for line in err.splitlines()), err
+
+
+@pytest.mark.parametrize("run", ["FD 100 Hz 30 s F_n 0.15", "FT 100 Hz 23.7 s F_n 0.3",
+                                 "other lab"])
+def test_an_offset_in_e_warns(clean_runs, run):
+    rec = clean_runs[run]
+    sd = float(np.std(rec.e))
+    reasons = _new_reasons(rec.with_signals(e=rec.e + 0.3 * sd))
+    assert len(reasons) == 1 and reasons[0].startswith(
+        "e has an offset: e - (f_t - theta), which the format defines as 0, has a mean of "), reasons
+    assert "0.30 of e's standard deviation" in reasons[0]
+    assert _new_reasons(rec.with_signals(e=rec.e - 0.1 * sd)) == []
+
+
+def test_spikes_in_u_warn_with_their_number_and_times(clean_runs):
+    for name in ("FD 100 Hz 30 s F_n 0.15", "FT 1000 Hz 10 s", "FD 50 Hz 20 s no remnant"):
+        rec = clean_runs[name]
+        u = np.array(rec.u)
+        k = rec.n_samples // 2
+        u[k] += 50 * np.std(rec.u)
+        reasons = _new_reasons(rec.with_signals(u=u))
+        assert len(reasons) == 1 and reasons[0].startswith(
+            "1 sample(s) of u jump away from their neighbours (spikes)"), (name, reasons)
+        assert f"at t = {rec.t[k]:.6g} s" in reasons[0]
+    rec = clean_runs["FD 100 Hz 30 s F_n 0.15"]
+    u = np.array(rec.u)
+    at = np.arange(200, 2800, 130)  # 20 samples, 5 sd(u) each
+    u[at] -= 5 * np.std(rec.u)
+    reasons = _new_reasons(rec.with_signals(u=u))
+    assert len(reasons) == 1 and reasons[0].startswith("20 sample(s) of u jump away"), reasons
+    assert "at t = 2, 3.3, 4.6, 5.9, 7.2, ... s" in reasons[0]

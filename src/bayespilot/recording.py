@@ -18,7 +18,7 @@ import numpy as np
 
 __all__ = ["Recording", "RecordingError", "QuestionableRecordingWarning", "questionable",
            "REQUIRED_SIGNALS", "OPTIONAL_SIGNALS", "OPTIONAL_KEYS", "TASKS", "SHORT_RECORDING_S",
-           "LOW_SAMPLE_RATE_HZ"]
+           "LOW_SAMPLE_RATE_HZ", "OFFSET_RATIO"]
 
 #: Columns every recording must have (recording format, version 1).
 REQUIRED_SIGNALS = ("t", "e", "u", "theta_ddot_m")
@@ -52,8 +52,9 @@ class QuestionableRecordingWarning(UserWarning):
     Issued by :func:`~bayespilot.io.read_recording` and
     :func:`~bayespilot.io.read_mat` for a record shorter than
     :data:`SHORT_RECORDING_S` (the paper's runs are 81.92 s) or sampled below
-    :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz), or whose metadata
-    contradicts its data or looks mistyped (see :func:`questionable`), and by
+    :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz), whose metadata
+    contradicts its data or looks mistyped, or whose columns contradict each
+    other (a sign, an offset in e, spikes in u; see :func:`questionable`), and by
     :func:`~bayespilot.fit.fast.fit_fast` and
     :func:`~bayespilot.fit.three_step.fit_paper` for a control output u with
     an offset (its mean more than
@@ -80,7 +81,15 @@ def questionable(recording: "Recording") -> list[str]:
         ``theta_ddot_m`` column that is not all zeros; a ``control_gain``
         that is not positive; a metadata key that looks like a misspelling of
         an optional key of the recording format (``controlled_elment``; keys
-        that merely extend one, such as ``subject_id``, are not).
+        that merely extend one, such as ``subject_id``, are not); a column
+        whose sign contradicts the others (e = f_t - theta; theta_ddot_m of
+        the sign of K_theta theta''; theta = G(s) (K_delta_u u + f_d) with
+        the sidecar's plant: each only when its columns are there, see
+        :data:`SIGN_R2_MIN`); an offset in e against f_t - theta over
+        :data:`OFFSET_RATIO` of std(e); spikes in u (:data:`SPIKE_K`,
+        :data:`SPIKE_SD`).  See "Checks of the columns against each other" in
+        docs/recording-format.md for the thresholds and what they were
+        measured on.
     """
     reasons = []
     if recording.duration < SHORT_RECORDING_S:
@@ -115,7 +124,226 @@ def questionable(recording: "Recording") -> list[str]:
         if near is not None:
             reasons.append(f"unknown key {key!r} (did you mean {near!r}?): it is kept but "
                            f"ignored, as the recording format does with unknown keys")
+    with np.errstate(all="ignore"):  # a record of extreme values says nothing, quietly
+        reasons += _sign_problems(recording)
+        spikes = _spike_problem(recording)
+    if spikes:
+        reasons.append(spikes)
     return reasons
+
+
+#: |mean| / std above which an offset is warned of: in u over the fitted samples, by the
+#: fitters (:func:`bayespilot.fit.three_step._warn_offset`, where its calibration is
+#: given), and in e, against f_t - theta, by :func:`questionable`.  e's own mean is no
+#: measure of an offset: it does not average out over a run (clean simulated runs: up to 0.31
+#: of std(e) over 30 s, 0.21 on the 40.96-s whole-period run of docs/model.md, 0.54 over
+#: 10 s), while e - (f_t - theta) is 0 to rounding on a clean record however short; an offset
+#: of 0.3 std(e) moved K_v by 2 run-to-run standard deviations, one of 1 std(e) halved it.
+OFFSET_RATIO = 0.2
+#: The sign checks (:func:`_sign_problems`) fit each identity between the recorded columns by
+#: least squares with a free coefficient per term, and judge the signs of the coefficients only
+#: when the fit explains at least this fraction of the variance of the identity's left side
+#: (104 clean simulated records: R^2 at least 0.9997, 0.94 with u clipped, every judged
+#: coefficient 0.96 to 1.34, while a column of the other sign gives -1; a theta_ddot_m logged
+#: after a washout at 4 rad/s (R^2 0.37) or a platform's lag and delay (0.003), or a plant the
+#: sidecar does not describe, explains less and is not judged: only signs are checked).
+SIGN_R2_MIN = 0.5
+#: ... and only the coefficients of terms that carry at least this fraction of the left
+#: side's standard deviation (an all but zero f_t or f_d says nothing of its sign).
+SIGN_TERM_MIN = 0.1
+#: The sign checks low-pass both sides of an identity (zero phase, 4th order) at the lower of
+#: this (Hz) and a fifth of the sample rate before differentiating, and leave out this many
+#: seconds (at most a tenth of the record) at each end, where the filter starts up.
+SIGN_CUTOFF_HZ = 5.0
+SIGN_EDGE_S = 1.0
+#: A sample of u is a spike when it stands out from the median of its four neighbours by more
+#: than SPIKE_K times the median such deviation (scaled as a standard deviation) AND by more
+#: than SPIKE_SD times the (median-absolute-deviation) standard deviation of u.  Clean
+#: simulated records (50 to 1000 Hz, remnant 0 to 0.3): at most 10.3 times the median and
+#: 0.17 standard deviations; a clipped u's corners reach 587 times the median (a quantised
+#: u's median is 0) but stay under 0.18 standard deviations, hence the second condition.
+SPIKE_K = 15.0
+SPIKE_SD = 2.0
+
+
+def _lowpassed(x: np.ndarray, rate: float) -> np.ndarray:
+    from scipy import signal
+
+    sos = signal.butter(4, min(SIGN_CUTOFF_HZ, 0.2 * rate), fs=rate, output="sos")
+    return signal.sosfiltfilt(sos, np.asarray(x, float))
+
+
+def _poly_d(coeffs: np.ndarray, x: np.ndarray, dt: float) -> np.ndarray:
+    """p(d/dt) x for p's coefficients (highest power first), by repeated central
+    differences."""
+    out = np.zeros_like(x)
+    deriv = x
+    for c in coeffs[::-1]:
+        if c:
+            out = out + c * deriv
+        deriv = np.gradient(deriv, dt)
+    return out
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    den = math.sqrt(float(a @ a) * float(b @ b))
+    return float(a @ b) / den if den > 0 else 0.0
+
+
+#: The identities the sign checks test: (left-side column, [term columns], the identity as
+#: said, the correlation as said).
+_IDENTITIES = {
+    "error": ("e", ["f_t", "theta"], "e = f_t - theta (the format's definition of e)",
+              "corr(e, f_t - theta)"),
+    "motion": ("theta_ddot_m", ["theta"], "theta_ddot_m = K_theta theta'' (the motion is "
+               "the pitch acceleration, of the same sign)", "corr(theta_ddot_m, theta'')"),
+    "plant": ("theta", ["u", "f_d"], "theta = G(s) (K_delta_u u + f_d) with the sidecar's "
+              "controlled element G", "corr(den(s) theta, num(s) (K_delta_u u + f_d))"),
+}
+
+
+def _sign_statistics(recording: "Recording") -> dict[str, dict[str, Any]]:
+    """For each identity between the columns the recording has (:data:`_IDENTITIES`): the
+    least-squares fit of its left side on its terms (each with the format's sign), as
+    ``{"r2", "coef" (per term), "share" (|coef| * std(term) / std(left)), "corr" (as
+    recorded)}``.  theta_ddot_m and the plant are compared after a zero-phase low-pass
+    (:data:`SIGN_CUTOFF_HZ`) and without :data:`SIGN_EDGE_S` at each end."""
+    sig = recording.signals
+    n = recording.n_samples
+    rate = recording.sample_rate_hz
+    edge = min(int(round(SIGN_EDGE_S * rate)), n // 10)
+    keep = slice(edge, n - edge)
+    if n - 2 * edge < max(16, int(2.0 * rate)):  # under 2 s left: nothing to judge
+        return {}
+    lp: dict[str, np.ndarray] = {}
+
+    def low(name: str) -> np.ndarray:
+        if name not in lp:
+            lp[name] = _lowpassed(sig[name], rate)
+        return lp[name]
+
+    def moves(name: str) -> bool:
+        return name in sig and bool(np.ptp(sig[name]) > 0)
+
+    sides: dict[str, tuple[np.ndarray, list[np.ndarray]]] = {}
+    if moves("e") and moves("theta") and "f_t" in sig:
+        sides["error"] = (np.asarray(sig["e"], float)[keep],
+                          [np.asarray(sig["f_t"], float)[keep],
+                           -np.asarray(sig["theta"], float)[keep]])
+    if moves("theta") and recording.motion_gain > 0 and moves("theta_ddot_m"):
+        sides["motion"] = (low("theta_ddot_m")[keep],
+                           [_poly_d(np.array([1.0, 0.0, 0.0]), low("theta"), recording.dt)[keep]])
+    if moves("theta") and moves("u") and "f_d" in sig:
+        num, den = recording.controlled_element
+        num = np.trim_zeros(num, "f")
+        den = np.trim_zeros(den, "f")
+        sides["plant"] = (_poly_d(den, low("theta"), recording.dt)[keep],
+                          [_poly_d(num, recording.control_gain * low("u"), recording.dt)[keep],
+                           _poly_d(num, low("f_d"), recording.dt)[keep]])
+    out: dict[str, dict[str, Any]] = {}
+    if "error" in sides:  # e's constant offset from f_t - theta, over the whole record
+        e = np.asarray(sig["e"], float)
+        gap = e - (np.asarray(sig["f_t"], float) - np.asarray(sig["theta"], float))
+        offset = {"offset": float(gap.mean()), "sd_e": float(e.std())}
+    for name, (lhs, terms) in sides.items():
+        y = lhs - lhs.mean()
+        X = np.stack([x - x.mean() for x in terms], axis=1)
+        sy = float(np.sqrt(y @ y))
+        if not sy > 0:
+            continue
+        coef = np.linalg.lstsq(X, y, rcond=None)[0]
+        res = y - X @ coef
+        r2 = 1.0 - float(res @ res) / float(y @ y)
+        share = np.abs(coef) * np.sqrt((X * X).sum(axis=0)) / sy
+        signs = np.where(share >= SIGN_TERM_MIN, np.sign(coef), 1.0)
+        out[name] = {"r2": r2, "coef": coef, "share": share,
+                     "corr": _corr(lhs, np.sum(terms, axis=0)),
+                     "corr_fixed": _corr(lhs, np.sum([k * x for k, x in zip(signs, terms)],
+                                                     axis=0))}
+        if name == "error":
+            out[name].update(offset)
+    return out
+
+
+def _sign_problems(recording: "Recording") -> list[str]:
+    """One sentence per identity between the recorded columns (:data:`_IDENTITIES`) that
+    holds (R^2 >= :data:`SIGN_R2_MIN`) with a term of the opposite sign: the column(s)
+    whose sign turned round explains it with the fewest columns."""
+    try:
+        stats = _sign_statistics(recording)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError):  # pragma: no cover
+        return []
+    reasons = []
+    for name, st in stats.items():
+        if st["r2"] < SIGN_R2_MIN:
+            continue
+        left, cols, what, measure = _IDENTITIES[name]
+        big = st["share"] >= SIGN_TERM_MIN
+        negative = [c for c, b, k in zip(cols, big, st["coef"]) if b and k < 0]
+        if not negative:
+            if name == "error" and abs(st["offset"]) > OFFSET_RATIO * st["sd_e"]:
+                reasons.append(
+                    f"e has an offset: e - (f_t - theta), which the format defines as 0, has a "
+                    f"mean of {st['offset']:.3g} rad, {abs(st['offset']) / st['sd_e']:.2f} of "
+                    f"e's standard "
+                    f"deviation {st['sd_e']:.3g} (more than {OFFSET_RATIO:g}); the model takes "
+                    f"e as the error the pilot saw, zero when on target, so an offset biases "
+                    f"the fit (K_v, T_vl, K_m) and can make diagnose name a channel the pilot "
+                    f"does not have; remove it from e (or, if theta or f_t was logged about "
+                    f"another zero, e.g. a trim attitude, from that column)")
+            continue
+        positive = [c for c, b, k in zip(cols, big, st["coef"]) if b and k > 0]
+        # turning round the left side and the positive terms is the same as turning round
+        # the negative terms (the identity is linear): name the shorter, both on a tie
+        options = sorted([[left] + positive, negative], key=len)
+        if len(options[0]) < len(options[1]):
+            options = options[:1]
+        culprit = " or of ".join(" and ".join(o) for o in options)
+        turned = " (or ".join(" and ".join(o) for o in options) + ")" * (len(options) - 1)
+        reasons.append(
+            f"the sign of {culprit} looks inverted: {what} fails, {measure} = "
+            f"{st['corr']:+.2f}, but holds with {turned} turned round "
+            f"(correlation {st['corr_fixed']:+.2f}); check the sign conventions of the logged "
+            f"columns (the model needs e, u and theta_ddot_m with the recording format's "
+            f"signs) and turn the wrong one round")
+    return reasons
+
+
+def _spike_statistics(recording: "Recording") -> tuple[np.ndarray, float, float]:
+    """(|u - median of its 4 neighbours| at samples 2..n-3, the median of it scaled as a
+    standard deviation, the MAD standard deviation of u)."""
+    u = np.asarray(recording.u, float)
+    if u.size < 5:
+        return np.zeros(0), 0.0, 0.0
+    neighbours = np.stack([u[:-4], u[1:-3], u[3:-1], u[4:]])
+    r = np.abs(u[2:-2] - np.median(neighbours, axis=0))
+    scale = 1.4826 * float(np.median(r))
+    sd = 1.4826 * float(np.median(np.abs(u - np.median(u))))
+    if not sd > 0:
+        sd = float(np.std(u))
+    return r, scale, sd
+
+
+def _spike_problem(recording: "Recording") -> str | None:
+    """A sentence on the spikes in u (:data:`SPIKE_K`, :data:`SPIKE_SD`), or None."""
+    r, scale, sd = _spike_statistics(recording)
+    if r.size == 0 or not sd > 0:
+        return None
+    limit = max(SPIKE_K * scale, SPIKE_SD * sd)
+    at = np.flatnonzero(r > limit) + 2
+    if at.size == 0:
+        return None
+    t = recording.t
+    first = ", ".join(f"{t[k]:.6g}" for k in at[:5]) + (", ..." if at.size > 5 else "")
+    peak = float(r.max())
+    return (f"{at.size} sample(s) of u jump away from their neighbours (spikes), by up to "
+            f"{peak:.3g} rad, {peak / sd:.3g} standard deviations of u, where the run's "
+            f"sample-to-sample scatter is {scale:.3g} (a sample is a spike past "
+            f"{SPIKE_K:g} times that and {SPIKE_SD:g} standard deviations), at t = {first} s; "
+            f"the fit takes them as the pilot's control, so remove them (interpolate over "
+            f"them, or cut the record) before fitting")
 
 
 def _near_miss(name: Any, known: "list[str] | tuple[str, ...]") -> str | None:

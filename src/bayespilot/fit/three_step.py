@@ -24,7 +24,7 @@ import numpy as np
 from ..likelihood import (Likelihood, _checked_discard, _startup_default, _startup_reason,
                           _unidentified)
 from ..model import PilotModel, paper_model
-from ..recording import Recording
+from ..recording import OFFSET_RATIO as _OFFSET_RATIO, Recording
 from .gauss_newton import joint_refine, refine
 from .result import CHECK_GAP, FitResult, NotAtMaximumWarning
 from .scan import scan_parameter
@@ -103,7 +103,10 @@ def _check_fittable(recording: Recording, model: PilotModel, discard: float) -> 
 #: offset of 0.02 rad on a simulated FD run (std(u) 0.032 rad: ratio 0.63) moved delta_abs
 #: from 0.0097 to 0.0148 and K_m from 0.60 to 0.67 while the VAF hid it (80.9 -> 80.5 %); at
 #: 0.2 an offset of a fifth of u's spread is warned of, four times the simulated maximum.
-OFFSET_RATIO = 0.2
+#: The same ratio is applied to an offset in e, by
+#: :func:`bayespilot.recording.questionable` when the recording is read (against
+#: f_t - theta, since e's own mean does not average out over a run as u's does).
+OFFSET_RATIO = _OFFSET_RATIO
 
 
 def _warn_offset(recording: Recording, u: np.ndarray, skip: int, discard: float) -> None:
