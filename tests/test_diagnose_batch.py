@@ -440,7 +440,8 @@ def test_summary_covers_every_diagnosis_in_the_folder_made_with_these_settings(
     assert [ln.split(",")[0] for ln in lines[head + 1:-1]] == ["s5-run1", "s6-run1", "s7-run1",
                                                                "s8-run1"]
     assert lines[-1] == (f"wrote {out / 'summary.csv'} (with 3 diagnoses an earlier run made "
-                         f"in {out} with these settings) and one <key>.json per diagnosis")
+                         f"in {out} with these settings), {out / 'summary.png'} and one "
+                         f"<key>.json per diagnosis")
 
 
 def test_cli_a_diagnosis_from_other_settings_is_a_usage_error(done_without_reports, capsys):

@@ -1131,7 +1131,9 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
         reports = " with its report in <key>/"
     scope = (f" (with {earlier} diagnos{'is' if earlier == 1 else 'es'} an earlier run made "
              f"in {args.out} with these settings)" if earlier > 0 else "")
-    _say(args, f"wrote {Path(args.out) / 'summary.csv'}{scope} and one <key>.json per "
+    png = Path(args.out) / "summary.png"  # (written when any diagnosis finished)
+    _say(args, f"wrote {Path(args.out) / 'summary.csv'}{scope}"
+               f"{f', {png}' if png.is_file() else ''} and one <key>.json per "
                f"diagnosis{reports}")
     if summary.failed:
         raise CommandFailed(f"{summary.failed} of {summary.total} diagnoses failed (messages in "
