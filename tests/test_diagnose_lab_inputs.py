@@ -296,3 +296,110 @@ def test_the_progress_bar_counts_every_replicate_and_ends_full(lab_rec, monkeypa
     bar = bars[-1]
     assert res.physics == "motion-washout"
     assert bar.closed_at == (bar.total, bar.total) and bar.total == 2 + 1 + 2 + 1
+
+
+# --- a quantised u on a grid not through 0; a bootstrap whose replicates all fail; a base
+# --- fit on a bound of its box (the nuisance audit)
+def _with_u(rec: Recording, u) -> Recording:
+    signals = dict(rec.signals)
+    signals["u"] = np.asarray(u, float)
+    return Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, rec.metadata)
+
+
+def test_a_quantised_u_is_recognised_whatever_its_grid_offset(lab_rec):
+    """An 8-bit u, centred (u - mean(u), as the offset warning advises) or on a trimmed grid,
+    is as quantised as on a grid through 0: its peaks' repeats are no flat tops."""
+    from bayespilot.diagnose.decide import flat_tops
+    from bayespilot.diagnose.locate import _grid, _quantum
+
+    q = 1.0 / 2**8
+    uq = np.round(lab_rec.u / q) * q
+    tops = flat_tops(uq)["n_samples"]
+    assert tops > 0  # the peaks repeat on this grid (the false control-saturation's cause)
+    for u in (uq, uq - uq.mean(), uq + 0.37 * q, uq - 10.3 * q):
+        step, offset = _grid(u)
+        assert step == pytest.approx(q, rel=1e-9) and abs(offset) <= q / 2
+        assert np.allclose((u - offset) / step, np.rint((u - offset) / step), atol=1e-6)
+        assert flat_tops(u)["n_samples"] == tops  # (the count and the limits shift with u)
+        assert flat_tops(u)["hi"] - flat_tops(u)["lo"] == pytest.approx(uq.max() - uq.min())
+    assert _quantum(lab_rec.u) == 0.0  # full precision
+    clipped = np.clip(lab_rec.u, -0.2, 0.2)  # a real limit, unquantised: flat tops decide
+    assert _quantum(clipped) == 0.0 and flat_tops(clipped)["n_samples"] > 0
+    # the diagnosis: not a finding without a bootstrap (it named control-saturation, p = 0)
+    res, said, others = _diagnose(_with_u(lab_rec, uq - uq.mean()), n_bootstrap=0,
+                                  candidates=["control-saturation"])
+    (sat,) = res.ranking
+    assert res.physics == "none" and sat.p_value == 1.0, sat.reason
+    assert "u is quantised" in sat.reason and "not a finding" in sat.reason
+
+
+def test_bootstrap_replicates_that_all_fail_are_said(lab_rec, monkeypatch):
+    """Every replicate's closed loop failing (a sign-flipped u's base fit) left every located
+    p-value "n/a" without a word; now an EvidenceWarning, the settings and the summary say it."""
+    import sys
+
+    from bayespilot.diagnose import _dropped_note
+
+    def diverges(*args, **kwargs):
+        raise RuntimeError("the closed loop diverged")
+
+    monkeypatch.setattr(sys.modules["bayespilot.simulate"], "simulate", diverges)
+    res, said, others = _diagnose(lab_rec, n_bootstrap=3)
+    assert others == []
+    assert len(said) == 1, said
+    assert "only 0 of 3 bootstrap replicates survived (3 closed loop(s) diverged)" in said[0]
+    assert "destabilises the recorded plant" in said[0] and "control_gain" in said[0]
+    assert said[0] == f"{lab_rec.source}: {res.settings['evidence_notes'][0]}"
+    boot = res.settings["bootstrap"]
+    assert boot["replicates"] == 0 and boot["dropped"] == 3 and boot["diverged"] == 3
+    assert all(not math.isfinite(e.p_value) for e in res.where.values())
+    line = "only 0 of 3 replicates survived"
+    assert line in res.summary()
+    assert line in type(res).from_dict(res.to_dict()).summary()
+    # some survived: the p-values are coarser, and said so; all survived: nothing
+    part = _dropped_note({"replicates": 2, "dropped": 1, "diverged": 0}, 3)
+    assert "only 2 of 3" in part and "1 refit(s) failed" in part and "rest on 2" in part
+    assert _dropped_note({"replicates": 3, "dropped": 0, "diverged": 0}, 3) is None
+
+
+def test_a_base_fit_on_a_bound_is_said_and_recorded(lab_rec, tmp_path):
+    """A base fit with a pilot parameter on a bound of its box (a sign-flipped recording's:
+    omega_nm on 30, tau_m on 0) named physics without a word about it; now a BaseFitWarning,
+    in the settings, the JSON and the summary; delta_abs = 0 ("no threshold"), a fixed or an
+    unidentified parameter is no such case.  The decision is made as ever."""
+    import dataclasses
+
+    from bayespilot.diagnose import BaseFitWarning, _base_at_bounds
+    from bayespilot.fit.result import FitResult
+    from bayespilot.model import paper_model
+    from bayespilot.presets import TABLE1_BOUNDS
+
+    params = dict(paper_parameters("FD"), omega_nm=30.0)
+    fit = FitResult(params, -1.0e4, 80.0, "fast", 0, True, bounds=dict(TABLE1_BOUNDS))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = diagnose(lab_rec, seed=0, n_bootstrap=0, candidates=["time-varying-gains"],
+                       base_fit=fit, intervals=False)
+    said = [str(w.message) for w in caught if issubclass(w.category, BaseFitWarning)]
+    assert len(said) == 1, [str(w.message) for w in caught]
+    assert "omega_nm = 30 on its upper bound (30, Eq. 4 fit)" in said[0]
+    assert "sign or unit convention" in said[0] and "rather than for missing physics" in said[0]
+    edge = res.settings["base_at_bounds"]
+    assert edge[0] == {"parameter": "omega_nm", "value": 30.0, "side": "upper", "bound": 30.0,
+                       "fit": "Eq. 4"}
+    assert said[0] == f"{lab_rec.source}: {res.settings['evidence_notes'][0]}"
+    res.to_json(tmp_path / "d.json")
+    back = type(res).from_json(tmp_path / "d.json")
+    assert back.settings["base_at_bounds"] == edge
+    for r in (res, back):
+        assert "base fit ON A BOUND: omega_nm = 30 (upper bound, Eq. 4)" in r.summary()
+    # not said: delta_abs = 0, a parameter fixed or not identified
+    m = paper_model()
+    quiet = [dataclasses.replace(fit, params=dict(paper_parameters("FD"), delta_abs=0.0)),
+             dataclasses.replace(fit, bounds={k: b for k, b in TABLE1_BOUNDS.items()
+                                             if k != "omega_nm"}),
+             dataclasses.replace(fit, settings={"unidentified": ["omega_nm"]})]
+    for f in quiet:
+        assert _base_at_bounds(f, None, m) == []
+    assert _base_at_bounds(dataclasses.replace(fit, params=dict(params, delta_abs=0.1)),
+                           None, m)[1]["parameter"] == "delta_abs"  # its upper bound is one

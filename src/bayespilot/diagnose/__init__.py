@@ -60,7 +60,7 @@ from .._files import dumps, json_ready, number, numbers, read_json, write_text_a
 from .catalogue import (CATALOGUE, NAMES, Extension, _candidate_name, candidate_names,
                         get_extension, register_extension, registered_extensions,
                         unregister_extension)
-from .locate import EvidenceWarning
+from .locate import BaseFitWarning, EvidenceWarning
 from .._blas import one_blas_thread
 from .._caller import warn_at_caller
 from .._seeds import resolve_seed
@@ -71,7 +71,7 @@ if TYPE_CHECKING:
 
 __all__ = ["diagnose", "DiagnosisResult", "CATALOGUE", "NAMES", "Extension", "get_extension",
            "register_extension", "unregister_extension", "registered_extensions",
-           "candidate_names", "EvidenceWarning"]
+           "candidate_names", "EvidenceWarning", "BaseFitWarning"]
 
 #: Default family-wise false-alarm level of the decision.
 ALPHA = 0.01
@@ -220,6 +220,16 @@ def _fitted_lines(chosen) -> list[str]:
     return lines
 
 
+def _at_bounds_lines(edge) -> list[str]:
+    """The summary's lines for ``settings["base_at_bounds"]`` (none without it)."""
+    if not edge:
+        return []
+    said = ", ".join(f"{d['parameter']} = {d['value']:.4g} ({d['side']} bound, {d['fit']})"
+                     for d in edge)
+    return [f"base fit ON A BOUND: {said}; a named extension may be making up for a "
+            f"recording problem (sign or unit convention, offset), not physics"]
+
+
 def _calibration_lines(ranking) -> list[str]:
     """The summary's account of the tests calibrated by the parametric bootstrap."""
     lines = []
@@ -257,7 +267,8 @@ class DiagnosisResult(_JSONSummary):
     settings : dict
         alpha, seed, bootstrap size, band, skip, remnant of the replicates
         (``bootstrap``; with ``skipped``, why, when the bootstrap asked for
-        could not be made).
+        could not be made; ``dropped`` replicates that failed), the base
+        fit's parameters on a bound (``base_at_bounds``, when any).
     elapsed : float
         Wall time, s.
     source : str or None
@@ -335,6 +346,7 @@ class DiagnosisResult(_JSONSummary):
                                                 " (no extension justified)"),
                  f"base model: -ln L (Eq. 4) = {self.base['neg_log_lik']:.2f}, "
                  f"VAF = {self.base['vaf']:.2f} %",
+                 *_at_bounds_lines(self.settings.get("base_at_bounds")),
                  f"level: alpha = {self.settings['alpha']:g} over "
                  f"{self.settings['n_tested']} candidates",
                  *([f"base model refitted from an extension's fit: -ln L (GLS) better by "
@@ -371,9 +383,16 @@ class DiagnosisResult(_JSONSummary):
                                  f"{d['hdi_90'][1]:.4g}]")
         if self.bayes_factor is not None:
             lines += ["", self.bayes_factor.summary_line()]
-        skipped = self.settings.get("bootstrap", {}).get("skipped")
-        lines += ["", "located evidence (bootstrap p-values):" if not skipped else
-                  f"located evidence (no p-values: the bootstrap was skipped, {skipped}):"]
+        boot = self.settings.get("bootstrap", {})
+        skipped = boot.get("skipped")
+        dropped = int(boot.get("dropped") or 0)
+        lines += ["", f"located evidence (no p-values: the bootstrap was skipped, {skipped}):"
+                  if skipped else
+                  f"located evidence (bootstrap p-values; only {boot.get('replicates', 0)} of "
+                  f"{boot.get('replicates', 0) + dropped} replicates survived, the others' "
+                  f"closed loop diverged or refit failed: check the signs and units of u, e "
+                  f"and control_gain):" if dropped else
+                  "located evidence (bootstrap p-values):"]
         for k, e in self.where.items():
             if not math.isfinite(e.value):
                 continue
@@ -560,10 +579,80 @@ def _where(recording) -> str:
     return f"{recording.source}: " if recording.source else ""
 
 
-def _warn(recording, text: str) -> None:
-    """One :class:`EvidenceWarning` about ``recording``, attributed to the first caller
-    outside bayespilot (``diagnose``, ``diagnose_pooled`` or a batch, however nested)."""
-    warn_at_caller(_where(recording) + text, EvidenceWarning)
+def _warn(recording, text: str, category: type[Warning] = EvidenceWarning) -> None:
+    """One :class:`EvidenceWarning` (or ``category``) about ``recording``, attributed to the
+    first caller outside bayespilot (``diagnose``, ``diagnose_pooled`` or a batch, however
+    nested)."""
+    warn_at_caller(_where(recording) + text, category)
+
+
+def _dropped_note(boot_info: Mapping[str, Any], n_bootstrap: int) -> str | None:
+    """The EvidenceWarning's text when fewer bootstrap replicates survived than were asked
+    for (``locate.bootstrap`` drops those whose closed loop diverges or whose refit fails),
+    or None."""
+    kept = int(boot_info.get("replicates", 0))
+    if n_bootstrap <= 0 or kept >= n_bootstrap or "skipped" in boot_info:
+        return None
+    diverged = int(boot_info.get("diverged", 0))
+    why = (f"{diverged} closed loop(s) diverged" if diverged == n_bootstrap - kept else
+           f"{diverged} closed loop(s) diverged, {n_bootstrap - kept - diverged} refit(s) "
+           f"failed" if diverged else f"{n_bootstrap - kept} refit(s) failed")
+    then = ("so every located statistic's p-value is missing (n/a)" if kept == 0 else
+            f"so the located p-values rest on {kept} (the smallest is {1 / (kept + 1):.2g})")
+    return (f"only {kept} of {n_bootstrap} bootstrap replicates survived ({why}), {then}: "
+            f"the fitted pilot most likely destabilises the recorded plant in the closed loop "
+            f"the bootstrap simulates, which is what a recording problem makes of the base "
+            f"fit; check the signs and units of u, e and control_gain (and the controlled "
+            f"element) against the recording format")
+
+
+def _base_at_bounds(base_fit, base, base_model) -> list[dict[str, Any]]:
+    """The pilot parameters of the base fit on (or beyond) a bound of their search box: of
+    the Eq. 4 fit (``FitResult.at_bounds``), then of the GLS base fit ``base`` (a
+    ``decide.FitSummary``, bounded by ``base_model``'s), each parameter once.
+
+    Not ``delta_abs`` on its lower bound (0, the answer "no threshold"), nor a parameter held
+    fixed or not identified (the Eq. 4 fit's ``settings["unidentified"]``, a silent
+    channel's).  Each entry: ``parameter``, ``value``, ``side`` ("lower" or "upper"),
+    ``bound``, ``fit`` ("Eq. 4" or "GLS").
+    """
+    from ..fit.result import ON_BOUND_RTOL
+
+    quiet = set(base_fit.settings.get("unidentified") or ())
+    fixed = set(base_fit.fixed)
+    out: list[dict[str, Any]] = []
+
+    def add(name, value, side, bound, fit):
+        if name in quiet or name in fixed or (name == "delta_abs" and side == "lower") \
+                or any(d["parameter"] == name for d in out):
+            return
+        out.append({"parameter": name, "value": float(value), "side": side,
+                    "bound": float(bound), "fit": fit})
+
+    for k, side in base_fit.at_bounds.items():
+        add(k, base_fit.params[k], side, base_fit._edge_text(k, side)[1], "Eq. 4")
+    if base is not None:
+        for k in base.refined:
+            par = base_model.parameter(k)
+            lo, hi, v = float(par.lower), float(par.upper), float(base.params[k])
+            tol = ON_BOUND_RTOL * (hi - lo)
+            if v <= lo + tol:
+                add(k, v, "lower", lo, "GLS")
+            elif v >= hi - tol:
+                add(k, v, "upper", hi, "GLS")
+    return out
+
+
+def _base_at_bounds_note(edge: Sequence[Mapping[str, Any]]) -> str:
+    """The BaseFitWarning's text for :func:`_base_at_bounds`' list (not empty)."""
+    said = ", ".join(f"{d['parameter']} = {d['value']:.4g} on its {d['side']} bound "
+                     f"({d['bound']:g}, {d['fit']} fit)" for d in edge)
+    return (f"the base fit has {said}: the bound, not the data, stopped it, because of the "
+            f"recording (a sign or unit convention of u, e or theta, an offset) or of physics "
+            f"the base model lacks (a strong otolith channel can put tau_m on 1 s); an "
+            f"extension named from this base fit may be making up for a recording problem "
+            f"rather than for missing physics: check the recording (signs, units, offsets) "
+            f"before reading the decision")
 
 
 #: What a recording without forcing functions misses (a warning's text; what to give:
@@ -631,6 +720,8 @@ class _Run:
     obstacle: tuple[str, str] | None = None
     #: The EvidenceWarnings said about this recording (kept in the result's settings).
     notes: tuple[str, ...] = ()
+    #: The base fit's parameters on a bound (:func:`_base_at_bounds`; a BaseFitWarning).
+    base_at_bounds: tuple = ()
 
 
 def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n_starts,
@@ -685,6 +776,11 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
                                          tuple(n for n in base_model.parameter_names
                                                if n != "delta_abs"))
     timings["base_gls"] = time.perf_counter() - t0 - timings["base_fit"]
+    edge = _base_at_bounds(base_fit, base, base_model)
+    if edge:  # (the decision is made as ever; the warning says how far to trust it)
+        note = _base_at_bounds_note(edge)
+        notes.append(note)
+        _warn(recording, note, BaseFitWarning)
     bar.update(1)
     bar.set_postfix_str(f"located evidence ({n_bootstrap} bootstrap replicates)")
     t1 = time.perf_counter()
@@ -704,11 +800,15 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
         null, boot_info = L.bootstrap(recording, base_model, base.params, forcing,
                                       st["arrays"]["residual"], n_replicates=n_bootstrap,
                                       seed=seed, skip=skip, refit=refit, progress=bar.update)
+        note = _dropped_note(boot_info, n_bootstrap)
+        if note is not None:
+            notes.append(note)
+            _warn(recording, note)
     where = L.calibrate(st["values"], null)
     timings["locate"] = time.perf_counter() - t1
     bar.update(1)
     return _Run(base_model, base_fit, base, noise, lik0, forcing, st, where, boot_info, skip,
-                timings, noise_passes, obstacle, tuple(notes))
+                timings, noise_passes, obstacle, tuple(notes), tuple(edge))
 
 
 def _fit_candidates(names, recording, base_model, base, noise, where, boot_info, profile_noise,
@@ -984,7 +1084,20 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         paper's 4/s^2 and the bootstrap simulates.  The messages are kept in
         ``settings["evidence_notes"]``.  With ``n_calibrate > 0`` the
         calibration is skipped for the same reasons, said once more when it
-        would start (``settings["calibration_skipped"]``).
+        would start (``settings["calibration_skipped"]``).  After the
+        bootstrap, once when fewer replicates survived than were asked for
+        (their closed loop diverged or their refit failed:
+        ``settings["bootstrap"]["dropped"]``, ``["diverged"]``; none
+        surviving leaves every p-value missing), which a base fit made from a
+        recording problem (u of the other sign) gives.
+    BaseFitWarning
+        After the base fit, once when a pilot parameter of it (the Eq. 4 fit,
+        :attr:`~bayespilot.fit.result.FitResult.at_bounds`, or the GLS fit)
+        is on a bound of its search box, other than ``delta_abs = 0`` and a
+        parameter fixed or not identified: the named extension may be making
+        up for a recording problem rather than physics.  The decision is made
+        as ever; ``settings["base_at_bounds"]`` records the parameters (and
+        the summary shows them).  A subclass of EvidenceWarning.
 
     Examples
     --------
@@ -1136,6 +1249,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         settings["calibration_skipped"] = uncalibrated[0]
     if run.notes:
         settings["evidence_notes"] = list(run.notes)  # (the EvidenceWarnings, for the record)
+    if run.base_at_bounds:
+        settings["base_at_bounds"] = [dict(d) for d in run.base_at_bounds]  # (BaseFitWarning)
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
                            where, base_d, chosen, settings, time.perf_counter() - t0,
                            recording.source, arrays, base_model=base_model)

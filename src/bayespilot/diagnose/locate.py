@@ -56,7 +56,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Forcing", "forcing_of", "describing_function", "statistics", "remnant_like",
            "task_of", "bootstrap", "Evidence", "EVIDENCE", "N_SEGMENTS", "EvidenceWarning",
-           "SNAP_TOLERANCE"]
+           "BaseFitWarning", "SNAP_TOLERANCE"]
 
 #: Evidence keys and what each measures.
 EVIDENCE = {
@@ -96,9 +96,28 @@ class EvidenceWarning(UserWarning):
     bins (:data:`SNAP_TOLERANCE`), or the bootstrap simulates the recording
     format's default plant for a task ``"other"`` that gives none; and, with
     ``n_calibrate``, once more when the calibration is skipped for the same
-    reason as the bootstrap.  The message says why and, where there is one,
-    what to provide.  The diagnosis goes on without what is missing, and the
-    result's ``settings["evidence_notes"]`` keeps the messages.
+    reason as the bootstrap.  After the bootstrap, once when fewer of its
+    replicates survived than were asked for (their closed loop diverged or
+    their refit failed; ``settings["bootstrap"]["dropped"]``): the p-values
+    are then coarser, or all missing.  The message says why and, where there
+    is one, what to provide.  The diagnosis goes on without what is missing,
+    and the result's ``settings["evidence_notes"]`` keeps the messages.
+    """
+
+
+class BaseFitWarning(EvidenceWarning):
+    """The base fit a diagnosis starts from has a pilot parameter on a bound of its search box.
+
+    Issued by :func:`bayespilot.diagnose.diagnose` (and
+    :func:`~bayespilot.diagnose.diagnose_pooled`, per run) once per recording,
+    after the base fit, naming the parameters and their values
+    (``settings["base_at_bounds"]``; the message is also kept in
+    ``settings["evidence_notes"]``).  Not for ``delta_abs = 0`` (the answer
+    "no threshold"), nor for a parameter fixed or not identified.  The
+    decision is made as ever, but an extension named from such a base fit may
+    be making up for a recording problem (a sign or unit convention of u, e
+    or theta, an offset) rather than for missing physics.  A subclass of
+    :class:`EvidenceWarning`, so that what handles those handles it too.
     """
 
 
@@ -622,17 +641,38 @@ def task_of(recording: Recording, forcing: Forcing) -> TrackingTask:
                         run_in=run_in, task=recording.task)
 
 
+#: Most levels a quantised u spans (a 24-bit converter's); a finer "step" is full precision.
+_MAX_LEVELS = 2.0**24
+
+
+def _grid(u: np.ndarray) -> tuple[float, float]:
+    """The recording's quantisation grid of u: ``(step, offset)``, the values being
+    ``offset + k * step``; ``(0.0, 0.0)`` if u is recorded at full precision.
+
+    Shift-invariant: u is quantised when the differences of its distinct values are whole
+    multiples of the smallest one, whether or not the grid passes through 0 (an ADC's u
+    after ``u - mean(u)``, or with a trim, is on a grid offset from 0).
+    """
+    v = np.unique(np.asarray(u, dtype=float))
+    if v.size < 3 or not np.all(np.isfinite(v)):
+        return 0.0, 0.0
+    d = np.diff(v)
+    q = float(d.min())
+    span = float(v[-1] - v[0])
+    if not q > 0 or span / q > _MAX_LEVELS:
+        return 0.0, 0.0
+    r = d / q
+    if float(np.max(np.abs(r - np.rint(r)))) >= 1e-3:
+        return 0.0, 0.0
+    q = span / float(np.rint(span / q))  # the step from the whole span (less rounding error)
+    offset = float(v[0] - q * np.rint(v[0] / q))  # in [-q/2, q/2]
+    return q, offset
+
+
 def _quantum(u: np.ndarray) -> float:
-    """The recording's quantisation step of u (0 if it is recorded at full precision)."""
-    v = np.unique(u)
-    if v.size < 3:
-        return 0.0
-    q = float(np.diff(v).min())
-    if not q > 0:
-        return 0.0
-    # quantised if every value is (close to) a whole multiple of the smallest step
-    r = v / q
-    return q if float(np.max(np.abs(r - np.rint(r)))) < 1e-3 else 0.0
+    """The recording's quantisation step of u (0 if it is recorded at full precision);
+    shift-invariant (:func:`_grid`)."""
+    return _grid(u)[0]
 
 
 def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, float],
@@ -668,16 +708,19 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
     -------
     (dict, dict)
         Key -> array of the replicate values; the remnant settings
-        (``K_n``, ``T_n``, ``quantum``, ``replicates``, ``refitted``).
-        Replicates whose closed loop diverges, or whose refit fails, are dropped.
+        (``K_n``, ``T_n``, ``quantum``, ``replicates``, ``refitted``, and
+        ``dropped`` and ``diverged``: replicates left out, and of those, the
+        ones whose closed loop diverged).  Replicates whose closed loop
+        diverges, or whose refit fails, are dropped (the caller says so).
     """
     from ..simulate import simulate
 
     K_n, T_n = remnant_like(eps[skip:], recording.dt)
     task = task_of(recording, forcing)
-    q = _quantum(recording.u)
+    q, q_offset = _grid(recording.u)
     seeds = np.random.SeedSequence(seed).generate_state(max(n_replicates, 1))
     out: dict[str, list[float]] = {k: [] for k in EVIDENCE}
+    diverged = 0
     for b in range(n_replicates):
         if progress is not None and b > 0:
             progress(1)  # (the replicate before, kept or dropped)
@@ -685,9 +728,12 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
             sim = simulate(model, params, task=task, remnant_gain=K_n, T_n=T_n,
                            seed=int(seeds[b]))
         except RuntimeError:
+            diverged += 1
             continue
         rep = sim.recording
-        u = np.round(rep.u / q) * q if q > 0 else None
+        # quantised on the recording's grid (its offset too: the flat-top count is
+        # shift-invariant, the replicate's rounding then is the recording's)
+        u = np.round((rep.u - q_offset) / q) * q + q_offset if q > 0 else None
         at = params
         if refit is not None:
             # (fitted to the unquantised replicate: a quantum of the recording's size moves
@@ -701,9 +747,11 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
             out[k].append(v)
     if progress is not None and n_replicates > 0:
         progress(1)
+    kept = len(out["time.nonstationarity"])
     return ({k: np.asarray(v, float) for k, v in out.items()},
-            {"K_n": K_n, "T_n": T_n, "quantum": q, "replicates": len(out["time.nonstationarity"]),
-             "refitted": refit is not None})
+            {"K_n": K_n, "T_n": T_n, "quantum": q, "replicates": kept,
+             "refitted": refit is not None, "dropped": n_replicates - kept,
+             "diverged": diverged})
 
 
 @dataclass
