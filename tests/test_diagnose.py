@@ -675,7 +675,7 @@ def test_bayes_factor_weighs_the_chosen_or_the_top_candidate(washout_case, contr
         ev = type("Ev", (), {"log_z": 10.0, "log_z_err": 0.5, "max_log_lik": 20.0})()
         return bf_module.ExtensionBayesFactor(kw["physics"], 4.0, 0.7, "very strong",
                                               kw["physics"], None, ev, ev, {"omega_w": [0.02, 5]},
-                                              {"runs": 3, "nlive": 200})
+                                              {"runs": 3, "nlive": 200}, elapsed=210.0)
 
     monkeypatch.setattr(bf_module, "nested_bayes_factor", stub)
     rec, res = washout_case
@@ -689,6 +689,9 @@ def test_bayes_factor_weighs_the_chosen_or_the_top_candidate(washout_case, contr
     d = json.loads(res.to_json())["bayes_factor"]
     assert d["physics"] == "motion-washout" and d["log_bayes_factor"] == 4.0
     assert "ln BF = +4.00 +- 0.70" in res.summary()
+    # (its minutes come after the diagnosis's: the summary's time line said only the latter)
+    assert res.summary().endswith(f"time: {res.elapsed:.1f} s (and 210.0 s for the Bayes "
+                                  f"factor's nested sampling)")
     assert "<h2>Bayes factor</h2>" in res.report(tmp_path / "rep")["html"].read_text()
     # 'none': the top-ranked candidate with a GLS fit
     crec = simulate(task="FD", motion_gain=1.0, remnant_gain=0.063, seed=21,

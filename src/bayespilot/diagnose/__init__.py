@@ -398,7 +398,10 @@ class DiagnosisResult(_JSONSummary):
                 continue
             p = "n/a" if not math.isfinite(e.p_value) else f"{e.p_value:.3f}"
             lines.append(f"  {k:<28} {e.value:12.4g}  p = {p}")
-        lines.append(f"time: {self.elapsed:.1f} s")
+        bf = self.bayes_factor
+        more = (f" (and {bf.elapsed:.1f} s for the Bayes factor's nested sampling)"
+                if bf is not None and bf.elapsed > 0 else "")  # (its runs come after)
+        lines.append(f"time: {self.elapsed:.1f} s{more}")
         return "\n".join(lines)
 
     __str__ = summary
