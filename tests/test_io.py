@@ -750,6 +750,9 @@ def test_a_folder_is_not_a_recording(tmp_path, monkeypatch):
         read_recording(".")
     with pytest.raises(RecordingError, match=r"path must name a file, got ''"):
         read_recording("")
+    # a folder that is not there (a console audit: "recordings/" read as a missing stem)
+    with pytest.raises(RecordingError, match=r"^recordings/: no such folder$"):
+        read_recording("recordings/")
 
 
 def test_a_stem_that_is_also_a_folder_still_reads_its_pair(tmp_path):

@@ -341,6 +341,8 @@ def _resolve(path: Path, shown: str | None = None) -> tuple[str, Path, Path, Pat
             raise _fail(shown, f"a folder, not a recording ({_WHAT_A_RECORDING_IS})")
         if path.exists():  # post.nc, fig.png, data.h5: a file, but not one of a recording
             raise _fail(shown, f"not a recording ({_WHAT_A_RECORDING_IS})")
+        if shown.endswith(("/", os.sep)):  # a folder was meant (its slash: not a stem)
+            raise _fail(shown, "no such folder")
         raise _fail(path, f"file not found (looked for {csv_path} and {json_path})")
     return "pair", path, csv_path, json_path
 
