@@ -651,8 +651,14 @@ def _client_within(Client: Any, scheduler: str, connect_timeout: float):
                             f"within {connect_timeout + CONNECT_GRACE:g} s (is it the "
                             f"scheduler's address, tcp://HOST:8786, not its dashboard's?)")
     if "error" in box:
+        exc = box["error"]
+        # (a peer that answers but speaks another protocol, e.g. HTTP, gets its reply read as
+        # a dask frame length: a MemoryError of exabytes says nothing to the user)
+        said = ("something answered there, but not in dask's protocol (is it the scheduler's "
+                "address, tcp://HOST:8786, and not another service's?)"
+                if isinstance(exc, MemoryError) else _first_line(exc))
         raise CampaignError(f"cannot reach the dask scheduler at {scheduler!r} within "
-                            f"{connect_timeout:g} s ({_first_line(box['error'])})")
+                            f"{connect_timeout:g} s ({said})")
     return box["client"]
 
 
