@@ -610,7 +610,7 @@ def test_canal_start_from_a_noisy_theta_is_the_clean_ones(fd_sim, fd_rec):
     run; the fast fit's K_m 20 % low); theta is checked against theta_ddot_m over the first
     second and the least-squares rate taken.  A clean theta keeps the three-point rate
     exactly (the results of clean recordings do not move), and a theta of the other sign,
-    which theta_ddot_m contradicts, gives way to the rate of theta_ddot_m alone."""
+    which theta_ddot_m contradicts, is turned round."""
     from bayespilot.likelihood import _pitch_rate_at_start
 
     rec = fd_sim.recording
@@ -626,8 +626,14 @@ def test_canal_start_from_a_noisy_theta_is_the_clean_ones(fd_sim, fd_rec):
     canal = Likelihood(paper_model(), rec).X[1]
     assert np.max(np.abs(Likelihood(paper_model(), noisy).X[1] - canal)) < 0.01 * np.std(canal)
     flipped = _with_theta(rec, -th)
-    assert _pitch_rate_at_start(flipped) == _pitch_rate_at_start(fd_rec)
-    assert abs(_pitch_rate_at_start(flipped) - three_point) < 1e-3  # (not -three_point)
+    assert _pitch_rate_at_start(flipped) == three_point  # (not -three_point)
+    # a constant bias of the logged acceleration (10 % of its sd) leaves theta's rate as it
+    # is (the check's t^2 term takes it up; without it the columns disagreed)
+    a = np.asarray(rec.theta_ddot_m)
+    biased = Recording(dict(rec.signals, theta_ddot_m=a + 0.1 * a.std()), rec.sample_rate_hz,
+                       rec.motion_gain, rec.task, rec.metadata)
+    assert _pitch_rate_at_start(biased) == three_point
+    assert _pitch_rate_at_start(fd_rec) != three_point  # (theta is what tells them apart)
 
 # --- records that are not whole periods of the forcing ----------------------------------------
 def test_whole_periods_is_read_from_the_forcing_or_its_columns():

@@ -318,46 +318,54 @@ def _pitch_rate_at_start(recording: Recording) -> float | None:
     seconds (:func:`_rate_by_least_squares`).  Where the two agree but the difference does
     not (a noisy or coarsely quantised theta sensor: 2e-4 rad of noise made it 0.060 rad/s
     where the rate was 0.019, and the fast fit's K_m 20 % low), the least-squares rate is
-    taken; where they disagree (theta of another sign or convention than the motion the
-    pilot felt), the estimate without theta, since theta_ddot_m is what the canal model is
-    driven by.  On a recording whose columns agree the difference is kept as it is.
+    taken.  Where they agree only with theta turned round (theta logged with the other
+    sign: the fast fit's K_m 21 % low), the rate of -theta: theta_ddot_m is what drives the
+    canal model.  Where they disagree either way (motion logged after a washout or a
+    platform filter), and on a recording whose columns agree, the difference is kept as it
+    is: the results of a recording with a clean theta do not change.
     """
     if recording.n_samples < 3:
         return None
     a = np.asarray(recording.theta_ddot_m, dtype=float)
     if "theta" not in recording:
         return _rate_from_acceleration(a, recording.dt)
-    th = recording["theta"]
-    rate = recording.motion_gain * (-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * recording.dt)
-    if not recording.motion_gain > 0:  # no motion: nothing to check theta against
+    K = recording.motion_gain
+    th = np.asarray(recording["theta"], dtype=float)
+    rate = K * (-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * recording.dt)
+    if not K > 0:  # no motion: nothing to check theta against
         return rate
-    fitted = _rate_by_least_squares(np.asarray(th, dtype=float), a / recording.motion_gain,
-                                    recording.dt)
-    if fitted is None:
-        return rate
-    rate_ls, stderr, agree, scale = fitted
-    if not agree:
-        return _rate_from_acceleration(a, recording.dt)
-    rate_ls, stderr, scale = (recording.motion_gain * x for x in (rate_ls, stderr, scale))
-    # (the difference stays where it is within its own small error: the results of a
-    # recording whose theta is clean do not change; 50 Hz, the lowest rate tried, gave 0.2 %
-    # of the rate's scale, a noisy sensor 60 % and more)
-    if abs(rate - rate_ls) > max(3.0 * stderr, 0.02 * scale):
-        return rate_ls
+    for sign in (1.0, -1.0):
+        fitted = _rate_by_least_squares(sign * th, a / K, recording.dt)
+        if fitted is None:
+            return rate
+        rate_ls, stderr, agree, scale = (K * x if i != 2 else x for i, x in enumerate(fitted))
+        if not agree:
+            continue
+        # (the difference stays where it is within its own small error: the results of a
+        # recording whose theta is clean do not change; 50 Hz, the lowest rate tried, gave
+        # 0.2 % of the rate's scale, a noisy sensor 60 % and more)
+        return rate_ls if abs(sign * rate - rate_ls) > max(3.0 * stderr, 0.02 * scale) \
+            else sign * rate
     return rate
+
+
+def _cumulative(x: np.ndarray, dt: float) -> np.ndarray:
+    """The trapezoidal integral of ``x`` from its first sample, at every sample."""
+    return np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]))]) * dt
 
 
 def _rate_from_acceleration(a: np.ndarray, dt: float) -> float:
     """The start rate that gives the integrated acceleration ``a`` a zero mean over the record."""
-    rate = np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]))]) * dt
-    return -float(np.mean(rate))
+    return -float(np.mean(_cumulative(a, dt)))
 
 
 def _rate_by_least_squares(theta: np.ndarray, acc: np.ndarray, dt: float
                            ) -> tuple[float, float, bool, float] | None:
     """d(theta)/dt at t = 0 from the first :data:`RATE_WINDOW` s of ``theta``, given its
-    second derivative ``acc`` (theta_ddot_m / K_theta): theta(t) - D(t) = theta_0 + r t by
-    least squares, D the acceleration integrated twice (trapezoidal) from rest.
+    second derivative ``acc`` (theta_ddot_m / K_theta): theta(t) - D(t) = theta_0 + r t
+    + c t^2 by least squares, D the acceleration integrated twice (trapezoidal) from rest
+    (c takes up a constant bias of the logged acceleration: 10 % of its sd made the fit
+    without it disagree).
 
     Returns (r, its standard error, whether theta and ``acc`` agree, the rms of the
     differenced theta over the record), or None when the window is too short to tell.
@@ -367,16 +375,16 @@ def _rate_by_least_squares(theta: np.ndarray, acc: np.ndarray, dt: float
     n = int(min(theta.size, round(RATE_WINDOW / dt) + 1))
     if n < 6:
         return None
-    v = np.concatenate([[0.0], np.cumsum(0.5 * (acc[1:n] + acc[:n - 1]))]) * dt
-    y = theta[:n] - np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]))]) * dt
-    X = np.column_stack([np.ones(n), np.arange(n) * dt])
+    y = theta[:n] - _cumulative(_cumulative(acc[:n], dt), dt)
+    t = np.arange(n) * dt
+    X = np.column_stack([np.ones(n), t, t * t])
     coef, *_ = np.linalg.lstsq(X, y, rcond=None)
     res = y - X @ coef
     spread = theta[:n] - theta[:n].mean()
     total = float(spread @ spread)
     if not total > 0:
         return None
-    stderr = float(np.sqrt(res @ res / (n - 2) * np.linalg.inv(X.T @ X)[1, 1]))
+    stderr = float(np.sqrt(res @ res / (n - 3) * np.linalg.inv(X.T @ X)[1, 1]))
     agree = float(res @ res) <= 0.01 * total
     return float(coef[1]), stderr, agree, float(np.std(np.diff(theta)) / dt)
 
