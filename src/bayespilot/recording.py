@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import difflib
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
@@ -86,10 +87,11 @@ def questionable(recording: "Recording") -> list[str]:
         the sign of K_theta theta''; theta = G(s) (K_delta_u u + f_d) with
         the sidecar's plant: each only when its columns are there, see
         :data:`SIGN_R2_MIN`); an offset in e against f_t - theta over
-        :data:`OFFSET_RATIO` of std(e); spikes in u (:data:`SPIKE_K`,
-        :data:`SPIKE_SD`).  See "Checks of the columns against each other" in
-        docs/recording-format.md for the thresholds and what they were
-        measured on.
+        :data:`OFFSET_RATIO` of std(e) that e carries (not a theta or f_t
+        logged about another zero); spikes in u (:data:`SPIKE_K`,
+        :data:`SPIKE_SD`; from :data:`LOW_SAMPLE_RATE_HZ` up).  See "Checks
+        of the columns against each other" in docs/recording-format.md for
+        the thresholds and what they were measured on.
     """
     reasons = []
     if recording.duration < SHORT_RECORDING_S:
@@ -139,14 +141,19 @@ def questionable(recording: "Recording") -> list[str]:
 #: of std(e) over 30 s, 0.21 on the 40.96-s whole-period run of docs/model.md, 0.54 over
 #: 10 s), while e - (f_t - theta) is 0 to rounding on a clean record however short; an offset
 #: of 0.3 std(e) moved K_v by 2 run-to-run standard deviations, one of 1 std(e) halved it.
+#: A theta (or f_t) logged about another zero, a trim attitude, gives e - (f_t - theta) the same
+#: mean; e is blamed only when removing that mean from e brings e's mean nearer 0
+#: (:func:`_offset_in_e`).
 OFFSET_RATIO = 0.2
 #: The sign checks (:func:`_sign_problems`) fit each identity between the recorded columns by
 #: least squares with a free coefficient per term, and judge the signs of the coefficients only
 #: when the fit explains at least this fraction of the variance of the identity's left side
 #: (104 clean simulated records: R^2 at least 0.9997, 0.94 with u clipped, every judged
 #: coefficient 0.96 to 1.34, while a column of the other sign gives -1; a theta_ddot_m logged
-#: after a washout at 4 rad/s (R^2 0.37) or a platform's lag and delay (0.003), or a plant the
-#: sidecar does not describe, explains less and is not judged: only signs are checked).
+#: after a washout at 4 rad/s (R^2 0.11 to 0.42 on 18 simulated 81.92-s runs) or a platform,
+#: omega^2 / (s^2 + 1.4 omega s + omega^2) at 5 rad/s with 30 ms of delay (0.001 to 0.03), or
+#: a plant the sidecar does not describe, explains less and is not judged: only signs are
+#: checked; docs/recording-format.md gives the runs).
 SIGN_R2_MIN = 0.5
 #: ... and only the coefficients of terms that carry at least this fraction of the left
 #: side's standard deviation (an all but zero f_t or f_d says nothing of its sign).
@@ -158,12 +165,36 @@ SIGN_CUTOFF_HZ = 5.0
 SIGN_EDGE_S = 1.0
 #: A sample of u is a spike when it stands out from the median of its four neighbours by more
 #: than SPIKE_K times the median such deviation (scaled as a standard deviation) AND by more
-#: than SPIKE_SD times the (median-absolute-deviation) standard deviation of u.  Clean
-#: simulated records (50 to 1000 Hz, remnant 0 to 0.3): at most 10.3 times the median and
-#: 0.17 standard deviations; a clipped u's corners reach 587 times the median (a quantised
-#: u's median is 0) but stay under 0.18 standard deviations, hence the second condition.
+#: than SPIKE_SD times the standard deviation of u (the larger of std(u) and its
+#: median-absolute-deviation estimate: a pilot who pulses the stick leaves u near 0 between
+#: pulses, where the MAD estimate alone collapsed: 65 to 87 samples of each synthetic 82-s
+#: train of pulses through a 30-rad/s neuromuscular system at 50 Hz were spikes, now 0, or 7
+#: to 15 for the sharpest, 0.05-s pulses).  Clean simulated records (50 to 1000 Hz, remnant
+#: 0 to 0.3): at most 10.3 times the median and 0.17 standard deviations; a clipped u's
+#: corners reach 587 times the median (a quantised u's median is 0) but stay under 0.18
+#: standard deviations, hence the second condition.  Not checked below
+#: :data:`LOW_SAMPLE_RATE_HZ`, where a pulse through the neuromuscular system is a sample or
+#: two wide and 5 to 6 standard deviations from its neighbours' median (89 to 145 flags per
+#: 82-s train of such pulses at 20 Hz, with either estimate).
 SPIKE_K = 15.0
 SPIKE_SD = 2.0
+
+
+def _one_blas_thread(func):
+    """:func:`bayespilot._blas.one_blas_thread`, imported on the first call.  Every read runs
+    the checks, whose dot products and least squares over a whole record (81920 x 2 at
+    1000 Hz) multi-threaded BLAS only slows: on a simulated 81.92-s FD run at 1000 Hz,
+    questionable() took 224-242 ms with OpenBLAS's two threads on a busy 2-core machine and
+    18 ms with one (read_recording 391-408 ms and 151-154 ms).  Importing threadpoolctl up
+    front would make ``import bayespilot.recording`` heavier, hence on the first call."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        from ._blas import one_blas_thread
+
+        return one_blas_thread(func)(*args, **kwargs)
+
+    return wrapper
 
 
 def _lowpassed(x: np.ndarray, rate: float) -> np.ndarray:
@@ -204,6 +235,7 @@ _IDENTITIES = {
 }
 
 
+@_one_blas_thread
 def _sign_statistics(recording: "Recording") -> dict[str, dict[str, Any]]:
     """For each identity between the columns the recording has (:data:`_IDENTITIES`): the
     least-squares fit of its left side on its terms (each with the format's sign), as
@@ -246,7 +278,8 @@ def _sign_statistics(recording: "Recording") -> dict[str, dict[str, Any]]:
     if "error" in sides:  # e's constant offset from f_t - theta, over the whole record
         e = np.asarray(sig["e"], float)
         gap = e - (np.asarray(sig["f_t"], float) - np.asarray(sig["theta"], float))
-        offset = {"offset": float(gap.mean()), "sd_e": float(e.std())}
+        offset = {"offset": float(gap.mean()), "sd_e": float(e.std()),
+                  "mean_e": float(e.mean())}
     for name, (lhs, terms) in sides.items():
         y = lhs - lhs.mean()
         X = np.stack([x - x.mean() for x in terms], axis=1)
@@ -267,6 +300,19 @@ def _sign_statistics(recording: "Recording") -> dict[str, dict[str, Any]]:
     return out
 
 
+def _offset_in_e(st: Mapping[str, float]) -> bool:
+    """Whether the "error" statistics of :func:`_sign_statistics` show an offset in e: the mean
+    of e - (f_t - theta) over :data:`OFFSET_RATIO` of std(e), and e the column that carries it.
+    A constant in theta or f_t (theta logged about a trim attitude) gives the same mean; then
+    it is f_t - theta that is off centre, and e is centred already: removing the mean from e
+    would put the constant into e.  So e is blamed only when removing the mean from e brings
+    e's own mean nearer 0 (on a short run whose e does not average out, see
+    :data:`OFFSET_RATIO`, this can go either way), and otherwise nothing is said: theta enters
+    the paper's model only through its rate, so its zero does no harm."""
+    off = st["offset"]
+    return abs(off) > OFFSET_RATIO * st["sd_e"] and abs(st["mean_e"] - off) < abs(st["mean_e"])
+
+
 def _sign_problems(recording: "Recording") -> list[str]:
     """One sentence per identity between the recorded columns (:data:`_IDENTITIES`) that
     holds (R^2 >= :data:`SIGN_R2_MIN`) with a term of the opposite sign: the column(s)
@@ -283,7 +329,7 @@ def _sign_problems(recording: "Recording") -> list[str]:
         big = st["share"] >= SIGN_TERM_MIN
         negative = [c for c, b, k in zip(cols, big, st["coef"]) if b and k < 0]
         if not negative:
-            if name == "error" and abs(st["offset"]) > OFFSET_RATIO * st["sd_e"]:
+            if name == "error" and _offset_in_e(st):
                 reasons.append(
                     f"e has an offset: e - (f_t - theta), which the format defines as 0, has a "
                     f"mean of {st['offset']:.3g} rad, {abs(st['offset']) / st['sd_e']:.2f} of "
@@ -291,8 +337,7 @@ def _sign_problems(recording: "Recording") -> list[str]:
                     f"deviation {st['sd_e']:.3g} (more than {OFFSET_RATIO:g}); the model takes "
                     f"e as the error the pilot saw, zero when on target, so an offset biases "
                     f"the fit (K_v, T_vl, K_m) and can make diagnose name a channel the pilot "
-                    f"does not have; remove it from e (or, if theta or f_t was logged about "
-                    f"another zero, e.g. a trim attitude, from that column)")
+                    f"does not have; remove it from e")
             continue
         positive = [c for c, b, k in zip(cols, big, st["coef"]) if b and k > 0]
         # turning round the left side and the positive terms is the same as turning round
@@ -313,21 +358,23 @@ def _sign_problems(recording: "Recording") -> list[str]:
 
 def _spike_statistics(recording: "Recording") -> tuple[np.ndarray, float, float]:
     """(|u - median of its 4 neighbours| at samples 2..n-3, the median of it scaled as a
-    standard deviation, the MAD standard deviation of u)."""
+    standard deviation, the standard deviation of u: the larger of its median-absolute-deviation
+    estimate and std(u), see :data:`SPIKE_SD`)."""
     u = np.asarray(recording.u, float)
     if u.size < 5:
         return np.zeros(0), 0.0, 0.0
     neighbours = np.stack([u[:-4], u[1:-3], u[3:-1], u[4:]])
     r = np.abs(u[2:-2] - np.median(neighbours, axis=0))
     scale = 1.4826 * float(np.median(r))
-    sd = 1.4826 * float(np.median(np.abs(u - np.median(u))))
-    if not sd > 0:
-        sd = float(np.std(u))
+    sd = max(1.4826 * float(np.median(np.abs(u - np.median(u)))), float(np.std(u)))
     return r, scale, sd
 
 
 def _spike_problem(recording: "Recording") -> str | None:
-    """A sentence on the spikes in u (:data:`SPIKE_K`, :data:`SPIKE_SD`), or None."""
+    """A sentence on the spikes in u (:data:`SPIKE_K`, :data:`SPIKE_SD`), or None; None below
+    :data:`LOW_SAMPLE_RATE_HZ`, where the pilot's own pulses are a sample or two wide."""
+    if recording.sample_rate_hz < LOW_SAMPLE_RATE_HZ:
+        return None
     r, scale, sd = _spike_statistics(recording)
     if r.size == 0 or not sd > 0:
         return None
