@@ -485,3 +485,49 @@ def test_pooling_one_recording_under_two_names_is_refused_up_front(lone_folder, 
                        f"each run once")
     assert all(ln.startswith("bayespilot: warning: ") for ln in err[:-1])  # (the 20-s records)
     assert not (tmp_path / "o").exists()
+
+
+def test_a_base_fit_on_a_bound_is_said_by_the_batch_as_a_base_fit_warning(recordings, tmp_path,
+                                                                          monkeypatch):
+    """The batch said every note its diagnoses kept as a plain EvidenceWarning, so a filter
+    on BaseFitWarning never saw a batch's: a note of a base fit on a bound (the text its
+    kept ``base_at_bounds`` makes, a single run's settings or a pooled run's) is said as a
+    BaseFitWarning, the others as EvidenceWarning.  In this process (run_keyed replaced, no
+    cluster), with hand-made Eq. 4 fits on omega_nm's upper bound for s1-run1 and s2-run1."""
+    import warnings
+
+    from bayespilot import campaign as C
+    from bayespilot import presets
+    from bayespilot.diagnose import BaseFitWarning, EvidenceWarning
+    from bayespilot.fit import fast
+    from bayespilot.fit.result import FitResult
+
+    def fit_fast(rec, model, **kwargs):
+        on = any(s in str(rec.source) for s in ("s1-run1", "s2-run1"))
+        p = dict(presets.paper_parameters("FD"), **({"omega_nm": 30.0} if on else {}))
+        return FitResult(p, -1.0e4, 80.0, "fast", 0, True, bounds=dict(presets.TABLE1_BOUNDS))
+
+    def run_keyed(tasks, out, *, to_json, **kwargs):
+        for key, fn, args, _ in tasks:
+            C._write_json_atomic(out / f"{key}.json", to_json(key, fn(*args)))
+        return len(tasks), {}
+
+    monkeypatch.setattr(fast, "fit_fast", fit_fast)
+    monkeypatch.setattr(C, "run_keyed", run_keyed)
+    out = tmp_path / "b"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        s = diagnose_batch(recordings, out, pool=True, seed=0, progress=False,
+                           warm_cache=False, **OPTIONS)
+    assert (s.completed, s.failed) == (2, 0)
+    bound = [w for w in caught if "the base fit has omega_nm = 30" in str(w.message)]
+    assert bound and all(w.category is BaseFitWarning for w in bound)
+    named = " ".join(str(w.message).split(": ")[0] for w in bound)
+    assert "s1_FD_k1" in named and "s2_FD_k0.75" in named
+    plain = [w for w in caught if issubclass(w.category, EvidenceWarning) and w not in bound]
+    assert plain and all(w.category is EvidenceWarning for w in plain)  # (the 20-s records')
+    pooled = json.loads((out / "s1_FD_k1.json").read_text())["diagnosis"]
+    one = json.loads((out / "s2_FD_k0.75.json").read_text())["diagnosis"]
+    assert pooled["runs"][0]["base_at_bounds"][0]["parameter"] == "omega_nm"
+    assert "base_at_bounds" not in pooled["runs"][1]
+    assert one["settings"]["base_at_bounds"][0]["parameter"] == "omega_nm"

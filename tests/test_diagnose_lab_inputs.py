@@ -333,6 +333,42 @@ def test_a_quantised_u_is_recognised_whatever_its_grid_offset(lab_rec):
     assert "u is quantised" in sat.reason and "not a finding" in sat.reason
 
 
+def test_a_quantised_u_with_a_few_samples_off_its_grid_is_still_quantised(lab_rec):
+    """One sample off the grid (ten zeros padded onto a centred 8-bit u, an interpolated
+    glitch) made the whole u "full precision", and its peaks' repeats named control-saturation
+    at p = 0; now u is quantised when 99 % of its samples are on the grid.  A lab writing 4
+    decimals (a grid whose levels are seldom seen twice) is recognised; a continuous u,
+    clipped or padded, is not."""
+    from bayespilot.diagnose.locate import _grid
+
+    q = 1.0 / 2**8
+    uq = np.round(lab_rec.u / q) * q
+    centred = uq - uq.mean()
+    padded = centred.copy()
+    padded[:10] = 0.0
+    glitch = centred.copy()
+    glitch[1000] = 0.37 * centred[999] + 0.63 * centred[1001] + 0.1 * q
+    w4 = np.round(lab_rec.u, 4)  # (as the CSV reads back)
+    assert not np.array_equal(w4, np.round(w4 / 1e-4) * 1e-4)  # (not exact multiples of 1e-4)
+    for u, step_is, off in ((padded, q, slice(0, 10)), (glitch, q, slice(1000, 1001)),
+                            (w4, 1e-4, slice(0, 0)), (w4 - w4.mean(), 1e-4, slice(0, 0))):
+        step, offset = _grid(u)
+        assert step == pytest.approx(step_is, rel=1e-6) and abs(offset) <= step / 2
+        k = (u - offset) / step
+        on = np.abs(k - np.rint(k)) < 1e-3
+        assert not on[off].any() and np.count_nonzero(~on) == off.stop - off.start
+    zeros = lab_rec.u.copy()
+    zeros[:10] = 0.0
+    for u in (lab_rec.u, np.clip(lab_rec.u, -0.2, 0.2), zeros, np.float32(lab_rec.u)):
+        assert _grid(u) == (0.0, 0.0)  # full precision
+    # the diagnosis: the padded u's peaks are no finding without a bootstrap (were p = 0)
+    res, said, others = _diagnose(_with_u(lab_rec, padded), n_bootstrap=0,
+                                  candidates=["control-saturation"])
+    (sat,) = res.ranking
+    assert res.physics == "none" and sat.p_value == 1.0, sat.reason
+    assert "u is quantised" in sat.reason and "not a finding" in sat.reason
+
+
 def test_bootstrap_replicates_that_all_fail_are_said(lab_rec, monkeypatch):
     """Every replicate's closed loop failing (a sign-flipped u's base fit) left every located
     p-value "n/a" without a word; now an EvidenceWarning, the settings and the summary say it."""

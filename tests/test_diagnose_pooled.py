@@ -515,3 +515,64 @@ def test_a_pooled_result_missing_a_runs_part_names_it():
          "runs": [{"base": {"params": {}}, "where": {}}, {"where": {}}]}
     with pytest.raises(ValueError, match="run 2 has no base"):
         PooledDiagnosisResult.from_dict(d)
+
+
+def test_each_runs_base_fit_on_a_bound_and_dropped_replicates_are_kept(washout_runs,
+                                                                        monkeypatch, tmp_path):
+    """A run's base fit on a bound (its BaseFitWarning) and its bootstrap's dropped replicates
+    were said but not kept: the pooled runs had no ``base_at_bounds`` and no bootstrap counts,
+    and the JSON and summary no "base fit ON A BOUND" line.  Now each run keeps them, through
+    to_dict/from_dict, and the summary says them under the run.  (Hand-made Eq. 4 fits, run
+    0's on omega_nm's upper bound; the first bootstrap replicate diverging.)"""
+    import sys
+    import warnings
+
+    from bayespilot.diagnose import BaseFitWarning, EvidenceWarning
+    from bayespilot.fit import fast
+    from bayespilot.fit.result import FitResult
+
+    first = washout_runs[0]
+
+    def fit_fast(rec, model, **kwargs):
+        p = dict(presets.paper_parameters("FD"), **({"omega_nm": 30.0} if rec is first else {}))
+        return FitResult(p, -1.0e4, 80.0, "fast", 0, True, bounds=dict(presets.TABLE1_BOUNDS))
+
+    sim = sys.modules["bayespilot.simulate"]
+    real, calls = sim.simulate, []
+
+    def first_diverges(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise RuntimeError("the closed loop diverged")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fast, "fit_fast", fit_fast)
+    monkeypatch.setattr(sim, "simulate", first_diverges)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = diagnose_pooled(washout_runs, seed=0, n_bootstrap=2, n_starts=1, n_calibrate=0,
+                              refit=False, candidates=["time-varying-gains"])
+    bound = [str(w.message) for w in caught if w.category is BaseFitWarning]
+    assert len(bound) == 1 and "omega_nm = 30 on its upper bound (30, Eq. 4 fit)" in bound[0]
+    dropped = [w for w in caught if "bootstrap replicates survived" in str(w.message)]
+    assert len(dropped) == 1 and dropped[0].category is EvidenceWarning
+    r0, r1 = res.runs
+    edge = r0["base_at_bounds"]
+    assert edge[0] == {"parameter": "omega_nm", "value": 30.0, "side": "upper", "bound": 30.0,
+                       "fit": "Eq. 4"}
+    assert bound[0][len(first.source) + 2:] in r0["evidence_notes"]
+    assert "base_at_bounds" not in r1  # (its base fit: the paper's values)
+    assert (r0["bootstrap"]["replicates"], r0["bootstrap"]["dropped"],
+            r0["bootstrap"]["diverged"]) == (1, 1, 1)
+    assert r1["bootstrap"]["replicates"] == 2 and r1["bootstrap"]["dropped"] == 0
+    res.to_json(tmp_path / "d.json")
+    back = PooledDiagnosisResult.from_json(tmp_path / "d.json")
+    assert back.runs[0]["base_at_bounds"] == edge and back.runs[0]["bootstrap"]["dropped"] == 1
+    assert back.to_dict() == json.loads(res.to_json())
+    text = res.summary()
+    assert back.summary() == text
+    runs = text.split("\nruns:\n")[1].splitlines()
+    assert runs[1].startswith("    base fit ON A BOUND: omega_nm = 30 (upper bound, Eq. 4)")
+    assert runs[2] == ("    bootstrap: only 1 of 2 replicates survived (1 closed loop(s) "
+                       "diverged): check the signs and units of u, e and control_gain")
+    assert text.count("ON A BOUND") == 1 and "bootstrap: only" not in "\n".join(runs[3:])

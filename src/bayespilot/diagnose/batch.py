@@ -67,7 +67,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 from .._files import json_ready, replacing, write_csv_atomic
 from ..campaign import CampaignError
 from ..recording import _signals_digest
-from .locate import EvidenceWarning
+from .locate import BaseFitWarning, EvidenceWarning
 
 if TYPE_CHECKING:
     from ..campaign import CampaignSummary
@@ -291,13 +291,21 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
     return res, time.perf_counter() - t0
 
 
-def _notes(res: Any) -> list[str]:
+def _notes(res: Any) -> list[tuple[str, type[EvidenceWarning]]]:
     """The EvidenceWarnings a diagnosis kept (``settings["evidence_notes"]``; a pooled one's
-    per run), each text once."""
-    notes = list(res.settings.get("evidence_notes", ()))
-    for run in getattr(res, "runs", None) or ():
-        notes += list(run.get("evidence_notes", ()))
-    return list(dict.fromkeys(notes))
+    per run), each text once, with its category: :class:`BaseFitWarning` for the note of a
+    base fit on a bound (the text :func:`~bayespilot.diagnose._base_at_bounds_note` makes of
+    the parameters kept beside it, ``settings["base_at_bounds"]`` or the run's
+    ``base_at_bounds``), :class:`EvidenceWarning` for the others."""
+    from . import _base_at_bounds_note
+
+    notes: dict[str, type[EvidenceWarning]] = {}
+    for part in (res.settings, *(getattr(res, "runs", None) or ())):
+        edge = part.get("base_at_bounds")
+        bound = _base_at_bounds_note(edge) if edge else None
+        for note in part.get("evidence_notes", ()):
+            notes.setdefault(note, BaseFitWarning if note == bound else EvidenceWarning)
+    return list(notes.items())
 
 
 def _warm() -> None:
@@ -508,6 +516,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         Once per gap in the diagnoses' evidence (no forcing, a record not
         whole periods, ...), naming how many diagnoses and which have it;
         each result keeps its own in its settings.
+    BaseFitWarning
+        The same, for a base fit with a pilot parameter on a bound (a
+        subclass of EvidenceWarning, issued as what it was in the diagnosis).
 
     Examples
     --------
@@ -642,14 +653,14 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             except OSError as exc:
                 raise C.CampaignError(f"{out / key}: cannot write the report "
                                       f"({exc.strerror or exc})") from None
-        for note in _notes(res):  # (silenced on the worker, said here once per text)
-            noted.setdefault(note, []).append(key)
+        for said in _notes(res):  # (silenced on the worker, said here once per text)
+            noted.setdefault(said, []).append(key)
         return C._jsonable({"key": key, **_settings(t, options, digests),
                             "diagnosis": res.to_dict(),
                             "elapsed_seconds": elapsed, "host": platform.node(),
                             "versions": C._versions()})
 
-    noted: dict[str, list[str]] = {}
+    noted: dict[tuple[str, type[EvidenceWarning]], list[str]] = {}
     try:
         completed, errors = C.run_keyed(
             [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths], options, shipped),
@@ -659,10 +670,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             warm=_warm if warm_cache else None, desc="diagnoses", unit="diagnosis",
             to_json=to_json, scatter=True)
     finally:
-        for note, keys in noted.items():
+        for (note, category), keys in noted.items():
             n = len(keys)
             warnings.warn(f"{n} diagnos{'is' if n == 1 else 'es'} ({', '.join(keys[:3])}"
-                          f"{' ...' if n > 3 else ''}): {note}", EvidenceWarning, stacklevel=2)
+                          f"{' ...' if n > 3 else ''}): {note}", category, stacklevel=2)
     settings = _settings_view({"settings": json.loads(json.dumps(dict(options)))}, implied)
     earlier, other = _earlier_tasks(tasks, out, settings, implied)
     if other:

@@ -111,8 +111,11 @@ class BaseFitWarning(EvidenceWarning):
     Issued by :func:`bayespilot.diagnose.diagnose` (and
     :func:`~bayespilot.diagnose.diagnose_pooled`, per run) once per recording,
     after the base fit, naming the parameters and their values
-    (``settings["base_at_bounds"]``; the message is also kept in
-    ``settings["evidence_notes"]``).  Not for ``delta_abs = 0`` (the answer
+    (``settings["base_at_bounds"]``, a pooled run's ``runs[j]["base_at_bounds"]``;
+    the message is also kept in ``settings["evidence_notes"]``, a pooled run's
+    ``runs[j]["evidence_notes"]``), and by
+    :func:`~bayespilot.diagnose.batch.diagnose_batch` once per text for its
+    diagnoses.  Not for ``delta_abs = 0`` (the answer
     "no threshold"), nor for a parameter fixed or not identified.  The
     decision is made as ever, but an extension named from such a base fit may
     be making up for a recording problem (a sign or unit convention of u, e
@@ -643,30 +646,92 @@ def task_of(recording: Recording, forcing: Forcing) -> TrackingTask:
 
 #: Most levels a quantised u spans (a 24-bit converter's); a finer "step" is full precision.
 _MAX_LEVELS = 2.0**24
+#: A sample is on the grid within this fraction of a step.
+_GRID_TOL = 1e-3
+#: Least fraction of the samples on the grid for u to count as quantised (a few padded or
+#: glitched samples off it do not make a quantised u full precision).
+_GRID_SHARE = 0.99
+
+
+def _on_grid(v: np.ndarray, w: np.ndarray, q: float) -> tuple[float, np.ndarray] | None:
+    """The grid of step ``q`` through most of the distinct values ``v`` (seen ``w`` times):
+    ``(anchor, on)``: the grid's phase the weighted median of the values' in their densest
+    phase bin, ``on`` the values within :data:`_GRID_TOL` steps of it, ``anchor`` the most
+    frequent of those; None if fewer than :data:`_GRID_SHARE` of the samples are on it, or of the samples
+    other than those of the most frequent value (a u at rest at one value 99 % of the time
+    is on any grid through it).
+
+    (The phase is not the most frequent value's: on a sparsely used grid, ten padded zeros
+    just off it can be seen more often than any level of it.)
+    """
+    nb = int(0.5 / _GRID_TOL)  # phase bins two tolerances wide
+    ph = np.mod((v - v[0]) / q, 1.0)
+    h = np.bincount(np.minimum((ph * nb).astype(np.int64), nb - 1), weights=w, minlength=nb)
+    c = (int(np.argmax(h + np.roll(h, 1) + np.roll(h, -1))) + 0.5) / nb  # (a split cluster)
+    rel = np.mod(ph - c + 0.5, 1.0) - 0.5
+    near = np.abs(rel) <= 1.5 / nb
+    o = np.argsort(rel[near])
+    cum = np.cumsum(w[near][o])
+    phi = c + float(rel[near][o][np.searchsorted(cum, 0.5 * cum[-1])])
+    on = np.abs(np.mod(ph - phi + 0.5, 1.0) - 0.5) < _GRID_TOL
+    n, n_on, top = float(w.sum()), float(w[on].sum()), int(np.argmax(w))
+    if n_on < _GRID_SHARE * n or \
+            n_on - on[top] * float(w[top]) < _GRID_SHARE * (n - float(w[top])):
+        return None
+    return float(v[on][np.argmax(w[on])]), on
 
 
 def _grid(u: np.ndarray) -> tuple[float, float]:
     """The recording's quantisation grid of u: ``(step, offset)``, the values being
     ``offset + k * step``; ``(0.0, 0.0)`` if u is recorded at full precision.
 
-    Shift-invariant: u is quantised when the differences of its distinct values are whole
-    multiples of the smallest one, whether or not the grid passes through 0 (an ADC's u
-    after ``u - mean(u)``, or with a trim, is on a grid offset from 0).
+    The step is the commonest difference between adjacent distinct values (each counted by
+    how often the rarer of the two is seen, so that a few off-grid values do not outvote the
+    grid), or a whole fraction of it where a sparsely used grid skips levels; u is quantised
+    when at least 99 % of its samples lie on a grid of that step (within 1e-3 of a step).  So
+    the grid counts whether or not it passes through 0 (an ADC's u after ``u - mean(u)``, or
+    with a trim), and a few samples off it (zero padding on an offset grid, a glitch) do not
+    make u full precision.  A continuous u, clipped or not, has no difference that repeats,
+    or far fewer than 99 % of its samples on the grid of one that does.
     """
-    v = np.unique(np.asarray(u, dtype=float))
-    if v.size < 3 or not np.all(np.isfinite(v)):
+    x = np.asarray(u, dtype=float).ravel()
+    if x.size < 3 or not np.all(np.isfinite(x)):
         return 0.0, 0.0
-    d = np.diff(v)
-    q = float(d.min())
-    span = float(v[-1] - v[0])
-    if not q > 0 or span / q > _MAX_LEVELS:
+    v, w = np.unique(x, return_counts=True)
+    if v.size < 3:
         return 0.0, 0.0
-    r = d / q
-    if float(np.max(np.abs(r - np.rint(r)))) >= 1e-3:
-        return 0.0, 0.0
-    q = span / float(np.rint(span / q))  # the step from the whole span (less rounding error)
-    offset = float(v[0] - q * np.rint(v[0] / q))  # in [-q/2, q/2]
-    return q, offset
+    dv = np.diff(v)
+    o = np.argsort(dv)
+    d, wd = dv[o], np.minimum(w[:-1], w[1:])[o]
+    idx = np.arange(d.size)
+    end = np.searchsorted(d, d * (1.0 + _GRID_TOL), side="right")  # equal within tolerance
+    if int(np.max(end - idx)) < 2:
+        return 0.0, 0.0  # no difference repeats
+    cw = np.concatenate([[0], np.cumsum(wd)])
+    i = int(np.argmax(cw[end] - cw[idx]))
+    j = int(np.flatnonzero(end - idx >= 2)[0])
+    # the commonest difference, or a whole fraction of it (a sparse grid's commonest may
+    # span some steps); last, the smallest that repeats (a grid too sparse for either)
+    steps = [float(np.median(d[i:end[i]])) / k for k in range(1, 17)]
+    for q in steps + [float(np.median(d[j:end[j]]))]:
+        r = dv / q
+        m = np.rint(r)
+        fit = (np.abs(r - m) < _GRID_TOL) & (m >= 1)
+        if not np.any(fit):
+            continue
+        q = float(dv[fit].sum() / m[fit].sum())  # from all its differences (less rounding)
+        grid = _on_grid(v, w, q)
+        if grid is None:
+            continue
+        anchor, on = grid
+        lo, hi = float(v[on][0]), float(v[on][-1])
+        if (hi - lo) / q > _MAX_LEVELS:
+            return 0.0, 0.0
+        if hi > lo:  # the step from the span of the values on the grid
+            q = (hi - lo) / float(np.rint((hi - lo) / q))
+        offset = float(anchor - q * np.rint(anchor / q))  # in [-q/2, q/2]
+        return q, offset
+    return 0.0, 0.0
 
 
 def _quantum(u: np.ndarray) -> float:
@@ -732,7 +797,10 @@ def bootstrap(recording: Recording, model: PilotModel, params: Mapping[str, floa
             continue
         rep = sim.recording
         # quantised on the recording's grid (its offset too: the flat-top count is
-        # shift-invariant, the replicate's rounding then is the recording's)
+        # shift-invariant, the replicate's rounding then is the recording's); the few
+        # recorded samples _grid allows off it (padding, a glitch) are not copied: inside
+        # u's range they are in no run at an extreme, and a lone glitch beyond it only
+        # takes that side's runs from the recording's count (conservative)
         u = np.round((rep.u - q_offset) / q) * q + q_offset if q > 0 else None
         at = params
         if refit is not None:

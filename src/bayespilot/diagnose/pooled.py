@@ -43,8 +43,8 @@ from .._caller import warn_at_caller
 from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
-               _base_from, _bic, _calibration_lines, _calibrator, _check, _fitted_lines, _JSONSummary,
-               _ranking_and_chosen, _short_repr,
+               _at_bounds_lines, _base_from, _bic, _calibration_lines, _calibrator, _check,
+               _fitted_lines, _JSONSummary, _ranking_and_chosen, _short_repr,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -121,8 +121,13 @@ class PooledDiagnosisResult(_JSONSummary):
     runs : list of dict
         Per run: ``source``, ``base`` (Eq. 4 and GLS fits), ``where`` (located
         evidence), ``delta_neg_log_lik`` (each candidate's improvement in
-        that run at the pooled fit) and ``params`` (the run's pilot parameters
-        under the chosen extension, if any).
+        that run at the pooled fit), ``params`` (the run's pilot parameters
+        under the chosen extension, if any), ``bootstrap`` (its located
+        evidence's bootstrap, as a single run's ``settings["bootstrap"]``:
+        ``replicates``, ``dropped``, ``diverged``, or ``skipped``), and when
+        there are any, ``evidence_notes`` (the run's EvidenceWarnings) and
+        ``base_at_bounds`` (its base fit's parameters on a bound, a
+        BaseFitWarning; as a single run's ``settings["base_at_bounds"]``).
     where : dict
         Located statistics with Fisher-combined p-values over the runs.
     chosen : CandidateResult or None
@@ -201,6 +206,17 @@ class PooledDiagnosisResult(_JSONSummary):
         for r in self.runs:
             lines.append(f"  {str(r['source']):<40} base VAF {r['base']['vaf']:6.2f} %, "
                          f"-ln L (Eq. 4) {r['base']['neg_log_lik']:.1f}")
+            lines += [f"    {line}" for line in _at_bounds_lines(r.get("base_at_bounds"))]
+            boot = r.get("bootstrap") or {}
+            dropped = int(boot.get("dropped") or 0)
+            if dropped and "skipped" not in boot:
+                kept, diverged = int(boot.get("replicates") or 0), int(boot.get("diverged") or 0)
+                why = ", ".join(w for n, w in ((diverged, f"{diverged} closed loop(s) diverged"),
+                                               (dropped - diverged,
+                                                f"{dropped - diverged} refit(s) failed")) if n)
+                lines.append(f"    bootstrap: only {kept} of {kept + dropped} replicates "
+                             f"survived ({why}): check the signs and units of u, e and "
+                             f"control_gain")
         lines.append(f"time: {self.elapsed:.1f} s")
         return "\n".join(lines)
 
@@ -815,6 +831,10 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
         Per run, as for :func:`~bayespilot.diagnose.diagnose` (kept in that
         run's ``runs[j]["evidence_notes"]``); with ``n_calibrate > 0`` and a
         run whose task cannot be simulated, the calibration is skipped.
+    BaseFitWarning
+        Per run whose base fit has a pilot parameter on a bound, as for
+        :func:`~bayespilot.diagnose.diagnose` (the parameters in that run's
+        ``runs[j]["base_at_bounds"]``, the summary's line under the run).
     """
     from tqdm.auto import tqdm
 
@@ -931,7 +951,11 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                       "where": run.where,
                       "delta_neg_log_lik": {n: s[j] for n, s in shares.items()},
                       "params": chosen_params,
-                      **({"evidence_notes": list(run.notes)} if run.notes else {})})
+                      "bootstrap": dict(run.boot_info),
+                      **({"evidence_notes": list(run.notes)} if run.notes else {}),
+                      # (the BaseFitWarning's parameters, as a single run's settings keep them)
+                      **({"base_at_bounds": [dict(d) for d in run.base_at_bounds]}
+                         if run.base_at_bounds else {})})
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "n_calibrate": n_calibrate,
                 "noise_passes": noise_passes, "refit": refit, "refit_seconds": t_refit,
