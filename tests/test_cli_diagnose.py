@@ -215,6 +215,7 @@ def test_diagnose_bayes_factor_option(rec_stem, tmp_path, capsys, monkeypatch):
 
     class Stub:
         physics = "threshold-shape"
+        elapsed = 12.5  # (the nested sampling's seconds, which the summary's time line adds)
 
         def summary_line(self):
             return "Bayes factor (threshold-shape : base, nested sampling): ln BF = -1.50"
@@ -236,6 +237,7 @@ def test_diagnose_bayes_factor_option(rec_stem, tmp_path, capsys, monkeypatch):
     assert code == 0, err
     assert seen["seed"] == 4 and seen["physics"] == "none" and seen["n"] == 3000
     assert stdout.count("ln BF = -1.50") == 2  # said when computed, and in the summary
+    assert "(and 12.5 s for the Bayes factor's nested sampling)" in stdout
     assert json.loads(out.read_text())["bayes_factor"]["log_bayes_factor"] == -1.5
 
     def refuse(res, rec, **kw):
