@@ -338,9 +338,10 @@ def _pitch_rate_at_start(recording: Recording) -> float | None:
         fitted = _rate_by_least_squares(sign * th, a / K, recording.dt)
         if fitted is None:
             return rate
-        rate_ls, stderr, agree, scale = (K * x if i != 2 else x for i, x in enumerate(fitted))
+        rate_ls, stderr, agree, scale = fitted
         if not agree:
             continue
+        rate_ls, stderr, scale = K * rate_ls, K * stderr, K * scale
         # (the difference stays where it is within its own small error: the results of a
         # recording whose theta is clean do not change; 50 Hz, the lowest rate tried, gave
         # 0.2 % of the rate's scale, a noisy sensor 60 % and more)

@@ -589,6 +589,14 @@ def _warn(recording, text: str, category: type[Warning] = EvidenceWarning) -> No
     warn_at_caller(_where(recording) + text, category)
 
 
+def _dropped_why(dropped: int, diverged: int) -> str:
+    """Why ``dropped`` bootstrap replicates were left out, ``diverged`` of them by their closed
+    loop, the others by their refit."""
+    return ", ".join(text for n, text in ((diverged, f"{diverged} closed loop(s) diverged"),
+                                          (dropped - diverged,
+                                           f"{dropped - diverged} refit(s) failed")) if n)
+
+
 def _dropped_note(boot_info: Mapping[str, Any], n_bootstrap: int) -> str | None:
     """The EvidenceWarning's text when fewer bootstrap replicates survived than were asked
     for (``locate.bootstrap`` drops those whose closed loop diverges or whose refit fails),
@@ -596,10 +604,7 @@ def _dropped_note(boot_info: Mapping[str, Any], n_bootstrap: int) -> str | None:
     kept = int(boot_info.get("replicates", 0))
     if n_bootstrap <= 0 or kept >= n_bootstrap or "skipped" in boot_info:
         return None
-    diverged = int(boot_info.get("diverged", 0))
-    why = (f"{diverged} closed loop(s) diverged" if diverged == n_bootstrap - kept else
-           f"{diverged} closed loop(s) diverged, {n_bootstrap - kept - diverged} refit(s) "
-           f"failed" if diverged else f"{n_bootstrap - kept} refit(s) failed")
+    why = _dropped_why(n_bootstrap - kept, int(boot_info.get("diverged", 0)))
     then = ("so every located statistic's p-value is missing (n/a)" if kept == 0 else
             f"so the located p-values rest on {kept} (the smallest is {1 / (kept + 1):.2g})")
     return (f"only {kept} of {n_bootstrap} bootstrap replicates survived ({why}), {then}: "
@@ -619,7 +624,7 @@ def _base_at_bounds(base_fit, base, base_model) -> list[dict[str, Any]]:
     channel's).  Each entry: ``parameter``, ``value``, ``side`` ("lower" or "upper"),
     ``bound``, ``fit`` ("Eq. 4" or "GLS").
     """
-    from ..fit.result import ON_BOUND_RTOL
+    from ..fit.result import _bound_side
 
     quiet = set(base_fit.settings.get("unidentified") or ())
     fixed = set(base_fit.fixed)
@@ -638,11 +643,9 @@ def _base_at_bounds(base_fit, base, base_model) -> list[dict[str, Any]]:
         for k in base.refined:
             par = base_model.parameter(k)
             lo, hi, v = float(par.lower), float(par.upper), float(base.params[k])
-            tol = ON_BOUND_RTOL * (hi - lo)
-            if v <= lo + tol:
-                add(k, v, "lower", lo, "GLS")
-            elif v >= hi - tol:
-                add(k, v, "upper", hi, "GLS")
+            side = _bound_side(v, lo, hi)
+            if side is not None:
+                add(k, v, side, lo if side == "lower" else hi, "GLS")
     return out
 
 

@@ -44,7 +44,7 @@ from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
                _at_bounds_lines, _base_from, _bic, _calibration_lines, _calibrator, _check,
-               _fitted_lines, _JSONSummary, _ranking_and_chosen, _short_repr,
+               _dropped_why, _fitted_lines, _JSONSummary, _ranking_and_chosen, _short_repr,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -210,10 +210,8 @@ class PooledDiagnosisResult(_JSONSummary):
             boot = r.get("bootstrap") or {}
             dropped = int(boot.get("dropped") or 0)
             if dropped and "skipped" not in boot:
-                kept, diverged = int(boot.get("replicates") or 0), int(boot.get("diverged") or 0)
-                why = ", ".join(w for n, w in ((diverged, f"{diverged} closed loop(s) diverged"),
-                                               (dropped - diverged,
-                                                f"{dropped - diverged} refit(s) failed")) if n)
+                kept = int(boot.get("replicates") or 0)
+                why = _dropped_why(dropped, int(boot.get("diverged") or 0))
                 lines.append(f"    bootstrap: only {kept} of {kept + dropped} replicates "
                              f"survived ({why}): check the signs and units of u, e and "
                              f"control_gain")

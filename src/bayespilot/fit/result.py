@@ -64,6 +64,17 @@ class _FitList(_ReadOnlyList):
 _READ_ONLY = ("params", "settings", "steps", "bounds", "units")
 
 
+def _bound_side(value: float, lo: float, hi: float) -> str | None:
+    """``"lower"`` or ``"upper"`` when ``value`` is within :data:`ON_BOUND_RTOL` of the box
+    ``[lo, hi]``'s width of that bound, or beyond it; else None."""
+    tol = ON_BOUND_RTOL * (hi - lo)
+    if value <= lo + tol:
+        return "lower"
+    if value >= hi - tol:
+        return "upper"
+    return None
+
+
 @dataclass(frozen=True, eq=False)
 class FitResult:
     """A fitted pilot model.
@@ -180,12 +191,9 @@ class FitResult:
         """
         out = {}
         for k, (lo, hi) in self._box().items():
-            v = self.params.get(k, math.nan)
-            tol = ON_BOUND_RTOL * (hi - lo)
-            if v <= lo + tol:
-                out[k] = "lower"
-            elif v >= hi - tol:
-                out[k] = "upper"
+            side = _bound_side(self.params.get(k, math.nan), lo, hi)
+            if side is not None:
+                out[k] = side
         return out
 
     def _edge_text(self, name: str, side: str) -> tuple[str, float]:
