@@ -17,6 +17,7 @@ import time
 import numpy as np
 import pytest
 
+import bayespilot
 from bayespilot import presets
 from bayespilot.campaign import (CampaignError, Job, load_results, paper_study, run_campaign,
                                  summarise, summary_markdown, write_summary_csv)
@@ -427,7 +428,8 @@ def test_run_keyed_reports_a_lost_cluster_not_failed_tasks(tmp_path, monkeypatch
                                               "same command again to resume"):
         C.run_keyed(tasks, tmp_path, total=3, skipped=0, scheduler=None, workers=1,
                     progress=False, connect_timeout=1.0)
-    assert json.loads((tmp_path / "a.json").read_text()) == {"x": 1}
+    assert json.loads((tmp_path / "a.json").read_text()) == {"x": 1, "bayespilot_version":
+                                                             bayespilot.__version__}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json"]
 
 

@@ -48,7 +48,13 @@ def test_sample_writes_netcdf_and_summary(sampled):
     post = Posterior.from_netcdf(nc)
     summary = json.loads(js.read_text())
     names = ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm", "delta_abs")
-    assert tuple(summary) == names == post.parameter_names
+    assert tuple(summary) == names == post.parameter_names  # (no version key among them)
+    import emcee
+
+    import bayespilot
+    attrs = post.idata.posterior.attrs
+    assert attrs["bayespilot_version"] == bayespilot.__version__
+    assert attrs["inference_library_version"] == emcee.__version__
     for n in names:
         d = summary[n]
         lo, hi = d["hdi_90"]

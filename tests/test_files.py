@@ -130,3 +130,25 @@ def test_result_readers_name_a_file_of_another_kind(tmp_path):
         Posterior.from_netcdf(side)
     with pytest.raises(FileNotFoundError, match="missing.nc"):
         Posterior.from_netcdf(tmp_path / "missing.nc")
+
+
+def test_a_result_file_names_the_release_that_wrote_it():
+    """Every result dict written is stamped with the bayespilot version (a reader of a file
+    from last year can tell which code made its numbers); readers ignore the key; a dict
+    keyed by one kind (a posterior's summary by parameter) can be written without it."""
+    import json
+
+    import bayespilot
+    from bayespilot._files import VERSION_KEY, dumps, nan_for_null
+    from bayespilot.compare import SavageDickey
+    from bayespilot.fit.result import FitResult
+
+    fit = FitResult({"K_v": 1.5}, -10.0, 90.0, "fast", 3, False)
+    d = json.loads(dumps(fit.to_dict()))
+    assert VERSION_KEY == "bayespilot_version" and d[VERSION_KEY] == bayespilot.__version__
+    assert FitResult.from_dict(d).to_dict() == fit.to_dict()
+    assert VERSION_KEY not in json.loads(dumps(fit.to_dict(), version=False))
+    assert json.loads(dumps({VERSION_KEY: "0.0.1"})) == {VERSION_KEY: "0.0.1"}  # (kept)
+    assert json.loads(dumps([1, 2])) == [1, 2]  # (only a dict has keys to stamp)
+    sd = SavageDickey(None, False, "no draws near 0", None, 2.0, 1.0, 0.1, 100, 0)
+    assert SavageDickey(**nan_for_null(SavageDickey, json.loads(dumps(sd.to_dict())))) == sd

@@ -6,6 +6,7 @@ import re
 import numpy as np
 import pytest
 
+import bayespilot
 from bayespilot.cli import main
 from bayespilot.fit.fast import fit_fast
 from bayespilot.fit.gauss_newton import refine
@@ -320,8 +321,9 @@ def test_a_fit_result_cannot_be_changed_in_place(tmp_path):
     assert type(deep["starts"]) is list and type(deep["starts"][0]) is dict
     assert fit.params["K_v"] == 1.5 and fit.settings["unidentified"] == ["K_m"]
     assert fit.steps["scan"]["grid"] == [0.0, 0.01] and fit.steps["starts"][0]["x"] == [1.0]
-    assert fit.to_dict() == FitResult.from_dict(fit.to_dict()).to_dict() == json.loads(
-        path.read_text())
+    written = json.loads(path.read_text())
+    assert written.pop("bayespilot_version") == bayespilot.__version__
+    assert fit.to_dict() == FitResult.from_dict(fit.to_dict()).to_dict() == written
     # the read-only dicts are still dicts: JSON, ** and comparison as before
     assert isinstance(fit.params, dict) and dict(**fit.params) == fit.params
     assert json.loads(json.dumps(fit.steps)) == {"scan": {"grid": [0.0, 0.01], "best": 0.01},

@@ -86,10 +86,24 @@ def json_ready(x: Any) -> Any:
     return x
 
 
-def dumps(obj: Any) -> str:
+#: The key of a result file that names the bayespilot release that wrote it.
+VERSION_KEY = "bayespilot_version"
+
+
+def dumps(obj: Any, *, version: bool = True) -> str:
     """The standard JSON text of a result's ``to_dict()``: non-finite numbers as null
     (:func:`json_ready`; a reader's ``from_dict`` makes a float field's null NaN again,
-    :func:`nan_for_null`)."""
+    :func:`nan_for_null`).
+
+    A dict is written with :data:`VERSION_KEY`, the release that wrote it (readers ignore
+    it), so that a result file says which code made its numbers; ``version=False`` leaves
+    it out (a dict whose keys are all of one kind, such as a posterior's summary by
+    parameter).
+    """
+    if version and isinstance(obj, Mapping) and VERSION_KEY not in obj:
+        from . import __version__
+
+        obj = {**obj, VERSION_KEY: __version__}
     return json.dumps(json_ready(obj), indent=1, allow_nan=False)
 
 
@@ -145,6 +159,7 @@ def read_result(path: str | os.PathLike, from_dict: Any, what: str) -> Any:
 def nan_for_null(cls: type, d: Mapping[str, Any]) -> dict[str, Any]:
     """``d`` with NaN for a null in each field of the dataclass ``cls`` annotated ``float``
     (as :func:`dumps` wrote a non-finite number; a field that may be None is annotated
-    otherwise and keeps its None)."""
+    otherwise and keeps its None); without :data:`VERSION_KEY`, which is not a field."""
     floats = {f.name for f in dataclasses.fields(cls) if f.type in (float, "float")}
-    return {k: (math.nan if v is None and k in floats else v) for k, v in d.items()}
+    return {k: (math.nan if v is None and k in floats else v) for k, v in d.items()
+            if k != VERSION_KEY}

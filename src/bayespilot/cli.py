@@ -778,12 +778,13 @@ def _read_posterior(path: str):
                          f"Posterior.to_netcdf): reading it raised {type(exc).__name__}") from None
 
 
-def _write_json(path: str, obj) -> None:
-    """``obj`` as JSON at ``path``, atomically (a failed write keeps the old file)."""
+def _write_json(path: str, obj, *, version: bool = True) -> None:
+    """``obj`` as JSON at ``path``, atomically (a failed write keeps the old file); with the
+    bayespilot version unless ``version`` is False (see ``_files.dumps``)."""
     from ._files import dumps, write_text_atomic
 
     try:
-        write_text_atomic(path, dumps(obj))
+        write_text_atomic(path, dumps(obj, version=version))
     except OSError as exc:
         raise CommandFailed(f"{path}: cannot write ({_os_reason(exc)})") from None
 
@@ -863,7 +864,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         raise CommandFailed(f"{out}: cannot write the posterior ({_os_reason(exc)})") from None
     _say(args, f"wrote {out}")
     if args.json:
-        _write_json(args.json, post.summary())
+        _write_json(args.json, post.summary(), version=False)  # (keyed by parameter)
         _say(args, f"wrote {args.json}")
     return EXIT_OK
 

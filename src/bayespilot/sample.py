@@ -777,7 +777,12 @@ def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
     meta["settings"] = dict(meta["settings"], discard=discard, thin=thin, n_draws=int(idx.size))
     # Standard JSON (non-finite numbers as null, as every result file of the project), which
     # strict parsers outside Python read; from_netcdf makes tau's nulls NaN again.
-    attrs = {"inference_library": "emcee", _META_ATTR: _files.dumps(meta)}
+    import emcee
+
+    from . import __version__
+
+    attrs = {"inference_library": "emcee", "inference_library_version": emcee.__version__,
+             _files.VERSION_KEY: __version__, _META_ATTR: _files.dumps(meta)}
     for k, v in meta["settings"].items():
         if isinstance(v, (str, int, float)) and not isinstance(v, bool):
             attrs[k] = v
