@@ -1348,11 +1348,13 @@ def flat_tops(u: np.ndarray, *, min_run: int = 3, rtol: float = 1e-9) -> dict[st
     Parameters
     ----------
     u : ndarray
+        The control signal.
     min_run : int
         Shortest run of equal extreme samples counted as a flat top.
     rtol : float
-        Two samples are "equal" within ``rtol * max|u|`` (or the recording's
-        quantisation step, whichever is larger).
+        A sample is at an extreme value within ``rtol * max|u|`` of it (a
+        quantised u is not widened here: its exact repeats are judged by the
+        caller, ``diagnose._saturation``).
 
     Returns
     -------
