@@ -941,8 +941,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
         (relative) since the previous check.
     seed : int, optional
         Seeds the initial fit, the initial ball and the sampler's moves: the
-        same seed gives the same chain, bit for bit (on the same machine and
-        thread count).  None draws one from fresh entropy; the seed used is
+        same seed gives the same chain, bit for bit, on the same machine
+        (whatever the number of numba or BLAS threads: each parameter
+        vector's likelihood is computed by one thread; another CPU may round
+        differently).  None draws one from fresh entropy; the seed used is
         recorded in the result (``seed``) and repeats the chain.
     progress : bool
         Show emcee's tqdm progress bar.
