@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import warnings
 from types import SimpleNamespace
 
@@ -221,7 +222,7 @@ def test_evidence_lines_are_both_named_when_they_coincide(washout):
     """B = 19: the smallest possible p, 1/20, is the 0.05 line; the legend names both."""
     fig = R.plot_evidence(_with_bootstrap(washout, 19))
     ax = fig.axes[0]
-    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]  # (under the axes)
     assert "p = 0.05" in labels
     assert any(lab.startswith("smallest possible p") and "0.05" in lab for lab in labels)
     xs = sorted(line.get_xdata()[0] for line in ax.lines)
@@ -299,22 +300,29 @@ def test_profile_and_posterior_legends_are_below_the_axes(washout):
     assert _below(fig, fig.axes[0])
 
 
-def test_candidates_p_values_are_outside_the_axes_and_symlog_has_ticks(washout):
+def test_candidates_values_are_outside_a_linear_axis(washout):
+    """Each candidate's d(-ln L) and p-value in a column at the right, clear of the bars; the
+    axis linear (a symlog one drew 1.06 and 3.83 close together), its ticks numbered."""
     fig = R.plot_candidates(washout)
     ax = fig.axes[0]
-    assert not [t for t in ax.texts if t.get_text().startswith("p =")]
+    assert not [t for t in ax.texts if "p =" in t.get_text()]
     fig.canvas.draw()
     r = fig.canvas.get_renderer()
     right = ax.child_axes[0]
-    labels = [t for t in right.get_yticklabels() if t.get_text().startswith("p = ")]
-    assert len(labels) == len([c for c in washout.ranking if c.testable])
+    rows = [c for c in washout.ranking if c.testable]
+    labels = [t for t in right.get_yticklabels() if "p = " in t.get_text()]
+    assert len(labels) == len(rows)
+    for t, c in zip(labels, rows):
+        assert t.get_text().startswith(r"$\Delta$ = ")
+        assert f"{c.delta_neg_log_lik:.3g}" in t.get_text() or abs(c.delta_neg_log_lik) < 1
     x1 = ax.get_window_extent(r).x1
     assert all(t.get_window_extent(r).x0 >= x1 for t in labels)
-    assert labels[0].get_window_extent(r).x1 <= fig.bbox.x1
-    assert ax.get_xscale() == "symlog"  # the washout's gain is about 50
+    assert max(t.get_window_extent(r).x1 for t in labels) <= fig.bbox.x1
+    assert ax.get_xscale() == "linear"  # (the washout's gain is about 50)
     lo, hi = ax.get_xlim()
+    assert lo <= 0 and hi >= max(c.delta_neg_log_lik for c in rows)
     shown = [t for t in ax.get_xticks() if lo <= t <= hi]
-    assert len(shown) >= 5
+    assert len(shown) >= 4
 
 
 def test_runs_are_named_by_their_files(pooled):
@@ -367,3 +375,188 @@ def test_pooled_report_has_the_candidate_table_and_captions(pooled, tmp_path):
     assert "<th>&Delta;BIC</th>" in html and "<td>motion-washout</td>" in html
     assert html.count("<figcaption>") >= 2
     assert f"Mismatch: <b>{'yes' if pooled.mismatch else 'no'}</b>" in html
+
+
+# -- 9. figures for a paper: a page wide, legible, at the plots' resolution --------------------
+
+
+def _all_new_figures(washout, pooled):
+    res = dataclasses.replace(_with_bootstrap(washout, 39), posterior=_fake_posterior(washout))
+    return {"frequency_response": R.plot_frequency_response(res),
+            "residuals": R.plot_residuals(res), "evidence": R.plot_evidence(res),
+            "candidates": R.plot_candidates(res), "profile": R.plot_profile(res),
+            "posterior": R.plot_posterior(res), "runs": plot_runs(pooled),
+            "batch": R.plot_batch([("a", _batch_dict(1e-9)), ("b", _batch_dict(0.3))]),
+            "no describing function": R.plot_frequency_response(_without_df(res))}
+
+
+def test_new_figures_are_a_page_wide_and_their_text_prints_at_7_pt(washout, pooled):
+    """Printed on a 7-in column (shrunk to it when wider), no text is below 7 pt: a figure
+    is at most 7.5 in wide and its smallest text rcParams' "small" (the report's were 10 in
+    wide with 7-pt legends: 4.9 pt printed)."""
+    from matplotlib.text import Text
+
+    from bayespilot.plots import PAGE_WIDTH
+
+    for name, fig in _all_new_figures(washout, pooled).items():
+        width = fig.get_figwidth()
+        assert width <= PAGE_WIDTH, name
+        fig.canvas.draw()  # (ticks and their labels made)
+        shrink = min(1.0, 7.0 / width)
+        for t in fig.findobj(Text):
+            if t.get_visible() and t.get_text().strip():
+                assert t.get_fontsize() * shrink >= 7.0, (name, t.get_text(), t.get_fontsize())
+
+
+def test_report_pngs_are_at_the_plots_resolution_and_a_page_wide(washout, tmp_path):
+    from PIL import Image
+
+    from bayespilot.cli import PLOT_DPI
+
+    assert R.FIGURE_DPI == PLOT_DPI  # (was 110)
+    res = dataclasses.replace(_with_bootstrap(washout, 19), posterior=_fake_posterior(washout))
+    paths = R.write_report(res, tmp_path)
+    pngs = [p for k, p in paths.items() if p.suffix == ".png"]
+    assert {p.stem for p in pngs} == {"frequency_response", "residuals", "evidence",
+                                      "candidates", "profile", "posterior"}
+    for p in pngs:
+        with Image.open(p) as im:
+            assert im.info["dpi"][0] == pytest.approx(PLOT_DPI, abs=0.5), p.name
+            assert im.size[0] / PLOT_DPI <= 7.5 + 1e-6, p.name
+
+
+def test_report_figures_also_in_pdf_and_svg(washout, tmp_path):
+    """formats= writes each figure also as PDF and SVG beside its PNG (listed, fonts TrueType
+    in the PDF: journals' checks reject Type 3), the PNG still embedded in the page."""
+    paths = R.write_report(washout, tmp_path, formats=("png", "pdf", "svg"))
+    for name in ("residuals", "candidates", "profile"):
+        assert paths[f"{name}_pdf"] == tmp_path / f"{name}.pdf" and paths[f"{name}_pdf"].is_file()
+        assert paths[f"{name}_svg"].is_file() and paths[name].suffix == ".png"
+    pdf = paths["candidates_pdf"].read_bytes()
+    assert b"/FontFile2" in pdf and b"/Type3" not in pdf
+    assert "<text" in paths["candidates_svg"].read_text(encoding="utf-8")  # text, not paths
+    assert {p for p in tmp_path.iterdir()} == set(paths.values())  # the list is what is there
+    with pytest.raises(ValueError, match="formats"):
+        R.write_report(washout, tmp_path, formats=("png", "jpeg"))
+
+
+# -- 10. empty figures are left out --------------------------------------------------------------
+
+
+def test_empty_figures_are_neither_written_nor_listed_nor_shown(washout, tmp_path):
+    """Without a bootstrap the evidence figure is an empty chart, without a describing
+    function the frequency-response one a sentence: neither is written (one left from an
+    earlier report is removed), listed or embedded; the page says why in words."""
+    res = _without_df(washout)  # (and n_bootstrap=0)
+    (tmp_path / "evidence.png").write_bytes(b"an earlier report's")
+    paths = R.write_report(res, tmp_path)
+    assert "evidence" not in paths and "frequency_response" not in paths
+    assert not (tmp_path / "evidence.png").exists()
+    assert not (tmp_path / "frequency_response.png").exists()
+    assert {p for p in tmp_path.iterdir()} == set(paths.values())
+    html = paths["html"].read_text(encoding="utf-8")
+    alts = set(re.findall(r'<img alt="([^"]+)"', html))
+    assert alts == {"residuals", "candidates", "profile"} and alts <= set(paths)
+    assert "evidence.png" not in html and "frequency_response.png" not in html
+    assert "No bootstrap p-values" in html and "no figure of them" in html
+    assert html.count("No describing function") == 1
+    # with p-values the evidence figure is there
+    paths = R.write_report(_with_bootstrap(washout, 19), tmp_path)
+    assert paths["evidence"].is_file()
+    assert 'alt="evidence"' in paths["html"].read_text(encoding="utf-8")
+
+
+# -- 11. words, not code; told apart without colour -------------------------------------------
+
+
+def test_evidence_ticks_are_words_from_one_table(washout):
+    fig = R.plot_evidence(_with_bootstrap(washout, 19))
+    ticks = [t.get_text() for t in fig.axes[0].get_yticklabels()]
+    keys = [k for k, e in washout.where.items() if math.isfinite(e.value)]
+    assert set(washout.where) <= set(R.EVIDENCE_LABELS)  # every built-in statistic named
+    assert ticks == [R.EVIDENCE_LABELS[k] for k in keys]
+    assert R.EVIDENCE_LABELS["frequency.motion_low"] == r"motion response, $\omega < 2$ rad/s"
+    for t in ticks:
+        plain = re.sub(r"\$[^$]*\$", "", t)  # (outside mathtext)
+        assert "_" not in plain and not re.search(r"[a-z]\.[a-z]", plain), t
+    assert R.evidence_label("lab.my_statistic") == "lab: my statistic"
+
+
+def test_greyscale_before_and_after_differ_by_line_style(washout):
+    fig = R.plot_residuals(washout)
+    after = f"with {washout.physics}"
+    for ax in fig.axes:
+        styles = {line.get_label(): line.get_linestyle() for line in ax.lines}
+        if "base model" in styles and after in styles:
+            assert styles["base model"] != styles[after], ax.get_title()
+    legend = {t.get_text(): h for t, h in zip(fig.legends[0].get_texts(),
+                                              fig.legends[0].legend_handles)}
+    assert legend["base model"].get_linestyle() != legend[after].get_linestyle()
+
+
+def test_greyscale_marked_bars_are_hatched(washout, pooled):
+    res = _with_bootstrap(washout, 19)
+    ax = R.plot_evidence(res).axes[0]
+    keys = [k for k, e in res.where.items() if math.isfinite(e.value)]
+    for bar, k in zip(ax.patches, keys):
+        assert bool(bar.get_hatch()) == (res.where[k].p_value <= 0.05), k
+    ax = R.plot_candidates(washout).axes[0]
+    rows = [c for c in washout.ranking if c.testable]
+    for bar, c in zip(ax.patches, rows):
+        assert bool(bar.get_hatch()) == c.justified, c.physics
+    ax = plot_runs(pooled).axes[0]
+    hatches = [h.get_hatch() or "" for h in ax.get_legend().legend_handles]
+    assert len(set(hatches)) == len(pooled.runs)  # each run its own hatching
+
+
+def test_log_axes_label_intermediate_ticks(washout):
+    """The magnitude and frequency axes span about one decade: numbered at 1, 2, 5 times a
+    power of ten as plain numbers (matplotlib numbered only 10^0 and 10^1)."""
+    fig = R.plot_frequency_response(washout)
+    fig.canvas.draw()
+    for ax in fig.axes[:2]:
+        lo, hi = ax.get_ylim()
+        shown = [t.get_text() for t in ax.get_yticklabels()
+                 if lo <= t.get_position()[1] <= hi and t.get_text()]
+        assert len(shown) >= 3 and "$" not in "".join(shown), shown
+    ax = fig.axes[2]
+    lo, hi = ax.get_xlim()
+    shown = [t.get_text() for t in ax.get_xticklabels()
+             if lo <= t.get_position()[0] <= hi and t.get_text()]
+    assert {"1", "2", "5", "10"} <= set(shown), shown
+
+
+def test_residual_labels_say_what_and_carry_their_power_of_ten(washout):
+    fig = R.plot_residuals(washout)
+    fig.canvas.draw()
+    var = fig.axes[1]
+    assert re.fullmatch(r"residual variance \(\$10\^\{-\d+\}\$ rad\$\^2\$\)", var.get_ylabel())
+    assert var.yaxis.get_offset_text().get_text() == ""  # no floating "1e-4"
+    assert max(max(line.get_ydata()) for line in var.lines) > 0.5  # in those units
+    assert r"sign($i(t - \tau_\mathrm{m})$)" in fig.axes[2].get_ylabel()
+    assert "sign($u$)" in fig.axes[3].get_ylabel()
+    ax = R.plot_profile(washout).axes[0]
+    assert ax.get_ylabel().startswith("scaled deviance $c")
+    assert ax.get_title().startswith("$c$ = ") and "s.e." in ax.get_title()
+
+
+def test_p_values_are_readable():
+    assert R._p_text(3.4e-9) == r"$3.4\times10^{-9}$"
+    assert R._p_text(0.073) == "0.073" and R._p_text(0.0) == r"$<10^{-300}$"
+    assert R._p_html(3.4e-9) == "3.4&times;10<sup>-9</sup>" and R._p_html(0.5) == "0.5"
+    assert R._p_html(math.nan) == "—"
+    fig = R.plot_batch([("a", _batch_dict(1e-9))])
+    assert "$p < 10^{-6}$" in fig.axes[1].get_ylabel()
+
+
+def test_standard_error_is_hatched_under_the_posterior(washout):
+    """The fit's ±1 s.e. is an unfilled hatched span at the bottom: a filled one blended with
+    an interval's shading into a colour no legend entry had."""
+    res = dataclasses.replace(washout, posterior=_fake_posterior(washout))
+    ax = R.plot_posterior(res).axes[0]
+    se = [p for p in ax.patches if p.get_label() == "±1 s.e."]
+    assert len(se) == 1 and se[0].get_hatch() and not se[0].get_fill()
+    assert se[0].get_zorder() == 0
+    ax = R.plot_profile(washout).axes[0]
+    span = [p for p in ax.patches if "interval" in p.get_label()]
+    assert span and span[0].get_zorder() == 0

@@ -341,9 +341,11 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
 
     A real omission improves every run a little; one run's artefact improves one run.
     The runs are named by their source's file stem (``run j`` without one), in a legend
-    beside the axes; a new figure uses constrained layout, given axes' figure is left as it is.
+    beside the axes, each run's bars hatched differently as well as coloured (told apart in
+    greyscale); a new figure (at most a page, 7.5 in, wide) uses constrained layout, given
+    axes' figure is left as it is.
     """
-    from .report import _figure_and_axes
+    from .report import PAGE_WIDTH, _figure_and_axes
 
     # each run's name: its source's file stem (recs/s1_run2.csv -> s1_run2), "run j" without
     # one; a name two runs share gets its run number
@@ -352,7 +354,7 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
         src = r.get("source")
         names.append((Path(str(src)).stem or str(src)) if src else f"run {j + 1}")
     names = [f"{n} (run {j + 1})" if names.count(n) > 1 else n for j, n in enumerate(names)]
-    fig, ax = _figure_and_axes(ax, figsize=(9, 4))
+    fig, ax = _figure_and_axes(ax, figsize=(PAGE_WIDTH, 4))
     rows = [c for c in result.ranking if c.testable]
     R = len(result.runs)
     width = 0.8 / max(R, 1)
@@ -360,10 +362,11 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
     for j, (r, name) in enumerate(zip(result.runs, names)):
         d = [r["delta_neg_log_lik"].get(c.physics, math.nan) for c in rows]
         top = max(top, float(np.nanmax(np.abs(d), initial=0.0)))
-        ax.barh(np.arange(len(rows)) + (j - (R - 1) / 2) * width, d, height=width, label=name)
+        ax.barh(np.arange(len(rows)) + (j - (R - 1) / 2) * width, d, height=width, label=name,
+                hatch=RUN_HATCHES[j % len(RUN_HATCHES)], edgecolor="w", linewidth=0)
     ax.axvline(0.0, color="k", lw=0.8)
     ax.set_yticks(range(len(rows)))
-    ax.set_yticklabels([c.physics for c in rows], fontsize=8)
+    ax.set_yticklabels([c.physics for c in rows], fontsize="small")
     ax.set_ylim(len(rows) - 0.5, -0.5)
     if top > 50:  # a censored fit's large gain beside the GLS candidates' few units
         ax.set_xscale("symlog", linthresh=1.0)
@@ -371,10 +374,14 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
     ax.set_axisbelow(True)
     ax.set_xlabel(r"$\Delta(-\ln L)$ of each run at the pooled fit: "
                   r"$-\ln L_\mathrm{base} - (-\ln L_\mathrm{pooled\ extension})$")
-    ax.set_title(f"Each run's share (decision: {result.physics})", fontsize=10)
-    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), title="run",
-              title_fontsize=7)
+    ax.set_title(f"Each run's share (decision: {result.physics})", fontsize="medium")
+    ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), title="run",
+              title_fontsize="small")
     return fig
+
+
+#: The hatching of each run's bars in :func:`plot_runs` (cycled), beside the colour cycle's.
+RUN_HATCHES = ("", "///", "...", "xxx", "\\\\\\", "+++", "oo", "---")
 
 
 def _refuse_repeats(recs: Sequence[Recording]) -> None:
@@ -783,7 +790,10 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     seed : int or None
         Seeds each run's base fit and bootstrap (run j uses ``seed + j``, so
         the runs' order is part of the seed: the same runs in another order
-        draw other bootstrap replicates).  None draws one from fresh
+        draw other bootstrap replicates; and two calls whose seeds differ by
+        less than the number of runs share streams: run j + 1 of ``seed``
+        draws what run j of ``seed + 1`` draws, so repeat a pooled
+        diagnosis with a seed at least the number of runs away).  None draws one from fresh
         entropy, recorded in ``settings["seed"]``.
     alpha, n_bootstrap, candidates, skip_seconds, omega_c, n_starts, oversample
         As for :func:`~bayespilot.diagnose.diagnose` (``candidates``: catalogue

@@ -21,6 +21,7 @@ import numpy as np
 
 from .._files import write_text_atomic
 from .._labels import parameter_label
+from ..plots import PAGE_WIDTH, _figsize
 from ..plots import _pyplot  # (one backend rule for every figure; batch.py imports it here)
 
 if TYPE_CHECKING:
@@ -35,9 +36,61 @@ __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_c
            "write_report"]
 
 
-def _subplots(*args, **kwargs):
-    """A new figure and its axes, laid out by matplotlib's constrained layout."""
-    return _pyplot().subplots(*args, layout="constrained", **kwargs)
+#: Resolution of the report's PNG figures, dots per inch: what ``bayespilot plot`` saves at
+#: (``cli.PLOT_DPI``), enough for a figure printed at its size.
+FIGURE_DPI = 200
+
+#: Short words for each located statistic (``result.where``'s keys), for the evidence
+#: figure's axis; a key not here (another lab's statistic) is shown as its words, "." and
+#: "_" read as ": " and " ".
+EVIDENCE_LABELS = {
+    "frequency.visual": "visual response",
+    "frequency.motion_low": r"motion response, $\omega < 2$ rad/s",
+    "frequency.motion_high": r"motion response, $\omega \geq 2$ rad/s",
+    "frequency.power_target": "residual power, target freq.",
+    "frequency.power_disturbance": "residual power, disturbance freq.",
+    "time.variance_drift": "residual variance trend",
+    "time.nonstationarity": "residual variance spread",
+    "time.gain_drift_visual": r"visual gain $K_\mathrm{v}$ drift",
+    "time.gain_drift_motion": r"motion gain $K_\mathrm{m}$ drift",
+    "amplitude.canal": r"residual vs. $|i(t - \tau_\mathrm{m})|$",
+    "amplitude.control": r"residual vs. $|u|$",
+    "amplitude.motion": r"variance vs. $|\ddot\theta_\mathrm{m}|$",
+    "amplitude.flat_tops": "flat tops of $u$",
+}
+
+
+def evidence_label(key: str) -> str:
+    """A located statistic's short words (:data:`EVIDENCE_LABELS`)."""
+    if key in EVIDENCE_LABELS:
+        return EVIDENCE_LABELS[key]
+    return key.replace(".", ": ", 1).replace("_", " ")
+
+
+def _subplots(*args, figsize: tuple[float, float] = (PAGE_WIDTH, 4.0), tall: bool = False,
+              **kwargs):
+    """A new figure and its axes, laid out by matplotlib's constrained layout, at most a
+    paper's page (:func:`bayespilot.plots._figsize`); ``tall``: only its width capped (a
+    batch's summary, a row per diagnosis)."""
+    w, h = _figsize(None, None, figsize)
+    return _pyplot().subplots(*args, layout="constrained", figsize=(w, figsize[1] if tall else h),
+                              **kwargs)
+
+
+def _readable_log_axis(ax: Any, which: str) -> None:
+    """Label the log ``which`` ("x" or "y") axis of ``ax`` with plain numbers, at 1, 2 and 5
+    times each power of ten where it spans under three decades (matplotlib labels only the
+    decades: two labels on most of the report's axes), else at the decades."""
+    from matplotlib import ticker
+
+    lo, hi = sorted(ax.get_xlim() if which == "x" else ax.get_ylim())
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    if not (lo > 0 and math.isfinite(hi)):
+        return
+    subs = (1.0, 2.0, 5.0) if math.log10(hi / lo) < 3 else (1.0,)
+    axis.set_major_locator(ticker.LogLocator(base=10, subs=subs))
+    axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(ticker.NullFormatter())
 
 
 #: Length of a Welch segment of the residual spectrum, s (1024 samples at the paper's
@@ -139,19 +192,18 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
     if "df_data" not in arr:
         msg = _no_describing_function(result)
         if axes is None:
-            fig, ax = _subplots(figsize=(8, 1.6))
+            fig, ax = _subplots(figsize=(PAGE_WIDTH, 1.6))
             rest = []
         else:
             flat = list(np.ravel(axes))
             fig, ax, rest = flat[0].figure, flat[0], flat[1:]
         for a in (ax, *rest):
             a.set_axis_off()
-        ax.text(0.5, 0.5, msg, ha="center", va="center", transform=ax.transAxes, wrap=True,
-                fontsize=9)
+        ax.text(0.5, 0.5, msg, ha="center", va="center", transform=ax.transAxes, wrap=True)
         return fig
     created = axes is None
     if created:
-        fig, axes = _subplots(2, 2, figsize=(10, 7), sharex=True)
+        fig, axes = _subplots(2, 2, figsize=(PAGE_WIDTH, 6.0), sharex=True)
     else:
         fig = np.ravel(axes)[0].figure
     axes = np.asarray(axes).reshape(2, 2)
@@ -173,21 +225,25 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
         if ma is not None:
             ax_m.loglog(w, np.abs(ma[key]), **after_kw)
             ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(ma[key]))), ph_d), **after_kw)
-        ax_m.set_title(title, fontsize=10)
+        ax_m.set_title(title, fontsize="medium")
         ax_m.set_ylabel(f"magnitude ({unit})")
         ax_p.set_ylabel("phase (deg)")
         ax_p.set_xlabel(r"$\omega$ (rad/s)")
         ax_m.grid(True, which="both", alpha=0.3)
         ax_p.grid(True, which="both", alpha=0.3)
+        _readable_log_axis(ax_m, "y")
+        for a in (ax_m, ax_p):
+            _readable_log_axis(a, "x")
     handles = [Line2D([], [], **data_kw, label="data (two-input multisine estimate)"),
                Line2D([], [], **base_kw, label="base model (same estimate, model output)")]
     if ma is not None:
         handles.append(Line2D([], [], **after_kw, label=f"with {result.physics}"))
     if created:
-        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8)
-        fig.suptitle("Describing functions at the forcing frequencies", fontsize=11)
+        fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize="small",
+                   frameon=False)
+        fig.suptitle("Describing functions at the forcing frequencies")
     else:
-        axes[0, 0].legend(handles=handles, fontsize=7)
+        axes[0, 0].legend(handles=handles, fontsize="small")
     return fig
 
 
@@ -231,8 +287,9 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
     from matplotlib.lines import Line2D
 
     arr = result.arrays
-    if axes is None:
-        fig, axes = _subplots(2, 2, figsize=(10, 7))
+    created = axes is None
+    if created:
+        fig, axes = _subplots(2, 2, figsize=(PAGE_WIDTH, 6.5))
     else:
         fig = np.ravel(axes)[0].figure
     axes = np.asarray(axes).reshape(2, 2)
@@ -245,7 +302,8 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
     w_max = 2.0 * omega_c if math.isfinite(omega_c) else math.inf
     ax = axes[0, 0]
     handles = []
-    for x, lab, st in ((before, "base model", "C0-"), (after, f"with {result.physics}", "C3-")):
+    # before and after differ by line style too (solid, dashed): told apart in greyscale
+    for x, lab, st in ((before, "base model", "C0-"), (after, f"with {result.physics}", "C3--")):
         if x is None:
             continue
         om, P = _residual_psd(np.asarray(x, float), fs)
@@ -268,27 +326,31 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
                                     "decision"))
     ax.set_xlabel(r"$\omega$ (rad/s)")
     ax.set_ylabel("one-sided PSD (rad$^2$/(rad/s))")
-    ax.set_title("residual spectrum", fontsize=10)
-    ax.legend(handles=handles, fontsize=7, loc="lower left")
+    ax.set_title("residual spectrum", fontsize="medium")
+    _readable_log_axis(ax, "x")
     ax = axes[0, 1]
     nseg = 8
-    for x, lab, st in ((before, "base model", "C0o-"), (after, f"with {result.physics}", "C3s-")):
-        if x is None:
-            continue
-        v = [np.var(s) for s in np.array_split(x, nseg)]
-        ax.plot(np.arange(nseg) + 1, v, st, label=lab)
-    ax.set_xlabel(f"segment of the run (eighths, after the first {result.settings['skip_seconds']:g} s)")
-    ax.set_ylabel("residual variance (rad$^2$)")
-    ax.set_title("residual over the run", fontsize=10)
-    ax.ticklabel_format(axis="y", style="sci", scilimits=(-2, 3))
-    for ax, key, lab, what in ((axes[1, 0], "amp_canal", r"$|i(t - \tau_\mathrm{m})|$ (IPUT)",
-                                r"$|i(t - \tau_\mathrm{m})|$"),
-                               (axes[1, 1], "amp_control", "$|u|$ (rad)", "$|u|$")):
+    var = [(x, lab, st, [np.var(s) for s in np.array_split(x, nseg)])
+           for x, lab, st in ((before, "base model", "C0o-"),
+                              (after, f"with {result.physics}", "C3s--")) if x is not None]
+    # the variance in a power of ten named in the label, not matplotlib's floating offset
+    top = max((max(v) for *_, v in var), default=0.0)
+    e = int(math.floor(math.log10(top))) if top > 0 and math.isfinite(top) else 0
+    e = 0 if -1 <= e <= 2 else e
+    for x, lab, st, v in var:
+        ax.plot(np.arange(nseg) + 1, np.asarray(v) / 10.0 ** e, st, label=lab)
+    ax.set_xlabel(f"eighth of the run (after the first {result.settings['skip_seconds']:g} s)")
+    ax.set_ylabel("residual variance (" + (f"$10^{{{e}}}$ " if e else "") + "rad$^2$)")
+    ax.set_title("residual over the run", fontsize="medium")
+    for ax, key, lab, what, sign in (
+            (axes[1, 0], "amp_canal", r"$|i(t - \tau_\mathrm{m})|$ (IPUT)",
+             r"$|i(t - \tau_\mathrm{m})|$", r"$i(t - \tau_\mathrm{m})$"),
+            (axes[1, 1], "amp_control", "$|u|$ (rad)", "$|u|$", "$u$")):
         b = arr.get(key)
         if b is None:
             ax.set_visible(False)
             continue
-        ax.plot(b["centre"], b["mean"], "C0o-", label="base model")
+        ax.plot(b["centre"], b["mean"], "C0o-", label="base model")  # (as in the spectrum)
         if after is not None:
             from .locate import _binned
 
@@ -296,12 +358,24 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
             src = arr["canal_delayed"] if key == "amp_canal" else arr["u_after_cond"]
             bb = _binned(after, src, edges_q=(0.0, 0.2, 0.4, 0.6, 0.8, 0.9, 1.0)
                          if key == "amp_canal" else (0.0, 0.5, 0.8, 0.95, 0.99, 1.0))
-            ax.plot(bb["centre"], bb["mean"], "C3s-", label=f"with {result.physics}")
+            ax.plot(bb["centre"], bb["mean"], "C3s--", label=f"with {result.physics}")
         ax.axhline(0, color="k", lw=0.5)
         ax.set_xlabel(lab)
-        ax.set_ylabel("mean residual × sign (rad)")
-        ax.set_title(f"residual conditioned on {what}", fontsize=10)
-    axes[0, 1].legend(fontsize=8)
+        # (locate._binned: the residual times the sign of the variable it is binned by)
+        ax.set_ylabel(f"mean of residual × sign({sign})\n(rad)")
+        ax.set_title(f"residual conditioned on {what}", fontsize="medium")
+    if created:  # one legend for the four panels, under them
+        lines = [Line2D([], [], color="C0", ls="-", marker="o", label="base model")]
+        if after is not None:
+            lines.append(Line2D([], [], color="C3", ls="--", marker="s",
+                                label=f"with {result.physics}"))
+        handles = lines + [h for h in handles if h.get_label() not in
+                           ("base model", f"with {result.physics}")]
+        fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize="small",
+                   frameon=False)
+    else:
+        axes[0, 0].legend(handles=handles, fontsize="small", loc="lower left")
+        axes[0, 1].legend(fontsize="small")
     return fig
 
 
@@ -319,17 +393,22 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
     Returns
     -------
     matplotlib.figure.Figure
-        One bar per statistic with a finite value (red at p <= 0.05), "n/a"
+        One bar per statistic with a finite value, named in words
+        (:data:`EVIDENCE_LABELS`; red and hatched at p <= 0.05), "n/a"
         where its p-value is not a finite positive number, p = 0.05 dashed
         and the smallest p the bootstrap of B replicates can give,
         1 / (B + 1), as a wide grey line (both in the legend; at B = 19 they
         are the same).  Without a bootstrap (``n_bootstrap=0``, or skipped)
-        the axes say "no bootstrap p-values" and draw no bars.
+        the axes say "no bootstrap p-values" and draw no bars
+        (:func:`write_report` then leaves the figure out).  On a new figure
+        the legend is under the axes, on given axes beside them.
     """
     from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
-    if ax is None:
-        fig, ax = _subplots(figsize=(8, 4.8))
+    created = ax is None
+    if created:
+        fig, ax = _subplots(figsize=(PAGE_WIDTH, 4.6))
     else:
         fig = ax.figure
     keys = [k for k, e in result.where.items() if math.isfinite(e.value)]
@@ -337,27 +416,31 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
     ok = [math.isfinite(x) and x > 0 for x in p]
     B = int((result.settings.get("bootstrap") or {}).get("replicates", 0) or 0)
     ax.set_yticks(range(len(keys)))
-    ax.set_yticklabels(keys, fontsize=8)
+    ax.set_yticklabels([evidence_label(k) for k in keys], fontsize="small")
     ax.set_ylim(len(keys) - 0.5, -0.5)
-    ax.set_title("Where the data and the base model differ", fontsize=10)
+    ax.set_title("Where the data and the base model differ", fontsize="medium")
     if not any(ok):
         why = (result.settings.get("bootstrap") or {}).get("skipped")
         ax.text(0.5, 0.5, "no bootstrap p-values: the located statistics were not tested\n"
                 + (f"({why})" if why else "(diagnose(n_bootstrap=0), --bootstrap 0)"),
-                ha="center", va="center", transform=ax.transAxes, fontsize=9, wrap=True,
+                ha="center", va="center", transform=ax.transAxes, wrap=True,
                 bbox=dict(fc="white", ec="0.6"))
         ax.set_xticks([])
         ax.set_xlabel(r"$-\log_{10} p$ (no parametric bootstrap)")
         return fig
     val = [-math.log10(x) if good else 0.0 for x, good in zip(p, ok)]
     crit = -math.log10(0.05)
-    ax.barh(range(len(keys)), val,
-            color=["C3" if good and x <= 0.05 else "C0" for x, good in zip(p, ok)])
+    # p <= 0.05: red and hatched (told apart in greyscale too)
+    low = [good and x <= 0.05 for x, good in zip(p, ok)]
+    bars = ax.barh(range(len(keys)), val, color=["C3" if s else "C0" for s in low])
+    for bar, s in zip(bars, low):
+        if s:
+            bar.set(hatch="///", edgecolor="w", linewidth=0)
     for i, good in enumerate(ok):
         if not good:
-            ax.text(0.02, i, "n/a", va="center", fontsize=7, color="0.3",
+            ax.text(0.02, i, "n/a", va="center", fontsize="small", color="0.3",
                     transform=ax.get_yaxis_transform())
-    handles = []
+    handles = [Patch(fc="C3", hatch="///", ec="w", lw=0, label="p ≤ 0.05")] if any(low) else []
     if B:
         floor = math.log10(B + 1)
         ax.axvline(floor, color="0.6", lw=5, alpha=0.5, solid_capstyle="butt")
@@ -366,24 +449,57 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
     ax.axvline(crit, color="k", ls="--", lw=1)
     handles.insert(0, Line2D([], [], color="k", ls="--", lw=1, label="p = 0.05"))
     ax.set_xlim(0, 1.1 * max(max(val), crit, math.log10(B + 1) if B else 0.0))
-    ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    ax.set_xlabel(rf"$-\log_{{10}}\,p$ (parametric bootstrap, B = {B}; red: p $\leq$ 0.05)")
+    if created:
+        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles),
+                   fontsize="small", frameon=False)
+    else:
+        ax.legend(handles=handles, fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.set_xlabel(rf"$-\log_{{10}}\,p$ (parametric bootstrap, B = {B})")
     return fig
 
 
-def _figure_and_axes(ax: Any = None, figsize=(8, 4)):
+def _figure_and_axes(ax: Any = None, figsize=(PAGE_WIDTH, 3.6)):
     """``(figure, axes)``: the given axes and their figure, or a new (constrained-layout)
-    figure of ``figsize``."""
+    figure of ``figsize`` (at most a page wide)."""
     if ax is None:
         return _subplots(figsize=figsize)
     return ax.figure, ax
 
 
+def _p_parts(p: float) -> tuple[str, int | None]:
+    """A p-value's mantissa and power of ten as written (``("3.4", -9)``; ``("0.012", None)``
+    from 0.001 up; ``("<", -300)`` for a p that underflowed to 0)."""
+    if p == 0:
+        return "<", -300
+    if p >= 1e-3:
+        return f"{p:.2g}", None
+    m, e = f"{p:.1e}".split("e")
+    return m, int(e)
+
+
 def _p_text(p: float) -> str:
-    """A p-value as the figures and the report write it."""
+    r"""A p-value as the figures write it (mathtext): 0.073, $3.4\times10^{-9}$,
+    $<10^{-300}$ (one that underflowed to 0); "—" when it is not a number."""
     if p is None or not math.isfinite(p):
         return "—"
-    return "0" if p == 0 else f"{p:.2g}"
+    m, e = _p_parts(p)
+    if e is None:
+        return m
+    return rf"$<10^{{{e}}}$" if m == "<" else rf"${m}\times10^{{{e}}}$"
+
+
+def _p_html(p: Any) -> str:
+    """A p-value as the report's tables write it: 0.073, 3.4&times;10<sup>-9</sup>."""
+    try:
+        p = float(p)
+    except (TypeError, ValueError):
+        return "—"
+    if not math.isfinite(p):
+        return "—"
+    m, e = _p_parts(p)
+    if e is None:
+        return _number(p, ".3g")
+    return f"&lt;10<sup>{e}</sup>" if m == "<" else f"{m}&times;10<sup>{e}</sup>"
 
 
 def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = None
@@ -401,9 +517,9 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     Returns
     -------
     matplotlib.figure.Figure
-        One bar per testable candidate, d(-ln L) (red: justified; a symlog
-        axis when the largest bar or threshold is above 10, else linear), its
-        p-value in a column at the right, and for an entry with new
+        One bar per testable candidate, d(-ln L) on a linear axis (red and
+        hatched: justified), its value and p-value (0.073, 3.4 x 10^-9) in a
+        column at the right, and for an entry with new
         parameters a black mark at the d(-ln L) its test needs at the level
         per candidate: half the chi2(df) quantile at the level, or for a
         one-parameter boundary null (chi-bar-squared: the p-value halved)
@@ -411,7 +527,6 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
         scale where the test was calibrated and the scale is above 1.
         The marks are the axes' only lines.
     """
-    from matplotlib import ticker
     from scipy import stats
 
     fig, ax = _figure_and_axes(ax)
@@ -419,7 +534,10 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     level = result.settings["level_per_candidate"]
     names = [c.physics for c in rows]
     d = [c.delta_neg_log_lik for c in rows]
-    ax.barh(range(len(rows)), d, color=["C3" if c.justified else "C0" for c in rows])
+    bars = ax.barh(range(len(rows)), d, color=["C3" if c.justified else "C0" for c in rows])
+    for bar, c in zip(bars, rows):
+        if c.justified:  # (hatched: told apart in greyscale too)
+            bar.set(hatch="///", edgecolor="w", linewidth=0)
     crits = []
     for i, c in enumerate(rows):
         if c.df > 0:
@@ -431,27 +549,25 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
             crits.append(crit)
             ax.plot([crit, crit], [i - 0.4, i + 0.4], "k-", lw=2)
     ax.set_yticks(range(len(rows)))
-    ax.set_yticklabels(names, fontsize=8)
+    ax.set_yticklabels(names, fontsize="small")
     ax.set_ylim(len(rows) - 0.5, -0.5)
-    top = max([0.0, *(x for x in d if math.isfinite(x)), *crits])
-    if top > 10:
-        ax.set_xscale("symlog", linthresh=1.0)
-        ax.set_xlim(min(0.0, *(x for x in d if math.isfinite(x))), top * 1.6)
-        ax.xaxis.set_major_locator(ticker.SymmetricalLogLocator(base=10, linthresh=1.0,
-                                                                subs=(1.0, 2.0, 5.0)))
-        ax.xaxis.set_minor_locator(ticker.NullLocator())
-        ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    # a linear axis (a symlog one drew 1.06 and 3.83 close together): the values are written
+    # in the column at the right, so a bar beside a censored fit's large gain is still read
+    finite = [x for x in d if math.isfinite(x)]
+    top = max([0.0, *finite, *crits])
+    ax.set_xlim(min([0.0, *finite]) * 1.05, 1.05 * top if top > 0 else 1.0)
     ax.grid(True, axis="x", alpha=0.3)
     ax.set_axisbelow(True)
-    # the p-values as a column at the right, clear of the bars and the marks
+    # the values and p-values as a column at the right, clear of the bars and the marks
     right = ax.secondary_yaxis("right")
     right.set_yticks(range(len(rows)))
-    right.set_yticklabels([f"p = {_p_text(c.p_value)}" for c in rows], fontsize=8)
+    right.set_yticklabels([rf"$\Delta$ = {_number(x, '.3g' if abs(x) >= 1 else '.2f')}, "
+                           f"p = {_p_text(c.p_value)}" for x, c in zip(d, rows)], fontsize="small")
     right.tick_params(length=0)
     ax.set_xlabel(r"$\Delta(-\ln L) = -\ln L_\mathrm{base} - (-\ln L_\mathrm{extension})$"
                   "\nblack mark: what the test needs at the level per candidate "
-                  f"({level:.2g}); red: justified", fontsize=9)
-    ax.set_title(f"Candidates (decision: {result.physics})", fontsize=10)
+                  f"({level:.2g}); red, hatched: justified")
+    ax.set_title(f"Candidates (decision: {result.physics})", fontsize="medium")
     return fig
 
 
@@ -478,8 +594,8 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
         ``(key, diagnosis)`` with ``diagnosis`` as ``DiagnosisResult.to_dict()``
         (or the pooled one) writes it.
     ax : matplotlib Axes, optional
-        Default: a new figure, at least 3.6 in tall (its colour bar's label
-        whole) and 0.28 in more per diagnosis.
+        Default: a new figure, a page (7.5 in) wide, at least 3.6 in tall
+        (its colour bar's label whole) and 0.28 in more per diagnosis.
 
     Returns
     -------
@@ -501,8 +617,8 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     for _, d in diagnoses:
         names += [c["physics"] for c in d["ranking"] if c["physics"] not in names]
     if ax is None:
-        fig, ax = _subplots(figsize=(8.5 + 0.9 * (len(names) - len(NAMES)),
-                                     min(max(3.6, 1.9 + 0.28 * n), 60.0)))
+        # at most a page wide (_subplots), as tall as the diagnoses need
+        fig, ax = _subplots(figsize=(PAGE_WIDTH, min(max(3.6, 1.9 + 0.28 * n), 60.0)), tall=True)
     else:
         fig = ax.figure
     z = np.full((n, len(names)), np.nan)
@@ -527,22 +643,23 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     tall = fig.get_size_inches()[1] * ax.get_position().height
     cb = fig.colorbar(im, ax=ax, extend="max" if capped else "neither", pad=0.02,
                       aspect=max(20.0, tall / 0.15),
-                      label=r"$-\log_{10} p$" + (" (arrow: p < 1e-6)" if capped else ""))
+                      label=r"$-\log_{10} p$" + (r" (arrow: $p < 10^{-6}$)" if capped else ""))
     levels = [d["settings"]["level_per_candidate"] for _, d in diagnoses]
     if levels:  # the decision's level per candidate (the median, should they differ)
         cb.ax.axhline(-math.log10(float(np.median(levels))), color="w", lw=2)
     ax.set_xticks(range(len(names)))
-    ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
+    ax.set_xticklabels(names, rotation=30, ha="right", fontsize="small")
     ax.set_yticks(range(n))
-    ax.set_yticklabels([f"{k}: {d['physics']}" for k, d in diagnoses], fontsize=7)
+    ax.set_yticklabels([f"{k}: {d['physics']}" for k, d in diagnoses], fontsize="small")
     ax.set_title(f"{n} {'diagnosis' if n == 1 else 'diagnoses'}: every candidate's p-value\n"
                  "dot: below the level per candidate (white line); box: chosen; grey: not "
-                 "testable", fontsize=9)
+                 "testable", fontsize="medium")
     return fig
 
 
 def _axes_row(n: int, axes: Any = None, height: float = 4.2):
-    """(figure, n axes in a row): new ones (constrained layout), or the given ones'."""
+    """(figure, n axes in a row): new ones (constrained layout, at most a page wide), or the
+    given ones'."""
     if axes is None:
         fig, axes = _subplots(1, n, figsize=(4.8 * n, height), squeeze=False)
         return fig, axes[0]
@@ -565,17 +682,33 @@ def _units_model(physics: str, model: Any = None) -> Any:
         return None
 
 
+def _suptitle(fig, text: str) -> None:
+    """The figure's title, broken into lines that fit its width (a one-panel figure is
+    4.8 in wide: a catalogue name and a phrase did not fit on one line)."""
+    from matplotlib.font_manager import FontProperties
+
+    from ..plots import _wrap
+
+    size = FontProperties(size=_pyplot().rcParams["figure.titlesize"]).get_size_in_points()
+    fig.suptitle(_wrap(text, 0.95 * fig.get_figwidth(), size))
+
+
 def _legend_below(ax, ncols: int = 2) -> None:
-    """The axes' legend under them, clear of the data (constrained layout makes room)."""
-    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncols=ncols,
-              frameon=False)
+    """The axes' legend under them, clear of the data (constrained layout makes room), in
+    one column under an axes narrower than 4 in."""
+    width = ax.get_position().width * ax.figure.get_figwidth()
+    ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.2),
+              ncols=ncols if width >= 4.0 else 1, frameon=False)
 
 
 def _mark_fit(ax, value: float, stderr: float, label: str) -> None:
-    """A maximum-likelihood fit and its ±1 standard error on a marginal's axes."""
+    """A maximum-likelihood fit (red dashed line) and its ±1 standard error (a red-hatched
+    span, unfilled, under everything: a filled one blended with an interval's shading into
+    a colour no legend entry had)."""
     ax.axvline(value, color="C3", ls="--", lw=1, label=label)
     if math.isfinite(stderr):
-        ax.axvspan(value - stderr, value + stderr, color="C3", alpha=0.12, label="±1 s.e.")
+        ax.axvspan(value - stderr, value + stderr, fill=False, hatch="///", edgecolor="C3",
+                   alpha=0.5, lw=0, zorder=0, label="±1 s.e.")
 
 
 def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
@@ -616,9 +749,9 @@ def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
                            label=f"{100 * iv.level:.0f} % profile interval" if k == 0 else None)
         ax.set_xlabel(parameter_label(model, n))
         ax.set_title(f"{post.draws(n).size} draws ("
-                     f"{'converged' if post.converged else 'not converged'})", fontsize=8)
+                     f"{'converged' if post.converged else 'not converged'})", fontsize="small")
         _legend_below(ax)
-    fig.suptitle(f"{chosen.physics}: posterior of its new parameters", fontsize=10)
+    _suptitle(fig, f"{chosen.physics}: posterior of its new parameters")
     return fig
 
 
@@ -662,14 +795,17 @@ def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
         q = iv.quantile
         ax.axhline(q, color="0.4", ls=":", lw=1,
                    label=rf"$\chi^2_1$ {100 * iv.level:.0f} % quantile")
-        ax.axvspan(iv.lower, iv.upper, color="C0", alpha=0.12,
+        ax.axvspan(iv.lower, iv.upper, color="C0", alpha=0.12, lw=0, zorder=0,
                    label=f"{100 * iv.level:.0f} % interval {iv}")
         ax.axvline(chosen.params[n], color="C3", ls="--", lw=1, label="reported fit")
         ax.set_ylim(-0.05 * q, 3 * q)
         ax.set_xlabel(parameter_label(model, n))
-        ax.set_ylabel(r"$2\,\Delta(-\ln L)$ × scale")
+        # the deviance scaled as the test's standard errors ask (profile.py): c says by what
+        ax.set_ylabel(r"scaled deviance $c \cdot 2\,\Delta(-\ln L)$")
+        ax.set_title(rf"$c$ = {iv.scale:.2g}: (own s.e. / test's s.e.)$^2$, at most 1",
+                     fontsize="small")
         _legend_below(ax)
-    fig.suptitle(f"{chosen.physics}: profile likelihood of its new parameters", fontsize=10)
+    _suptitle(fig, f"{chosen.physics}: profile likelihood of its new parameters")
     return fig
 
 
@@ -700,23 +836,42 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
         ax.plot(g, m, color="C0", lw=1.5, label="posterior (grid, Laplace)")
         lo, hi = post.marginals[n]["interval"]
         inside = (g >= lo) & (g <= hi)
-        ax.fill_between(g[inside], m[inside], color="C0", alpha=0.2, label="central 90 %")
+        ax.fill_between(g[inside], m[inside], color="C0", alpha=0.2, lw=0, zorder=0,
+                        label="central 90 %")
         _mark_fit(ax, post.ml[n], post.stderr.get(n, math.nan), "pooled ML fit")
         ax.set_xlabel(parameter_label(model, n))
         ax.set_ylabel("posterior density")
         _legend_below(ax)
-    fig.suptitle(f"{post.physics}: posterior of the parameters shared by "
-                 f"{post.settings['n_runs']} runs", fontsize=10)
+    _suptitle(fig, f"{post.physics}: posterior of the parameters shared by "
+                 f"{post.settings['n_runs']} runs")
     return fig
 
 
-def _png(fig, path: Path) -> Path:
+#: The formats :func:`write_report` can write its figures in, besides the PNG it embeds.
+FORMATS = ("png", "pdf", "svg")
+
+
+def _png(fig, path: Path, formats: Sequence[str] = ("png",)) -> Path:
+    """Save ``fig`` as the PNG ``path`` at :data:`FIGURE_DPI` (and in each other of
+    ``formats`` beside it, of the same stem: fonts embedded as TrueType in a PDF, text kept
+    as text in an SVG), close it, and return ``path``."""
     plt = _pyplot()
     try:
-        fig.savefig(path, dpi=110)
+        fig.savefig(path, dpi=FIGURE_DPI)
+        with plt.rc_context({"pdf.fonttype": 42, "svg.fonttype": "none"}):
+            for fmt in formats:
+                if fmt != "png":
+                    fig.savefig(path.with_suffix(f".{fmt}"), dpi=FIGURE_DPI)
     finally:
         plt.close(fig)
     return path
+
+
+def _has_p_values(result: DiagnosisResult) -> bool:
+    """Whether any located statistic has a bootstrap p-value to draw (:func:`plot_evidence`
+    draws bars only then)."""
+    return any(math.isfinite(e.value) and math.isfinite(e.p_value) and e.p_value > 0
+               for e in result.where.values())
 
 
 def _number(x: Any, fmt: str, missing: str = "—") -> str:
@@ -762,7 +917,7 @@ def _candidate_table(ranking: Sequence[Any]) -> str:
         rows.append(f"<tr{bold}>"
                     f"<td>{html.escape(c.physics)}</td>"
                     f"<td>{_number(c.delta_neg_log_lik, '.2f')}</td>"
-                    f"<td>{_number(c.p_value, '.3g')}</td>"
+                    f"<td>{_p_html(c.p_value)}</td>"
                     f"<td>{_number(c.delta_bic, '.1f')}</td>"
                     f"<td>{_number(c.signature_score, '.2f')}</td><td>{ps}</td></tr>")
     return ("<table><tr><th>physics</th><th>&Delta;(-ln L)</th><th>p</th><th>&Delta;BIC</th>"
@@ -785,8 +940,8 @@ _STYLE = ("body{font-family:sans-serif;max-width:1000px;margin:auto}"
           "font-size:90%}figcaption{font-size:85%;color:#444}")
 
 
-def write_report(result: DiagnosisResult, directory: str | Path, *, recording: Any = None
-                 ) -> dict[str, Path]:
+def write_report(result: DiagnosisResult, directory: str | Path, *, recording: Any = None,
+                 formats: Sequence[str] = ("png",)) -> dict[str, Path]:
     """Write the figures, ``report.html`` and ``diagnosis.json`` to ``directory``.
 
     Parameters
@@ -800,18 +955,26 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
     recording : Recording, optional
         The recording diagnosed, for a result without its sample interval
         (:func:`plot_residuals`).
+    formats : sequence of str, optional
+        Each figure is written as a PNG (at :data:`FIGURE_DPI`, embedded in
+        the page) and also, beside it, in each other format of these
+        (:data:`FORMATS`: ``"pdf"``, ``"svg"``), for a paper.
 
     Returns
     -------
     dict of str to Path
-        The files by name: ``frequency_response``, ``residuals``,
+        The files written, by name: ``frequency_response``, ``residuals``,
         ``evidence`` and ``candidates`` (PNG), ``profile`` (PNG, when the
         chosen extension has profile intervals), ``posterior`` (PNG, when
-        ``result.posterior`` is set), ``json`` (``diagnosis.json``,
+        ``result.posterior`` is set), each figure's other formats as
+        ``<name>_pdf`` and ``<name>_svg``, ``json`` (``diagnosis.json``,
         :meth:`DiagnosisResult.to_json`) and ``html`` (``report.html``, the
-        figures embedded).  Without a describing function (a record that is
-        not whole periods of the forcing) ``frequency_response.png`` says so
-        and the page says it in words instead of showing it.
+        figures embedded).  A figure that would be empty is not written (a
+        file of its name left from an earlier report is removed) and the
+        page says why in words: ``frequency_response`` without a describing
+        function (a record that is not whole periods of the forcing),
+        ``evidence`` without bootstrap p-values (``n_bootstrap=0``, or the
+        bootstrap skipped).
 
     Raises
     ------
@@ -819,35 +982,51 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         ``directory`` cannot be created or a file in it written.
     ValueError
         Neither ``result.settings["dt"]`` nor ``recording`` gives the sample
-        interval (:func:`plot_residuals`; a result of ``diagnose`` has it).
+        interval (:func:`plot_residuals`; a result of ``diagnose`` has it), or
+        ``formats`` names one not in :data:`FORMATS`.
     """
+    formats = tuple(dict.fromkeys(("png", *([formats] if isinstance(formats, str) else formats))))
+    bad = [f for f in formats if f not in FORMATS]
+    if bad:
+        raise ValueError(f"formats must be among {', '.join(FORMATS)}, got {bad[0]!r}")
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
-    paths = {
-        "frequency_response": _png(plot_frequency_response(result), out / "frequency_response.png"),
-        "residuals": _png(plot_residuals(result, recording=recording), out / "residuals.png"),
-        "evidence": _png(plot_evidence(result), out / "evidence.png"),
-        "candidates": _png(plot_candidates(result), out / "candidates.png"),
-    }
+    paths: dict[str, Path] = {}
     chosen = getattr(result, "chosen", None)
-    if chosen is not None and chosen.interval:
-        paths["profile"] = _png(plot_profile(result), out / "profile.png")
     post = getattr(result, "posterior", None)
+    figures = {  # name: how to draw it, or None: it would be empty (not written)
+        "frequency_response": (lambda: plot_frequency_response(result))
+        if "df_data" in result.arrays else None,
+        "residuals": lambda: plot_residuals(result, recording=recording),
+        "evidence": (lambda: plot_evidence(result)) if _has_p_values(result) else None,
+        "candidates": lambda: plot_candidates(result),
+    }
+    if chosen is not None and chosen.interval:
+        figures["profile"] = lambda: plot_profile(result)
     if post is not None:
-        paths["posterior"] = _png(plot_posterior(result), out / "posterior.png")
+        figures["posterior"] = lambda: plot_posterior(result)
+    for name, draw in figures.items():
+        png = out / f"{name}.png"
+        if draw is None:  # no empty placeholder, nor one left from an earlier report
+            for fmt in FORMATS:
+                png.with_suffix(f".{fmt}").unlink(missing_ok=True)
+            continue
+        paths[name] = _png(draw(), png, formats)
+        for fmt in formats[1:]:
+            paths[f"{name}_{fmt}"] = png.with_suffix(f".{fmt}")
     paths["json"] = out / "diagnosis.json"
     result.to_json(paths["json"])
 
     physics = html.escape(result.physics)
     after = f" and with {physics}" if chosen is not None else ""
-    tested = [e for e in result.where.values() if math.isfinite(e.value)]
     ev = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(e.description)}</td>"
                  f"<td>{_number(e.value, '.4g')}</td><td>{_number(e.p_value, '.3f')}</td></tr>"
                  for k, e in result.where.items() if math.isfinite(e.value))
-    no_p = "" if any(math.isfinite(e.p_value) for e in tested) else (
+    no_p = "" if "evidence" in paths else (
         "<p>No bootstrap p-values: the located statistics were not tested "
-        "(diagnose(n_bootstrap=0), or the bootstrap was skipped).</p>")
-    if "df_data" in result.arrays:
+        "(diagnose(n_bootstrap=0), or the bootstrap was skipped), so there is no figure of "
+        "them.</p>")
+    if "frequency_response" in paths:
         freq = _img(paths["frequency_response"],
                     f"Describing functions u/e (visual) and u/theta_ddot_m (motion) at the "
                     f"forcing frequencies: the data's two-input estimate (dots), the same "
@@ -887,13 +1066,14 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 <h2>Where</h2>
 <table><tr><th>evidence</th><th>what</th><th>value</th><th>bootstrap p</th></tr>{ev}</table>
 {no_p}
-{_img(paths['evidence'], "-log10 of each located statistic's parametric-bootstrap p-value.")}
+{_img(paths['evidence'], "-log10 of each located statistic's parametric-bootstrap p-value.")
+ if "evidence" in paths else ""}
 <h2>Frequency responses</h2>{freq}
 <h2>Residuals before and after</h2>
 {_img(paths['residuals'], f"Residual u - u_hat of the base model{after}: its spectrum ({band}), "
       "its variance over the run, and its mean times sign against the canal output and the "
       "control.")}
-{f"<h2>Profile likelihood of the new parameters</h2>{_img(paths['profile'], 'Scaled deviance along each new parameter, the level it must stay below, the interval and the reported fit.')}" if "profile" in paths else ""}
+{f"<h2>Profile likelihood of the new parameters</h2>{_img(paths['profile'], 'Scaled deviance along each new parameter (twice the rise of -ln L times c = (standard error of the fit / standard error of the test)^2, at most 1, so that a quadratic profile gives the reported standard error), the level it must stay below, the interval and the reported fit.')}" if "profile" in paths else ""}
 {f"<h2>Posterior of the extended model</h2>{_img(paths['posterior'], 'Marginal posterior of each new parameter with the maximum-likelihood fit and its standard error.')}" if post is not None else ""}
 <pre>{html.escape(result.summary())}</pre>
 </body></html>
