@@ -438,6 +438,10 @@ def test_report_figures_also_in_pdf_and_svg(washout, tmp_path):
     assert {p for p in tmp_path.iterdir()} == set(paths.values())  # the list is what is there
     with pytest.raises(ValueError, match="formats"):
         R.write_report(washout, tmp_path, formats=("png", "jpeg"))
+    # the result's own report() passes them on (the PNG always, for the page)
+    paths = washout.report(tmp_path / "own", formats=("pdf",))
+    assert paths["residuals_pdf"].is_file() and paths["residuals"].suffix == ".png"
+    assert "residuals_svg" not in paths
 
 
 # -- 10. empty figures are left out --------------------------------------------------------------

@@ -459,7 +459,8 @@ class DiagnosisResult(_JSONSummary):
                    number(d.get("elapsed_seconds", 0.0)), d.get("source"), arrays,
                    bayes_factor=None if bf is None else ExtensionBayesFactor.from_dict(bf))
 
-    def report(self, directory: str | Path) -> dict[str, Path]:
+    def report(self, directory: str | Path, *,
+               formats: Sequence[str] = ("png",)) -> dict[str, Path]:
         """Write PNG figures, ``report.html`` (figures embedded) and ``diagnosis.json``.
 
         Parameters
@@ -467,6 +468,10 @@ class DiagnosisResult(_JSONSummary):
         directory : str or Path
             Created, with its parents, if missing; files of the same names in
             it are replaced.
+        formats : sequence of str, optional
+            Also write each figure in these formats beside its PNG (``"pdf"``,
+            ``"svg"``: for a paper; fonts embedded as TrueType, SVG text kept
+            as text); another name is refused (ValueError).
 
         Returns
         -------
@@ -489,7 +494,7 @@ class DiagnosisResult(_JSONSummary):
                              f"numbers, not the signals the report's figures are drawn from; "
                              f"diagnose the recording again to write its report")
 
-        return write_report(self, directory)
+        return write_report(self, directory, formats=formats)
 
 
 def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1,
