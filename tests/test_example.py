@@ -19,18 +19,45 @@ from bayespilot.io import read_recording
 from bayespilot.sample import Posterior
 
 
+#: The titles of the figures the demo saved, by file name (filled by the ``demo`` fixture).
+TITLES: dict[str, list[str]] = {}
+
+
 @pytest.fixture(scope="module")
 def demo(tmp_path_factory):
+    from bayespilot import example
+
     out = tmp_path_factory.mktemp("demo")
-    code = main(["-q", "demo", "--out", str(out), "--motion-gains", "1", "--duration", "20",
-                 "--max-steps", "400", "--nlive", "30", "--seed", "3"])
+    save = example._save
+
+    def keep_titles(fig, path):
+        TITLES[path.name] = [ax.get_title() for ax in fig.axes]
+        save(fig, path)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(example, "_save", keep_titles)
+        code = main(["-q", "demo", "--out", str(out), "--motion-gains", "1", "--duration", "20",
+                     "--max-steps", "400", "--nlive", "30", "--seed", "3"])
     return code, out
+
+
+def test_demo_figure_titles_are_in_the_papers_notation(demo):
+    """Audit 3: the marginal's title read "FD_k1: posterior of delta_abs" (a file stem and a
+    code identifier), without the run's convergence; the traces' title began with a path."""
+    assert demo[0] == 0
+    (title,) = TITLES["delta_abs_FD_k1.png"]
+    flat = title.replace("\n", " ")
+    assert flat.startswith(r"FD, $K_\theta$ = 1: posterior of $\delta_\mathrm{abs}$")
+    assert "delta_abs" not in flat.replace(r"\delta_\mathrm{abs}", "") and "FD_k1" not in flat
+    assert "converged" in flat and "likelihood" in flat
+    assert not any("recordings" in t for t in TITLES["traces.png"])
 
 
 def test_demo_writes_the_report_and_its_files(demo):
     code, out = demo
     assert code == 0
     report = (out / "report.md").read_text()
+    assert "with seed 3 (run i seeded 3 + i)" in report  # (a reader can repeat it)
     rows = [line for line in report.splitlines() if line.startswith("| FD_k1 |")]
     assert len(rows) == 1
     cells = [c.strip() for c in rows[0].strip("|").split("|")]
@@ -58,3 +85,14 @@ def test_demo_writes_the_report_and_its_files(demo):
         assert (out / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     rec = read_recording(out / "recordings" / "FD_k1")
     assert (rec.task, rec.motion_gain, rec.n_samples) == ("FD", 1.0, 2000)
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "3", True])
+def test_a_bad_seed_is_refused_before_any_folder_is_made(tmp_path, seed):
+    """run_example(seed=None) raised a TypeError (None + 0) after making five empty folders;
+    None now draws a seed (stated in the report) and a bad one is refused first."""
+    from bayespilot.example import run_example
+
+    with pytest.raises(ValueError, match="seed must be an integer >= 0 or None"):
+        run_example(tmp_path / "out", seed=seed, progress=False, say=lambda s: None)
+    assert not (tmp_path / "out").exists()

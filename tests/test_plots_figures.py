@@ -8,6 +8,7 @@ runs in seconds; geometry is checked in display coordinates after a draw.
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import numpy as np
@@ -36,9 +37,9 @@ def _close_figures():
 
 
 def _posterior(names=PAPER, *, n_walkers=10, n_draws=60, centre=None, truth=None, seed=0,
-               spread=0.08):
+               spread=0.08, model="Pool et al. (2012)", likelihood="eq4"):
     """A Posterior of Gaussian draws around ``centre`` (default Table 3 FD; relative standard
-    deviation ``spread``), kept as sample keeps it."""
+    deviation ``spread``), kept as sample keeps it (``model``: the sampled model's name)."""
     import arviz as az
 
     from bayespilot.sample import _META_ATTR, Posterior
@@ -49,8 +50,8 @@ def _posterior(names=PAPER, *, n_walkers=10, n_draws=60, centre=None, truth=None
             for n in names}
     lp = rng.normal(7740.0, 2.0, (n_walkers, n_draws))
     idata = az.from_dict(posterior=post, sample_stats={"lp": lp})
-    settings = {"likelihood": "eq4", "discard": 150, "thin": 7, "n_steps": 600,
-                "model": "Pool et al. (2012)", "true_parameters": truth}
+    settings = {"likelihood": likelihood, "discard": 150, "thin": 7, "n_steps": 600,
+                "model": model, "true_parameters": truth}
     tau = {n: 40.0 + i for i, n in enumerate(names)}
     meta = {"parameter_names": list(names), "tau": tau, "converged": False,
             "settings": settings, "seed": seed}
@@ -196,7 +197,7 @@ def test_histogram_statistics_leave_the_bar_tops_visible():
         for ax in fig.axes:
             if any(t.get_text() == "no fits" for t in ax.texts):
                 continue
-            stats = [t for t in ax.texts if "N50" in t.get_text()]
+            stats = [t for t in ax.texts if "N_{50" in t.get_text()]
             assert len(stats) == 1
             box = stats[0].get_window_extent()
             assert box.x0 >= ax.get_window_extent().x0, "statistics spill onto the tick labels"
@@ -231,7 +232,7 @@ def test_failed_fits_are_reported_and_statistics_use_the_finite_ones():
     d[::10] = np.nan
     fig = plot_threshold_histograms(_results(d, fn=0.0, k=0.25))
     ax = fig.axes[0]
-    text = next(t.get_text() for t in ax.texts if "N50" in t.get_text())
+    text = next(t.get_text() for t in ax.texts if "N_{50" in t.get_text())
     assert "nan" not in text.lower()
     assert re.search(r"\b5 failed\b", text)
     finite = d[np.isfinite(d)]
@@ -239,7 +240,7 @@ def test_failed_fits_are_reported_and_statistics_use_the_finite_ones():
     # N50 out of every realization (Figs. 14/15: "out of 100"): a failed fit is not within 50 %
     # (the count is written only when it is not the paper's 100)
     n50 = int(np.count_nonzero(np.abs(finite - 0.0075) <= 0.5 * 0.0075))
-    assert f"N50={n50}/50" in text
+    assert f"$N_{{50\\%}}$={n50}/50" in text
     # every finite fit is in the histogram
     assert sum(b.get_height() for b in _bars(ax)) == finite.size
 
@@ -248,7 +249,7 @@ def test_values_above_upper_are_counted_and_marked():
     d = [0.005, 0.007, 0.008, 0.2, 0.3, 0.15]
     fig = plot_threshold_histograms(_results(d), upper=0.1)
     ax = fig.axes[0]
-    text = next(t.get_text() for t in ax.texts if "N50" in t.get_text())
+    text = next(t.get_text() for t in ax.texts if "N_{50" in t.get_text())
     assert re.search(r"≥\s?0\.1: 3\b", text)
     labels = [t.get_text() for lg in (ax.get_legend(), *fig.legends) if lg is not None
               for t in lg.get_texts()]
@@ -263,10 +264,10 @@ def test_histogram_numbers_are_those_of_campaign_summarise_without_failures():
     res = _results(np.abs(rng.normal(0.009, 0.005, 100)), fn=0.2, k=1.0)
     st = summarise(res)[0]
     fig = plot_threshold_histograms(res)
-    text = next(t for t in fig.axes[0].texts if "N50" in t.get_text())
+    text = next(t for t in fig.axes[0].texts if "N_{50" in t.get_text())
     s = text.get_text()
     assert f"{st['mu']:.4f}" in s and f"{st['sigma']:.4f}" in s
-    assert st["n"] == 100 and f"N50={st['N50']} (paper" in s and "failed" not in s
+    assert st["n"] == 100 and f"$N_{{50\\%}}$={st['N50']} (paper" in s and "failed" not in s
     assert (matplotlib.colors.to_hex(text.get_color()) == matplotlib.colors.to_hex("C3")) \
         == st["flag"]
     # a flagged value is marked in the text, not by colour alone
@@ -475,3 +476,321 @@ def test_threshold_histograms_say_what_they_take():
     # a generator of results is still taken
     fig = plot_threshold_histograms(r for r in _results([0.006, 0.008, 0.02]))
     assert len(fig.axes) == 1
+
+
+# --- 7. the figure audit of 2026-11-29 -----------------------------------------------------------
+def _paper_fit(*, seed=0, n_runs=4, generations=12):
+    """A FitResult of the three-step procedure with made-up steps, shaped like the audit's
+    Fig. 9 (FD, K_theta = 0.5): -ln L 20 000 units above its minimum at delta_abs = 0, a
+    minimum at 0.0587 and a plateau 7.5 units above it from 0.064 up, where the Step II value
+    and most Step I estimates lie."""
+    from bayespilot.fit.result import FitResult
+
+    rng = np.random.default_rng(seed)
+    names = list(PAPER)
+    grid = np.round(np.arange(0.0, 0.1 + 1e-12, 0.0005), 6)
+    bottom = -31112.8
+    nll = np.where(grid < 0.0587, bottom + 2.0e4 * ((0.0587 - grid) / 0.0587) ** 2,
+                   bottom + 7.5 * np.clip((grid - 0.0587) / 0.0053, 0.0, 1.0))
+    k = int(np.argmin(nll))
+    deltas = [0.0751, 0.0693, 0.0586, 0.0946][:n_runs]
+    runs = []
+    for j, d in enumerate(deltas):
+        x = [TRUTH[n] * (1 + 0.1 * rng.standard_normal()) for n in names]
+        x[names.index("delta_abs")] = d
+        hist_x = np.array([x] * (generations + 1)) * (1 + 0.05 * rng.random((generations + 1, 1)))
+        hist_f = np.sort(-2.9e4 - 2e3 * rng.random(generations + 1))[::-1]
+        runs.append({"x": x, "fun": float(hist_f[-1]), "history_best_x": hist_x.tolist(),
+                     "history_best_fun": hist_f.tolist(),
+                     "history_mean_fun": hist_f.tolist(), "n_evaluations": 100, "seed": {},
+                     "settings": {}})
+    params = dict(TRUTH, delta_abs=float(grid[k]))
+    steps = {"step1": {"parameter_names": names, "delta_abs": 0.064, "n_best": 2,
+                       "order": list(range(n_runs)), "seed": {}, "runs": runs},
+             "step1_delta_abs": 0.064,
+             "step2": [{"params": dict(TRUTH, delta_abs=0.064), "neg_log_lik": bottom + 7.5,
+                        "start_neg_log_lik": r["fun"], "refined": True, "nfev": 5, "njev": 5,
+                        "success": True, "message": ""} for r in runs],
+             "step2_best": 1,
+             "step3": [{"name": "delta_abs", "grid": grid.tolist(), "neg_log_lik": nll.tolist(),
+                        "best": float(grid[k]), "best_neg_log_lik": float(nll[k])}],
+             "iterations": [], "iterations_converged": None, "check": {}}
+    return FitResult.from_dict({
+        "params": params, "neg_log_lik": float(nll[k]), "vaf": 80.0, "method": "paper",
+        "seed": seed, "threshold": True, "elapsed_seconds": 1.0, "source": None,
+        "settings": {"model": "Pool et al. (2012)"},
+        "bounds": {n: list(presets.TABLE1_BOUNDS[n]) for n in names},
+        "units": dict(presets.PARAMETER_UNITS), "steps": steps})
+
+
+def _fit_figures(fits):
+    from bayespilot.fit.figures import (plot_ga_convergence, plot_step_one_thresholds,
+                                        plot_step_three, plot_step_two)
+
+    return {"fig6": plot_step_one_thresholds(fits), "fig7": plot_ga_convergence(fits),
+            "fig8": plot_step_two(fits), "fig9": plot_step_three(fits)}
+
+
+def test_fit_figures_fit_a_page_in_constrained_layout_with_no_small_fixed_fonts():
+    """Audit 1 and 14: Figs. 6-9 were 3 in per panel (12 in for four fits), Fig. 8 in tight
+    layout with its legend on the first panel in 7 pt."""
+    from matplotlib.font_manager import FontProperties
+    from matplotlib.layout_engine import ConstrainedLayoutEngine
+
+    small = FontProperties(size="small").get_size_in_points()
+    for name, fig in _fit_figures([_paper_fit(seed=s) for s in range(4)]).items():
+        w, h = fig.get_size_inches()
+        assert w <= 7.5 and h <= 9.5, f"{name}: {w:.1f} x {h:.1f} in"
+        assert isinstance(fig.get_layout_engine(), ConstrainedLayoutEngine), name
+        fig.canvas.draw()
+        for t in _texts(fig):
+            assert t.get_fontsize() >= small - 1e-9, f"{name}: {t.get_text()!r} is smaller"
+        # one legend above the panels, none on a panel
+        assert len(fig.legends) == 1 and not any(ax.get_legend() for ax in fig.axes), name
+        top = min(ax.get_window_extent().y1 for ax in fig.axes if ax.get_visible())
+        assert fig.legends[0].get_window_extent().y0 >= top - 1.0, name
+        # the bottom row's x tick labels do not run into each other
+        for ax in fig.axes:
+            assert _x_tick_labels_clear(ax), name
+        plt.close(fig)
+
+
+def test_fit_figures_label_neg_log_lik_in_the_paper_notation():
+    """Audit 3: Fig. 8's y label was a plain "-ln L"."""
+    figs = _fit_figures([_paper_fit()])
+    for name in ("fig7", "fig8", "fig9"):
+        assert figs[name].axes[0].get_ylabel() == r"$-\ln L$", name
+
+
+def test_ga_repetitions_differ_in_line_style_not_only_colour():
+    """Audit 6: Fig. 7's repetitions were blue, orange and green solid lines (grey print)."""
+    fig = _fit_figures([_paper_fit()])["fig7"]
+    for ax in fig.axes:
+        styles = [ln.get_linestyle() for ln in ax.get_lines()]
+        assert len(styles) == 3 and len(set(styles)) == 3
+    handles = fig.legends[0].legend_handles
+    assert len({h.get_linestyle() for h in handles}) == 3
+
+
+def test_step_three_shows_the_minimum_and_the_markers():
+    """Audit 7: Fig. 9's y range was set by the curve's far end (20 000 units above the
+    minimum), flattening the 7.5 units between the Step II value and the minimum to a point."""
+    fit = _paper_fit()
+    fig = _fit_figures([fit])["fig9"]
+    ax = fig.axes[0]
+    lo, hi = ax.get_ylim()
+    steps = fit.steps
+    best = steps["step3"][0]["best_neg_log_lik"]
+    step_two = next(ln for ln in ax.get_lines() if ln.get_label() == "Step II")
+    y2 = float(step_two.get_ydata()[0])
+    assert lo < best < y2 < hi
+    # the minimum is not squashed: the Step II value stands a tenth of the axis above it
+    assert (y2 - best) / (hi - lo) > 0.1
+    # the open ring is drawn over the filled minimum (which shows through it)
+    filled = next(ln for ln in ax.get_lines() if ln.get_label() == "Step III")
+    assert step_two.get_zorder() > filled.get_zorder()
+    assert step_two.get_markerfacecolor() == "none"
+    # a Step I estimate off the range is marked at the top, not lost
+    fig.canvas.draw()
+    xs = np.concatenate([ln.get_xdata() for ln in ax.get_lines()
+                         if ln.get_label() in ("Step I", "Step I (above the range shown)")])
+    assert sorted(np.round(xs, 6)) == sorted(np.round(
+        [r["x"][PAPER.index("delta_abs")] for r in steps["step1"]["runs"]], 6))
+    import math
+
+    from bayespilot.fit.figures import plot_step_three
+
+    whole = plot_step_three([fit], span=math.inf).axes[0].get_ylim()  # the whole curve
+    assert whole[1] - whole[0] > 1.9e4
+    with pytest.raises(ValueError, match="span"):
+        plot_step_three([fit], span=0)
+
+
+def _x_tick_labels_clear(ax) -> bool:
+    """Whether an axes' x tick labels (drawn) stand apart: side by side at least a quarter of
+    a character apart ("0.19750.2000" touches: it reads as one number), or, turned by an
+    angle, as parallel strips one text height apart."""
+    labels = sorted((t for t in ax.get_xticklabels() if t.get_visible() and t.get_text()),
+                    key=lambda t: t.get_window_extent().x0)
+    if len(labels) < 2:
+        return True
+    angle = math.radians(labels[0].get_rotation())
+    if abs(math.sin(angle)) < 1e-6:
+        gap = 0.25 * labels[0].get_fontsize() * ax.figure.dpi / 72.0
+        boxes = [t.get_window_extent() for t in labels]
+        return all(b1.x0 >= b0.x1 + gap for b0, b1 in zip(boxes, boxes[1:]))
+    height = labels[0].get_fontsize() * ax.figure.dpi / 72.0
+    xs = [t.get_window_extent().x1 for t in labels]  # the turned labels' upper right ends
+    return all(abs(b - a) * abs(math.sin(angle)) >= height for a, b in zip(xs, xs[1:]))
+
+
+def test_pair_plot_bottom_tick_labels_do_not_overlap():
+    """Audit 2: the demo's pair plot read "0.19750.20000.20250.2050" under tau_m."""
+    post = _posterior(centre={"K_m": 0.49, "tau_m": 0.2012, "delta_abs": 0.0077}, spread=0.0069,
+                      n_walkers=24, n_draws=60, seed=4)
+    for kw in ({}, {"figsize": (3.5, 3.7)}, {"names": PAPER}):
+        fig = plot_pair(post, **kw)
+        fig.canvas.draw()
+        k = int(round(len(fig.axes) ** 0.5))
+        for ax in fig.axes[-k:]:
+            assert len([t for t in ax.get_xticklabels() if t.get_text()]) >= 2
+            assert _x_tick_labels_clear(ax), f"{kw}: tick labels overlap under {ax.get_xlabel()}"
+        plt.close(fig)
+
+
+def test_figure_titles_read_as_a_paper_writes():
+    """Audit 3 and 15: "eq4 likelihood", "NOT converged", the recording's path in the title."""
+    from bayespilot.recording import Recording
+
+    post = _posterior()
+    assert "Eq. (4) likelihood" in plot_marginal(post).axes[0].get_title().replace("\n", " ")
+    assert "eq4" not in plot_pair(post)._suptitle.get_text()
+    assert "Eq. (4) likelihood" in plot_pair(post)._suptitle.get_text().replace("\n", " ")
+    title = plot_chains(post).axes[0].get_title(loc="left")
+    assert "not converged" in title and "NOT" not in title
+    fig = plot_marginal(post)
+    assert "90 % HDI" in " ".join(t.get_text() for t in fig.legends[0].get_texts())
+    t = np.arange(300) / 100.0
+    rec = Recording({"t": t, "e": np.sin(t), "u": np.cos(t), "theta_ddot_m": -np.sin(t)},
+                    100.0, 1.0, "FD", source="demo/recordings/FD_k0.5")
+    assert "FD_k0.5" not in plot_traces(rec).axes[0].get_title()
+    assert "demo/recordings/FD_k0.5" in plot_traces(rec, show_source=True).axes[0].get_title()
+
+
+def test_marginal_density_has_the_inverse_unit():
+    """Audit 12: "posterior density" without its unit."""
+    post = _posterior()
+    assert plot_marginal(post, "delta_abs").axes[0].get_ylabel() == "posterior density (1/IPUT)"
+    assert plot_marginal(post, "tau_m").axes[0].get_ylabel() == "posterior density (1/s)"
+    assert plot_marginal(post, "K_m").axes[0].get_ylabel() == "posterior density (IPUT/rad)"
+    assert plot_marginal(post, "zeta_nm").axes[0].get_ylabel() == "posterior density"
+
+
+def test_marginal_interval_median_and_an_added_span_stay_apart():
+    """Audit 5: the 90 % HDI was a blue translucent span; a fit's red s.e. span on the same
+    axes (the diagnosis report's) mixed with it into purple, and the median was the bars'
+    blue.  Now the HDI is a bar above the histogram, the median another colour and style."""
+    from matplotlib.colors import to_rgba
+
+    post = _posterior()
+    fig, ax = plt.subplots(layout="constrained")
+    plot_marginal(post, "delta_abs", truth=0.0075, ax=ax)
+    bars = _bars(ax)
+    translucent = [p for p in ax.patches if p.get_facecolor()[3] < 0.5]
+    assert not translucent, "a shaded span would mix with spans added to the axes"
+    bar_colour = to_rgba(bars[0].get_facecolor())[:3]
+    median = next(ln for ln in ax.get_lines() if ln.get_label().startswith("median"))
+    assert to_rgba(median.get_color())[:3] != bar_colour and median.get_linestyle() != "-"
+    hdi = next(ln for ln in ax.get_lines() if ln.get_label().startswith("90 % HDI"))
+    lo, hi = post.credible_interval("delta_abs", 0.9)
+    np.testing.assert_allclose(hdi.get_xdata(), [lo, hi])
+    assert min(hdi.get_ydata()) > max(b.get_height() for b in bars)  # above every bar
+    assert max(hdi.get_ydata()) < ax.get_ylim()[1]
+
+
+def test_marginal_title_wraps_and_the_legend_on_given_axes_clears_the_bars():
+    """Audit 8: at figsize=(3.4, 2.6) the title ran off the figure; on given axes the title
+    ran over the neighbour and the legend ("best") covered bars."""
+    post = _posterior()
+    fig = plot_marginal(post, "zeta_nm", truth=0.22, figsize=(3.4, 2.6))
+    fig.canvas.draw()
+    title = fig.axes[0].title.get_window_extent()
+    page = fig.bbox
+    assert title.x0 >= page.x0 and title.x1 <= page.x1, "the title runs off the figure"
+    fig, axs = plt.subplots(1, 2, figsize=(7, 2.8), layout="constrained")
+    for ax, name in zip(axs, ("K_m", "delta_abs")):
+        plot_marginal(post, name, truth=TRUTH[name], ax=ax)
+    fig.canvas.draw()
+    for ax in axs:
+        title, box = ax.title.get_window_extent(), ax.get_window_extent()
+        assert title.width <= box.width + 2.0, "the title is wider than its axes"
+        legend = ax.get_legend().get_window_extent()
+        for bar in _bars(ax):
+            assert not legend.overlaps(bar.get_window_extent()), "the legend covers a bar"
+        label = ax.xaxis.label.get_window_extent()
+        assert not legend.overlaps(label), "the legend covers the x label"
+    assert not axs[0].title.get_window_extent().overlaps(axs[1].title.get_window_extent())
+    # a figure without a layout engine has no room under the axes: the legend stays on the
+    # figure, in a corner above the bars and the HDI
+    fig, ax = plt.subplots()
+    plot_marginal(post, "delta_abs", truth=0.0075, ax=ax)
+    fig.canvas.draw()
+    legend = ax.get_legend().get_window_extent()
+    assert legend.y0 >= fig.bbox.y0 and legend.y1 <= fig.bbox.y1
+    for bar in _bars(ax):
+        assert not legend.overlaps(bar.get_window_extent()), "the legend covers a bar"
+    hdi = next(ln for ln in ax.get_lines() if ln.get_label().startswith("90 % HDI"))
+    assert not legend.overlaps(hdi.get_window_extent(fig.canvas.get_renderer()))
+
+
+def test_histograms_upper_auto_shows_a_tight_distribution():
+    """Audit 13: with every estimate below 0.015 the [0, 0.1] axis put them in 2-5 bins."""
+    rng = np.random.default_rng(5)
+    d = np.abs(rng.normal(0.0075, 0.002, 100))
+    res = _results(d)
+    assert plot_threshold_histograms(res).axes[0].get_xlim() == (0.0, 0.1)  # the paper's
+    ax = plot_threshold_histograms(res, upper="auto").axes[0]
+    lo, hi = ax.get_xlim()
+    assert lo == 0.0 and 1.5 * 0.0075 < hi <= 0.02 and np.quantile(d, 0.98) < hi
+    assert sum(1 for b in _bars(ax) if b.get_height() > 0) >= 10
+    with pytest.raises(ValueError, match="upper"):
+        plot_threshold_histograms(res, upper="big")
+
+
+def test_cli_replicate_takes_a_histogram_upper_limit():
+    from bayespilot.cli import build_parser
+
+    parser = build_parser()
+    base = ["replicate", "--out", "x"]
+    assert parser.parse_args(base).hist_upper == 0.1
+    assert parser.parse_args([*base, "--hist-upper", "auto"]).hist_upper == "auto"
+    assert parser.parse_args([*base, "--hist-upper", "0.03"]).hist_upper == 0.03
+    with pytest.raises(Exception, match="hist-upper"):
+        parser.parse_args([*base, "--hist-upper", "-1"])
+
+
+def test_cli_plot_pdf_embeds_truetype_and_svg_keeps_text(posterior_file, tmp_path, capsys):
+    """Audit 11: a PDF with Type 3 fonts fails AIAA's and IEEE's PDF checks; SVG text was
+    drawn as paths."""
+    for fmt in ("pdf", "svg"):
+        code = main(["plot", str(posterior_file), "-o", str(tmp_path / fmt), "--format", fmt])
+        assert code == 0, capsys.readouterr().err
+    for name in ("marginal_delta_abs", "pair", "trace"):
+        pdf = (tmp_path / "pdf" / f"{name}.pdf").read_bytes()
+        assert b"/Subtype /Type3" not in pdf and b"/FontFile2" in pdf
+        svg = (tmp_path / "svg" / f"{name}.svg").read_text()
+        assert "<text" in svg and "font-family" in svg
+
+
+#: The name sample records for the paper's model with the catalogue's motion washout.
+WASHOUT_MODEL = "Pool et al. (2012) + SecondOrderWashout on vestibular"
+
+
+def test_an_extension_posterior_has_its_units_without_a_model():
+    """Audit 4: a posterior written by diagnose (omega_w) was labelled without its unit."""
+    names = (*PAPER, "omega_w")
+    post = _posterior(names, centre={"omega_w": 0.3}, model=WASHOUT_MODEL)
+    want = label("omega_w", "rad/s")
+    assert plot_marginal(post, "omega_w").axes[0].get_xlabel() == want
+    assert plot_marginal(post, "omega_w").axes[0].get_ylabel() == "posterior density (s/rad)"
+    assert plot_chains(post).axes[-2].get_ylabel() == want
+    assert plot_pair(post, names=("delta_abs", "omega_w")).axes[-1].get_xlabel() == want
+    # the paper's model (or an unknown one): Table 1's units, as before
+    other = _posterior(names, centre={"omega_w": 0.3}, model="someone else's model + X")
+    assert plot_marginal(other, "omega_w").axes[0].get_xlabel() == symbol("omega_w")
+
+
+def test_cli_plot_of_an_extension_posterior_draws_its_parameter(tmp_path, capsys):
+    names = (*PAPER, "omega_w")
+    nc = tmp_path / "wash.nc"
+    _posterior(names, centre={"omega_w": 0.3}, model=WASHOUT_MODEL,
+               likelihood="coloured").to_netcdf(nc)
+    code = main(["plot", str(nc), "-o", str(tmp_path / "figs"), "--format", "svg"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert "marginal_omega_w.svg" in out
+    marginal = (tmp_path / "figs" / "marginal_omega_w.svg").read_text()
+    trace = (tmp_path / "figs" / "trace.svg").read_text()
+    # (matplotlib writes each text into the SVG as a comment too)
+    for svg in (marginal, trace):
+        assert r"<!-- $\omega_\mathrm{w}$ (rad/s) -->" in svg

@@ -120,12 +120,21 @@ PLOT_DPI = 200
 PLOT_FORMATS = ("png", "pdf", "svg")
 
 
+#: How a vector figure keeps its text: TrueType fonts in a PDF (Type 3 fonts, matplotlib's
+#: default, fail the font checks of AIAA's and IEEE's PDF submission), text as text in an SVG.
+VECTOR_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
+
+
 def _save_figure(fig, path: Path, dpi: int = PLOT_DPI) -> None:
     """Write a figure (format from ``path``'s suffix) and close it; a failed write is a
     runtime failure (exit 1).  ``dpi`` sets a PNG's resolution; in a PDF or SVG only the
-    rasterized point clouds (the pair plot's) use it."""
+    rasterized point clouds (the pair plot's) use it.  A PDF's fonts are embedded as
+    TrueType and an SVG's text stays text (:data:`VECTOR_TEXT`)."""
+    import matplotlib
+
     try:
-        fig.savefig(path, dpi=dpi)
+        with matplotlib.rc_context(VECTOR_TEXT):
+            fig.savefig(path, dpi=dpi)
     except OSError as exc:
         raise CommandFailed(f"{path}: cannot write the plot ({_os_reason(exc)})") from None
     finally:
@@ -672,6 +681,13 @@ _FITS_SAID = {"both": "with and without threshold", "threshold": "with threshold
               "none": "without threshold"}
 
 
+def _hist_upper(text: str) -> float | str:
+    """--hist-upper: a positive number (IPUT) or 'auto'."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    return _positive(text)
+
+
 def _cmd_replicate(args: argparse.Namespace) -> int:
     from ._files import write_text_atomic
     from .campaign import (CampaignError, load_results, paper_study, run_campaign, summarise,
@@ -728,7 +744,8 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
         from .plots import plot_threshold_histograms
 
         _save_figure(plot_threshold_histograms(results, fractions=fractions,
-                                               method=args.method), png)
+                                               method=args.method, upper=args.hist_upper),
+                     png)
         _say(args, f"wrote {csv_path}, {md_path} and {png}")
     else:
         _say(args, f"wrote {csv_path} and {md_path} (no fit with threshold finished: no figure)")
@@ -901,9 +918,12 @@ def _cmd_compare(args: argparse.Namespace) -> int:
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
-    from .plots import plot_chains, plot_marginal, plot_pair
+    from . import presets
+    from .plots import _posterior_model, plot_chains, plot_marginal, plot_pair
 
     post = _read_posterior(args.posterior)
+    # a posterior of a catalogue extension (written by 'diagnose'): its model gives the units
+    model = _posterior_model(post)
     out = Path(args.output)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -913,16 +933,20 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     names = post.parameter_names
     main = "delta_abs" if "delta_abs" in names else names[0]
     written = []
-    path = out / f"marginal_{main}.{args.format}"
-    _save_figure(plot_marginal(post, main, truth=truth.get(main)), path, args.dpi)
-    written.append(path)
+    # delta_abs (or the first parameter), then each parameter an extension adds
+    added = [n for n in names if n not in presets.PARAMETER_NAMES and not n.startswith("pacf_")]
+    for name in dict.fromkeys([main, *added]):
+        path = out / f"marginal_{name}.{args.format}"
+        _save_figure(plot_marginal(post, name, truth=truth.get(name), model=model), path,
+                     args.dpi)
+        written.append(path)
     pair = [n for n in ("K_m", "tau_m", "delta_abs") if n in names]
     if pair:
         path = out / f"pair.{args.format}"
-        _save_figure(plot_pair(post, pair, truth=truth), path, args.dpi)
+        _save_figure(plot_pair(post, pair, truth=truth, model=model), path, args.dpi)
         written.append(path)
     path = out / f"trace.{args.format}"
-    _save_figure(plot_chains(post), path, args.dpi)
+    _save_figure(plot_chains(post, model=model), path, args.dpi)
     written.append(path)
     note = (f" (true {main} = {truth[main]:g} marked)" if main in truth else "")
     _say(args, "wrote " + ", ".join(str(p) for p in written) + note)
@@ -1459,11 +1483,15 @@ Examples:
 
 PLOT_EPILOG = """\
 Plots a posterior written by 'bayespilot sample' into DIR:
-marginal_delta_abs.png (histogram with the 90% HDI, the median and, for a
+marginal_delta_abs.png (histogram with the 90 % HDI, the median and, for a
 simulated recording, the true value), pair.png (K_m, tau_m, delta_abs) and
-trace.png (every walker and the log posterior against the step); with
---format pdf or svg the same names end in .pdf or .svg (vector figures for a
-paper: --dpi then only sets the resolution of the pair plot's point clouds).
+trace.png (every walker and the log posterior against the step). A posterior
+of a model with a catalogue extension (written by 'bayespilot diagnose') also
+gets marginal_NAME.png for each parameter the extension adds, and its axes
+carry the extension's units. With --format pdf or svg the same names end in
+.pdf or .svg (vector figures for a paper, fonts embedded as TrueType, SVG
+text kept as text: --dpi then only sets the resolution of the pair plot's
+point clouds).
 
 Examples:
   bayespilot plot out/run-post.nc -o out/run-plots
@@ -1526,13 +1554,14 @@ docs/performance.md).
 The JSON (--json) has mismatch, physics (a catalogue name or 'none'), ranking
 (physics, delta_neg_log_lik, p_value, delta_bic, params, stderr per
 candidate), where (each located statistic with its bootstrap p-value), base,
-chosen and the settings. --report DIR writes frequency_response.png,
-residuals.png, evidence.png, candidates.png, diagnosis.json and report.html
-(self-contained, figures embedded). --posterior POST.nc also samples the
-posterior of the chosen extended model (emcee, started at its fit; tens of
-seconds), writes it as netCDF (readable by 'bayespilot plot') and adds its
-medians and 90 % intervals to the summary and JSON and posterior.png to the
-report. --bayes-factor also weighs the chosen extension (on 'none': the
+chosen and the settings. --report DIR writes residuals.png, candidates.png,
+frequency_response.png (on whole forcing periods), evidence.png (with
+bootstrap p-values), diagnosis.json and report.html (self-contained, figures
+embedded). --posterior POST.nc also samples the posterior of the chosen
+extended model (emcee, started at its fit; tens of seconds), writes it as
+netCDF (readable by 'bayespilot plot') and adds its medians and 90 %
+intervals to the summary and JSON and posterior.png to the report.
+--bayes-factor also weighs the chosen extension (on 'none': the
 top-ranked candidate) against the base model by nested sampling: ln BF with
 priors uniform on the bounds, three runs per model, several minutes at
 N = 8192; beside the decision, which stays the likelihood-ratio test's.
@@ -1719,6 +1748,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "the fast one; VALUE is a JSON value (true/false, True/False: a "
                         "boolean; iterate takes only these); what the options above set "
                         "(threshold: --fits, duration, remnant, ...) is refused here")
+    p.add_argument("--hist-upper", type=_hist_upper, default=0.1, metavar="X|auto",
+                   help="right end of the histograms' delta_abs axis in IPUT (default 0.1, "
+                        "the Table 1 bound and the axis of the paper's Figs. 14/15); 'auto': "
+                        "just above nearly all estimates, to show the shape of tight "
+                        "distributions (fits beyond the end are counted in the last bin)")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_replicate)
 

@@ -47,7 +47,7 @@ def _save(fig, path: Path) -> None:
     plt.close(fig)
 
 
-def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
+def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
                 motion_gains: Sequence[float] = (0.5, 1.0), task: str = "FD",
                 remnant_fraction: float = 0.15, duration: float | None = None,
                 max_steps: int = 6000, nlive: int = 150, likelihood: str = "coloured",
@@ -59,9 +59,10 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
     out : path
         Output folder (created): ``recordings/``, ``fits/``, ``posteriors/``,
         ``comparisons/``, ``figures/`` and ``report.md``.
-    seed : int
+    seed : int or None
         Seeds the remnant of each run, the fits, the samplers and the nested
-        sampler (run i uses ``seed + i``).
+        sampler (run i uses ``seed + i``); None draws one from fresh entropy.
+        The report states it.
     motion_gains : sequence of float
         K_theta of the runs, one run each.
     task : {"FD", "FT"}
@@ -106,16 +107,20 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
     ...     report.name
     'report.md'
     """
+    from ._labels import symbol
     from .compare import compare, pool
     from .fit.fast import fit_fast
     from .io import read_recording, write_recording
-    from .plots import _pyplot, plot_marginal, plot_pair, plot_traces
+    from .plots import _pyplot, _run_note, _wrap, plot_marginal, plot_pair, plot_traces
     from .sample import sample
     from .simulate import simulate
 
     from .noise import ARNoise
     from .sample import COLOURED_DISCARD, ConvergenceWarning
 
+    from ._seeds import resolve_seed
+
+    seed = resolve_seed(seed)  # (checked before a folder is made; None: a fresh one)
     if task not in ("FD", "FT"):
         raise ValueError(f"task must be 'FD' or 'FT', got {task!r}")
     if likelihood not in ("coloured", "eq4"):
@@ -188,14 +193,16 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int = 0,
                      "log_bf": cmp_.log_bayes_factor, "log_bf_err": cmp_.log_bayes_factor_err,
                      "decision": cmp_.decision, "converged": post.converged})
         fig = plot_marginal(post, "delta_abs", truth=true_d)
-        fig.axes[0].set_title(f"{name}: posterior of delta_abs", fontsize=9)
+        title = (f"{task}, $K_\\theta$ = {kt:g}: posterior of {symbol('delta_abs')}, "
+                 f"{_run_note(post, d.size)}")  # (draws, likelihood, convergence)
+        fig.axes[0].set_title(_wrap(title, fig.get_figwidth() - 0.3, 10.0), fontsize="medium")
         _save(fig, dirs["figures"] / f"delta_abs_{name}.png")
     _save(plot_pair(posteriors[-1], truth=truth), dirs["figures"] / "pair.png")
     pooled = pool(comparisons, label=f"{task}, K_theta {', '.join(f'{k:g}' for k in gains)}")
     write_text_atomic(out / "pooled_comparison.json", dumps(pooled.to_dict()))
     elapsed = time.perf_counter() - t_start
     report = out / "report.md"
-    report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood),
+    report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood, seed),
                       encoding="utf-8")
     say(f"wrote {report} ({elapsed:.0f} s)")
     plt.close("all")
@@ -223,7 +230,7 @@ def _warn_unconverged(runs: Sequence[tuple[str, float]], max_steps: int) -> None
         "(bayespilot demo --max-steps)", None, max_steps))
 
 
-def _report(rows, pooled, truth, task, gains, elapsed, likelihood) -> str:
+def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed) -> str:
     from .compare import DECISION_LEVEL, DECISION_Z
 
     true_d = truth["delta_abs"]
@@ -238,7 +245,8 @@ def _report(rows, pooled, truth, task, gains, elapsed, likelihood) -> str:
         + ("all with the coloured (prediction-error) likelihood: the output error whitened by "
            "one AR model per run, estimated from a prediction-error fit, the first 2 s left out. "
            if likelihood == "coloured" else "all with the paper's Eq. 4 likelihood. ")
-        + f"Made in {elapsed:.0f} s by `bayespilot demo`.",
+        + f"Made in {elapsed:.0f} s by `bayespilot demo` with seed {seed} (run i seeded "
+        f"{seed} + i).",
         "",
         "| run | K_theta | F_n | delta_abs ML | posterior median | 90 % HDI | P(within +-50 %) "
         "| -ln L with | -ln L without | ln BF | decision |",

@@ -92,34 +92,90 @@ def _param_label(name: str, model: Any = None) -> str:
     paper's parameters have Table 1's units, a partial autocorrelation ``pacf_j`` none, and
     another lab's parameter its symbol without a unit.
     """
+    from ._labels import label
+
+    return label(name, _param_unit(name, model))
+
+
+def _param_unit(name: str, model: Any = None) -> str | None:
+    """The unit of ``name`` as :func:`_param_label` writes it (None or ``"-"``: none)."""
     from . import presets
-    from ._labels import label, parameter_label
 
     units = getattr(model, "units", None)  # a FitResult's: as its model declared them
     if isinstance(units, Mapping) and name in units:
-        return label(name, units[name])
+        return units[name]
     if model is not None:
         try:
-            model.parameter(name)
+            return model.parameter(name).unit
         except (KeyError, ValueError, AttributeError):
             pass
-        else:
-            return parameter_label(model, name)
     if name.startswith("pacf_"):
-        return label(name, "-")
-    return label(name, presets.PARAMETER_UNITS.get(name))
+        return "-"
+    return presets.PARAMETER_UNITS.get(name)
+
+
+def _per_unit(unit: str | None) -> str:
+    """``" (1/unit)"``, the unit of a density over a parameter in ``unit`` ("" for none):
+    "s" -> " (1/s)", "rad/IPUT" -> " (IPUT/rad)", "rad/s^2" -> " (s$^2$/rad)"."""
+    from ._labels import unit_text
+
+    if not unit or unit == "-":
+        return ""
+    num, slash, den = unit.partition("/")
+    if slash and "/" not in den and " " not in num and " " not in den and num != "1":
+        inverse = f"{den}/{num}"
+    else:
+        inverse = f"1/{unit}" if not any(c in unit for c in " /*") else f"1/({unit})"
+    return f" ({unit_text(inverse)})"
+
+
+def _posterior_model(posterior: Any, model: Any = None) -> Any:
+    """The model that declares the units of ``posterior``'s parameters: ``model`` when given;
+    else, for a posterior of a catalogue extension of the paper's model (one written by
+    ``bayespilot diagnose``, whose settings name the model it sampled), that extension built
+    on the paper's model, as the diagnosis report labels it; else None (Table 1's units)."""
+    if model is not None:
+        return model
+    name = (getattr(posterior, "settings", None) or {}).get("model")
+    if not isinstance(name, str) or " + " not in name:
+        return None  # the paper's model, or a model whose name says nothing
+    try:
+        from .diagnose.catalogue import candidate_names, get_extension
+        from .model import paper_model
+
+        base = paper_model()
+        for physics in candidate_names():
+            try:
+                built = get_extension(physics).build(base)
+            except Exception:  # an entry that needs more than the paper's model
+                continue
+            if built.name == name:  # (diagnose.report._units_model(physics) builds it so)
+                return built
+    except Exception:  # the diagnose module unavailable: Table 1's units
+        return None
+    return None
 
 
 def _wrap(text: str, width_in: float, fontsize: float) -> str:
     """``text`` broken into lines that fit ``width_in`` inches at ``fontsize`` pt (mathtext
     spans are kept whole)."""
+    import re
     import textwrap
 
     chars = max(16, int(width_in * 72.0 / (0.58 * fontsize)))
-    # a space inside $...$ must not break a line: protect it
-    parts = text.split("$")
-    protected = "$".join(p.replace(" ", "\0") if i % 2 else p for i, p in enumerate(parts))
-    return textwrap.fill(protected, chars, break_long_words=False).replace("\0", " ")
+    # a mathtext span is one word as long as what it shows ($\delta_\mathrm{abs}$: about 4
+    # characters, not 20), and "Eq. (4)" is not broken either
+    spans: list[str] = []
+
+    def hide(m) -> str:
+        spans.append(m.group(0))
+        shown = re.sub(r"[{}_^ ]", "", re.sub(r"\\[A-Za-z]+", "x", m.group(0)[1:-1]))
+        return ("\ue000" if len(spans) % 2 else "\ue001") * max(1, len(shown) - 1)
+
+    hidden = re.sub(r"\$[^$]*\$", hide, text.replace("Eq. (", "Eq.\0("))
+    wrapped = textwrap.fill(hidden, chars, break_long_words=False)
+    shown = iter(spans)
+    return re.sub("\ue000+|\ue001+", lambda m: next(shown), wrapped).replace("\0", " ")
 
 
 def _legend_below(fig, handles, labels, ncols: int):
@@ -145,7 +201,7 @@ def _legend_columns(labels: Sequence[str], width: float, ncols: int) -> int:
 
 def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | np.ndarray | None = None,
                 delta_abs: float | None = None, ax: Sequence[Any] | None = None,
-                figsize: tuple[float, float] | None = None) -> Figure:
+                figsize: tuple[float, float] | None = None, show_source: bool = False) -> Figure:
     """Plot a run's signals over time: e, u, theta_ddot_m and, if given, the canal output i.
 
     Parameters
@@ -168,6 +224,10 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
     figsize : (float, float), optional
         Size of the new figure, inches (default 7 in wide, 1.55 in per panel);
         not with ``ax``.
+    show_source : bool, default False
+        Start the title with the recording's file (``recording.source``);
+        by default the title names only the task, K_theta and the duration,
+        as a paper's figure would.
 
     Returns
     -------
@@ -261,7 +321,7 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
             a.legend(loc="best", fontsize="small", title=share, title_fontsize="small")
     axes[-1].set_xlabel("$t$ (s)")
     axes[-1].set_xlim(t[0], t[-1])
-    src = f"{recording.source}: " if recording.source else ""
+    src = f"{recording.source}: " if show_source and recording.source else ""
     title = (f"{src}task {recording.task}, $K_\\theta$ = {recording.motion_gain:g}, "
              f"{recording.duration:g} s")
     axes[0].set_title(_wrap(title, fig.get_figwidth() - 0.8, 10.0) if ax is None else title)
@@ -270,7 +330,7 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
 
 def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[float] = (0.0, 0.2, 0.3),
                               method: str | None = None, bins: int = 40,
-                              upper: float = 0.1, ax: Any = None,
+                              upper: float | str = 0.1, ax: Any = None,
                               figsize: tuple[float, float] | None = None) -> Figure:
     """Histograms of the estimated threshold over realizations, after Figs. 14 and 15.
 
@@ -304,8 +364,13 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
         Which fits to show; needed when ``results`` holds both.
     bins : int
         Histogram bins on [0, ``upper``].
-    upper : float
-        Right end of the delta_abs axis, IPUT (Table 1 bound: 0.1).
+    upper : float or "auto"
+        Right end of the delta_abs axis, IPUT.  Default 0.1, the Table 1
+        bound and the axis of the paper's Figs. 10, 14 and 15 (whose bins
+        are 0.005 IPUT: ``bins=20``).  ``"auto"``: a round number just above
+        nearly all estimates (their 98th percentile) and the +50 % margin, so
+        that the shape of a tight distribution shows (fits above it are
+        counted in the last bin, as above ``upper``).
     ax : array of matplotlib Axes, optional
         One axes per panel (rows x columns as above, or flat in that order).
         Default: a new figure.
@@ -347,8 +412,10 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
 
     if isinstance(bins, bool) or not isinstance(bins, (int, np.integer)) or bins < 1:
         raise ValueError(f"bins must be a positive integer, got {bins!r}")
-    if not (isinstance(upper, (int, float)) and math.isfinite(upper) and upper > 0):
-        raise ValueError(f"upper must be a positive number, got {upper!r}")
+    if not (upper == "auto" if isinstance(upper, str) else
+            isinstance(upper, (int, float)) and not isinstance(upper, bool)
+            and math.isfinite(upper) and upper > 0):
+        raise ValueError(f"upper must be a positive number or 'auto', got {upper!r}")
     results = _campaign_results(results)
     wanted = [float(f) for f in fractions]
     sel = [r for r in results if bool(r["threshold"])
@@ -375,6 +442,9 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     cols = sorted({k for (_, _, k) in stats})
 
     finite = np.array([_delta(r) for r in sel], dtype=float)
+    if upper == "auto":
+        upper = _auto_upper(finite[np.isfinite(finite)],
+                            max(float(r["true_params"]["delta_abs"]) for r in sel))
     any_over = bool(np.any(finite[np.isfinite(finite)] >= upper))
     handles = [Patch(color="C2", alpha=0.25, lw=0, label=r"true $\pm$50 %"),
                Line2D([], [], color="k", ls="--", lw=0.9, label="true")]
@@ -446,7 +516,7 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
             if paper:
                 lines.append(f"paper {st['paper_mu']:.4f}, {st['paper_sigma']:.4f}")
             # (of 100 realizations, as the paper counts: "/n" only for another number)
-            lines.append(mark[bool(st["flag_N50"])] + f"N50={st['N50']}"
+            lines.append(mark[bool(st["flag_N50"])] + f"$N_{{50\\%}}$={st['N50']}"
                          + ("" if st["n"] == 100 else f"/{st['n']}")
                          + (f" (paper {st['paper_N50']})" if paper else ""))
             if failed:
@@ -475,6 +545,21 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
         fig.suptitle(title, fontsize=10)
     _clear_bars(fig, edges, boxes)
     return fig
+
+
+def _auto_upper(estimates: np.ndarray, true: float) -> float:
+    """A round right end (1, 2, 2.5 or 5 x 10^k) above 98 % of ``estimates`` (times 1.05) and
+    above 1.6 ``true`` (the +50 % margin and a little room), for ``upper="auto"``."""
+    need = 1.6 * true
+    if estimates.size:
+        need = max(need, 1.05 * float(np.quantile(estimates, 0.98)))
+    if not (math.isfinite(need) and need > 0):
+        return 0.1
+    scale = 10.0 ** math.floor(math.log10(need))
+    for m in (1.0, 2.0, 2.5, 5.0, 10.0):
+        if m * scale >= need * (1 - 1e-12):
+            return float(f"{m * scale:.12g}")
+    return 10.0 * scale
 
 
 #: What every campaign result needs for :func:`plot_threshold_histograms`.
@@ -513,21 +598,29 @@ def _clear_bars(fig, edges: np.ndarray, boxes) -> None:
     """Raise each panel's y limit until its statistics text is above the bars under it."""
     if not boxes:
         return
-    fig.draw_without_rendering()  # lays the figure out: the text's place on the page
-    for a, txt, heights in boxes:
-        tb, ab = txt.get_window_extent(), a.get_window_extent()
-        if ab.height <= 0:
-            continue
-        bottom = (tb.y0 - ab.y0) / ab.height  # the text's bottom, fraction of the axes height
-        x0, x1 = a.transData.inverted().transform([[tb.x0, 0.0], [tb.x1, 0.0]])[:, 0]
-        under = heights[(edges[1:] > x0) & (edges[:-1] < x1)]
-        top = float(under.max()) if under.size else 0.0
-        if top <= 0:
-            continue
-        room = max(bottom - 0.04, 0.3)  # a tiny panel: at least the lower 30 % for the bars
-        lo, hi = a.get_ylim()
-        if top > lo + room * (hi - lo):
-            a.set_ylim(lo, lo + (top - lo) / room)
+    # (again after a change: new y tick labels can move the axes in the layout)
+    for _ in range(3):
+        fig.draw_without_rendering()  # lays the figure out: the text's place on the page
+        changed = False
+        for a, txt, heights in boxes:
+            tb, ab = txt.get_window_extent(), a.get_window_extent()
+            if ab.height <= 0:
+                continue
+            bottom = (tb.y0 - ab.y0) / ab.height  # the text's bottom, fraction of the height
+            # (a few pixels' margin: a bar just beside the text counts as under it)
+            x0, x1 = a.transData.inverted().transform([[tb.x0 - 4.0, 0.0],
+                                                       [tb.x1 + 4.0, 0.0]])[:, 0]
+            under = heights[(edges[1:] > x0) & (edges[:-1] < x1)]
+            top = float(under.max()) if under.size else 0.0
+            if top <= 0:
+                continue
+            room = max(bottom - 0.04, 0.3)  # a tiny panel: at least the lower 30 % for bars
+            lo, hi = a.get_ylim()
+            if top > lo + room * (hi - lo) + 1e-9 * (hi - lo):
+                a.set_ylim(lo, lo + (top - lo) / room)
+                changed = True
+        if not changed:
+            return
 
 
 # --- posteriors (bayespilot.sample) ------------------------------------------------------------
@@ -555,8 +648,13 @@ def _names(names: Any) -> tuple[str, ...]:
     return out
 
 
+#: The likelihoods of :func:`bayespilot.sample.sample` as a figure names them.
+_LIKELIHOOD_NAMES = {"eq4": "Eq. (4) likelihood"}
+
+
 def _run_note(posterior, n_draws: int) -> str:
-    return (f"{n_draws} draws ({posterior.settings.get('likelihood', '?')} likelihood, "
+    lik = posterior.settings.get("likelihood", "?")
+    return (f"{n_draws} draws ({_LIKELIHOOD_NAMES.get(lik, f'{lik} likelihood')}, "
             f"{'converged' if posterior.converged else 'not converged'})")
 
 
@@ -564,6 +662,11 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
                   ax: Any = None, *, model: Any = None,
                   figsize: tuple[float, float] | None = None) -> Figure:
     """Histogram of one parameter's posterior draws with its 90 % HDI, median and (if given) truth.
+
+    The 90 % HDI is a black bar above the histogram (not a shaded span, so that a span
+    added to the axes, such as a fit's standard error, keeps its own colour), the median
+    an orange dash-dotted line and the truth a dashed black line.  The title (draws,
+    likelihood, convergence) is wrapped to the width of the axes.
 
     Parameters
     ----------
@@ -574,10 +677,12 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
         The true value (simulations), drawn as a dashed line.
     ax : matplotlib Axes, optional
         Default: a new figure, with the legend under the axes; on given axes
-        the legend goes where it covers least.
+        the legend is under the axes' x label, clear of the bars.
     model : bayespilot.model.PilotModel, optional
-        The sampled model, for the unit of a parameter outside the paper's
-        (those have Table 1's units without it).
+        The sampled model, for the unit of a parameter outside the paper's.
+        Without it, a posterior of a catalogue extension of the paper's model
+        (``bayespilot diagnose`` writes them) has its extension's units, any
+        other Table 1's.
     figsize : (float, float), optional
         Size of the new figure, inches (default 5.5 x 3.8); not with ``ax``.
 
@@ -593,10 +698,13 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
         If ``name`` was not sampled, ``truth`` is not a finite number, or
         ``figsize`` is given with ``ax`` or is not two positive numbers.
     """
+    from matplotlib.ticker import MaxNLocator
+
     from ._labels import symbol
 
     posterior = _posterior_or_raise(posterior)
     x = posterior.draws(name)
+    model = _posterior_model(posterior, model)
     if truth is not None:
         try:
             truth = float(truth)
@@ -611,21 +719,63 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
     else:
         _figsize(figsize, ax, (0.0, 0.0))
         fig = ax.figure
-    ax.hist(x, bins=50, density=True, color="C0", alpha=0.7, lw=0)
-    ax.axvspan(lo, hi, color="C0", alpha=0.15, lw=0, label=f"90% HDI [{lo:.4g}, {hi:.4g}]")
+    heights, edges, _ = ax.hist(x, bins=50, density=True, color="C0", alpha=0.7, lw=0)
+    top = float(np.max(heights)) if len(heights) and np.max(heights) > 0 else 1.0
+    # the HDI as a bar above the bars (the axes' top raised to make room)
+    ax.set_ylim(0.0, 1.16 * top)
+    ax.yaxis.set_major_locator(MaxNLocator(5))
+    ax.plot([lo, hi], [1.08 * top] * 2, color="k", lw=3, solid_capstyle="butt",
+                  label=f"90 % HDI [{lo:.4g}, {hi:.4g}]")[0]
+    ax.plot([lo, hi], [1.08 * top] * 2, "|", color="k", ms=8, mew=1.2)
     med = float(np.median(x))
-    ax.axvline(med, color="C0", lw=1.2, label=f"median {med:.4g}")
+    ax.axvline(med, color="C1", lw=1.5, ls="-.", label=f"median {med:.4g}")
     if truth is not None:
         ax.axvline(truth, color="k", lw=1.2, ls="--", label=f"truth {truth:.4g}")
     ax.set_xlabel(_param_label(name, model))
-    ax.set_ylabel("posterior density")
+    ax.set_ylabel("posterior density" + _per_unit(_param_unit(name, model)))
+    handles, labels = ax.get_legend_handles_labels()
+    title = f"{symbol(name)}: {_run_note(posterior, x.size)}"
     if new:
-        handles, labels = ax.get_legend_handles_labels()
         _legend_below(fig, handles, labels, ncols=3)
+        ax.set_title(_wrap(title, fig.get_figwidth() - 0.3, _points("medium")),
+                     fontsize="medium")
     else:
-        ax.legend(loc="best", fontsize="small")
-    ax.set_title(f"{symbol(name)}: {_run_note(posterior, x.size)}", fontsize="medium")
+        width = ax.get_position().width * fig.get_figwidth()
+        ax.set_title(_wrap(title, width, _points("medium")), fontsize="medium")
+        legend = _legend_under_xlabel(ax, handles, labels, width)
+        if fig.get_layout_engine() is None:
+            # no layout to make room under the axes: if the legend is off the figure, it goes
+            # in the upper corner, the axes' top raised until the bars and the HDI are below it
+            fig.draw_without_rendering()
+            if legend.get_window_extent().y0 < fig.bbox.y0:
+                legend.remove()
+                legend = ax.legend(handles, labels, loc="upper right", fontsize="small")
+                tall = np.asarray(heights, float).copy()
+                tall[(edges[1:] > lo) & (edges[:-1] < hi)] = 1.12 * top  # (the HDI bar)
+                _clear_bars(fig, edges, [(ax, legend, tall)])
     return fig
+
+
+def _points(size: str | float) -> float:
+    """A font size (a number or a name such as "medium") in points."""
+    from matplotlib.font_manager import FontProperties
+
+    return FontProperties(size=size).get_size_in_points()
+
+
+def _legend_under_xlabel(ax, handles, labels, width: float):
+    """The legend of a user's axes under their x label (clear of the data; constrained layout
+    makes room), placed a fixed distance below the axes so that a new layout keeps it there."""
+    from matplotlib.transforms import ScaledTranslation
+
+    fig = ax.figure
+    fig.draw_without_rendering()  # the tick labels' and the label's place
+    below = ax.xaxis.get_tightbbox()
+    drop = 0.05 if below is None else max(0.0, ax.get_window_extent().y0 - below.y0) / fig.dpi
+    trans = ax.transAxes + ScaledTranslation(0.0, -(drop + 0.03), fig.dpi_scale_trans)
+    return ax.legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, 0.0),
+                     bbox_transform=trans, borderaxespad=0.0,
+                     ncols=_legend_columns(labels, width, 2), fontsize="small", frameon=False)
 
 
 def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "delta_abs"),
@@ -647,7 +797,8 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     ax : 2-D array of matplotlib Axes, optional
         len(names) x len(names) axes.  Default: a new figure.
     model : bayespilot.model.PilotModel, optional
-        The sampled model, for the units of parameters outside the paper's.
+        The sampled model, for the units of parameters outside the paper's
+        (default: as :func:`plot_marginal` finds it).
     figsize : (float, float), optional
         Size of the new figure, inches (default: 2.3 in per panel, at most
         7.5 in wide); not with ``ax``.
@@ -670,6 +821,7 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     from matplotlib.ticker import MaxNLocator
 
     posterior = _posterior_or_raise(posterior)
+    model = _posterior_model(posterior, model)
     names = _names(names)
     if not names:
         raise ValueError("names must hold at least one parameter")
@@ -722,21 +874,24 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
             a.set_xlim(*lims[j])
             if i != j:
                 a.set_ylim(*lims[i])
+            # few ticks on every panel: a panel's width holds 3-4 labels of 5-6 digits
+            a.xaxis.set_major_locator(MaxNLocator(3 if small else 4))
+            if i != j:
+                a.yaxis.set_major_locator(MaxNLocator(3 if small else 4))
             if small:
                 a.tick_params(labelsize=SMALLEST_FONT)
-                a.xaxis.set_major_locator(MaxNLocator(3))
-                if i != j:
-                    a.yaxis.set_major_locator(MaxNLocator(3))
             if i == k - 1:
-                a.set_xlabel(labels[j], fontsize=8 if small else None)
+                a.set_xlabel(labels[j], fontsize=SMALLEST_FONT + 1 if small else None)
                 if small:
                     a.tick_params(axis="x", labelrotation=45)
             else:
                 a.tick_params(labelbottom=False)
             if j == 0 and i > 0:
-                a.set_ylabel(labels[i], fontsize=8 if small else None)
+                a.set_ylabel(labels[i], fontsize=SMALLEST_FONT + 1 if small else None)
             elif i != j:
                 a.tick_params(labelleft=False)
+    if not small:
+        _unclash_ticks(fig, axes[k - 1, :])
     handles = []
     if marked_line:
         handles.append(Line2D([], [], color="k", ls="--", lw=1, label="true value (histograms)"))
@@ -759,6 +914,20 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     return fig
 
 
+def _unclash_ticks(fig, row) -> None:
+    """Rotate the x tick labels of a row of axes by 45 degrees where two of them overlap or
+    nearly touch (less than half a character apart: "0.19750.2000" reads as one number)."""
+    fig.draw_without_rendering()
+    for a in row:
+        labels = [t for t in a.get_xticklabels() if t.get_visible() and t.get_text()]
+        if len(labels) < 2:
+            continue
+        gap = 0.3 * labels[0].get_fontsize() * fig.dpi / 72.0  # pixels
+        boxes = sorted((t.get_window_extent() for t in labels), key=lambda b: b.x0)
+        if any(b1.x0 < b0.x1 + gap for b0, b1 in zip(boxes, boxes[1:])):
+            a.tick_params(axis="x", labelrotation=45)
+
+
 def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
                 ax: Sequence[Any] | None = None, *, model: Any = None,
                 figsize: tuple[float, float] | None = None) -> Figure:
@@ -776,7 +945,8 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     ax : sequence of matplotlib Axes, optional
         len(names) + 1 axes (the last for the log posterior).  Default: a new figure.
     model : bayespilot.model.PilotModel, optional
-        The sampled model, for the units of parameters outside the paper's.
+        The sampled model, for the units of parameters outside the paper's
+        (default: as :func:`plot_marginal` finds it).
     figsize : (float, float), optional
         Size of the new figure, inches (default 7 in wide, about 1 in per
         panel, at most 9.5 in tall); not with ``ax``.
@@ -795,6 +965,7 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
         ``figsize`` is given with ``ax`` or is not two positive numbers.
     """
     posterior = _posterior_or_raise(posterior)
+    model = _posterior_model(posterior, model)
     names = posterior.parameter_names if names is None else _names(names)
     for n in names:
         posterior.draws(n)  # validates the name
@@ -829,7 +1000,7 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
         a.grid(True, lw=0.3, alpha=0.6)
     axes[-1].set_xlabel("step")
     axes[0].set_title(f"{len(series[0][2])} walkers, {posterior.settings.get('n_steps', '?')} steps, "
-                      f"{'converged' if posterior.converged else 'NOT converged'}",
+                      f"{'converged' if posterior.converged else 'not converged'}",
                       fontsize="medium", loc="left")
     return fig
 

@@ -3,7 +3,10 @@
 Each function takes :class:`~bayespilot.fit.result.FitResult` objects from
 :func:`~bayespilot.fit.three_step.fit_paper` (or read back with
 ``FitResult.from_json``: everything is drawn from ``result.steps``) and
-returns a matplotlib Figure.
+returns a matplotlib Figure, at most :data:`~bayespilot.plots.PAGE_WIDTH`
+(7.5 in) wide unless ``figsize=`` says otherwise, in constrained layout with
+one legend above the panels, its text in matplotlib's default sizes (save it
+with ``fig.savefig("fig9.pdf")`` for a vector copy).
 
 - :func:`plot_step_one_thresholds` (Fig. 6): the Step I delta_abs of every GA
   repetition, in ascending order of -ln L, one panel per condition.
@@ -19,12 +22,13 @@ returns a matplotlib Figure.
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from .._labels import symbol
-from ..plots import _legend_columns, _param_label, _pyplot
+from ..plots import _figsize, _legend_columns, _new_figure, _param_label, _pyplot
 from .result import FitResult
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -36,6 +40,8 @@ __all__ = ["plot_step_one_thresholds", "plot_ga_convergence", "plot_step_two", "
 PASSIVE_THRESHOLD = 0.0075
 #: -ln L as the axes show it.
 _NLL = r"$-\ln L$"
+#: Line styles of the GA repetitions of Fig. 7 (with their colours: apart in grey print too).
+_STYLES = ("-", "--", ":", "-.")
 
 
 def _paper_fit(result: FitResult, what: str) -> dict:
@@ -54,9 +60,44 @@ def _grid(n: int, ncols: int | None = None):
     return nrows, ncols
 
 
+def _panels(nrows: int, ncols: int, width: float, height: float, figsize, *,
+            integer_x: bool = False, **kw):
+    """A new figure of nrows x ncols panels, each ``width`` x ``height`` in by default, at
+    most a page wide (:func:`bayespilot.plots._figsize`; ``figsize`` overrides); x ticks on
+    whole numbers only if ``integer_x`` (repetitions, generations)."""
+    from matplotlib.ticker import MaxNLocator
+
+    size = _figsize(figsize, None, (width * ncols + 0.6, height * nrows + 0.6))
+    fig, axes = _new_figure(nrows, ncols, size, squeeze=False, **kw)
+    # narrow panels: fewer round ticks (about one x tick label per 0.55 in)
+    nbins = max(2, min(5, int((size[0] - 0.8) / ncols / 0.55)))
+    steps = [1, 2, 2.5, 5, 10]
+    for ax in axes.flat:
+        ax.yaxis.set_major_locator(MaxNLocator(5, steps=steps))
+        ax.xaxis.set_major_locator(MaxNLocator(nbins, steps=steps, integer=integer_x))
+    return fig, axes
+
+
+def _finish(fig, axes) -> None:
+    """The x tick labels of the bottom row turned where they would still overlap."""
+    from ..plots import _unclash_ticks
+
+    _unclash_ticks(fig, [ax for ax in np.asarray(axes).flat if ax.get_visible()
+                         and ax.xaxis.get_label_position() == "bottom"
+                         and any(t.get_visible() for t in ax.get_xticklabels())])
+
+
+def _legend_above(fig, handles, labels, ncols: int, **kw):
+    """One legend above the panels (constrained layout makes room)."""
+    return fig.legend(handles, labels, loc="outside upper center",
+                      ncols=_legend_columns(labels, fig.get_figwidth(), ncols),
+                      fontsize="small", frameon=False, **kw)
+
+
 def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
                              ncols: int | None = None,
-                             true_value: float | None = PASSIVE_THRESHOLD) -> Figure:
+                             true_value: float | None = PASSIVE_THRESHOLD,
+                             figsize: tuple[float, float] | None = None) -> Figure:
     """Fig. 6: the Step I delta_abs of every repetition, ordered by -ln L.
 
     Parameters
@@ -66,27 +107,30 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
         (the paper's five runs per condition), drawn as separate lines.
         One legend above the panels names the lines and the true value.
     labels : sequence of str, optional
-        Panel titles.
+        Panel titles (default "fit 1", "fit 2", ... as in Figs. 7-9, or
+        "condition 1", ... for panels of several fits).
     ncols : int, optional
         Panels per row (default up to 4).
     true_value : float or None
         The true delta_abs, a dashed black horizontal line named in the
         legend (default Groen et al.'s 0.0075 IPUT, the paper's true value);
         None for no line.
+    figsize : (float, float), optional
+        Size of the figure, inches (default 3 in per panel and 2.6 in per
+        row, at most 7.5 in wide).
 
     Returns
     -------
     matplotlib.figure.Figure
     """
-    plt = _pyplot()
     panels = [r if isinstance(r, (list, tuple)) else [r] for r in results]
     if not panels:
         raise ValueError("no fits to plot")
     if labels is not None and len(labels) != len(panels):
         raise ValueError(f"{len(labels)} labels for {len(panels)} panels")
     nrows, ncols = _grid(len(panels), ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.0 * ncols, 2.6 * nrows + 0.3),
-                             sharey=True, squeeze=False, layout="constrained")
+    fig, axes = _panels(nrows, ncols, 3.0, 2.6, figsize, integer_x=True, sharey=True)
+    several = any(len(f) > 1 for f in panels)
     for k, (ax, fits) in enumerate(zip(axes.flat, panels)):
         for j, fit in enumerate(fits):
             s1 = _paper_fit(fit, "plot_step_one_thresholds")["step1"]
@@ -94,35 +138,41 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
             funs = np.array([r["fun"] for r in s1["runs"]])
             deltas = np.array([r["x"][i] for r in s1["runs"]])
             order = np.argsort(funs, kind="stable")
-            ax.plot(np.arange(1, len(order) + 1), deltas[order], "o-", ms=3, lw=0.8,
+            ax.plot(np.arange(1, len(order) + 1), deltas[order], marker="os^Dv"[j % 5],
+                    ls=_STYLES[j % len(_STYLES)], ms=3, lw=0.8,
                     label=f"run {j + 1}" if len(fits) > 1 else "Step I estimate")
         if true_value is not None:
             # the package's mark of a true value: a dashed black line
             ax.axhline(true_value, color="k", ls="--", lw=0.9, zorder=0,
                        label=f"true {symbol('delta_abs')} ({true_value:g} IPUT)")
-        ax.set_title(labels[k] if labels is not None else f"condition {k + 1}", fontsize=9)
-        ax.set_xlabel(f"GA repetition (ascending {_NLL})")
+        ax.set_title(labels[k] if labels is not None
+                     else f"{'condition' if several else 'fit'} {k + 1}", fontsize="medium")
+        if ncols == 1:
+            ax.set_xlabel(f"GA repetition (ascending {_NLL})")
         if k % ncols == 0:
             ax.set_ylabel(r"$\hat{\delta}_\mathrm{abs}$ after Step I (IPUT)")
     for ax in list(axes.flat)[len(panels):]:
         ax.set_visible(False)
+    if ncols > 1:  # (one label for the panels side by side: each would overrun its panel)
+        fig.supxlabel(f"GA repetition (ascending {_NLL})", fontsize="medium")
     # one legend for every panel, above them (the panels with most runs name them all)
     widest = max(range(len(panels)), key=lambda k: len(panels[k]))
     handles, names = axes.flat[widest].get_legend_handles_labels()
-    fig.legend(handles, names, loc="outside upper center",
-               ncol=_legend_columns(names, fig.get_figwidth(), 4), fontsize="small",
-               frameon=False)
+    _legend_above(fig, handles, names, 4)
+    _finish(fig, axes[-1])
     return fig
 
 
 def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
                         parameters: Sequence[str] = ("K_v", "K_m", "tau_m", "delta_abs"),
-                        repetitions: int = 3) -> Figure:
+                        repetitions: int = 3,
+                        figsize: tuple[float, float] | None = None) -> Figure:
     """Fig. 7: the best-so-far individual over the GA generations.
 
     Rows are -ln L and ``parameters``; columns are the fits (conditions); each
     panel shows ``repetitions`` GA runs as separate lines, repetition j in
-    the same colour in every panel, named by one legend above the panels.
+    the same colour and line style (solid, dashed, dotted, dash-dotted) in
+    every panel, named by one legend above the panels.
 
     Parameters
     ----------
@@ -138,6 +188,9 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     repetitions : int, default 3
         GA runs drawn per fit: the first ones in repetition order (not the
         best), or all of them if the fit has fewer.
+    figsize : (float, float), optional
+        Size of the figure, inches (default 3 in per column and 1.7 in per
+        row, at most 7.5 x 9.5 in).
 
     Returns
     -------
@@ -161,9 +214,8 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
         raise ValueError(f"repetitions must be >= 1, got {repetitions}")
     _check_labels(labels, len(results))
     rows = [_NLL, *(_param_label(p, results[0]) for p in parameters)]  # its model's units
-    fig, axes = plt.subplots(len(rows), len(results),
-                             figsize=(3.0 * len(results), 1.7 * len(rows) + 0.3),
-                             sharex=True, squeeze=False, layout="constrained")
+    fig, axes = _panels(len(rows), len(results), 3.0, 1.7, figsize, integer_x=True,
+                        sharex=True)
     drawn = 0
     for c, fit in enumerate(results):
         s1 = _paper_fit(fit, "plot_ga_convergence")["step1"]
@@ -178,20 +230,22 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
             # default cycle up to 10, then a colour map, whose colours do not repeat)
             color = (f"C{j}" if repetitions <= 10
                      else plt.cm.viridis(j / max(1, repetitions - 1)))
-            axes[0, c].plot(gen, run["history_best_fun"], lw=1, color=color,
-                            label=f"GA repetition {j + 1}")
+            style = {"lw": 1.2, "color": color, "ls": _STYLES[j % len(_STYLES)]}
+            axes[0, c].plot(gen, run["history_best_fun"], label=f"GA repetition {j + 1}",
+                            **style)
             for r, p in enumerate(parameters, start=1):
-                axes[r, c].plot(gen, hx[:, names.index(p)], lw=1, color=color)
+                axes[r, c].plot(gen, hx[:, names.index(p)], **style)
         drawn = max(drawn, min(repetitions, len(s1["runs"])))
-        axes[0, c].set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
+        axes[0, c].set_title(labels[c] if labels is not None else f"fit {c + 1}",
+                             fontsize="medium")
         axes[-1, c].set_xlabel("GA generation")
     for r, name in enumerate(rows):
         axes[r, 0].set_ylabel(name)
     handles, names = next(ax for ax in axes[0]
                           if len(ax.get_lines()) == drawn).get_legend_handles_labels()
-    fig.legend(handles, names, loc="outside upper center",
-               ncol=_legend_columns(names, fig.get_figwidth(), len(names)), fontsize="small",
-               frameon=False, title="best-so-far individual of", title_fontsize="small")
+    _legend_above(fig, handles, names, len(names), title="best-so-far individual of",
+                  title_fontsize="small")
+    _finish(fig, axes[-1])
     return fig
 
 
@@ -201,18 +255,20 @@ def _check_labels(labels: Sequence[str] | None, n: int) -> None:
         raise ValueError(f"{len(labels)} labels for {n} fits")
 
 
-def _one_row(results: Sequence[FitResult], labels: Sequence[str] | None = None):
+def _one_row(results: Sequence[FitResult], labels: Sequence[str] | None = None,
+             figsize: tuple[float, float] | None = None, height: float = 2.8,
+             integer_x: bool = False):
     """The fits as a list and a figure with one panel per fit in a row (Figs. 8 and 9)."""
     results = list(results)
     if not results:
         raise ValueError("no fits to plot")
     _check_labels(labels, len(results))
-    fig, axes = _pyplot().subplots(1, len(results), figsize=(3.0 * len(results), 2.8),
-                                   squeeze=False)
+    fig, axes = _panels(1, len(results), 3.0, height, figsize, integer_x=integer_x)
     return results, fig, axes
 
 
-def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = None) -> Figure:
+def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
+                  figsize: tuple[float, float] | None = None) -> Figure:
     """Fig. 8: -ln L per repetition after Step I (grey) and Step II (black).
 
     Parameters
@@ -224,10 +280,14 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
         (the lowest -ln L) is circled.
     labels : sequence of str, optional
         Panel titles, one per fit (default "fit 1", "fit 2", ...).
+    figsize : (float, float), optional
+        Size of the figure, inches (default 3 in per panel, at most 7.5 in
+        wide).
 
     Returns
     -------
     matplotlib.figure.Figure
+        One legend above the panels names the markers.
 
     Raises
     ------
@@ -237,7 +297,9 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
         If ``results`` is empty, ``labels`` is not one per fit, or a fit is
         not by the paper's three-step procedure.
     """
-    results, fig, axes = _one_row(results, labels)
+    from matplotlib.lines import Line2D
+
+    results, fig, axes = _one_row(results, labels, figsize, integer_x=True)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):
         steps = _paper_fit(fit, "plot_step_two")
         before = np.array([r["fun"] for r in steps["step1"]["runs"]])
@@ -246,24 +308,38 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
         ax.plot(k, before, "s", color="0.65", ms=4, label="Step I")
         ax.plot(k, after, "s", color="k", ms=4, label="Step II")
         best = steps["step2_best"]
-        ax.plot(k[best], after[best], "o", mfc="white", mec="k", ms=9, label="kept")
-        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
+        # a ring around the kept square (a filled circle would hide it)
+        ax.plot(k[best], after[best], "o", mfc="none", mec="k", mew=1.2, ms=10, label="kept",
+                zorder=3)
+        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize="medium")
         ax.set_xlabel("GA repetition")
         if c == 0:
-            ax.set_ylabel("-ln L")
-            ax.legend(fontsize=7)
-    fig.tight_layout()
+            ax.set_ylabel(_NLL)
+    handles = [Line2D([], [], ls="none", marker="s", color="0.65", ms=4),
+               Line2D([], [], ls="none", marker="s", color="k", ms=4),
+               Line2D([], [], ls="none", marker="o", mfc="none", mec="k", mew=1.2, ms=10)]
+    _legend_above(fig, handles, ["after Step I (GA)", "after Step II (Gauss-Newton)",
+                                 "Step II refinement kept (lowest " + _NLL + ")"], 3)
+    _finish(fig, axes[0])
     return fig
 
 
 def plot_step_three(results: Sequence[FitResult],
-                    labels: Sequence[str] | None = None, *, scan: int = 0) -> Figure:
+                    labels: Sequence[str] | None = None, *, scan: int = 0,
+                    span: float | None = None,
+                    figsize: tuple[float, float] | None = None) -> Figure:
     """Fig. 9: -ln L along delta_abs (Step II parameters fixed) with the estimates marked.
 
     The Step I estimates of each repetition are crosses on the curve, the
-    Step II value (the mean of the best Step I runs) an open circle and a
-    dashed vertical line, the scan's minimum a filled circle and a solid
-    vertical line; one legend above the panels names them.
+    Step II value (the mean of the best Step I runs) an open ring and a
+    dashed vertical line, the scan's minimum a filled circle (inside the
+    ring where they coincide) and a solid vertical line; one legend above
+    the panels names them.
+
+    The y axis shows the curve from its minimum up to ``span`` units of
+    -ln L above it: far from the minimum -ln L is tens of thousands of units
+    higher, which would flatten the minimum, where the estimates lie, to a
+    point.  A Step I estimate off that range is a triangle at the top edge.
 
     Parameters
     ----------
@@ -276,6 +352,14 @@ def plot_step_three(results: Sequence[FitResult],
         Which Step III scan of each fit to draw, as a list index: 0 (default)
         the first, as in the paper's Fig. 9; -1 the last pass of a fit made
         with ``iterate=True``, whose minimum is the fit's final delta_abs.
+    span : float, optional
+        How far above each curve's minimum the y axis reaches, in units of
+        -ln L.  Default: three times the rise from the minimum to the Step II
+        value, or twice the median rise to the Step I estimates if more, and
+        at least 2 units; ``math.inf``: the whole curve.
+    figsize : (float, float), optional
+        Size of the figure, inches (default 3 in per panel, at most 7.5 in
+        wide).
 
     Returns
     -------
@@ -288,8 +372,8 @@ def plot_step_three(results: Sequence[FitResult],
     ValueError
         If ``results`` is empty, ``labels`` is not one per fit, a fit is not
         by the paper's three-step procedure, a fit has no Step III scan
-        (fitted without threshold), or ``scan`` is not an index of every
-        fit's scans.
+        (fitted without threshold), ``scan`` is not an index of every
+        fit's scans, or ``span`` is not a positive number.
 
     Notes
     -----
@@ -301,6 +385,10 @@ def plot_step_three(results: Sequence[FitResult],
     if isinstance(scan, bool) or not isinstance(scan, (int, np.integer)):
         raise ValueError(f"scan must be an integer index (0 the first, -1 the last), "
                          f"got {scan!r}")
+    if span is not None and (isinstance(span, bool) or not isinstance(span, (int, float))
+                             or not span > 0):
+        raise ValueError(f"span must be a positive number (units of -ln L) or math.inf, "
+                         f"got {span!r}")
     results = list(results)  # (once: a generator is read once)
     chosen = []
     for fit in results:  # checked before a figure is made
@@ -313,12 +401,9 @@ def plot_step_three(results: Sequence[FitResult],
         chosen.append((steps, steps["step3"][scan]))
     from matplotlib.lines import Line2D
 
-    if not results:
-        raise ValueError("no fits to plot")
-    _check_labels(labels, len(results))
-    # (as _one_row's, with room above the panels for the legend)
-    fig, axes = _pyplot().subplots(1, len(results), figsize=(3.0 * len(results), 3.3),
-                                   squeeze=False, layout="constrained")
+    # (room above the panels for the legend's four lines)
+    results, fig, axes = _one_row(results, labels, figsize, height=3.3)
+    off_scale = False
     for c, (ax, (steps, one)) in enumerate(zip(axes[0], chosen)):
         scan_c = one
         grid = np.asarray(scan_c["grid"], dtype=float)
@@ -327,26 +412,63 @@ def plot_step_three(results: Sequence[FitResult],
         s1 = steps["step1"]
         i = s1["parameter_names"].index("delta_abs")
         d1 = np.array([r["x"][i] for r in s1["runs"]])
-        ax.plot(d1, np.interp(d1, grid, nll), "x", color="0.4", ms=6, label="Step I")
+        y1 = np.interp(d1, grid, nll)
         d2 = steps["step1_delta_abs"]
+        y2 = float(np.interp(d2, grid, nll))
+        lo, hi = _zoom(nll, y2, y1, span)
+        inside = y1 <= hi
+        ax.plot(d1[inside], y1[inside], "x", color="0.4", ms=6, mew=1.2, label="Step I")
+        if not inside.all():  # off the range shown: a triangle at the top edge
+            off_scale = True
+            ax.plot(d1[~inside], np.full((~inside).sum(), hi), "^", color="0.4", ms=6,
+                    clip_on=False, zorder=3, label="Step I (above the range shown)")
         ax.axvline(d2, color="k", lw=0.8, ls="--")
-        ax.plot(d2, np.interp(d2, grid, nll), "o", mfc="white", mec="k", ms=7, label="Step II")
         ax.axvline(scan_c["best"], color="k", lw=0.8)
-        ax.plot(scan_c["best"], scan_c["best_neg_log_lik"], "ko", ms=6, label="Step III")
-        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize=9)
+        ax.plot(scan_c["best"], scan_c["best_neg_log_lik"], "ko", ms=5, zorder=3,
+                label="Step III")
+        # the ring on top: a filled circle at the same place shows inside it
+        ax.plot(d2, y2, "o", mfc="none", mec="k", mew=1.2, ms=10, zorder=4, label="Step II")
+        if math.isfinite(lo) and math.isfinite(hi) and hi > lo:
+            ax.set_ylim(lo, hi)
+        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize="medium")
         ax.set_xlabel(_param_label("delta_abs"))
         if c == 0:
             ax.set_ylabel(_NLL)
     d = symbol("delta_abs")
     handles = [Line2D([], [], color="k", lw=1, label=f"{_NLL} along {d}, Step II parameters "
                                                       "held"),
-               Line2D([], [], ls="none", marker="x", color="0.4", ms=6,
+               Line2D([], [], ls="none", marker="x", color="0.4", ms=6, mew=1.2,
                       label=f"Step I estimates of {d}"),
-               Line2D([], [], color="k", lw=0.8, ls="--", marker="o", mfc="white", mec="k",
-                      ms=7, label=f"Step II {d} (mean of the best Step I runs)"),
-               Line2D([], [], color="k", lw=0.8, marker="o", ms=6,
+               Line2D([], [], color="k", lw=0.8, ls="--", marker="o", mfc="none", mec="k",
+                      mew=1.2, ms=10, label=f"Step II {d} (mean of the best Step I runs)"),
+               Line2D([], [], color="k", lw=0.8, marker="o", ms=5,
                       label="Step III minimum of the scan")]
-    fig.legend(handles=handles, loc="outside upper center",
-               ncol=_legend_columns([h.get_label() for h in handles], fig.get_figwidth(), 2),
-               fontsize="small", frameon=False)
+    if off_scale:
+        handles.insert(2, Line2D([], [], ls="none", marker="^", color="0.4", ms=6,
+                                 label="Step I estimates above the range shown"))
+    _legend_above(fig, handles, [h.get_label() for h in handles], 2)
+    _finish(fig, axes[0])
     return fig
+
+
+def _zoom(nll: np.ndarray, at_step_two: float, at_step_one: np.ndarray,
+          span: float | None) -> tuple[float, float]:
+    """The y range of a Fig. 9 panel: from a little below the curve's minimum to ``span``
+    above it (default: see :func:`plot_step_three`)."""
+    ok = np.isfinite(nll)
+    if not ok.any():
+        return math.nan, math.nan
+    bottom = float(np.min(nll[ok]))
+    if span is None:
+        rises = [2.0]
+        if math.isfinite(at_step_two):
+            rises.append(3.0 * (at_step_two - bottom))
+        one = np.asarray(at_step_one, float)
+        if np.isfinite(one).any():
+            rises.append(2.0 * float(np.median(one[np.isfinite(one)]) - bottom))
+        span = max(rises)
+    top = min(bottom + span, float(np.max(nll[ok])))
+    if not top > bottom:
+        top = bottom + 1.0
+    pad = 0.06 * (top - bottom)
+    return bottom - pad, top + pad
