@@ -592,6 +592,13 @@ def test_step_three_shows_the_minimum_and_the_markers():
     assert step_two.get_markerfacecolor() == "none"
     # a Step I estimate off the range is marked at the top, not lost
     fig.canvas.draw()
+    # whole -ln L values on the ticks, however narrow the range: no offset text
+    # ("-2.615e4", as a flat scan of the docs' FD 0.25 fit had) to run into the title
+    from bayespilot.fit.figures import plot_step_three
+
+    narrow = plot_step_three([fit], span=2.0)
+    narrow.canvas.draw()
+    assert narrow.axes[0].yaxis.get_offset_text().get_text() == ""
     xs = np.concatenate([ln.get_xdata() for ln in ax.get_lines()
                          if ln.get_label() in ("Step I", "Step I (above the range shown)")])
     assert sorted(np.round(xs, 6)) == sorted(np.round(

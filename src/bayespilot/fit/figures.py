@@ -430,6 +430,9 @@ def plot_step_three(results: Sequence[FitResult],
         ax.plot(d2, y2, "o", mfc="none", mec="k", mew=1.2, ms=10, zorder=4, label="Step II")
         if math.isfinite(lo) and math.isfinite(hi) and hi > lo:
             ax.set_ylim(lo, hi)
+        # whole values of -ln L on the ticks: a range of a few units about -26 157 otherwise
+        # gets an offset text ("-2.615e4") that runs into the panel's title
+        ax.ticklabel_format(axis="y", useOffset=False, style="plain")
         ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize="medium")
         ax.set_xlabel(_param_label("delta_abs"))
         if c == 0:
