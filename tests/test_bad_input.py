@@ -515,8 +515,8 @@ def test_a_labs_own_keys_do_not_warn(tmp_path):
     assert questionable(rec) == [] and _questionable_reasons(tmp_path, rec) == []
 
 
-# --- columns that contradict each other: signs, an offset in e, spikes in u -----------------------
-_NEW_CHECKS = ("looks inverted", "e has an offset", "of u jump away")
+# --- columns that contradict each other: signs, an offset in e, spikes in u, a biased motion -------
+_NEW_CHECKS = ("looks inverted", "e has an offset", "of u jump away", "theta_ddot_m looks biased")
 
 
 def _new_reasons(rec: Recording) -> list[str]:
@@ -765,6 +765,113 @@ def test_spikes_are_not_checked_below_the_low_sample_rate(clean_runs):
         reasons = questionable(slow.with_signals(u=_pulse_train(slow, 0.05, seed)))
         assert [r for r in reasons if "of u jump away" in r] == [], seed
         assert any(r.startswith("the sample rate is 20 Hz") for r in reasons)
+
+
+def _bare(rec: Recording) -> Recording:
+    """rec with only the required columns (no theta to check the motion against)."""
+    return Recording({k: rec[k] for k in ("t", "e", "u", "theta_ddot_m")}, rec.sample_rate_hz,
+                     rec.motion_gain, rec.task, rec.metadata)
+
+
+@pytest.mark.parametrize("run", ["FD 100 Hz 30 s F_n 0.15", "FD washout pilot", "other lab"])
+@pytest.mark.parametrize("share", [0.03, -0.03])
+def test_a_bias_in_theta_ddot_m_warns(clean_runs, run, share):
+    """A constant in theta_ddot_m makes its running integral, the pitch rate, a ramp: the canal
+    model takes it for a sustained rotation (1 % of std(theta_ddot_m) took the fast fit's K_m
+    from 0.52 to 0.40 on a simulated 81.92-s FD run).  Seen with or without theta."""
+    rec = clean_runs[run]
+    a = rec.theta_ddot_m
+    b = share * float(np.std(a))
+    for biased in (rec.with_signals(theta_ddot_m=a + b), _bare(rec).with_signals(
+            theta_ddot_m=a + b)):
+        reasons = _new_reasons(biased)
+        assert len(reasons) == 1 and reasons[0].startswith(
+            "theta_ddot_m looks biased: it has a constant part of about "), reasons
+        m = re.search(r"about (\S+) rad/s\^2 \((\S+)% of its standard deviation .*drifts by "
+                      r"(\S+) rad/s over the (\S+)-s run, (\S+) times that rate's spread",
+                      reasons[0])
+        assert m, reasons[0]
+        est, pct, drift, T, ratio = (float(x) for x in m.groups())
+        assert est == pytest.approx(b, rel=0.15)
+        assert pct == pytest.approx(100 * abs(share), rel=0.15)
+        assert drift == pytest.approx(b * rec.duration, rel=0.15) and T == pytest.approx(
+            rec.duration, rel=1e-3)
+        assert ratio > 0.75
+        assert reasons[0].endswith("if the lab knows it is a sensor or logging bias, remove it "
+                                   "(subtract the mean of theta_ddot_m over whole periods of "
+                                   "the forcing, or the estimate above) before fitting")
+        # the estimate removed, as the warning says: silent again
+        assert _new_reasons(biased.with_signals(theta_ddot_m=a + b - est)) == []
+
+
+def test_a_bias_in_theta_ddot_m_warns_when_read(clean_runs, tmp_path):
+    rec = clean_runs["FD 100 Hz 30 s F_n 0.15"]
+    a = rec.theta_ddot_m
+    write_recording(rec.with_signals(theta_ddot_m=a + 0.01 * np.std(a)), tmp_path / "lab")
+    with pytest.warns(QuestionableRecordingWarning, match=re.escape(
+            f"{tmp_path / 'lab'}: theta_ddot_m looks biased: it has a constant part of about ")):
+        read_recording(tmp_path / "lab")
+
+
+def test_a_constant_motion_column_is_a_bias_and_no_motion_is_not(clean_runs, tmp_path):
+    rec = clean_runs["FD 100 Hz 30 s F_n 0.15"]
+    const = rec.with_signals(theta_ddot_m=np.full(rec.n_samples, 0.01))
+    reasons = _new_reasons(const)
+    assert len(reasons) == 1 and "(all of it: the column is constant)" in reasons[0], reasons
+    # no motion: theta_ddot_m all zeros, or motion_gain 0 (whose moving column the motion_gain
+    # check names; the motion of a run without motion is not judged for a bias)
+    assert _new_reasons(rec.with_signals(theta_ddot_m=np.zeros(rec.n_samples))) == []
+    still = clean_runs["FD no motion"]
+    assert _new_reasons(still) == [] and _questionable_reasons(tmp_path, still) == []
+    off = _with(const, motion_gain=0.0)
+    assert _new_reasons(off) == []
+    assert [r for r in questionable(off) if "moves although motion_gain is 0" in r]
+
+
+def test_noise_in_theta_ddot_m_is_not_a_bias(clean_runs):
+    """White noise in a logged (measured) theta_ddot_m makes its integral wander too (its drift
+    ratio passes BIAS_DRIFT on these), but no estimate of a bias stands out from it (z < 1):
+    nothing is said.  A bias still does, noise or not."""
+    from bayespilot.recording import BIAS_DRIFT, _motion_bias_statistics
+
+    for run, level in (("other lab", 0.3), ("other lab", 1.0)):
+        rec = clean_runs[run]
+        a = rec.theta_ddot_m
+        noisy = a + level * np.std(a) * np.random.default_rng(1).normal(size=a.size)
+        assert _motion_bias_statistics(rec.with_signals(theta_ddot_m=noisy))["ratio"] \
+            > BIAS_DRIFT
+        assert _new_reasons(rec.with_signals(theta_ddot_m=noisy)) == [], run
+        biased = rec.with_signals(theta_ddot_m=noisy + 0.3 * level * np.std(a))
+        assert [r for r in _new_reasons(biased) if "looks biased" in r], run
+
+
+@pytest.mark.parametrize("run", ["FT 1000 Hz 10 s", "FD 50 Hz 20 s no remnant",
+                                 "FT 100 Hz 23.7 s F_n 0.3"])
+def test_short_records_are_not_judged_for_a_bias(clean_runs, run):
+    """Under BIAS_MIN_S the rate's slowest lines do not average out (clean 10-s runs: drift
+    ratio up to 0.98; 20-s windows of clean runs: 0.65): a record that short is not judged
+    (its shortness is warned of), though the bias still harms it."""
+    rec = clean_runs[run]
+    a = rec.theta_ddot_m
+    reasons = questionable(rec.with_signals(theta_ddot_m=a + 0.03 * np.std(a)))
+    assert [r for r in reasons if "looks biased" in r] == []
+    assert any(f"{rec.duration:g} s long" in r for r in reasons)
+
+
+def test_the_paper_runs_and_the_examples_are_not_biased():
+    """The runs the example makes (FD, K_theta 0.5 and 1, F_n 0.15, seeds 0 and 1, 81.92 s,
+    and its 20-s doctest run); the shipped recordings are in
+    test_clean_recordings_raise_none_of_the_column_checks."""
+    from bayespilot.simulate import simulate
+
+    for kt, seed, duration in ((0.5, 0, None), (1.0, 1, None), (1.0, 0, 20.0)):  # (20 s: silent)
+        rec = simulate(task="FD", motion_gain=kt, remnant_fraction=0.15, seed=seed,
+                       duration=duration).recording
+        assert _new_reasons(rec) == [], (kt, seed)
+        a = rec.theta_ddot_m  # and 1 % of bias is caught on the long ones
+        found = [r for r in _new_reasons(rec.with_signals(theta_ddot_m=a + 0.01 * np.std(a)))
+                 if "looks biased" in r]
+        assert duration or len(found) == 1, (kt, seed, found)
 
 
 def test_the_column_checks_run_with_one_blas_thread(clean_runs):

@@ -55,7 +55,8 @@ class QuestionableRecordingWarning(UserWarning):
     :data:`SHORT_RECORDING_S` (the paper's runs are 81.92 s) or sampled below
     :data:`LOW_SAMPLE_RATE_HZ` (the paper's rate is 100 Hz), whose metadata
     contradicts its data or looks mistyped, or whose columns contradict each
-    other (a sign, an offset in e, spikes in u; see :func:`questionable`), and by
+    other (a sign, an offset in e, spikes in u, a bias in theta_ddot_m; see
+    :func:`questionable`), and by
     :func:`~bayespilot.fit.fast.fit_fast` and
     :func:`~bayespilot.fit.three_step.fit_paper` for a control output u with
     an offset (its mean more than
@@ -89,7 +90,10 @@ def questionable(recording: "Recording") -> list[str]:
         :data:`SIGN_R2_MIN`); an offset in e against f_t - theta over
         :data:`OFFSET_RATIO` of std(e) that e carries (not a theta or f_t
         logged about another zero); spikes in u (:data:`SPIKE_K`,
-        :data:`SPIKE_SD`; from :data:`LOW_SAMPLE_RATE_HZ` up).  See "Checks
+        :data:`SPIKE_SD`; from :data:`LOW_SAMPLE_RATE_HZ` up); a constant bias in
+        theta_ddot_m, whose running integral, the pitch rate, then drifts away
+        (:data:`BIAS_DRIFT`, :data:`BIAS_Z`; with motion, from :data:`BIAS_MIN_S`
+        s up; theta is not needed).  See "Checks
         of the columns against each other" in docs/recording-format.md for
         the thresholds and what they were measured on.
     """
@@ -129,8 +133,11 @@ def questionable(recording: "Recording") -> list[str]:
     with np.errstate(all="ignore"):  # a record of extreme values says nothing, quietly
         reasons += _sign_problems(recording)
         spikes = _spike_problem(recording)
+        bias = _motion_bias_problem(recording)
     if spikes:
         reasons.append(spikes)
+    if bias:
+        reasons.append(bias)
     return reasons
 
 
@@ -178,6 +185,36 @@ SIGN_EDGE_S = 1.0
 #: 82-s train of such pulses at 20 Hz, with either estimate).
 SPIKE_K = 15.0
 SPIKE_SD = 2.0
+#: A constant bias b in theta_ddot_m is read as a sustained rotation: the canal model
+#: K_scc (1 + T1 s) / (1 + T2 s) passes it at its DC gain K_scc = 5.97, far above its gain at the
+#: task's frequencies (1.0 at 1 rad/s, 0.35 at 3), so its output gains an offset K_scc b (1 % of
+#: std(theta_ddot_m) on an FD run: a quarter of the output's std) (over ~T2 = 5.9 s; without
+#: a theta column, the start rate, :func:`bayespilot.likelihood._pitch_rate_at_start`, is also
+#: off by -b T / 2), which the model, with no constant term, can follow only by lowering K_m (a
+#: simulated 81.92-s FD run: 1 % of std(theta_ddot_m) took the fast fit's K_m from 0.52 to 0.40,
+#: 0.30 without theta).  The pitch rate the motion presents, the running integral of
+#: theta_ddot_m, cannot drift away on a platform, while a bias makes it a ramp b t.  So the bias
+#: is estimated twice, as the least-squares slope of that integral (a parabolic-window mean of
+#: theta_ddot_m) and as the Hann-window mean of theta_ddot_m, and the smaller of the two in size
+#: is taken (a bias moves both alike; a slow line of the rate leaks into the first when it
+#: completes a period or more in the record, into the second when it does not).  It is warned of
+#: when the drift it implies over the run, |b| T, exceeds BIAS_DRIFT times the rms of the
+#: integral about its straight line, AND it stands BIAS_Z standard errors from 0, the standard
+#: error being that of white noise in theta_ddot_m (estimated from its second differences),
+#: whose integral wanders too (white noise of 10 to 100 % of std(theta_ddot_m) added to the
+#: clean records below from BIAS_MIN_S s up, three draws: the drift ratio up to 5.7, z at most
+#: 3.5 where the ratio passed BIAS_DRIFT).  96 clean simulated records (FD and
+#: FT, 50 to 1000 Hz, K_theta 0.5 to 1, F_n 0 to 0.3, 10 to 81.92 s, a washout in the pilot or
+#: not; each also with theta_ddot_m logged after a washout, a motion system or a lag, from
+#: rest): drift ratio at most 0.09 from 30 s up, 0.23 at 23.7 s, 0.37 at 20 s, 0.98 at 10 s;
+#: windows cut anywhere from the clean 60- and 81.92-s ones (1120 per length): at most 0.27 over
+#: 30 s, 0.40 over 25 s, 0.65 over 20 s.  The slowest lines of the rate (periods of 14 and 16 s
+#: in the paper's forcing) do not average out over a short record, hence nothing is judged
+#: under BIAS_MIN_S s (which the short-record warning covers).  See docs/recording-format.md
+#: for the detection rates.
+BIAS_DRIFT = 0.75
+BIAS_Z = 5.0
+BIAS_MIN_S = 25.0
 
 
 def _one_blas_thread(func):
@@ -391,6 +428,64 @@ def _spike_problem(recording: "Recording") -> str | None:
             f"{SPIKE_K:g} times that and {SPIKE_SD:g} standard deviations), at t = {first} s; "
             f"the fit takes them as the pilot's control, so remove them (interpolate over "
             f"them, or cut the record) before fitting")
+
+
+@_one_blas_thread
+def _motion_bias_statistics(recording: "Recording") -> dict[str, float] | None:
+    """theta_ddot_m's bias as :data:`BIAS_DRIFT` judges it: ``{"bias"`` (rad/s^2, the
+    smaller in size of the rate's least-squares slope and theta_ddot_m's Hann-window mean),
+    ``"sd"`` (std of theta_ddot_m), ``"drift"`` (bias times the record's duration, rad/s),
+    ``"spread"`` (rms of the rate, theta_ddot_m integrated from 0, about its straight line,
+    rad/s), ``"ratio"`` (|drift| / spread), ``"z"`` (|bias| over its standard error from
+    white noise in theta_ddot_m)``}``; None with no motion (motion_gain 0, or theta_ddot_m
+    all zeros) or under :data:`BIAS_MIN_S` s.  Needs no theta."""
+    if not recording.motion_gain > 0 or recording.duration < BIAS_MIN_S:
+        return None
+    a = np.asarray(recording.theta_ddot_m, float)
+    n = a.size
+    dt = recording.dt
+    if not np.any(a) or n < 16:  # (16: as the sign checks, too few samples to judge)
+        return None
+    rate = np.concatenate([[0.0], np.cumsum(0.5 * (a[1:] + a[:-1]))]) * dt
+    t = np.arange(n) * dt
+    tc = t - t.mean()
+    rc = rate - rate.mean()
+    slope = float(tc @ rc) / float(tc @ tc)
+    res = rc - slope * tc
+    spread = math.sqrt(float(res @ res) / n)
+    w = np.sin(np.pi * (np.arange(n) + 0.5) / n) ** 2
+    hann = float(w @ a) / float(w.sum())
+    bias = slope if abs(slope) <= abs(hann) else hann
+    d2 = a[2:] - 2.0 * a[1:-1] + a[:-2]
+    noise = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+    stderr = noise * math.sqrt(1.5 / n)  # the Hann window's (the parabolic one's: 1.2 / n)
+    drift = bias * recording.duration
+
+    def over(x: float, scale: float) -> float:
+        return abs(x) / scale if scale > 0 else (math.inf if x else 0.0)
+
+    sd = float(a.std()) if np.ptp(a) > 0 else 0.0  # (a constant's std is not 0 to rounding)
+    return {"bias": bias, "sd": sd, "drift": drift, "spread": spread,
+            "ratio": over(drift, spread), "z": over(bias, stderr)}
+
+
+def _motion_bias_problem(recording: "Recording") -> str | None:
+    """A sentence on a constant bias in theta_ddot_m (:data:`BIAS_DRIFT`, :data:`BIAS_Z`), or
+    None."""
+    st = _motion_bias_statistics(recording)
+    if st is None or not (st["ratio"] > BIAS_DRIFT and st["z"] > BIAS_Z):
+        return None
+    share = (f"{abs(st['bias']) / st['sd']:.2%} of its standard deviation {st['sd']:.3g} "
+             f"rad/s^2" if st["sd"] > 0 else "all of it: the column is constant")
+    return (f"theta_ddot_m looks biased: it has a constant part of about {st['bias']:.3g} "
+            f"rad/s^2 ({share}), so the pitch rate it presents, its running integral, drifts by "
+            f"{st['drift']:.3g} rad/s over the {recording.duration:g}-s run, "
+            f"{st['ratio']:.3g} times that rate's spread about its trend ({st['spread']:.3g} "
+            f"rad/s; more than {BIAS_DRIFT:g}); a motion platform's pitch rate cannot drift "
+            f"away, and the model's canal takes the bias for a sustained rotation, which biases "
+            f"the fit (K_m low); if the lab knows it is a sensor or logging bias, remove it "
+            f"(subtract the mean of theta_ddot_m over whole periods of the forcing, or the "
+            f"estimate above) before fitting")
 
 
 def _near_miss(name: Any, known: "list[str] | tuple[str, ...]") -> str | None:
