@@ -36,8 +36,11 @@ def test_diagnose_json_and_report(rec_stem, tmp_path, capsys):
     rep = tmp_path / "report"
     post = tmp_path / "post.nc"
     code, stdout, err = _run(capsys, "diagnose", rec_stem, "--json", out, "--report", rep,
-                             "--bootstrap", "0", "--seed", "1", "--posterior", post)
+                             "--bootstrap", "0", "--seed", "1", "--posterior", post,
+                             "--report-format", "pdf")
     assert code == 0, err
+    pdf = (rep / "candidates.pdf").read_bytes()  # (a vector copy for a paper)
+    assert pdf[:5] == b"%PDF-" and b"/Type3" not in pdf and not (rep / "candidates.svg").exists()
     assert "decision:" in stdout
     # nothing chosen, nothing to sample: said, and no file
     assert "no extended model to sample" in err and not post.exists()
@@ -58,6 +61,13 @@ def test_diagnose_json_and_report(rec_stem, tmp_path, capsys):
     # and the page says why
     assert not (rep / "frequency_response.png").exists() and not (rep / "evidence.png").exists()
     assert "so there is no figure of them" in html
+
+
+def test_diagnose_report_format_needs_a_report(rec_stem, capsys):
+    code, out, err = _run(capsys, "diagnose", rec_stem, "--report-format", "pdf")
+    assert code == 2 and "--report-format: needs --report" in err and out == ""
+    code, out, err = _run(capsys, "diagnose", rec_stem, "--report", "x", "--report-format", "eps")
+    assert code == 2 and "invalid choice" in err
 
 
 def test_diagnose_missing_recording_is_a_usage_error(tmp_path, capsys):

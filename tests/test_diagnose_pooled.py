@@ -222,10 +222,16 @@ def test_pooled_controls_say_none_and_report(tmp_path):
         if c.physics in ("motion-washout", "otolith-channel"):
             assert c.delta_neg_log_lik == pytest.approx(max(0.0, ref - c.fit.neg_log_lik),
                                                         abs=1e-9)
-    paths = res.report(tmp_path / "rep")
+    paths = res.report(tmp_path / "rep", formats=("svg",))
     for key in ("candidates", "runs", "json", "html"):
         assert paths[key].stat().st_size > 0
     assert "data:image/png;base64," in paths["html"].read_text()
+    # the vector copies beside the PNGs, listed, and nothing else
+    assert paths["runs_svg"] == tmp_path / "rep" / "runs.svg" and "<text" in paths[
+        "runs_svg"].read_text(encoding="utf-8")
+    assert set((tmp_path / "rep").iterdir()) == set(paths.values())
+    with pytest.raises(ValueError, match="formats"):
+        res.report(tmp_path / "rep", formats=("jpeg",))
 
 
 def test_pooled_whole_band_starts_from_the_low_band_fit(monkeypatch):

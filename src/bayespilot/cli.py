@@ -979,6 +979,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     if args.bayes_factor and len(args.recording) > 1:
         raise UsageError("argument --bayes-factor: takes one recording (the evidence of a "
                          "pooled model is not built)")
+    if args.report_format and not args.report:
+        raise UsageError("argument --report-format: needs --report DIR (the folder the "
+                         "figures are written to)")
     if args.posterior is not None:
         want = ".nc" if len(args.recording) == 1 else ".json"
         if Path(args.posterior).suffix != want:
@@ -1065,7 +1068,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         _say(args, f"wrote {args.json}")
     if args.report:
         try:
-            paths = res.report(args.report)
+            paths = res.report(args.report, formats=args.report_format)
         except OSError as exc:
             raise CommandFailed(f"{args.report}: cannot write the report "
                                 f"({_os_reason(exc)})") from None
@@ -1815,6 +1818,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="OUT", help="write the diagnosis to this JSON file")
     p.add_argument("--report", metavar="DIR",
                    help="write PNG figures, report.html and diagnosis.json to this folder")
+    p.add_argument("--report-format", action="append", choices=("pdf", "svg"), default=[],
+                   metavar="{pdf,svg}",
+                   help="with --report, also write each figure in this vector format beside "
+                        "its PNG, for a paper (fonts as TrueType; may be given twice)")
     _diagnose_arguments(p)
     p.add_argument("--posterior", metavar="POST.nc",
                    help="one recording: also sample the posterior of the chosen extended model "

@@ -272,7 +272,8 @@ class PooledDiagnosisResult(_JSONSummary):
                    dict(d.get("settings") or {}), number(d.get("elapsed_seconds", 0.0)),
                    posterior=None if post is None else SharedPosterior.from_dict(post))
 
-    def report(self, directory: str | Path) -> dict[str, Path]:
+    def report(self, directory: str | Path, *,
+               formats: Sequence[str] = ("png",)) -> dict[str, Path]:
         """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``
         (and ``posterior.png`` once :func:`~bayespilot.diagnose.shared_posterior` has run).
 
@@ -281,31 +282,41 @@ class PooledDiagnosisResult(_JSONSummary):
         directory : str or Path
             Created, with its parents, if missing; files of the same names in
             it are replaced.
+        formats : sequence of str, optional
+            Also write each figure in these formats beside its PNG (``"pdf"``,
+            ``"svg"``), as :meth:`DiagnosisResult.report` does.
 
         Returns
         -------
         dict of str to Path
             The files by name: ``candidates``, ``runs``, ``posterior`` (when
-            set), ``json`` and ``html``.
+            set), each figure's other formats as ``<name>_pdf`` and
+            ``<name>_svg``, ``json`` and ``html``.
 
         Raises
         ------
         OSError
             ``directory`` cannot be created or a file in it written.
+        ValueError
+            ``formats`` names one that is not ``"png"``, ``"pdf"`` or ``"svg"``.
         """
         import html
 
-        from .report import (_STYLE, _candidate_table, _img, _png, _yes_no, plot_candidates,
-                             plot_shared_posterior)
+        from .report import (_STYLE, _candidate_table, _checked_formats, _img, _png, _yes_no,
+                             plot_candidates, plot_shared_posterior)
 
+        formats = _checked_formats(formats)
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
-        paths = {"candidates": _png(plot_candidates(self), out / "candidates.png"),
-                 "runs": _png(plot_runs(self), out / "runs.png"),
-                 "json": out / "diagnosis.json"}
+        figures = {"candidates": lambda: plot_candidates(self), "runs": lambda: plot_runs(self)}
         if self.posterior is not None:
-            paths["posterior"] = _png(plot_shared_posterior(self.posterior),
-                                      out / "posterior.png")
+            figures["posterior"] = lambda: plot_shared_posterior(self.posterior)
+        paths = {}
+        for name, draw in figures.items():
+            paths[name] = _png(draw(), out / f"{name}.png", formats)
+            for fmt in formats[1:]:
+                paths[f"{name}_{fmt}"] = paths[name].with_suffix(f".{fmt}")
+        paths["json"] = out / "diagnosis.json"
         self.to_json(paths["json"])
 
         title = f"bayespilot pooled diagnosis: {html.escape(self.physics)}"

@@ -851,6 +851,16 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
 FORMATS = ("png", "pdf", "svg")
 
 
+def _checked_formats(formats: str | Sequence[str]) -> tuple[str, ...]:
+    """``formats`` as a tuple starting with "png" (the page embeds the PNGs), each once;
+    ValueError for a name not in :data:`FORMATS`."""
+    formats = tuple(dict.fromkeys(("png", *([formats] if isinstance(formats, str) else formats))))
+    bad = [f for f in formats if f not in FORMATS]
+    if bad:
+        raise ValueError(f"formats must be among {', '.join(FORMATS)}, got {bad[0]!r}")
+    return formats
+
+
 def _png(fig, path: Path, formats: Sequence[str] = ("png",)) -> Path:
     """Save ``fig`` as the PNG ``path`` at :data:`FIGURE_DPI` (and in each other of
     ``formats`` beside it, of the same stem: fonts embedded as TrueType in a PDF, text kept
@@ -985,10 +995,7 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         interval (:func:`plot_residuals`; a result of ``diagnose`` has it), or
         ``formats`` names one not in :data:`FORMATS`.
     """
-    formats = tuple(dict.fromkeys(("png", *([formats] if isinstance(formats, str) else formats))))
-    bad = [f for f in formats if f not in FORMATS]
-    if bad:
-        raise ValueError(f"formats must be among {', '.join(FORMATS)}, got {bad[0]!r}")
+    formats = _checked_formats(formats)
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     paths: dict[str, Path] = {}
