@@ -17,9 +17,11 @@ import pytest
 from bayespilot.campaign import CampaignError
 from bayespilot.cli import main
 from bayespilot.diagnose import diagnose, diagnose_pooled
-from bayespilot.diagnose.batch import batch_summary_rows, diagnose_batch, plan_batch
+from bayespilot.diagnose.batch import (ResultConflictError, batch_summary_rows, diagnose_batch,
+                                       plan_batch, task_seed)
 from bayespilot.io import read_recording, write_recording
-from bayespilot.recording import QuestionableRecordingWarning, Recording, RecordingError
+from bayespilot.recording import (QuestionableRecordingWarning, Recording, RecordingError,
+                                  _signals_digest)
 from bayespilot.simulate import simulate
 
 #: What a 20-s record is told when read (a QuestionableRecordingWarning), not refused.
@@ -73,7 +75,7 @@ def test_plan_keys_and_groups(recordings, tmp_path):
         ("s1_FD_k1", tuple(recordings[:2])), ("s2_FD_k0.75", (recordings[2],))]
     assert pooled[0].pooled and not pooled[1].pooled
     # given in another order, a pooled task's runs are the same, in the files' order (run j is
-    # seeded seed + j: the paths' order changed the bootstrap's draws)
+    # seeded s + j from the task's seed s: the paths' order changed the bootstrap's draws)
     assert plan_batch(recordings[::-1], recs[::-1], pool=True) == pooled
     # the same stem in two folders: the folder goes into the key; the same file twice: refused
     other = str(tmp_path / "elsewhere" / "s1-run1")
@@ -101,21 +103,27 @@ def test_batch_matches_direct_diagnoses_and_resumes(recordings, tmp_path):
     assert (s1.total, s1.completed, s1.skipped, s1.failed) == (2, 2, 0, 0)
     assert "2 diagnoses: 2 run" in str(s1)
     recs = _read_all(recordings)
-    direct = {"s1_FD_k1": diagnose_pooled(recs[:2], seed=3, **OPTIONS),
-              "s2_FD_k0.75": diagnose(recs[2], seed=3, **OPTIONS)}
+    # each diagnosis with its own seed, drawn from the batch's and its recordings' content
+    seeds = {"s1_FD_k1": task_seed(3, [_signals_digest(r) for r in recs[:2]]),
+             "s2_FD_k0.75": task_seed(3, [_signals_digest(recs[2])])}
+    assert len(set(seeds.values()) | {3}) == 3
+    direct = {"s1_FD_k1": diagnose_pooled(recs[:2], seed=seeds["s1_FD_k1"], **OPTIONS),
+              "s2_FD_k0.75": diagnose(recs[2], seed=seeds["s2_FD_k0.75"], **OPTIONS)}
     for key, ref in direct.items():
         got = json.loads((out / f"{key}.json").read_text())
-        assert got["key"] == key and got["settings"]["seed"] == 3
+        assert got["key"] == key and got["settings"]["seed"] == seeds[key]
+        assert got["settings"]["batch_seed"] == 3
         d = got["diagnosis"]
+        assert d["settings"]["seed"] == seeds[key]
         assert d["physics"] == ref.physics
         for a, b in zip(d["ranking"], ref.ranking):
             assert a["physics"] == b.physics
             assert a["delta_neg_log_lik"] == pytest.approx(b.delta_neg_log_lik, rel=1e-6,
                                                            abs=1e-6)
     rows = list(csv.DictReader((out / "summary.csv").open()))
-    assert [(r["key"], r["n_runs"], r["physics"]) for r in rows] == [
-        ("s1_FD_k1", "2", direct["s1_FD_k1"].physics),
-        ("s2_FD_k0.75", "1", direct["s2_FD_k0.75"].physics)]
+    assert [(r["key"], r["n_runs"], r["physics"], r["seed"]) for r in rows] == [
+        ("s1_FD_k1", "2", direct["s1_FD_k1"].physics, str(seeds["s1_FD_k1"])),
+        ("s2_FD_k0.75", "1", direct["s2_FD_k0.75"].physics, str(seeds["s2_FD_k0.75"]))]
     for r in rows:  # the nearest miss, from the direct diagnosis's ranking
         p_min, name = min((c.p_value, c.physics) for c in direct[r["key"]].ranking
                           if math.isfinite(c.p_value))
@@ -128,7 +136,7 @@ def test_batch_matches_direct_diagnoses_and_resumes(recordings, tmp_path):
                         **OPTIONS)
     assert (s2.completed, s2.skipped) == (0, 2)
     assert [(out / f"{k}.json").stat().st_mtime_ns for k in direct] == stamp
-    with pytest.raises(CampaignError, match="from other settings: seed 3 there, 4 here"):
+    with pytest.raises(CampaignError, match="from other settings: batch_seed 3 there, 4 here; "):
         diagnose_batch(recordings, out, pool=True, seed=4, workers=1, progress=False,
                        **OPTIONS)
 
@@ -457,10 +465,10 @@ def test_cli_a_diagnosis_from_other_settings_is_a_usage_error(done_without_repor
     assert code == 2 and stdout == ""
     assert [ln for ln in err.splitlines() if "warning" not in ln] == [
         f"bayespilot: error: {out / 's7-run1.json'} holds a diagnosis of s7-run1 from other "
-        f"settings: seed 0 there, 5 here; use another output folder or delete it"]
+        f"settings: batch_seed 0 there, 5 here; use another output folder or delete it"]
     assert issubclass(ResultConflictError, CampaignError)  # (Python callers catch it as before)
     with pytest.warns(QuestionableRecordingWarning, match=SHORT), \
-            pytest.raises(ValueError, match="from other settings: seed 0 there, 5 here"):
+            pytest.raises(ValueError, match="from other settings: batch_seed 0 there, 5 here;"):
         diagnose_batch([stem], out, n_bootstrap=0, seed=5, progress=False)
 
 
@@ -531,3 +539,157 @@ def test_a_base_fit_on_a_bound_is_said_by_the_batch_as_a_base_fit_warning(record
     assert pooled["runs"][0]["base_at_bounds"][0]["parameter"] == "omega_nm"
     assert "base_at_bounds" not in pooled["runs"][1]
     assert one["settings"]["base_at_bounds"][0]["parameter"] == "omega_nm"
+
+
+# --- each diagnosis its own seed ----------------------------------------------------------------
+def _run_here(monkeypatch):
+    """diagnose_batch with its tasks run in this process (run_keyed replaced, no cluster): the
+    same arguments the workers get, a few seconds a batch."""
+    from bayespilot import campaign as C
+
+    def run_keyed(tasks, out, *, to_json, **kwargs):
+        for key, fn, args, _ in tasks:
+            C._write_json_atomic(out / f"{key}.json", to_json(key, fn(*args)))
+        return len(tasks), {}
+
+    monkeypatch.setattr(C, "run_keyed", run_keyed)
+
+
+@pytest.fixture(scope="module")
+def twins(tmp_path_factory):
+    """Two 40.96-s runs a and b (the shortest of the paper's forcing that a bootstrap can
+    simulate), and a2: a with one sample of its control moved by 1e-9 (another recording by
+    its content, the same fit within rounding)."""
+    folder = tmp_path_factory.mktemp("twins")
+    a = _write(folder, "a", subject="s1", seed=11, duration=40.96)
+    b = _write(folder, "b", subject="s2", seed=12, duration=40.96)
+    rec = read_recording(a)
+    signals = {k: v.copy() for k, v in rec.signals.items()}
+    signals["u"][500] += 1e-9
+    write_recording(Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task,
+                              dict(rec.metadata)), folder / "a2")
+    return a, b, str(folder / "a2")
+
+
+#: Cheap settings with a bootstrap (its replicates are what the seeds are for).
+BOOT = {"n_bootstrap": 3, "candidates": ["motion-washout"], "progress": False,
+        "warm_cache": False}
+#: Without it, for what the seeds do not change.
+NOBOOT = dict(BOOT, n_bootstrap=0)
+
+
+def _result(out, key):
+    return json.loads((out / f"{key}.json").read_text())
+
+
+def _null_means(d):
+    return {k: e["null_mean"] for k, e in d["where"].items()
+            if isinstance(e.get("null_mean"), float)}
+
+
+def test_each_diagnosis_of_a_batch_draws_its_own_bootstrap(twins, tmp_path, monkeypatch):
+    """Every diagnosis of a batch ran with the batch's seed, so two recordings' bootstraps
+    drew the same normal sequences: a and a2 (one sample apart) got the same replicates to
+    1e-6.  Now each has its own seed, task_seed(batch seed, its signals' digest), and their
+    replicates differ as independent draws do; each result records the seed it ran with,
+    and diagnose(recording, seed=that) repeats it."""
+    a, b, a2 = twins
+    _run_here(monkeypatch)
+    out = tmp_path / "out"
+    diagnose_batch([a, a2], out, seed=0, **BOOT)
+    ra, ra2 = _result(out, "a"), _result(out, "a2")
+    rec_a, rec_a2 = read_recording(a), read_recording(a2)
+    want = task_seed(0, [_signals_digest(rec_a)]), task_seed(0, [_signals_digest(rec_a2)])
+    assert (ra["settings"]["seed"], ra2["settings"]["seed"]) == want and want[0] != want[1]
+    assert ra["settings"]["batch_seed"] == ra2["settings"]["batch_seed"] == 0
+    assert ra["diagnosis"]["settings"]["seed"] == want[0]
+    null_a, null_a2 = _null_means(ra["diagnosis"]), _null_means(ra2["diagnosis"])
+    assert len(null_a) >= 5 and null_a.keys() == null_a2.keys()
+    # the statistics themselves agree (the same run within 1e-9), their replicates do not
+    for k in null_a:
+        assert ra["diagnosis"]["where"][k]["value"] == pytest.approx(
+            ra2["diagnosis"]["where"][k]["value"], rel=1e-4, abs=1e-9), k
+    apart = [k for k in null_a if null_a[k] != pytest.approx(null_a2[k], rel=1e-3)]
+    assert len(apart) >= len(null_a) - 1, (null_a, null_a2)
+    # the same seed for both (the old batch's) drew the same replicates: a2 run with a's seed
+    kw = {k: v for k, v in BOOT.items() if k != "warm_cache"}
+    same = diagnose(rec_a2, seed=want[0], **kw).to_dict()
+    assert _null_means(same) == pytest.approx(null_a, rel=1e-4)
+    # and the recorded seed repeats a's diagnosis exactly
+    again = diagnose(rec_a, seed=ra["settings"]["seed"], **kw).to_dict()
+    assert _null_means(again) == null_a
+    assert [c["delta_neg_log_lik"] for c in again["ranking"]] == [
+        c["delta_neg_log_lik"] for c in ra["diagnosis"]["ranking"]]
+
+
+def test_a_diagnosis_seed_depends_on_its_recordings_alone(twins, tmp_path, monkeypatch):
+    """A diagnosis's seed, and so its result, is the same whichever other recordings are in
+    the batch and in whatever order the paths come: a in {a, a2} and in {b, a}; a pooled
+    condition's seed is task_seed of its runs' digests, in any order."""
+    a, b, a2 = twins
+    _run_here(monkeypatch)
+    diagnose_batch([a, a2], tmp_path / "one", seed=5, **NOBOOT)
+    diagnose_batch([b, a], tmp_path / "two", seed=5, **NOBOOT)
+    first, second = _result(tmp_path / "one", "a"), _result(tmp_path / "two", "a")
+    recs = {p: read_recording(p) for p in (a, b, a2)}
+    digest = {p: _signals_digest(r) for p, r in recs.items()}
+    assert first["settings"]["seed"] == second["settings"]["seed"] == task_seed(5, [digest[a]])
+    assert _result(tmp_path / "two", "b")["settings"]["seed"] == task_seed(5, [digest[b]])
+    one, two = first["diagnosis"], second["diagnosis"]
+    assert one["base"] == two["base"] and one["ranking"] == two["ranking"]
+    # pooled (a and a2 are s1's runs, b s2's alone): the condition's seed from its runs'
+    # digests in any order, its own; b's, alone in its condition, is b's seed above
+    diagnose_batch([a2, b, a], tmp_path / "pooled", pool=True, seed=5, **NOBOOT)
+    s1, s2 = _result(tmp_path / "pooled", "s1_FD_k1"), _result(tmp_path / "pooled", "s2_FD_k1")
+    assert s1["settings"]["seed"] == task_seed(5, [digest[a2], digest[a]])
+    assert s1["settings"]["seed"] not in {5, task_seed(5, [digest[a]]),
+                                          task_seed(5, [digest[a2]])}
+    alone_b = _result(tmp_path / "two", "b")
+    assert s2["settings"]["seed"] == alone_b["settings"]["seed"]
+    assert s2["diagnosis"]["ranking"] == alone_b["diagnosis"]["ranking"]
+
+
+def test_resume_by_batch_seed_and_results_of_the_old_seeding_refused(twins, tmp_path,
+                                                                      monkeypatch):
+    """The same batch again skips what is done; another batch seed is refused, saying so (not
+    'seed <one diagnosis's> there'); a result written when every diagnosis ran with the
+    batch's seed itself (its settings record no batch_seed) is refused by name rather than
+    taken as done and mixed with diagnoses seeded each its own."""
+    import warnings
+
+    from bayespilot.diagnose.batch import SummaryScopeWarning
+
+    a, b, a2 = twins
+    _run_here(monkeypatch)
+    out = tmp_path / "out"
+    s = diagnose_batch([a], out, seed=2, **NOBOOT)
+    assert (s.completed, s.skipped) == (1, 0)
+    stamp = (out / "a.json").stat().st_mtime_ns
+    s = diagnose_batch([b, a], out, seed=2, **NOBOOT)  # a subset again, with another one
+    assert (s.total, s.completed, s.skipped) == (2, 1, 1)
+    assert (out / "a.json").stat().st_mtime_ns == stamp
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [(r["key"], r["seed"]) for r in rows] == [
+        ("a", str(_result(out, "a")["settings"]["seed"])),
+        ("b", str(_result(out, "b")["settings"]["seed"]))]
+    with pytest.raises(ResultConflictError, match=r"\.json holds a diagnosis of a from other "
+                                                  r"settings: batch_seed 2 there, 3 here; use"):
+        diagnose_batch([a], out, seed=3, **NOBOOT)
+    # a result of the old seeding: settings["seed"] the batch's, no batch_seed
+    stored = _result(out, "a")
+    settings = {k: v for k, v in stored["settings"].items() if k != "batch_seed"}
+    (out / "a.json").write_text(json.dumps(dict(stored, settings=dict(settings, seed=2))))
+    with pytest.raises(ResultConflictError, match=(
+            r"holds 1 diagnosis of this batch's keys \(a\) made by an earlier bayespilot, "
+            r"which ran every diagnosis of a batch with the batch's seed itself \(the seed "
+            r"2 recorded, no batch_seed\); .* delete its <key>.json to redo it")):
+        diagnose_batch([b, a], out, seed=2, **NOBOOT)
+    assert "batch_seed" not in _result(out, "a")["settings"]  # (not redone, not mixed)
+    # one of another key: left out of the summary, named as made with other settings
+    with warnings.catch_warnings(record=True) as said:
+        warnings.simplefilter("always")
+        s = diagnose_batch([b], out, seed=2, **NOBOOT)
+    assert (s.completed, s.skipped) == (0, 1)
+    scope = [str(w.message) for w in said if w.category is SummaryScopeWarning]
+    assert len(scope) == 1 and "made with other settings (a)" in scope[0]
+    assert [r["key"] for r in csv.DictReader((out / "summary.csv").open())] == ["b"]

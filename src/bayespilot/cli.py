@@ -1231,11 +1231,11 @@ def _load_extensions(specs: Sequence[str]) -> list:
     return out
 
 
-def _diagnose_arguments(p: argparse.ArgumentParser) -> None:
+def _diagnose_arguments(p: argparse.ArgumentParser, seed_help: str | None = None) -> None:
     """--seed, --bootstrap, --alpha, --calibrate and --noise-passes, as diagnose and
-    diagnose-batch take them."""
-    _seed_argument(p, "seed of the base fit's starts and the bootstrap (default 0; run j of "
-                      "a pooled diagnosis uses S + j)")
+    diagnose-batch take them (``seed_help``: diagnose-batch's own --seed help)."""
+    _seed_argument(p, seed_help or "seed of the base fit's starts and the bootstrap (default 0; "
+                                   "run j of a pooled diagnosis uses S + j)")
     p.add_argument("--bootstrap", type=_whole_number(0), default=39, metavar="B",
                    help="bootstrap replicates for the located evidence (default 39; 0: none)")
     p.add_argument("--alpha", type=_fraction, default=0.01, metavar="A",
@@ -1855,7 +1855,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where an extension is chosen, also its posterior (one run: emcee, "
                         "minutes; pooled: the shared parameters on a grid, seconds), in each "
                         "<key>.json and summary.csv")
-    _diagnose_arguments(p)
+    _diagnose_arguments(p, seed_help="the batch's seed (default 0): each diagnosis runs with "
+                                     "its own seed drawn from S and its recordings' content "
+                                     "(not from their paths, order or the other recordings; "
+                                     "run j of a pooled one uses its seed + j), recorded as "
+                                     "settings.seed in <key>.json and the seed column of "
+                                     "summary.csv ('bayespilot diagnose REC --seed' with it "
+                                     "and the same options repeats one); S is recorded as "
+                                     "settings.batch_seed")
     _cluster_arguments(p)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_diagnose_batch)

@@ -20,6 +20,22 @@ gone mid-run) stops the batch with what finished saved, to resume.  ``reports`` 
 not a setting: a diagnosis done before keeps what it has, and one without a
 report is named by a :class:`MissingReportWarning`.
 
+Seeds: each diagnosis runs with its own seed, drawn from the batch's ``seed``
+and its recordings' content (:func:`task_seed`: ``stream_seed(seed, k)`` with
+``k`` taken from the SHA-256 of the recordings' signal digests), so that two
+recordings' bootstraps (and base-fit starts, and posterior chains) draw
+independent streams, and a diagnosis's seed does not depend on the order of
+the paths, on which other recordings are in the batch, or on resuming.  A
+pooled condition's runs are seeded ``s + j`` from its seed ``s``
+(:func:`~bayespilot.diagnose.diagnose_pooled`).  Each result records the
+seed its diagnosis ran with (``settings["seed"]``: ``diagnose(recording,
+seed=...)`` with the other settings repeats it) and the batch's
+(``settings["batch_seed"]``, what a resume compares).  A result of one of the
+batch's keys written before seeds were drawn per diagnosis (its settings
+record no ``batch_seed``: every diagnosis ran with the batch's seed itself)
+is refused by a :class:`ResultConflictError` that names it, not mixed with
+or overwritten by those of the new scheme.
+
 Every recording is read, and every setting checked, in this process before
 the cluster starts, so a bad file among hundreds is reported (all of them at
 once) before any work is done.  The workers receive the recordings
@@ -27,7 +43,8 @@ themselves, not their paths, so a remote cluster needs no shared folder.  The
 results (and, with ``reports=True``, each diagnosis's HTML report) are
 written here.
 
-Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``,
+Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``
+(the options, the diagnosis's own ``seed`` and the ``batch_seed``),
 ``recording_digests``, ``diagnosis``: the same dict as ``bayespilot diagnose
 --json`` writes,
 ``elapsed_seconds``, ``host``, ``versions``), ``<key>/`` (the report, with
@@ -37,7 +54,8 @@ diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`) and
 chosen extension's p-value, -ln L improvement and parameters, with
 ``posterior=True`` its posterior's medians and 90 % intervals, the candidate
 with the smallest p-value and that p-value (the nearest miss when the answer
-is ``none``), or the error).  ``summary.csv`` and ``summary.png`` cover every
+is ``none``), or the error; and the diagnosis's seed).  ``summary.csv`` and
+``summary.png`` cover every
 diagnosis in ``out_dir`` made with the batch's settings, sorted by key: this
 call's, and those an earlier call on other recordings left there (a batch run
 again on a subset, or on new recordings, into the same folder keeps the
@@ -76,7 +94,7 @@ if TYPE_CHECKING:
     from .catalogue import Extension
     from .pooled import PooledDiagnosisResult
 
-__all__ = ["DiagnoseTask", "plan_batch", "run_diagnose_task", "diagnose_batch",
+__all__ = ["DiagnoseTask", "plan_batch", "task_seed", "run_diagnose_task", "diagnose_batch",
            "batch_summary_rows", "SUMMARY_FIELDS", "MissingReportWarning",
            "SummaryScopeWarning", "ResultConflictError"]
 
@@ -102,7 +120,7 @@ class ResultConflictError(CampaignError, ValueError):
 #: Columns of ``summary.csv``.
 SUMMARY_FIELDS = ("key", "n_runs", "subject", "task", "motion_gain", "physics", "mismatch",
                   "p_value", "delta_neg_log_lik", "params", "interval", "posterior",
-                  "smallest_p_candidate", "smallest_p_value", "error")
+                  "smallest_p_candidate", "smallest_p_value", "error", "seed")
 
 @dataclass(frozen=True)
 class DiagnoseTask:
@@ -161,8 +179,8 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
     pool : bool
         Group the runs of one subject, task and motion gain into one pooled
         diagnosis, its runs in the order of the files they resolve to (run j
-        is seeded ``seed + j``: sorted, the result does not depend on the
-        order the paths were given).
+        is seeded ``s + j`` from the task's seed ``s``: sorted, the result
+        does not depend on the order the paths were given).
 
     Returns
     -------
@@ -210,6 +228,44 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
     return tasks
 
 
+def task_seed(seed: int, digests: Sequence[str]) -> int:
+    """The seed of one diagnosis of a batch: drawn from the batch's ``seed`` and its recordings.
+
+    ``stream_seed(seed, k)`` (:func:`bayespilot._seeds.stream_seed`, not
+    ``seed + k``: batches of seeds 3 and 4 share no stream), with ``k`` the first 60
+    bits of the SHA-256 of the recordings' signal digests, sorted and joined by
+    newlines.  A function of the recordings' content alone: not of their paths
+    or order, nor of the other diagnoses of the batch, so a batch run again, on
+    a subset, or resumed gives each diagnosis the seed it had.
+
+    Parameters
+    ----------
+    seed : int
+        The batch's seed (>= 0).
+    digests : sequence of str
+        The task's recordings' :func:`~bayespilot.recording._signals_digest`
+        (one for a recording alone, one per run for a pooled condition).
+
+    Returns
+    -------
+    int
+        A 31-bit seed, what the diagnosis runs with (``diagnose(recording,
+        seed=...)`` repeats it).
+
+    Examples
+    --------
+    >>> task_seed(0, ["ab", "cd"]) == task_seed(0, ["cd", "ab"]) != task_seed(1, ["ab", "cd"])
+    True
+    """
+    import hashlib
+
+    from .._seeds import stream_seed
+
+    text = "\n".join(sorted(str(d) for d in digests))
+    k = int(hashlib.sha256(text.encode()).hexdigest()[:15], 16)
+    return stream_seed(int(seed), k)
+
+
 def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
                       options: Mapping[str, Any], extensions: Sequence[Extension] = ()
                       ) -> tuple[DiagnosisResult | PooledDiagnosisResult, float]:
@@ -235,8 +291,10 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
         Keywords of :func:`~bayespilot.diagnose.diagnose` (of
         :func:`~bayespilot.diagnose.diagnose_pooled` for a pooled task), the
         same for both, and ``posterior`` (bool, default False) as above; not
-        modified.  With ``posterior`` a single run's chain is seeded by
-        ``options["seed"]`` (default 0) and its warnings are silenced;
+        modified.  ``options["seed"]`` is used as given: :func:`diagnose_batch`
+        gives each task its own (:func:`task_seed`), not the batch's.  With
+        ``posterior`` a single run's chain is seeded by ``options["seed"]``
+        (default 0) too and its warnings are silenced;
         :func:`~bayespilot.diagnose.shared_posterior` takes its defaults.
     extensions : sequence of Extension
         Catalogue entries of one's own that ``options["candidates"]`` names,
@@ -320,15 +378,22 @@ def _warm() -> None:
                  candidates=NAMES)  # (the built-in entries, whatever is registered)
 
 
+def _task_options(task: DiagnoseTask, options: Mapping[str, Any],
+                  digests: Mapping[str, str]) -> dict[str, Any]:
+    """The keywords ``task``'s diagnosis runs with: the batch's ``options`` with ``seed`` (the
+    batch's) replaced by the task's own (:func:`task_seed`)."""
+    return {**options, "seed": task_seed(options["seed"], [digests[p] for p in task.paths])}
+
+
 def _settings(task: DiagnoseTask, options: Mapping[str, Any],
-              digests: Mapping[str, str] | None = None) -> dict[str, Any]:
+              digests: Mapping[str, str]) -> dict[str, Any]:
     """What a result file records of how it was made: the recordings as given, their
     content's digests (``digests``: path -> :func:`~bayespilot.recording._signals_digest`;
-    what a resume compares) and the options."""
+    what a resume compares) and the settings: the batch's ``options`` with ``seed`` the
+    task's own (:func:`_task_options`) and ``batch_seed`` the batch's."""
     d: dict[str, Any] = {"recordings": list(task.paths)}
-    if digests is not None:
-        d["recording_digests"] = [digests[p] for p in task.paths]
-    d["settings"] = dict(options)
+    d["recording_digests"] = [digests[p] for p in task.paths]
+    d["settings"] = {**_task_options(task, options, digests), "batch_seed": options["seed"]}
     # (not compared on resume: the summary's columns of a diagnosis an earlier batch left)
     d["condition"] = {"subject": task.subject, "task": task.task,
                       "motion_gain": task.motion_gain}
@@ -382,12 +447,30 @@ def _settings_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> An
     return merged
 
 
+def _batch_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
+    """:func:`_settings_view` without the diagnosis's own ``seed`` (each diagnosis of a batch
+    has its own, :func:`task_seed`): what the diagnoses of one batch share, ``batch_seed``
+    among it; None if it records no settings."""
+    view = _settings_view(stored, defaults)
+    if view is not None:
+        view.pop("seed", None)
+    return view
+
+
+def _seeded_by_batch(stored: Any) -> bool:
+    """True for a result file written before seeds were drawn per diagnosis: its settings
+    record no ``batch_seed`` (its ``seed`` is the batch's, which every diagnosis ran with)."""
+    return (isinstance(stored, dict) and isinstance(stored.get("settings"), dict)
+            and "batch_seed" not in stored["settings"])
+
+
 def _earlier_tasks(tasks: Sequence[DiagnoseTask], out: Path, settings: Any,
                    defaults: Mapping[str, Any]) -> tuple[list[DiagnoseTask], list[str]]:
     """The diagnoses in ``out`` that are not ``tasks``': as tasks, those whose result file (or,
-    for one that failed, error file) records ``settings`` (a :func:`_settings_view`), sorted
-    by key; and the keys of those made with other settings.  Other JSON files are not
-    results of a batch and are passed over."""
+    for one that failed, error file) records ``settings`` (a :func:`_batch_view`: each its
+    own seed, the same ``batch_seed``), sorted by key; and the keys of those made with other
+    settings (or seeded by an earlier scheme, :func:`_seeded_by_batch`).  Other JSON files
+    are not results of a batch and are passed over."""
     from .. import campaign as C
 
     mine = {t.key for t in tasks}
@@ -402,7 +485,7 @@ def _earlier_tasks(tasks: Sequence[DiagnoseTask], out: Path, settings: Any,
             if not (isinstance(stored, dict) and stored.get("key") == key
                     and isinstance(stored.get("recordings"), list)):
                 continue
-        view = _settings_view(stored, defaults)
+        view = _batch_view(stored, defaults)
         if view is None:
             continue
         if view != settings:
@@ -422,6 +505,8 @@ def _differs(old: Any, new: Any) -> str:
         return "other recordings"
     keys = sorted(k for k in set(old["settings"]) | set(new["settings"])
                   if old["settings"].get(k) != new["settings"].get(k))
+    if "batch_seed" in keys:  # (the diagnosis's seed follows from it)
+        keys = [k for k in keys if k != "seed"]
     return "other settings: " + ", ".join(f"{k} {old['settings'].get(k)!r} there, "
                                           f"{new['settings'].get(k)!r} here" for k in keys)
 
@@ -445,11 +530,18 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         Created if missing; ``<key>.json`` per diagnosis and ``summary.csv`` (module docs).
     pool : bool
         Diagnose the runs of each subject and condition together (module docs).
-    seed, alpha, n_bootstrap, n_calibrate, noise_passes, candidates
+    seed : int
+        The batch's seed (>= 0).  Each diagnosis runs with its own seed,
+        :func:`task_seed` of ``seed`` and its recordings' content, so that the
+        diagnoses' bootstraps (base-fit starts, posterior chains) are
+        independent draws, and a diagnosis's seed does not depend on the
+        paths' order, the other recordings of the batch or a resume.  Each
+        result records it (``settings["seed"]``, and ``seed`` in
+        ``summary.csv``: ``diagnose(recording, seed=...)`` with the other
+        settings repeats that diagnosis) beside ``settings["batch_seed"]``.
+    alpha, n_bootstrap, n_calibrate, noise_passes, candidates
         As for :func:`~bayespilot.diagnose.diagnose` (None: its default), the
-        same for every diagnosis (so every recording's bootstrap draws the
-        same normal sequences: each p-value is calibrated, but those of two
-        recordings are not independent draws).  ``candidates`` may give
+        same for every diagnosis.  ``candidates`` may give
         catalogue entries of one's own, registered here; every registered entry the
         diagnoses test (with ``candidates=None``: every registered entry)
         is sent to the workers with each task and registered there, and
@@ -498,7 +590,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         or settings (the message says which); nothing is run.  The recordings
         are compared by their content (module docs), the settings with the
         diagnosis's defaults filled in (``alpha=None`` and ``alpha=0.01`` are
-        one).  A CampaignError and a ValueError.
+        one), the seeds by ``batch_seed``.  Also results of the batch's keys
+        written before seeds were drawn per diagnosis (they record no
+        ``batch_seed``; module docs, "Seeds"), all named at once.  A
+        CampaignError and a ValueError.
     CampaignError
         The cluster cannot be reached or started or is lost during the run
         (what finished is saved), ``out_dir`` cannot be written in (checked
@@ -613,10 +708,26 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     implied = json.loads(json.dumps(
         {**{k: default[k] for k in ("seed", "noise_passes", "alpha", "n_bootstrap",
                                     "n_calibrate", "candidates")}, "posterior": False}))
+    found = {t.key: C._read_json(out / f"{t.key}.json") for t in tasks}
+    found = {k: old for k, old in found.items()
+             if isinstance(old, dict) and old.get("key") == k and "diagnosis" in old}
+    by_batch = [k for k, old in found.items() if _seeded_by_batch(old)]
+    if by_batch:  # (every diagnosis ran with the batch's seed: not this batch's diagnoses)
+        n = len(by_batch)
+        one = n == 1
+        raise ResultConflictError(
+            f"{out} holds {n} diagnos{'is' if one else 'es'} of this batch's keys "
+            f"({', '.join(by_batch[:5])}{' ...' if n > 5 else ''}) made by an earlier "
+            f"bayespilot, which ran every diagnosis of a batch with the batch's seed itself "
+            f"(the seed {found[by_batch[0]]['settings'].get('seed')!r} recorded, no "
+            f"batch_seed); each diagnosis now runs with its own seed drawn from the batch's "
+            f"seed and its recordings, so {'it' if one else 'they'} would not be repeated by "
+            f"this batch: use another output folder, or delete "
+            f"{'its' if one else 'their'} <key>.json to redo {'it' if one else 'them'}")
     pending, skipped, unreported = [], 0, []
     for t in tasks:
-        old = C._read_json(out / f"{t.key}.json")
-        if not (isinstance(old, dict) and old.get("key") == t.key and "diagnosis" in old):
+        old = found.get(t.key)
+        if old is None:
             pending.append(t)
             continue
         by_content = isinstance(old.get("recording_digests"), list)
@@ -663,7 +774,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     noted: dict[tuple[str, type[EvidenceWarning]], list[str]] = {}
     try:
         completed, errors = C.run_keyed(
-            [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths], options, shipped),
+            [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths],
+                                         _task_options(t, options, digests), shipped),
               _settings(t, options, digests)) for t in pending], out,
             total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
             progress=progress, connect_timeout=connect_timeout,
@@ -674,7 +786,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             n = len(keys)
             warnings.warn(f"{n} diagnos{'is' if n == 1 else 'es'} ({', '.join(keys[:3])}"
                           f"{' ...' if n > 3 else ''}): {note}", category, stacklevel=2)
-    settings = _settings_view({"settings": json.loads(json.dumps(dict(options)))}, implied)
+    settings = _batch_view({"settings": json.loads(json.dumps({**options,
+                                                                "batch_seed": seed}))}, implied)
     earlier, other = _earlier_tasks(tasks, out, settings, implied)
     if other:
         n = len(other)
@@ -770,8 +883,9 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
         ''), and among the candidates whose p-value is a number the smallest
         (``smallest_p_candidate``, ``smallest_p_value``: the nearest miss when
         the answer is ``none``); without one, ``error`` (the error file's
-        ``"<error>: <message>"``, or ``"no result"``).  Fields that do not
-        apply are ''.
+        ``"<error>: <message>"``, or ``"no result"``); and ``seed``, the
+        seed the diagnosis ran with (:func:`task_seed`; ``diagnose(recording,
+        seed=...)`` repeats it).  Fields that do not apply are ''.
     """
     from .. import campaign as C
 
@@ -784,10 +898,11 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
                "task": t.task, "motion_gain": t.motion_gain, "physics": "", "mismatch": "",
                "p_value": "", "delta_neg_log_lik": "", "params": "", "interval": "",
                "posterior": "",
-               "smallest_p_candidate": "", "smallest_p_value": "", "error": ""}
+               "smallest_p_candidate": "", "smallest_p_value": "", "error": "", "seed": ""}
         d = diagnoses.get(t.key)
         if d is not None:
             row.update(physics=d["physics"], mismatch=d["mismatch"])
+            row["seed"] = (d.get("settings") or {}).get("seed", "")
             chosen = next((c for c in d["ranking"] if c["physics"] == d["physics"]), None)
             if chosen is not None:
                 row.update(p_value=chosen.get("p_value"),
@@ -804,6 +919,8 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
             err = C._read_json(out / f"{t.key}.error.json")
             row["error"] = (f"{err.get('error')}: {err.get('message')}"
                             if isinstance(err, dict) else "no result")
+            if isinstance(err, dict) and isinstance(err.get("settings"), dict):
+                row["seed"] = err["settings"].get("seed", "")
         rows.append(row)
     return rows
 
