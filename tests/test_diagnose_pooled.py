@@ -288,6 +288,10 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
     res = washout_result
     post = shared_posterior(res, washout_runs, n_grid=11)
     assert res.posterior is post and post.names == ("omega_w",)
+    from bayespilot.diagnose.report import plot_shared_posterior
+
+    fig = plot_shared_posterior(post)  # a density over omega_w (rad/s) is in s/rad
+    assert fig.axes[0].get_ylabel() == "posterior density (s/rad)"
     g, logp = post.grid[0], post.log_density
     model = res.chosen.model
     names = tuple(n for n in model.parameter_names if n not in ("omega_w", "delta_abs"))

@@ -828,6 +828,8 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
         Each panel's x axis is the parameter in the paper's notation with
         the unit its catalogue entry declares, its legend under the axes.
     """
+    from ..plots import _param_unit, _per_unit
+
     names = list(post.names)
     fig, axes = _axes_row(len(names), axes)
     model = _units_model(post.physics)
@@ -840,7 +842,7 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
                         label="central 90 %")
         _mark_fit(ax, post.ml[n], post.stderr.get(n, math.nan), "pooled ML fit")
         ax.set_xlabel(parameter_label(model, n))
-        ax.set_ylabel("posterior density")
+        ax.set_ylabel("posterior density" + _per_unit(_param_unit(n, model)))
         _legend_below(ax)
     _suptitle(fig, f"{post.physics}: posterior of the parameters shared by "
                  f"{post.settings['n_runs']} runs")
