@@ -601,6 +601,8 @@ def test_each_diagnosis_of_a_batch_draws_its_own_bootstrap(twins, tmp_path, monk
     rec_a, rec_a2 = read_recording(a), read_recording(a2)
     want = task_seed(0, [_signals_digest(rec_a)]), task_seed(0, [_signals_digest(rec_a2)])
     assert (ra["settings"]["seed"], ra2["settings"]["seed"]) == want and want[0] != want[1]
+    # one digest given alone is that recording's, not a list of its characters
+    assert task_seed(0, _signals_digest(rec_a)) == want[0]
     assert ra["settings"]["batch_seed"] == ra2["settings"]["batch_seed"] == 0
     assert ra["diagnosis"]["settings"]["seed"] == want[0]
     null_a, null_a2 = _null_means(ra["diagnosis"]), _null_means(ra2["diagnosis"])

@@ -87,6 +87,26 @@ def test_demo_writes_the_report_and_its_files(demo):
     assert (rec.task, rec.motion_gain, rec.n_samples) == ("FD", 1.0, 2000)
 
 
+def test_no_seed_draws_one_and_says_it(tmp_path, monkeypatch):
+    """seed=None (it raised TypeError, None + 0): a seed is drawn, and run i simulates with
+    it + i, said on the first line (the report states it too, test above)."""
+    import bayespilot.simulate
+    from bayespilot.example import run_example
+
+    class Stop(Exception):
+        pass
+
+    def first_simulation(**kw):  # (the first run's simulation: its seed, then stop)
+        raise Stop(kw["seed"])
+
+    monkeypatch.setattr(bayespilot.simulate, "simulate", first_simulation)
+    said = []
+    with pytest.raises(Stop) as stop:
+        run_example(tmp_path / "out", seed=None, progress=False, say=said.append)
+    drawn = stop.value.args[0]
+    assert isinstance(drawn, int) and 0 <= drawn < 2 ** 31 and f"seed {drawn})" in said[0]
+
+
 @pytest.mark.parametrize("seed", [-1, 1.5, "3", True])
 def test_a_bad_seed_is_refused_before_any_folder_is_made(tmp_path, seed):
     """run_example(seed=None) raised a TypeError (None + 0) after making five empty folders;

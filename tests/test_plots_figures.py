@@ -671,6 +671,11 @@ def test_marginal_density_has_the_inverse_unit():
     assert plot_marginal(post, "tau_m").axes[0].get_ylabel() == "posterior density (1/s)"
     assert plot_marginal(post, "K_m").axes[0].get_ylabel() == "posterior density (IPUT/rad)"
     assert plot_marginal(post, "zeta_nm").axes[0].get_ylabel() == "posterior density"
+    # the catalogue's compound units (the otolith gain K_ot, a rate): inverted whole
+    from bayespilot.plots import _per_unit
+
+    assert _per_unit("rad/(m/s^2)") == " ((m/s$^2$)/rad)"  # (was 1/(rad/(m/s$^2$)))
+    assert _per_unit("1/s") == " (s)" and _per_unit("rad/s") == " (s/rad)"
 
 
 def test_marginal_interval_median_and_an_added_span_stay_apart():

@@ -442,6 +442,13 @@ def test_report_figures_also_in_pdf_and_svg(washout, tmp_path):
     paths = washout.report(tmp_path / "own", formats=("pdf",))
     assert paths["residuals_pdf"].is_file() and paths["residuals"].suffix == ".png"
     assert "residuals_svg" not in paths
+    # a report written again without them leaves no PDF of the earlier one behind (a stale
+    # vector copy would be taken for this report's)
+    again = washout.report(tmp_path / "own")
+    assert set((tmp_path / "own").iterdir()) == set(again.values())
+    assert not list((tmp_path / "own").glob("*.pdf"))
+    with pytest.raises(ValueError, match="formats must be"):
+        R.write_report(washout, tmp_path, formats=None)
 
 
 # -- 10. empty figures are left out --------------------------------------------------------------
@@ -483,7 +490,7 @@ def test_evidence_ticks_are_words_from_one_table(washout):
     for t in ticks:
         plain = re.sub(r"\$[^$]*\$", "", t)  # (outside mathtext)
         assert "_" not in plain and not re.search(r"[a-z]\.[a-z]", plain), t
-    assert R.evidence_label("lab.my_statistic") == "lab: my statistic"
+    assert R._evidence_label("lab.my_statistic") == "lab: my statistic"
 
 
 def test_greyscale_before_and_after_differ_by_line_style(washout):

@@ -114,15 +114,9 @@ def _oversample_argument(p: argparse.ArgumentParser) -> None:
 
 
 # --- helpers --------------------------------------------------------------------------
-#: Resolution of the figures the commands write, dots per inch (a print-quality PNG).
-PLOT_DPI = 200
-#: Formats 'bayespilot plot --format' writes (matplotlib picks the writer by the suffix).
-PLOT_FORMATS = ("png", "pdf", "svg")
-
-
-#: How a vector figure keeps its text: TrueType fonts in a PDF (Type 3 fonts, matplotlib's
-#: default, fail the font checks of AIAA's and IEEE's PDF submission), text as text in an SVG.
-VECTOR_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
+# the figures' resolution, the formats 'bayespilot plot --format' writes and how a vector
+# figure keeps its text: one definition for the commands and the reports
+from ._figstyle import PLOT_DPI, PLOT_FORMATS, VECTOR_TEXT  # noqa: E402
 
 
 def _save_figure(fig, path: Path, dpi: int = PLOT_DPI) -> None:
@@ -1115,9 +1109,11 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     _load_extensions(args.extension)
     paths = _recordings_in(args.recording)
     where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
-    _say(args, f"diagnosing {len({_the_recording(p) for p in paths})} recording(s)"
+    # (said before the recordings are read: a refusal of one of them may follow, and nothing
+    # has run then)
+    _say(args, f"{len({_the_recording(p) for p in paths})} recording(s) to diagnose"
                f"{', the runs of each subject and condition pooled' if args.pool else ''} "
-               f"on {where} -> {args.out}")
+               f"on {where} -> {args.out}; each is read and checked before anything runs")
     unreported = []  # MissingReportWarning: finished before, without a report
 
     def said(message) -> None:  # --reports, and finished diagnoses it cannot give one

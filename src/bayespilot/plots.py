@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
+from . import _figstyle
 from .recording import Recording
 from .simulate import Simulation
 
@@ -38,6 +39,11 @@ PAGE_WIDTH = 7.5
 PAGE_HEIGHT = 9.5
 #: The smallest text (pt) in a figure drawn here.
 SMALLEST_FONT = 7.0
+#: How a saved figure keeps its text: ``matplotlib.rc_context(VECTOR_TEXT)`` around
+#: ``savefig`` gives a PDF with TrueType fonts and an SVG with text (``_figstyle``'s).
+VECTOR_TEXT = _figstyle.VECTOR_TEXT
+#: Resolution of the figures the package writes, dots per inch.
+PLOT_DPI = _figstyle.PLOT_DPI
 
 
 def _pyplot():
@@ -116,13 +122,17 @@ def _param_unit(name: str, model: Any = None) -> str | None:
 
 def _per_unit(unit: str | None) -> str:
     """``" (1/unit)"``, the unit of a density over a parameter in ``unit`` ("" for none):
-    "s" -> " (1/s)", "rad/IPUT" -> " (IPUT/rad)", "rad/s^2" -> " (s$^2$/rad)"."""
+    "s" -> " (1/s)", "rad/IPUT" -> " (IPUT/rad)", "rad/s^2" -> " (s$^2$/rad)", "1/s" ->
+    " (s)", "rad/(m/s^2)" -> " ((m/s$^2$)/rad)"."""
     from ._labels import unit_text
 
     if not unit or unit == "-":
         return ""
     num, slash, den = unit.partition("/")
-    if slash and "/" not in den and " " not in num and " " not in den and num != "1":
+    whole = den.startswith("(") and den.endswith(")") and den.count("(") == 1
+    if slash and num == "1" and ("/" not in den or whole):
+        inverse = den[1:-1] if whole else den
+    elif slash and ("/" not in den or whole) and " " not in num and " " not in den:
         inverse = f"{den}/{num}"
     else:
         inverse = f"1/{unit}" if not any(c in unit for c in " /*") else f"1/({unit})"
@@ -725,7 +735,7 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
     ax.set_ylim(0.0, 1.16 * top)
     ax.yaxis.set_major_locator(MaxNLocator(5))
     ax.plot([lo, hi], [1.08 * top] * 2, color="k", lw=3, solid_capstyle="butt",
-                  label=f"90 % HDI [{lo:.4g}, {hi:.4g}]")[0]
+            label=f"90 % HDI [{lo:.4g}, {hi:.4g}]")
     ax.plot([lo, hi], [1.08 * top] * 2, "|", color="k", ms=8, mew=1.2)
     med = float(np.median(x))
     ax.axvline(med, color="C1", lw=1.5, ls="-.", label=f"median {med:.4g}")

@@ -185,33 +185,15 @@ SIGN_EDGE_S = 1.0
 #: 82-s train of such pulses at 20 Hz, with either estimate).
 SPIKE_K = 15.0
 SPIKE_SD = 2.0
-#: A constant bias b in theta_ddot_m is read as a sustained rotation: the canal model
-#: K_scc (1 + T1 s) / (1 + T2 s) passes it at its DC gain K_scc = 5.97, far above its gain at the
-#: task's frequencies (1.0 at 1 rad/s, 0.35 at 3), so its output gains an offset K_scc b (1 % of
-#: std(theta_ddot_m) on an FD run: a quarter of the output's std) (over ~T2 = 5.9 s; without
-#: a theta column, the start rate, :func:`bayespilot.likelihood._pitch_rate_at_start`, is also
-#: off by -b T / 2), which the model, with no constant term, can follow only by lowering K_m (a
-#: simulated 81.92-s FD run: 1 % of std(theta_ddot_m) took the fast fit's K_m from 0.52 to 0.40,
-#: 0.30 without theta).  The pitch rate the motion presents, the running integral of
-#: theta_ddot_m, cannot drift away on a platform, while a bias makes it a ramp b t.  So the bias
-#: is estimated twice, as the least-squares slope of that integral (a parabolic-window mean of
-#: theta_ddot_m) and as the Hann-window mean of theta_ddot_m, and the smaller of the two in size
-#: is taken (a bias moves both alike; a slow line of the rate leaks into the first when it
-#: completes a period or more in the record, into the second when it does not).  It is warned of
-#: when the drift it implies over the run, |b| T, exceeds BIAS_DRIFT times the rms of the
-#: integral about its straight line, AND it stands BIAS_Z standard errors from 0, the standard
-#: error being that of white noise in theta_ddot_m (estimated from its second differences),
-#: whose integral wanders too (white noise of 10 to 100 % of std(theta_ddot_m) added to the
-#: clean records below from BIAS_MIN_S s up, three draws: the drift ratio up to 5.7, z at most
-#: 3.5 where the ratio passed BIAS_DRIFT).  96 clean simulated records (FD and
-#: FT, 50 to 1000 Hz, K_theta 0.5 to 1, F_n 0 to 0.3, 10 to 81.92 s, a washout in the pilot or
-#: not; each also with theta_ddot_m logged after a washout, a motion system or a lag, from
-#: rest): drift ratio at most 0.09 from 30 s up, 0.23 at 23.7 s, 0.37 at 20 s, 0.98 at 10 s;
-#: windows cut anywhere from the clean 60- and 81.92-s ones (1120 per length): at most 0.27 over
-#: 30 s, 0.40 over 25 s, 0.65 over 20 s.  The slowest lines of the rate (periods of 14 and 16 s
-#: in the paper's forcing) do not average out over a short record, hence nothing is judged
-#: under BIAS_MIN_S s (which the short-record warning covers).  See docs/recording-format.md
-#: for the detection rates.
+#: A constant bias b in theta_ddot_m is read by the canal (DC gain 5.97) as a sustained
+#: rotation, which the fit follows by lowering K_m; the pitch rate the motion presents (the
+#: integral of theta_ddot_m) cannot drift away on a platform, while a bias makes it a ramp
+#: b t.  Warned of when the drift |b| T exceeds BIAS_DRIFT times the integral's rms about its
+#: straight line AND b stands BIAS_Z standard errors (of white noise in the column) from 0,
+#: b being the smaller in size of the integral's least-squares slope and the column's
+#: Hann-window mean; not under BIAS_MIN_S s, where the forcing's slowest lines do not average
+#: out.  Measured on 96 clean records (largest ratio 0.09 from 30 s up) and their windows:
+#: docs/recording-format.md, "A bias in theta_ddot_m".
 BIAS_DRIFT = 0.75
 BIAS_Z = 5.0
 BIAS_MIN_S = 25.0

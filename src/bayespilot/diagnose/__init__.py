@@ -483,7 +483,8 @@ class DiagnosisResult(_JSONSummary):
         ------
         ValueError
             The result was read from a file (:meth:`from_json`), which keeps
-            the numbers but not the signals the figures are drawn from.
+            the numbers but not the signals the figures are drawn from; or
+            ``formats`` names one that is not ``"png"``, ``"pdf"`` or ``"svg"``.
         """
         from .report import write_report
 

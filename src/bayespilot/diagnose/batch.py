@@ -261,6 +261,8 @@ def task_seed(seed: int, digests: Sequence[str]) -> int:
 
     from .._seeds import stream_seed
 
+    if isinstance(digests, str):  # (one recording's digest, not its characters)
+        digests = [digests]
     text = "\n".join(sorted(str(d) for d in digests))
     k = int(hashlib.sha256(text.encode()).hexdigest()[:15], 16)
     return stream_seed(int(seed), k)
@@ -469,8 +471,9 @@ def _earlier_tasks(tasks: Sequence[DiagnoseTask], out: Path, settings: Any,
     """The diagnoses in ``out`` that are not ``tasks``': as tasks, those whose result file (or,
     for one that failed, error file) records ``settings`` (a :func:`_batch_view`: each its
     own seed, the same ``batch_seed``), sorted by key; and the keys of those made with other
-    settings (or seeded by an earlier scheme, :func:`_seeded_by_batch`).  Other JSON files
-    are not results of a batch and are passed over."""
+    settings (a result of the earlier seeding, without ``batch_seed``, is among these: its
+    settings differ from ``settings`` by that key).  Other JSON files are not results of a
+    batch and are passed over."""
     from .. import campaign as C
 
     mine = {t.key for t in tasks}

@@ -302,20 +302,16 @@ class PooledDiagnosisResult(_JSONSummary):
         """
         import html
 
-        from .report import (_STYLE, _candidate_table, _checked_formats, _img, _png, _yes_no,
-                             plot_candidates, plot_shared_posterior)
+        from .report import (_STYLE, _candidate_table, _checked_formats, _img,
+                             _write_figures, _yes_no, plot_candidates, plot_shared_posterior)
 
         formats = _checked_formats(formats)
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
-        figures = {"candidates": lambda: plot_candidates(self), "runs": lambda: plot_runs(self)}
-        if self.posterior is not None:
-            figures["posterior"] = lambda: plot_shared_posterior(self.posterior)
-        paths = {}
-        for name, draw in figures.items():
-            paths[name] = _png(draw(), out / f"{name}.png", formats)
-            for fmt in formats[1:]:
-                paths[f"{name}_{fmt}"] = paths[name].with_suffix(f".{fmt}")
+        figures = {"candidates": lambda: plot_candidates(self), "runs": lambda: plot_runs(self),
+                   "posterior": None if self.posterior is None
+                   else (lambda: plot_shared_posterior(self.posterior))}
+        paths = _write_figures(figures, out, formats)
         paths["json"] = out / "diagnosis.json"
         self.to_json(paths["json"])
 

@@ -20,7 +20,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from .._files import write_text_atomic
-from .._labels import parameter_label
+from .._labels import parameter_label, symbol
+from .._figstyle import PLOT_DPI, PLOT_FORMATS, VECTOR_TEXT
 from ..plots import PAGE_WIDTH, _figsize
 from ..plots import _pyplot  # (one backend rule for every figure; batch.py imports it here)
 
@@ -36,9 +37,9 @@ __all__ = ["plot_frequency_response", "plot_residuals", "plot_evidence", "plot_c
            "write_report"]
 
 
-#: Resolution of the report's PNG figures, dots per inch: what ``bayespilot plot`` saves at
-#: (``cli.PLOT_DPI``), enough for a figure printed at its size.
-FIGURE_DPI = 200
+#: Resolution of the report's PNG figures, dots per inch: what ``bayespilot plot`` saves at,
+#: enough for a figure printed at its size.
+FIGURE_DPI = PLOT_DPI
 
 #: Short words for each located statistic (``result.where``'s keys), for the evidence
 #: figure's axis; a key not here (another lab's statistic) is shown as its words, "." and
@@ -51,20 +52,26 @@ EVIDENCE_LABELS = {
     "frequency.power_disturbance": "residual power, disturbance freq.",
     "time.variance_drift": "residual variance trend",
     "time.nonstationarity": "residual variance spread",
-    "time.gain_drift_visual": r"visual gain $K_\mathrm{v}$ drift",
-    "time.gain_drift_motion": r"motion gain $K_\mathrm{m}$ drift",
-    "amplitude.canal": r"residual vs. $|i(t - \tau_\mathrm{m})|$",
+    "time.gain_drift_visual": f"visual gain {symbol('K_v')} drift",
+    "time.gain_drift_motion": f"motion gain {symbol('K_m')} drift",
+    "amplitude.canal": f"residual vs. $|i(t - {symbol('tau_m')[1:-1]})|$",
     "amplitude.control": r"residual vs. $|u|$",
     "amplitude.motion": r"variance vs. $|\ddot\theta_\mathrm{m}|$",
     "amplitude.flat_tops": "flat tops of $u$",
 }
 
 
-def evidence_label(key: str) -> str:
+def _evidence_label(key: str) -> str:
     """A located statistic's short words (:data:`EVIDENCE_LABELS`)."""
     if key in EVIDENCE_LABELS:
         return EVIDENCE_LABELS[key]
     return key.replace(".", ": ", 1).replace("_", " ")
+
+
+def _delta_format(x: float) -> str:
+    """The format of a candidate's improvement of -ln L in the candidates figure: three
+    significant digits, whole numbers from 100 up, two decimals below 1."""
+    return ".0f" if abs(x) >= 100 else (".3g" if abs(x) >= 1 else ".2f")
 
 
 def _subplots(*args, figsize: tuple[float, float] = (PAGE_WIDTH, 4.0), tall: bool = False,
@@ -416,7 +423,7 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
     ok = [math.isfinite(x) and x > 0 for x in p]
     B = int((result.settings.get("bootstrap") or {}).get("replicates", 0) or 0)
     ax.set_yticks(range(len(keys)))
-    ax.set_yticklabels([evidence_label(k) for k in keys], fontsize="small")
+    ax.set_yticklabels([_evidence_label(k) for k in keys], fontsize="small")
     ax.set_ylim(len(keys) - 0.5, -0.5)
     ax.set_title("Where the data and the base model differ", fontsize="medium")
     if not any(ok):
@@ -561,7 +568,8 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     # the values and p-values as a column at the right, clear of the bars and the marks
     right = ax.secondary_yaxis("right")
     right.set_yticks(range(len(rows)))
-    right.set_yticklabels([rf"$\Delta$ = {_number(x, '.3g' if abs(x) >= 1 else '.2f')}, "
+    # (a censored fit's gain of thousands as 1234, not 1.23e+03)
+    right.set_yticklabels([rf"$\Delta$ = {_number(x, _delta_format(x))}, "
                            f"p = {_p_text(c.p_value)}" for x, c in zip(d, rows)], fontsize="small")
     right.tick_params(length=0)
     ax.set_xlabel(r"$\Delta(-\ln L) = -\ln L_\mathrm{base} - (-\ln L_\mathrm{extension})$"
@@ -850,17 +858,43 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
 
 
 #: The formats :func:`write_report` can write its figures in, besides the PNG it embeds.
-FORMATS = ("png", "pdf", "svg")
+FORMATS = PLOT_FORMATS
 
 
 def _checked_formats(formats: str | Sequence[str]) -> tuple[str, ...]:
     """``formats`` as a tuple starting with "png" (the page embeds the PNGs), each once;
-    ValueError for a name not in :data:`FORMATS`."""
-    formats = tuple(dict.fromkeys(("png", *([formats] if isinstance(formats, str) else formats))))
+    ValueError for a name not in :data:`FORMATS` (or not a name at all)."""
+    if isinstance(formats, str):
+        formats = [formats]
+    try:
+        formats = tuple(dict.fromkeys(("png", *formats)))
+    except TypeError:
+        raise ValueError(f"formats must be names among {', '.join(FORMATS)}, got "
+                         f"{formats!r}") from None
     bad = [f for f in formats if f not in FORMATS]
     if bad:
         raise ValueError(f"formats must be among {', '.join(FORMATS)}, got {bad[0]!r}")
     return formats
+
+
+def _write_figures(figures: Mapping[str, Any], out: Path,
+                   formats: Sequence[str]) -> dict[str, Path]:
+    """Draw and save each of ``figures`` (name -> a function drawing it, or None for a figure
+    with nothing to draw) as ``out/<name>.png`` and its other ``formats`` beside it; the
+    files by name (``<name>``, ``<name>_pdf``, ...).  A file of a name or format not written
+    now (left from an earlier report, of another diagnosis) is removed, so the folder holds
+    only this report's figures."""
+    paths: dict[str, Path] = {}
+    for name, draw in figures.items():
+        png = out / f"{name}.png"
+        if draw is not None:
+            paths[name] = _png(draw(), png, formats)
+            for fmt in formats[1:]:
+                paths[f"{name}_{fmt}"] = png.with_suffix(f".{fmt}")
+        for fmt in FORMATS:
+            if draw is None or fmt not in formats:
+                png.with_suffix(f".{fmt}").unlink(missing_ok=True)
+    return paths
 
 
 def _png(fig, path: Path, formats: Sequence[str] = ("png",)) -> Path:
@@ -870,7 +904,7 @@ def _png(fig, path: Path, formats: Sequence[str] = ("png",)) -> Path:
     plt = _pyplot()
     try:
         fig.savefig(path, dpi=FIGURE_DPI)
-        with plt.rc_context({"pdf.fonttype": 42, "svg.fonttype": "none"}):
+        with plt.rc_context(VECTOR_TEXT):
             for fmt in formats:
                 if fmt != "png":
                     fig.savefig(path.with_suffix(f".{fmt}"), dpi=FIGURE_DPI)
@@ -1000,7 +1034,6 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
     formats = _checked_formats(formats)
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
-    paths: dict[str, Path] = {}
     chosen = getattr(result, "chosen", None)
     post = getattr(result, "posterior", None)
     figures = {  # name: how to draw it, or None: it would be empty (not written)
@@ -1014,15 +1047,12 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         figures["profile"] = lambda: plot_profile(result)
     if post is not None:
         figures["posterior"] = lambda: plot_posterior(result)
-    for name, draw in figures.items():
-        png = out / f"{name}.png"
-        if draw is None:  # no empty placeholder, nor one left from an earlier report
-            for fmt in FORMATS:
-                png.with_suffix(f".{fmt}").unlink(missing_ok=True)
-            continue
-        paths[name] = _png(draw(), png, formats)
-        for fmt in formats[1:]:
-            paths[f"{name}_{fmt}"] = png.with_suffix(f".{fmt}")
+    if chosen is None or not chosen.interval:
+        figures["profile"] = None  # (one left from an earlier report is removed)
+    if post is None:
+        figures["posterior"] = None
+    # no empty placeholder, nor a figure left from an earlier report
+    paths = _write_figures(figures, out, formats)
     paths["json"] = out / "diagnosis.json"
     result.to_json(paths["json"])
 

@@ -5,8 +5,9 @@ Each function takes :class:`~bayespilot.fit.result.FitResult` objects from
 ``FitResult.from_json``: everything is drawn from ``result.steps``) and
 returns a matplotlib Figure, at most :data:`~bayespilot.plots.PAGE_WIDTH`
 (7.5 in) wide unless ``figsize=`` says otherwise, in constrained layout with
-one legend above the panels, its text in matplotlib's default sizes (save it
-with ``fig.savefig("fig9.pdf")`` for a vector copy).
+one legend above the panels, its text in matplotlib's default sizes (for a
+vector copy with TrueType fonts, which journals' PDF checks want, save it
+within ``matplotlib.rc_context(bayespilot.plots.VECTOR_TEXT)``).
 
 - :func:`plot_step_one_thresholds` (Fig. 6): the Step I delta_abs of every GA
   repetition, in ascending order of -ln L, one panel per condition.
@@ -83,7 +84,6 @@ def _finish(fig, axes) -> None:
     from ..plots import _unclash_ticks
 
     _unclash_ticks(fig, [ax for ax in np.asarray(axes).flat if ax.get_visible()
-                         and ax.xaxis.get_label_position() == "bottom"
                          and any(t.get_visible() for t in ax.get_xticklabels())])
 
 

@@ -1,0 +1,16 @@
+"""How the package writes its figures: resolution, formats, vector text.
+
+Light on purpose (no matplotlib, no numba): the command line reads it at start-up.
+"""
+
+from __future__ import annotations
+
+#: Resolution of the figures the package writes, dots per inch (a print-quality PNG): the
+#: commands' (``bayespilot plot``, ``demo``) and the diagnosis reports'.
+PLOT_DPI = 200
+#: Formats a figure can be written in (matplotlib picks the writer by the suffix).
+PLOT_FORMATS = ("png", "pdf", "svg")
+#: How a vector figure keeps its text: TrueType fonts in a PDF (Type 3 fonts, matplotlib's
+#: default, fail the font checks of AIAA's and IEEE's PDF submission), text as text in an
+#: SVG; save with ``matplotlib.rc_context(VECTOR_TEXT)``.
+VECTOR_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
