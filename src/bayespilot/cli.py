@@ -20,6 +20,9 @@ from pathlib import Path
 from typing import Mapping, Sequence
 
 from . import __version__
+# the figures' resolution, the formats 'bayespilot plot --format' writes and how a vector
+# figure keeps its text: one definition for the commands and the reports (a light module)
+from ._figstyle import PLOT_DPI, PLOT_FORMATS, VECTOR_TEXT
 
 __all__ = ["main", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE"]
 
@@ -114,9 +117,6 @@ def _oversample_argument(p: argparse.ArgumentParser) -> None:
 
 
 # --- helpers --------------------------------------------------------------------------
-# the figures' resolution, the formats 'bayespilot plot --format' writes and how a vector
-# figure keeps its text: one definition for the commands and the reports
-from ._figstyle import PLOT_DPI, PLOT_FORMATS, VECTOR_TEXT  # noqa: E402
 
 
 def _save_figure(fig, path: Path, dpi: int = PLOT_DPI) -> None:
