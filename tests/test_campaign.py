@@ -354,6 +354,30 @@ def stopped_campaign(monkeypatch):
     return seen
 
 
+def test_replicate_cli_first_realization_repeats_the_study_independently(tmp_path, capsys,
+                                                                        stopped_campaign):
+    """--first-realization K numbers the realizations from K: other keys and other seeds (an
+    independent repeat of the study: its root seed is fixed), the same cells."""
+    from bayespilot.campaign import job_seed
+
+    code = main(["replicate", "--realizations", "2", "--first-realization", "100", "--tasks",
+                 "FD", "--motion-gains", "1", "--remnant-fractions", "0.2", "--fits",
+                 "threshold", "--method", "fast", "--out", str(tmp_path / "x"), "-q"])
+    assert code == 1 and "stopped by the test" in capsys.readouterr().err
+    assert [j.realization for j in stopped_campaign] == [100, 101]
+    assert [j.key for j in stopped_campaign] == ["FD_k1_fn0.2_r100_thr_fast_kn4",
+                                                 "FD_k1_fn0.2_r101_thr_fast_kn4"]
+    first = paper_study(1, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.2,),
+                        threshold=True, method="fast")[0]
+    assert job_seed("remnant", "FD", 1.0, 0.2, 100) != job_seed("remnant", "FD", 1.0, 0.2,
+                                                                first.realization)
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="first_realization must be an integer >= 0"):
+            paper_study(1, first_realization=bad)
+    code = main(["replicate", "--first-realization", "-1", "--out", str(tmp_path / "y")])
+    assert code == 2
+
+
 @pytest.mark.parametrize("value, expected", [("False", False), ("false", False),
                                              ("True", True), ("true", True), ("TRUE", True)])
 def test_replicate_cli_fit_option_booleans(tmp_path, capsys, stopped_campaign, value, expected):

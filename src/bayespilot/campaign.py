@@ -352,7 +352,7 @@ def paper_study(realizations: int = 100, tasks: Sequence[str] = ("FD", "FT"),
                 remnant_fractions: Sequence[float] = (0.0, 0.1, 0.2, 0.25, 0.3),
                 threshold: bool | Sequence[bool] = (True, False), method: str = "paper", *,
                 duration: float | None = None, remnant: str = "fraction",
-                **fit_kwargs: Any) -> list[Job]:
+                first_realization: int = 0, **fit_kwargs: Any) -> list[Job]:
     """The jobs of the simulation study of Section III.B.2 (Figs. 14 and 15).
 
     Parameters
@@ -369,6 +369,11 @@ def paper_study(realizations: int = 100, tasks: Sequence[str] = ("FD", "FT"),
     remnant : {"fraction", "table4"}
         K_n calibrated to F_n per realization, or the paper's Table 4 gains
         (see :class:`Job`).
+    first_realization : int
+        The realizations are numbered from this one (default 0): each number
+        seeds its remnant and fit (:func:`job_seed`), so a study from 100 is
+        an independent repeat of the one from 0 (the seeds' root is fixed,
+        :data:`SEED_ROOT`), and the two can share an output folder.
     **fit_kwargs
         Options of the fit function, e.g. ``repetitions=2`` (see :class:`Job`).
 
@@ -384,17 +389,26 @@ def paper_study(realizations: int = 100, tasks: Sequence[str] = ("FD", "FT"),
     >>> [j.key for j in jobs]  # doctest: +NORMALIZE_WHITESPACE
     ['FD_k1_fn0.2_r000_thr_paper', 'FD_k1_fn0.2_r000_nothr_paper',
      'FD_k1_fn0.2_r001_thr_paper', 'FD_k1_fn0.2_r001_nothr_paper']
+    >>> [j.realization for j in paper_study(2, tasks=("FD",), motion_gains=(1.0,),
+    ...                                     remnant_fractions=(0.2,), threshold=True,
+    ...                                     first_realization=100)]
+    [100, 101]
     """
     if isinstance(realizations, bool) or not isinstance(realizations, (int, np.integer)) \
             or realizations < 1:
         raise ValueError(f"realizations must be a positive integer, got {realizations!r}")
+    if isinstance(first_realization, bool) \
+            or not isinstance(first_realization, (int, np.integer)) or first_realization < 0:
+        raise ValueError(f"first_realization must be an integer >= 0, got "
+                         f"{first_realization!r}")
     thresholds = (threshold,) if isinstance(threshold, (bool, np.bool_)) else tuple(threshold)
     for name, seq in (("tasks", tasks), ("motion_gains", motion_gains),
                       ("remnant_fractions", remnant_fractions), ("threshold", thresholds)):
         if isinstance(seq, str) or len(seq) == 0:
             raise ValueError(f"{name} must be a non-empty sequence, got {seq!r}")
     return [Job(task, k, fn, r, thr, method, dict(fit_kwargs), duration, remnant)
-            for r in range(int(realizations)) for task in tasks for k in motion_gains
+            for r in range(int(first_realization), int(first_realization) + int(realizations))
+            for task in tasks for k in motion_gains
             for fn in remnant_fractions for thr in thresholds]
 
 

@@ -644,7 +644,8 @@ _count = _whole_number(1)
 
 
 #: paper_study's own keywords, and the option of 'replicate' that sets each: not fit options.
-_STUDY_SETTINGS = {"realizations": "--realizations", "tasks": "--tasks",
+_STUDY_SETTINGS = {"realizations": "--realizations",
+                   "first_realization": "--first-realization", "tasks": "--tasks",
                    "motion_gains": "--motion-gains", "remnant_fractions": "--remnant-fractions",
                    "threshold": "--fits", "method": "--method", "duration": "--duration",
                    "remnant": "--remnant"}
@@ -695,6 +696,7 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
                            remnant_fractions=args.remnant_fractions,
                            threshold=_FITS[args.fits], method=args.method,
                            duration=args.duration, remnant=args.remnant,
+                           first_realization=args.first_realization,
                            **dict(args.fit_option))
     except ValueError as exc:  # an option the fit function does not take, a cell Table 4 lacks
         arg = "--remnant" if "Table 4" in str(exc) else "--fit-option"
@@ -1715,6 +1717,10 @@ def build_parser() -> argparse.ArgumentParser:
                                     "resumable campaign of fits.")
     p.add_argument("--realizations", type=_count, default=100, metavar="N",
                    help="remnant realizations per cell (default 100, as in the paper)")
+    p.add_argument("--first-realization", type=_whole_number(0), default=0, metavar="K",
+                   help="number the realizations from K (default 0): each number seeds its "
+                        "remnant and fit, so '--first-realization 100' is an independent "
+                        "repeat of the study (same folder or another)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder for one JSON per fit and the summary (created if missing; "
                         "fits already in it are not redone)")
