@@ -693,11 +693,9 @@ def _units_model(physics: str, model: Any = None) -> Any:
 def _suptitle(fig, text: str) -> None:
     """The figure's title, broken into lines that fit its width (a one-panel figure is
     4.8 in wide: a catalogue name and a phrase did not fit on one line)."""
-    from matplotlib.font_manager import FontProperties
+    from ..plots import _points, _wrap
 
-    from ..plots import _wrap
-
-    size = FontProperties(size=_pyplot().rcParams["figure.titlesize"]).get_size_in_points()
+    size = _points(_pyplot().rcParams["figure.titlesize"])
     fig.suptitle(_wrap(text, 0.95 * fig.get_figwidth(), size))
 
 
