@@ -14,3 +14,12 @@ PLOT_FORMATS = ("png", "pdf", "svg")
 #: default, fail the font checks of AIAA's and IEEE's PDF submission), text as text in an
 #: SVG; save with ``matplotlib.rc_context(VECTOR_TEXT)``.
 VECTOR_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
+
+
+def save_figure(fig, path, dpi: int = PLOT_DPI) -> None:
+    """Write ``fig`` to ``path`` (format from its suffix) at ``dpi``, a vector format with
+    its text kept (:data:`VECTOR_TEXT`); the figure stays open (the caller closes it)."""
+    import matplotlib
+
+    with matplotlib.rc_context(VECTOR_TEXT):
+        fig.savefig(path, dpi=dpi)

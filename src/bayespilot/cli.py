@@ -22,7 +22,7 @@ from typing import Mapping, Sequence
 from . import __version__
 # the figures' resolution, the formats 'bayespilot plot --format' writes and how a vector
 # figure keeps its text: one definition for the commands and the reports (a light module)
-from ._figstyle import PLOT_DPI, PLOT_FORMATS, VECTOR_TEXT
+from ._figstyle import PLOT_DPI, PLOT_FORMATS, save_figure
 
 __all__ = ["main", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE"]
 
@@ -123,12 +123,9 @@ def _save_figure(fig, path: Path, dpi: int = PLOT_DPI) -> None:
     """Write a figure (format from ``path``'s suffix) and close it; a failed write is a
     runtime failure (exit 1).  ``dpi`` sets a PNG's resolution; in a PDF or SVG only the
     rasterized point clouds (the pair plot's) use it.  A PDF's fonts are embedded as
-    TrueType and an SVG's text stays text (:data:`VECTOR_TEXT`)."""
-    import matplotlib
-
+    TrueType and an SVG's text stays text (``_figstyle.VECTOR_TEXT``)."""
     try:
-        with matplotlib.rc_context(VECTOR_TEXT):
-            fig.savefig(path, dpi=dpi)
+        save_figure(fig, path, dpi)
     except OSError as exc:
         raise CommandFailed(f"{path}: cannot write the plot ({_os_reason(exc)})") from None
     finally:

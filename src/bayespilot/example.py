@@ -41,9 +41,9 @@ __all__ = ["run_example"]
 def _save(fig, path: Path) -> None:
     import matplotlib.pyplot as plt
 
-    from .cli import PLOT_DPI  # the resolution of every figure the commands write
+    from ._figstyle import save_figure  # (at the resolution of every figure written)
 
-    fig.savefig(path, dpi=PLOT_DPI)
+    save_figure(fig, path)
     plt.close(fig)
 
 

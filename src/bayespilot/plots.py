@@ -42,8 +42,6 @@ SMALLEST_FONT = 7.0
 #: How a saved figure keeps its text: ``matplotlib.rc_context(VECTOR_TEXT)`` around
 #: ``savefig`` gives a PDF with TrueType fonts and an SVG with text (``_figstyle``'s).
 VECTOR_TEXT = _figstyle.VECTOR_TEXT
-#: Resolution of the figures the package writes, dots per inch.
-PLOT_DPI = _figstyle.PLOT_DPI
 
 
 def _pyplot():
@@ -150,19 +148,14 @@ def _posterior_model(posterior: Any, model: Any = None) -> Any:
     if not isinstance(name, str) or " + " not in name:
         return None  # the paper's model, or a model whose name says nothing
     try:
-        from .diagnose.catalogue import candidate_names, get_extension
-        from .model import paper_model
-
-        base = paper_model()
-        for physics in candidate_names():
-            try:
-                built = get_extension(physics).build(base)
-            except Exception:  # an entry that needs more than the paper's model
-                continue
-            if built.name == name:  # (diagnose.report._units_model(physics) builds it so)
-                return built
+        from .diagnose.catalogue import candidate_names
+        from .diagnose.report import _units_model  # (the report's labels: the same model)
     except Exception:  # the diagnose module unavailable: Table 1's units
         return None
+    for physics in candidate_names():
+        built = _units_model(physics)  # (None: an entry that needs more than the paper's)
+        if built is not None and built.name == name:
+            return built
     return None
 
 

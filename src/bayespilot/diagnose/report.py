@@ -21,7 +21,7 @@ import numpy as np
 
 from .._files import write_text_atomic
 from .._labels import parameter_label, symbol
-from .._figstyle import PLOT_DPI, PLOT_FORMATS, VECTOR_TEXT
+from .._figstyle import PLOT_DPI, PLOT_FORMATS, save_figure
 from ..plots import PAGE_WIDTH, _figsize
 from ..plots import _pyplot  # (one backend rule for every figure; batch.py imports it here)
 
@@ -899,15 +899,11 @@ def _png(fig, path: Path, formats: Sequence[str] = ("png",)) -> Path:
     """Save ``fig`` as the PNG ``path`` at :data:`FIGURE_DPI` (and in each other of
     ``formats`` beside it, of the same stem: fonts embedded as TrueType in a PDF, text kept
     as text in an SVG), close it, and return ``path``."""
-    plt = _pyplot()
     try:
-        fig.savefig(path, dpi=FIGURE_DPI)
-        with plt.rc_context(VECTOR_TEXT):
-            for fmt in formats:
-                if fmt != "png":
-                    fig.savefig(path.with_suffix(f".{fmt}"), dpi=FIGURE_DPI)
+        for fmt in dict.fromkeys(("png", *formats)):
+            save_figure(fig, path.with_suffix(f".{fmt}"), FIGURE_DPI)
     finally:
-        plt.close(fig)
+        _pyplot().close(fig)
     return path
 
 
