@@ -603,6 +603,9 @@ def test_each_diagnosis_of_a_batch_draws_its_own_bootstrap(twins, tmp_path, monk
     assert (ra["settings"]["seed"], ra2["settings"]["seed"]) == want and want[0] != want[1]
     # one digest given alone is that recording's, not a list of its characters
     assert task_seed(0, _signals_digest(rec_a)) == want[0]
+    for bad in (-1, "0", 1.0, True, None):
+        with pytest.raises(ValueError, match="seed must be an integer >= 0"):
+            task_seed(bad, [_signals_digest(rec_a)])
     assert ra["settings"]["batch_seed"] == ra2["settings"]["batch_seed"] == 0
     assert ra["diagnosis"]["settings"]["seed"] == want[0]
     null_a, null_a2 = _null_means(ra["diagnosis"]), _null_means(ra2["diagnosis"])

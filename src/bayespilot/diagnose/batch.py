@@ -252,6 +252,11 @@ def task_seed(seed: int, digests: Sequence[str]) -> int:
         A 31-bit seed, what the diagnosis runs with (``diagnose(recording,
         seed=...)`` repeats it).
 
+    Raises
+    ------
+    ValueError
+        ``seed`` is not an integer >= 0.
+
     Examples
     --------
     >>> task_seed(0, ["ab", "cd"]) == task_seed(0, ["cd", "ab"]) != task_seed(1, ["ab", "cd"])
@@ -261,6 +266,10 @@ def task_seed(seed: int, digests: Sequence[str]) -> int:
 
     from .._seeds import stream_seed
 
+    import numbers
+
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     if isinstance(digests, str):  # (one recording's digest, not its characters)
         digests = [digests]
     text = "\n".join(sorted(str(d) for d in digests))
