@@ -158,7 +158,7 @@ _FIT_KEYS = ("params", "neg_log_lik", "vaf", "method")
 
 
 def _read_params(path: str, model, *, require: Sequence[str] = (),
-                 detail=None) -> dict[str, float]:
+                 detail=None, with_hint: bool = False) -> dict[str, float]:
     """Pilot parameters by name from a JSON file, checked against ``model``'s names and bounds.
 
     Parameters
@@ -174,6 +174,9 @@ def _read_params(path: str, model, *, require: Sequence[str] = (),
         Names that must be given.
     detail : callable, optional
         Called with one line saying where the values came from (a fit's file).
+    with_hint : bool
+        The command takes ``--with``: an unknown name that a catalogue entry adds is
+        said with the ``--with`` that gives it.
 
     Returns
     -------
@@ -228,6 +231,11 @@ def _read_params(path: str, model, *, require: Sequence[str] = (),
         if "params" in unknown:  # a result file of another kind, or a fit's cut short
             hint = (f" (a fit's result, as 'bayespilot fit --json' writes it, is read by its "
                     f"params when it has {', '.join(_FIT_KEYS)})")
+        elif with_hint:  # e.g. the fit of an extended model, read without its --with
+            entries = _entries_adding(unknown, model)
+            if entries:
+                hint = (" (" + " and ".join(f"{', '.join(new)}: give --with {name}"
+                                            for name, new in entries) + ")")
         raise UsageError(f"{p}: unknown {what} name(s) {', '.join(map(repr, unknown))}; "
                          f"valid names are {', '.join(names)}{hint}")
     values: dict[str, float] = {}
@@ -250,6 +258,25 @@ def _read_params(path: str, model, *, require: Sequence[str] = (),
         raise UsageError(f"{p}: missing parameter(s) {', '.join(missing)} "
                          f"(this command needs {', '.join(require)})")
     return values
+
+
+def _entries_adding(names: Sequence[str], model) -> list[tuple[str, list[str]]]:
+    """(catalogue name, the ``names`` it adds) for each built-in entry that adds some of
+    ``names`` to ``model`` (none where the catalogue cannot be had)."""
+    try:
+        from .diagnose.catalogue import CATALOGUE
+    except Exception:  # noqa: BLE001 - a hint only
+        return []
+    found = []
+    for ext in CATALOGUE:
+        try:
+            added = set(ext.build(model).all_names) - set(model.all_names)
+        except Exception:  # noqa: BLE001 - an entry that cannot extend this model
+            continue
+        hit = [n for n in names if n in added]
+        if hit:
+            found.append((ext.name, hit))
+    return found
 
 
 def _read(path: str):
@@ -497,14 +524,13 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_loglik(args: argparse.Namespace) -> int:
-    from .model import paper_model
-
-    model = paper_model(threshold=not args.no_threshold, oversample=args.oversample)
+    model = _paper_model_with(args, threshold=not args.no_threshold)
     params = _read_params(args.params, model, require=model.parameter_names,
-                          detail=lambda text: _detail(args, text))
+                          detail=lambda text: _detail(args, text), with_hint=True)
     if args.no_threshold and "delta_abs" in params:
         _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
     rec = _read(args.recording)
+    _paper_model_with(args, rec, threshold=not args.no_threshold)  # (an entry's columns: checked once the recording is read)
     _detail(args, f"{rec!r}\n{model.summary()}\ninitial conditions: {args.initial}")
     from .likelihood import _startup_default, _startup_reason
 
@@ -525,15 +551,13 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         raise UsageError("argument --noise: 'ar' (a prediction-error fit) goes with --method fast")
     if args.iterate and args.method != "paper":
         raise UsageError("argument --iterate: it repeats Steps II and III of --method paper")
-    from .model import paper_model
-
     from .recording import RecordingError
 
     rec = _read(args.recording)
     if args.json:  # checked before the fit: its seconds are not lost to a bad path
         _check_writable(args.json, "fit")
     threshold = not args.no_threshold
-    model = paper_model(oversample=args.oversample)
+    model = _paper_model_with(args, rec)
     try:
         if args.method == "paper":
             _say(args, f"fitting {rec.source} with the paper's three-step procedure "
@@ -834,7 +858,6 @@ def _check_folder(path: str | Path, what: str) -> None:
 
 
 def _cmd_sample(args: argparse.Namespace) -> int:
-    from .model import paper_model
     from .sample import sample
 
     out = Path(args.output)
@@ -846,6 +869,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
                          "an order >= 1; leave --ar-order out for the order chosen by BIC, or "
                          "give --likelihood eq4 for white output error")
     rec = _read(args.recording)
+    model = _paper_model_with(args, rec)
     _check_writable(out, "posterior")  # hours of sampling are not lost to an unwritable file
     if args.json:
         _check_writable(args.json, "summary")
@@ -854,7 +878,7 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            post = sample(rec, paper_model(oversample=args.oversample),
+            post = sample(rec, model,
                           likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
                           seed=args.seed,
                           max_steps=args.max_steps, min_steps=min(1000, args.max_steps),
@@ -881,10 +905,10 @@ def _cmd_sample(args: argparse.Namespace) -> int:
 
 def _cmd_compare(args: argparse.Namespace) -> int:
     from .compare import compare
-    from .model import paper_model
 
     posterior = _read_posterior(args.posterior) if args.posterior else None
     rec = _read(args.recording)
+    model = _paper_model_with(args, rec)
     if args.json:
         _check_writable(args.json, "comparison")
     _say(args, f"comparing the model with and without threshold on {rec.source} "
@@ -892,7 +916,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            result = compare(rec, paper_model(oversample=args.oversample),
+            result = compare(rec, model,
                              likelihood=args.likelihood, ar=args.ar, ar_order=args.ar_order,
                              seed=args.seed, nlive=args.nlive,
                              posterior=posterior,
@@ -1175,14 +1199,14 @@ def _seed_argument(p: argparse.ArgumentParser, help: str) -> None:
     p.add_argument("--seed", type=_seed, default=0, metavar="S", help=help)
 
 
-def _load_extensions(specs: Sequence[str]) -> list:
+def _load_extensions(specs: Sequence[str], option: str = "--extension") -> list:
     """The catalogue entries named by --extension, each registered for this process.
 
     ``FILE.py:NAME`` runs the file as a module that is not put in ``sys.modules``, so that
     cloudpickle sends its build functions to a batch's workers by value (they cannot import
     a file they were never given); ``package.module:NAME`` imports the module, which the
     workers must then be able to import too.  NAME is an Extension or a list or tuple of
-    them.  Any problem is bad input, said with the option's value.
+    them.  Any problem is bad input, said with the option (``option``) and its value.
     """
     import importlib
     import importlib.util
@@ -1192,7 +1216,7 @@ def _load_extensions(specs: Sequence[str]) -> list:
     out: list = []
     for spec in specs:
         where, sep, name = spec.rpartition(":")
-        bad = f"argument --extension: {spec}"
+        bad = f"argument {option}: {spec}"
         if not sep or not where or not name.isidentifier():
             raise UsageError(f"{bad}: give FILE.py:NAME or package.module:NAME (NAME: the "
                              "Extension, or a list of them, defined there)")
@@ -1224,6 +1248,50 @@ def _load_extensions(specs: Sequence[str]) -> list:
                 raise UsageError(f"{bad}: {exc}") from None
         out += entries
     return out
+
+
+def _with_argument(p: argparse.ArgumentParser) -> None:
+    """--with: the paper's model extended by catalogue entries (fit, loglik, sample, compare)."""
+    p.add_argument("--with", dest="extended_by", action="append", default=[], metavar="PHYSICS",
+                   help="extend the paper's model by this catalogue entry of 'bayespilot "
+                        "diagnose' (motion-system-dynamics, motion-washout, otolith-channel, "
+                        "threshold-shape, time-varying-gains), or by one of your own given as "
+                        "FILE.py:NAME or package.module:NAME; repeatable (applied in order)")
+
+
+def _paper_model_with(args: argparse.Namespace, recording=None, *, threshold: bool = True):
+    """The paper's model (``--oversample``; ``threshold``: with a free delta_abs), extended by
+    each ``--with`` entry in turn; an entry the recording lacks a column for, or one that
+    only ``diagnose`` fits (its likelihood is not Eq. 4's), is refused as bad input."""
+    from .model import paper_model
+
+    model = paper_model(threshold=threshold, oversample=args.oversample)
+    for spec in args.extended_by:
+        if ":" in spec:
+            entries = _load_extensions([spec], "--with")
+        else:
+            from .diagnose import get_extension
+
+            try:
+                entries = [get_extension(spec)]
+            except ValueError as exc:  # (an entry of one's own, in the command's words)
+                raise UsageError("argument --with: " + str(exc).replace(
+                    "register_extension", "FILE.py:NAME")) from None
+        for ext in entries:
+            if ext.likelihood != "gls":
+                raise UsageError(f"argument --with: {ext.name} is fitted by the "
+                                 f"{ext.likelihood} likelihood, which only 'bayespilot "
+                                 f"diagnose' has")
+            missing = [c for c in ext.needs if recording is not None and c not in recording]
+            if missing:
+                raise UsageError(f"argument --with: {ext.name} needs the recording column(s) "
+                                 f"{', '.join(missing)}, which {recording.source} lacks")
+            try:
+                model = ext.build(model)
+            except (TypeError, ValueError, KeyError) as exc:
+                raise UsageError(f"argument --with: {ext.name} cannot extend "
+                                 f"{model.name!r} ({exc})") from None
+    return model
 
 
 def _diagnose_arguments(p: argparse.ArgumentParser, seed_help: str | None = None) -> None:
@@ -1650,6 +1718,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="model start-up: 'periodic' treats the record as periodic (filters in "
                         "steady state), 'rest' starts from zero state (default periodic)")
     _oversample_argument(p)
+    _with_argument(p)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_loglik)
 
@@ -1677,6 +1746,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="write the result (params, neg_log_lik, vaf, method, seed and every "
                         "step) to this JSON file")
     _oversample_argument(p)
+    _with_argument(p)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_fit)
 
@@ -1765,6 +1835,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, metavar="POST.nc",
                    help="the posterior as a netCDF file (ArviZ InferenceData)")
     _likelihood_arguments(p, profiled=True)
+    _with_argument(p)
     p.add_argument("--json", metavar="SUMMARY",
                    help="write the per-parameter summary to this JSON file")
     _seed_argument(p, "seed of the initial fit and the sampler (default 0)")
@@ -1783,6 +1854,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", metavar="OUT", help="write the result to this JSON file")
     _seed_argument(p, "seed of the nested sampler and the sampler (default 0)")
     _likelihood_arguments(p)
+    _with_argument(p)
     p.add_argument("--nlive", type=_whole_number(20), default=200, metavar="N",
                    help="live points of each nested-sampling run (default 200)")
     p.add_argument("--posterior", metavar="POST.nc",

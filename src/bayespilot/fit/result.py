@@ -362,6 +362,9 @@ class FitResult:
                  f"{'with' if self.threshold else 'without'} threshold, seed {self.seed})"]
         if self.source:
             lines.append(f"recording: {self.source}")
+        model = self.settings.get("model")
+        if isinstance(model, str) and " + " in model:  # (an extended model: say which)
+            lines.append(f"model: {model}")
         lines.append(f"{'parameter':<10} {'estimate':>12}   unit")
         for k, v in self.params.items():
             mark = "*" if k in edge else " "

@@ -1,0 +1,117 @@
+"""``--with PHYSICS``: fit, loglik, sample and compare on the paper's model extended by a
+catalogue entry of ``diagnose`` (the API took an extended model; the command line did not).
+
+The commands run in-process through ``main([...])``; numbers are checked against the library
+called directly with the entry's ``build``.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from bayespilot.cli import main
+from bayespilot.diagnose import get_extension
+from bayespilot.fit.fast import fit_fast
+from bayespilot.fit.result import FitResult
+from bayespilot.io import read_recording, write_recording
+from bayespilot.model import paper_model
+from bayespilot.recording import Recording
+from test_cli import _loglik_value, _run  # (the command-line tests' helpers)
+
+ENTRY_FILE = '''
+from bayespilot.diagnose import get_extension
+import dataclasses
+MY_WASHOUT = dataclasses.replace(get_extension("motion-washout"), name="my-washout")
+'''
+
+
+@pytest.fixture(scope="module")
+def washout_fit(tmp_path_factory):
+    """A 10-s FT run (K_theta = 1, F_n = 0.15) and its fast fit with the washout, by the CLI."""
+    d = tmp_path_factory.mktemp("with")
+    assert main(["simulate", "--task", "FT", "--motion-gain", "1", "--remnant-fraction", "0.15",
+                 "--seed", "4", "--duration", "10", "-o", str(d / "run"), "-q"]) == 0
+    assert main(["fit", str(d / "run"), "--method", "fast", "--with", "motion-washout",
+                 "--json", str(d / "fit.json"), "-q"]) == 0
+    return d / "run", d / "fit.json"
+
+
+def test_fit_with_an_entry_is_the_librarys_fit_of_the_built_model(washout_fit, capsys):
+    run, fit_json = washout_fit
+    model = get_extension("motion-washout").build(paper_model())
+    direct = fit_fast(read_recording(run), model, seed=0)
+    saved = FitResult.from_json(fit_json)
+    assert tuple(saved.params) == tuple(model.all_names)  # omega_w (and the fixed zeta_w) included
+    assert saved.params["zeta_w"] == 0.7
+    for k, v in direct.params.items():
+        assert saved.params[k] == pytest.approx(v, rel=1e-12), k
+    assert saved.neg_log_lik == pytest.approx(direct.neg_log_lik, rel=1e-12)
+    # the summary says which model was fitted
+    assert f"model: {model.name}" in saved.summary()
+    assert "model:" not in fit_fast(read_recording(run), paper_model(), seed=0).summary()
+
+
+def test_loglik_with_an_entry_takes_the_extended_fit(washout_fit, capsys):
+    run, fit_json = washout_fit
+    code, out, err = _run(capsys, "loglik", run, "--params", fit_json, "--with", "motion-washout")
+    assert code == 0, err
+    assert _loglik_value(out) == pytest.approx(FitResult.from_json(fit_json).neg_log_lik,
+                                               rel=1e-9)
+    # without --with, the new names are refused with the option that gives them
+    code, out, err = _run(capsys, "loglik", run, "--params", fit_json)
+    assert code == 2 and out == ""
+    assert "unknown fit's parameter name(s) 'omega_w', 'zeta_w'" in err
+    assert "(omega_w, zeta_w: give --with motion-washout)" in err
+
+
+def test_an_entry_of_ones_own_by_file(washout_fit, tmp_path, capsys):
+    run, fit_json = washout_fit
+    entry = tmp_path / "my_entries.py"
+    entry.write_text(ENTRY_FILE)
+    code, out, err = _run(capsys, "loglik", run, "--params", fit_json,
+                          "--with", f"{entry}:MY_WASHOUT")
+    assert code == 0, err
+    assert _loglik_value(out) == pytest.approx(FitResult.from_json(fit_json).neg_log_lik,
+                                               rel=1e-9)
+
+
+@pytest.mark.parametrize("spec, message", [
+    ("control-saturation", "argument --with: control-saturation is fitted by the censored "
+                           "likelihood, which only 'bayespilot diagnose' has"),
+    ("washout", "argument --with: unknown extension 'washout'; the catalogue has "
+                "motion-system-dynamics, motion-washout"),
+    ("nofile.py:X", "argument --with: nofile.py:X: no file nofile.py"),
+])
+def test_an_entry_that_cannot_be_used_is_refused(washout_fit, spec, message, capsys):
+    run, _ = washout_fit
+    code, out, err = _run(capsys, "fit", run, "--method", "fast", "--with", spec)
+    assert code == 2 and out == ""
+    assert message in err
+    assert "register_extension" not in err  # (the command's words: FILE.py:NAME)
+
+
+def test_an_entry_the_recording_lacks_a_column_for_is_refused(washout_fit, tmp_path, capsys):
+    run, _ = washout_fit
+    rec = read_recording(run)
+    bare = tmp_path / "bare"
+    signals = {k: v for k, v in rec.signals.items() if k != "theta"}
+    write_recording(Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task,
+                              rec.metadata), bare)
+    code, out, err = _run(capsys, "fit", bare, "--method", "fast", "--with", "otolith-channel")
+    assert code == 2 and out == ""
+    assert "argument --with: otolith-channel needs the recording column(s) theta" in err
+
+
+def test_sample_with_an_entry_and_its_plot(washout_fit, tmp_path, capsys):
+    run, _ = washout_fit
+    post = tmp_path / "post.nc"
+    code, out, err = _run(capsys, "sample", run, "--with", "motion-washout", "--max-steps", "60",
+                          "-o", post, "--json", tmp_path / "post.json", "-q")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "post.json").read_text())
+    assert "omega_w" in summary and "zeta_w" not in summary  # (fixed: not sampled)
+    code, out, err = _run(capsys, "plot", post, "-o", tmp_path / "plots", "-q")
+    assert code == 0, err
+    assert (tmp_path / "plots" / "marginal_omega_w.png").is_file()
