@@ -115,3 +115,44 @@ def test_sample_with_an_entry_and_its_plot(washout_fit, tmp_path, capsys):
     code, out, err = _run(capsys, "plot", post, "-o", tmp_path / "plots", "-q")
     assert code == 0, err
     assert (tmp_path / "plots" / "marginal_omega_w.png").is_file()
+
+
+def test_simulate_with_an_entry_is_the_librarys_simulation(tmp_path, capsys):
+    """simulate --with: the run of the built model, sample for sample, with the entry's
+    parameter in the sidecar's truth (what the diagnosis walk-through's recording is)."""
+    from bayespilot import presets
+    from bayespilot.simulate import simulate
+
+    params = tmp_path / "washout.json"
+    params.write_text('{"omega_w": 0.3}')
+    code, out, err = _run(capsys, "simulate", "--task", "FD", "--motion-gain", "1",
+                          "--remnant-gain", "0.063", "--seed", "777", "--duration", "20",
+                          "--with", "motion-washout", "--params", params, "-o", tmp_path / "w")
+    assert code == 0, err
+    truth = dict(presets.paper_parameters("FD"), omega_w=0.3)
+    sim = simulate(get_extension("motion-washout").build(paper_model()), truth, task="FD",
+                   motion_gain=1.0, remnant_gain=0.063, seed=777, duration=20.0)
+    rec = read_recording(tmp_path / "w")
+    for k in ("e", "u", "theta_ddot_m", "theta"):
+        assert (rec[k] == sim.recording[k]).all(), k
+    written = json.loads((tmp_path / "w.json").read_text())["simulation"]["parameters"]
+    assert written["omega_w"] == 0.3 and written["zeta_w"] == 0.7
+
+
+def test_simulate_with_an_entry_needs_its_truth(tmp_path, capsys):
+    code, out, err = _run(capsys, "simulate", "--task", "FD", "--with", "otolith-channel",
+                          "-o", tmp_path / "o")
+    assert code == 2 and out == "" and not (tmp_path / "o.csv").exists()
+    assert ("argument --with: give the true value of K_ot in [-5, 5] rad/(m/s^2), h_head in "
+            "[-3, 3] m in --params") in err
+
+
+def test_simulate_with_control_saturation_clips_the_control(tmp_path, capsys):
+    params = tmp_path / "sat.json"
+    params.write_text('{"u_max": 0.02}')
+    code, out, err = _run(capsys, "simulate", "--task", "FD", "--remnant-fraction", "0.1",
+                          "--duration", "20", "--with", "control-saturation", "--params", params,
+                          "-o", tmp_path / "s", "-q")
+    assert code == 0, err
+    u = read_recording(tmp_path / "s").u
+    assert abs(u).max() == 0.02 and (abs(u) == 0.02).sum() > 10  # flat tops at the limit

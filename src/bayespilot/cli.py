@@ -394,8 +394,10 @@ def _subject_name(text: str) -> str:
 def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: str, motion_gain: float,
                         seed: int, remnant_fraction: float | None = None,
                         remnant_gain: float | None = None, duration: float | None = None,
-                        sample_rate_hz: float | None = None, subject: str | None = None):
-    """Simulate one run with the paper's model and write it; returns (simulation, csv, json).
+                        sample_rate_hz: float | None = None, subject: str | None = None,
+                        model=None):
+    """Simulate one run with the paper's model (or ``model``, e.g. one extended by
+    ``--with``) and write it; returns (simulation, csv, json).
 
     The paper's task ``task`` (FD or FT) at ``motion_gain``, recorded at
     ``sample_rate_hz`` (None: the paper's 100 Hz); a rate whose Nyquist
@@ -419,7 +421,7 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
         raise UsageError(f"argument --sample-rate: {said.replace(' or leave the line out', '')}"
                          ) from None
     try:
-        sim = simulate(paper_model(), params, task=tracking,
+        sim = simulate(model if model is not None else paper_model(), params, task=tracking,
                        remnant_fraction=remnant_fraction, remnant_gain=remnant_gain, seed=seed,
                        duration=duration)
     except RuntimeError as exc:
@@ -499,22 +501,31 @@ def _likelihood(model, recording, params: Mapping[str, float], initial: str = "p
 # --- subcommands ------------------------------------------------------------------------
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from . import presets
-    from .model import paper_model
 
     rate = args.sample_rate
     if args.duration is not None and args.duration * rate < 2:
         raise UsageError(f"argument --duration: {args.duration:g} s is shorter than 2 samples "
                          f"at {rate:g} Hz")
+    model = _paper_model_with(args, fitted=False)
     params = presets.paper_parameters(args.task)
     if args.params is not None:
-        params.update(_read_params(args.params, paper_model(),
-                                   detail=lambda text: _detail(args, text)))
+        params.update(_read_params(args.params, model, detail=lambda text: _detail(args, text),
+                                   with_hint=True))
+    # the truth of an extension's new parameters is the user's to say (a default of the
+    # entry's, e.g. K_ot = 0, would simulate a run without the effect)
+    unsaid = [n for n in model.parameter_names if n not in params]
+    if unsaid:
+        said = ", ".join(f"{n} in [{model.parameter(n).lower:g}, {model.parameter(n).upper:g}]"
+                         + ("" if model.parameter(n).unit == "-"
+                            else f" {model.parameter(n).unit}") for n in unsaid)
+        raise UsageError(f"argument --with: give the true value of {said} in --params "
+                         f"(e.g. {{\"{unsaid[0]}\": {model.parameter(unsaid[0]).default:g}}})")
     _detail(args, "parameters: " + ", ".join(f"{k}={v:g}" for k, v in params.items()))
     sim, csv_path, json_path = _simulate_and_write(
         args.output, params, task=args.task, motion_gain=args.motion_gain, seed=args.seed,
         remnant_fraction=None if args.remnant_gain is not None else args.remnant_fraction,
         remnant_gain=args.remnant_gain, duration=args.duration, sample_rate_hz=rate,
-        subject=args.subject)
+        subject=args.subject, model=model)
     rec = sim.recording
     _say(args, f"wrote {csv_path} and {json_path}: task {rec.task}, K_theta = {rec.motion_gain:g}, "
                f"{rec.duration:g} s at {rec.sample_rate_hz:g} Hz, seed {args.seed}, "
@@ -1250,22 +1261,26 @@ def _load_extensions(specs: Sequence[str], option: str = "--extension") -> list:
     return out
 
 
-def _with_argument(p: argparse.ArgumentParser) -> None:
-    """--with: the paper's model extended by catalogue entries (fit, loglik, sample, compare)."""
+def _with_argument(p: argparse.ArgumentParser, simulated: bool = False) -> None:
+    """--with: the paper's model extended by catalogue entries (simulate, fit, loglik, sample,
+    compare; ``simulated``: simulate's, which takes control-saturation too)."""
+    entries = ("motion-system-dynamics, motion-washout, otolith-channel, threshold-shape, "
+               "time-varying-gains" + (", control-saturation" if simulated else ""))
     p.add_argument("--with", dest="extended_by", action="append", default=[], metavar="PHYSICS",
-                   help="extend the paper's model by this catalogue entry of 'bayespilot "
-                        "diagnose' (motion-system-dynamics, motion-washout, otolith-channel, "
-                        "threshold-shape, time-varying-gains), or by one of your own given as "
-                        "FILE.py:NAME or package.module:NAME; repeatable (applied in order)")
+                   help=f"extend the paper's model by this catalogue entry of 'bayespilot "
+                        f"diagnose' ({entries}), or by one of your own given as FILE.py:NAME or "
+                        f"package.module:NAME; repeatable (applied in order)")
 
 
-def _paper_model_with(args: argparse.Namespace, recording=None, *, threshold: bool = True):
+def _paper_model_with(args: argparse.Namespace, recording=None, *, threshold: bool = True,
+                      fitted: bool = True):
     """The paper's model (``--oversample``; ``threshold``: with a free delta_abs), extended by
-    each ``--with`` entry in turn; an entry the recording lacks a column for, or one that
-    only ``diagnose`` fits (its likelihood is not Eq. 4's), is refused as bad input."""
+    each ``--with`` entry in turn; an entry the recording lacks a column for, or (``fitted``:
+    a command that fits or evaluates the likelihood) one that only ``diagnose`` fits (its
+    likelihood is not Eq. 4's), is refused as bad input."""
     from .model import paper_model
 
-    model = paper_model(threshold=threshold, oversample=args.oversample)
+    model = paper_model(threshold=threshold, oversample=getattr(args, "oversample", 1))
     for spec in args.extended_by:
         if ":" in spec:
             entries = _load_extensions([spec], "--with")
@@ -1278,7 +1293,7 @@ def _paper_model_with(args: argparse.Namespace, recording=None, *, threshold: bo
                 raise UsageError("argument --with: " + str(exc).replace(
                     "register_extension", "FILE.py:NAME")) from None
         for ext in entries:
-            if ext.likelihood != "gls":
+            if fitted and ext.likelihood != "gls":
                 raise UsageError(f"argument --with: {ext.name} is fitted by the "
                                  f"{ext.likelihood} likelihood, which only 'bayespilot "
                                  f"diagnose' has")
@@ -1401,11 +1416,16 @@ bounds of Table 1. For example:
   {"K_m": 0.3, "delta_abs": 0.02}
 A fit's JSON ('bayespilot fit --json') is taken too: its "params", all eight.
 
+--with PHYSICS simulates the paper's model extended by a catalogue entry of
+'bayespilot diagnose' (a concealed case to diagnose); --params must then give
+the entry's new parameters, e.g. --with motion-washout and {"omega_w": 0.3}.
+
 Examples:
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
   bayespilot simulate --task FD --motion-gain 0.5 --params mine.json --duration 40 -o out/short
   bayespilot simulate --task FD --remnant-fraction 0.2 --sample-rate 50 -o out/run50
   bayespilot simulate --task FD --params out/run-fit.json --seed 4 -o out/refit
+  bayespilot simulate --task FT --remnant-fraction 0.15 --with motion-washout --params washout.json -o out/washout
 """
 
 LOGLIK_EPILOG = """\
@@ -1702,6 +1722,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--subject", type=_subject_name, default=None, metavar="S",
                    help="the sidecar's subject (what 'diagnose-batch --pool' groups runs by; "
                         "default: none)")
+    _with_argument(p, simulated=True)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_simulate)
 
