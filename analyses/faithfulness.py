@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
@@ -33,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from bayespilot import presets
+from bayespilot._files import VERSION_KEY, dumps
 from bayespilot.likelihood import Likelihood
 from bayespilot.model import paper_model
 from bayespilot.simulate import simulate
@@ -40,6 +42,16 @@ from bayespilot.simulate import simulate
 CELLS = [(task, k) for task in ("FD", "FT") for k in presets.MOTION_GAINS]
 SCALES = (0.15, 0.2, 0.25, 0.3)
 THRESH = 0.0075
+
+
+def _nan_for_null(x):
+    """The stored results with NaN again where :func:`bayespilot._files.dumps` wrote null
+    (NaN is not JSON; this script stores no None of its own)."""
+    if isinstance(x, dict):
+        return {k: _nan_for_null(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_nan_for_null(v) for v in x]
+    return math.nan if x is None else x
 
 
 def _scale_point(args):
@@ -289,7 +301,8 @@ def main(argv=None):
     path = out / "faithfulness.json"
     # Resumable: each part is saved as it finishes and skipped on the next run
     # (delete the file, or the part's key, to recompute).
-    results = json.loads(path.read_text()) if path.exists() else {}
+    results = _nan_for_null(json.loads(path.read_text())) if path.exists() else {}
+    results.pop(VERSION_KEY, None)  # each write names the release that wrote it
     if results.get("quick") not in (None, args.quick):
         results = {}
     results["quick"] = args.quick
@@ -297,7 +310,7 @@ def main(argv=None):
     def part(key, fn):
         if key not in results:
             results[key] = fn()
-            path.write_text(json.dumps(results))
+            path.write_text(dumps(results))
         else:
             print(f"\n({key}: loaded from {path})")
 
@@ -309,7 +322,7 @@ def main(argv=None):
         part("E_model_vs_simulator", lambda: part_e(pool))
     part("F_sign", part_f)
     results["seconds"] = time.time() - t0
-    path.write_text(json.dumps(results))
+    path.write_text(dumps(results))
     print(f"\nwrote {out / 'faithfulness.json'} and {figdir}/fig13_likelihood_vs_delta_abs.png "
           f"in {results['seconds']:.0f} s")
 

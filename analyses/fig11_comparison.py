@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bayespilot._files import dumps, number
+
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "analyses" / "results" / "fig11"
 TASKS = ("FD", "FT")
@@ -66,10 +68,24 @@ def run_one(task, k, delta, r, nlive, savage_dickey, lik) -> None:
               "F_n": F_N, "sim_seed": seed_of(task, k, delta, r), "likelihood": lik})
     path = _path(task, k, delta, r, lik)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(d, indent=1, allow_nan=True))
+    path.write_text(dumps(d))  # standard JSON: a non-finite number as null
     print(f"  {task} K={k:g} delta={delta:g} r{r}: ln BF = {c.log_bayes_factor:+.2f} +- "
           f"{c.log_bayes_factor_err:.2f} -> {c.decision} ({time.perf_counter() - t0:.0f} s)",
           flush=True)
+
+
+def _read(path: Path) -> dict:
+    """One comparison file, with NaN again where :func:`bayespilot._files.dumps` wrote null
+    for a non-finite number, in the numbers the report computes with."""
+    d = json.loads(path.read_text())
+    for k in ("log_bayes_factor", "log_bayes_factor_err"):
+        if k in d:
+            d[k] = number(d[k])
+    ic = d.get("information_criteria") or {}
+    for k in ("neg_log_lik_threshold", "neg_log_lik_none"):
+        if k in ic:
+            ic[k] = number(ic[k])
+    return d
 
 
 def report(rows) -> dict:
@@ -145,14 +161,14 @@ def main(argv=None) -> int:
                         run_one(task, k, delta, r, args.nlive, args.savage_dickey,
                                 args.likelihood)
                         done += 1
-    rows = [d for d in (json.loads(p.read_text()) for p in sorted(OUT.glob("*_r[0-9]*.json")))
+    rows = [d for d in (_read(p) for p in sorted(OUT.glob("*_r[0-9]*.json")))
             if d.get("likelihood", "eq4") == args.likelihood]
     if not rows:
         print("no results yet")
         return 0
     summary = report(rows)
     out = OUT / f"summary_{args.likelihood}.json"
-    out.write_text(json.dumps(summary, indent=1, allow_nan=True))
+    out.write_text(dumps(summary, version=False))  # (its keys are all cells)
     print(f"\nwrote {out.relative_to(ROOT)}")
     return 0
 

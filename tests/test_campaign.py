@@ -483,3 +483,61 @@ def test_a_scheduler_address_that_does_not_answer_dask_is_refused_in_time(monkey
                                               "there, but not in dask's protocol") as info:
         C._client_within(garbage, "tcp://x:1", 0.1)
     assert "EiB" not in str(info.value)  # (dask's misread frame length says nothing)
+
+
+# --- saving a campaign's summary; what a per-fit file holds --------------------------------
+def test_campaign_summary_round_trips_through_json(tmp_path):
+    """run_campaign's and diagnose_batch's CampaignSummary: to_dict is strict JSON (the folder
+    as text), from_dict rebuilds an equal summary, ignoring keys of a later release and
+    refusing a dict of another kind."""
+    from pathlib import Path
+
+    from bayespilot import _files
+    from bayespilot.campaign import CampaignSummary
+
+    s = CampaignSummary(5, 2, 2, 1, {"FD_k1_fn0_r001_thr_fast": "ValueError: n_starts"},
+                        tmp_path / "c", 12.5, "diagnoses")
+    d = s.to_dict()
+    assert d["out_dir"] == str(tmp_path / "c") and d["elapsed_seconds"] == 12.5
+
+    def reject(c):
+        raise ValueError(c)
+
+    for text in (json.dumps(d, allow_nan=False), _files.dumps(d)):  # with the version key too
+        back = CampaignSummary.from_dict(json.loads(text, parse_constant=reject))
+        assert back == s and isinstance(back.out_dir, Path) and str(back) == str(s)
+    d["errors"]["x"] = "changed"  # a copy: the summary's own errors are left as they are
+    assert "x" not in s.errors
+    assert CampaignSummary.from_dict({**s.to_dict(), "new_key": 1}) == s
+    with pytest.raises(ValueError, match="not a campaign summary: no completed"):
+        CampaignSummary.from_dict({"total": 1})
+
+
+def test_run_job_writes_seeds_as_text_and_the_fraction_reached(tmp_path):
+    """Seeds up to 2**63 read back rounded by a double-only JSON reader (jq, JavaScript), so the
+    per-fit dict carries exact decimal copies; F_n (the fraction reached, unlike summary.csv's
+    requested F_n) has the unambiguous alias F_n_reached.  A file written before these keys
+    still loads, is resumed (skipped, untouched) and summarised."""
+    from bayespilot.campaign import _write_json_atomic, run_job
+
+    job = Job("FD", 1.0, 0.2, 0, method="fast", fit_kwargs=TINY, duration=4.0)
+    res = run_job(job)
+    assert job.remnant_seed > 2**53 or job.fit_seed > 2**53  # the case that needs the text
+    assert res["remnant_seed_text"] == str(job.remnant_seed) == str(res["remnant_seed"])
+    assert res["fit_seed_text"] == str(job.fit_seed) == str(res["fit"]["seed"])
+    doubles = json.loads(json.dumps(res), parse_int=float)  # as jq or JavaScript read it
+    assert int(doubles["fit_seed_text"]) == job.fit_seed
+    assert int(doubles["remnant_seed_text"]) == job.remnant_seed
+    assert res["F_n_reached"] == res["F_n"] and res["remnant_fraction"] == 0.2
+
+    out = tmp_path / "c"
+    old = {k: v for k, v in res.items()
+           if k not in ("remnant_seed_text", "fit_seed_text", "F_n_reached")}
+    _write_json_atomic(out / f"{job.key}.json", old)
+    before = _stamp(out / f"{job.key}.json")
+    s = run_campaign([job], out, workers=1, progress=False)
+    assert (s.completed, s.skipped, s.failed) == (0, 1, 0)
+    assert _stamp(out / f"{job.key}.json") == before
+    (back,) = load_results(out, [job])
+    assert back["remnant_seed"] == job.remnant_seed and "F_n_reached" not in back
+    assert summarise([back])[0]["F_n"] == 0.2  # summary.csv's F_n: the requested one

@@ -447,8 +447,13 @@ def run_job(job: Job) -> dict[str, Any]:
     Keys: ``key``; the job fields (``task``, ``motion_gain``,
     ``remnant_fraction``, ``realization``, ``threshold``, ``method``,
     ``fit_kwargs``, ``duration``) and the same under ``"job"``;
-    ``remnant_seed``, ``fit_seed``; ``true_params``; ``K_n`` and ``F_n`` (the
-    remnant gain and the fraction reached); ``fit`` (``FitResult.to_dict(full=False)``);
+    ``remnant_seed``, ``fit_seed`` and the same as exact decimal text,
+    ``remnant_seed_text``, ``fit_seed_text`` (the seeds reach 2**63; a reader
+    that takes JSON numbers as doubles, such as jq or JavaScript, rounds the
+    integers above 2**53); ``true_params``; ``K_n`` and ``F_n`` (the remnant
+    gain and the fraction **reached**; ``remnant_fraction`` is the one asked
+    for, the ``F_n`` of :func:`summarise`), and ``F_n_reached``, the same
+    reached fraction under an unambiguous name; ``fit`` (``FitResult.to_dict(full=False)``);
     ``step1_delta_abs`` and ``check`` (paper method with threshold only: the fit's own
     check, ``gap``, ``neg_log_lik`` and ``delta_abs``, see
     :class:`~bayespilot.fit.result.NotAtMaximumWarning`, which is not issued here);
@@ -467,7 +472,8 @@ def run_job(job: Job) -> dict[str, Any]:
     dict
         The keys above, with plain JSON types only (numpy scalars and arrays
         converted); the job fields include ``remnant`` too, as in
-        :meth:`Job.to_dict`.  ``F_n`` is 0 when the job has no remnant.
+        :meth:`Job.to_dict`.  ``F_n`` (and ``F_n_reached``) is 0 when the job has no
+        remnant.
 
     Raises
     ------
@@ -500,8 +506,12 @@ def run_job(job: Job) -> dict[str, Any]:
                                         seed=job.fit_seed, **job.fit_kwargs)
     out: dict[str, Any] = {"key": job.key, **job.to_dict(), "job": job.to_dict(),
                            "remnant_seed": job.remnant_seed, "fit_seed": job.fit_seed,
+                           # exact copies: readers of JSON numbers as doubles round seeds > 2**53
+                           "remnant_seed_text": str(job.remnant_seed),
+                           "fit_seed_text": str(job.fit_seed),
                            "true_params": dict(sim.params), "K_n": sim.remnant_gain,
-                           "F_n": sim.remnant_fraction, "fit": fit.to_dict(full=False)}
+                           "F_n": sim.remnant_fraction, "F_n_reached": sim.remnant_fraction,
+                           "fit": fit.to_dict(full=False)}
     step1 = fit.steps.get("step1_delta_abs")
     if step1 is not None:
         out["step1_delta_abs"] = step1
@@ -555,6 +565,43 @@ class CampaignSummary:
     def __str__(self) -> str:
         return (f"{self.total} {self.what}: {self.completed} run, {self.skipped} already done, "
                 f"{self.failed} failed ({self.elapsed:.1f} s) -> {self.out_dir}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict (a copy): the fields, with ``out_dir`` as text and ``elapsed`` as
+        ``elapsed_seconds``, as in the package's other result files; ``json.dumps`` writes
+        it, and :meth:`from_dict` reads it back."""
+        return {"total": int(self.total), "completed": int(self.completed),
+                "skipped": int(self.skipped), "failed": int(self.failed),
+                "errors": {str(k): str(v) for k, v in self.errors.items()},
+                "out_dir": str(self.out_dir), "elapsed_seconds": float(self.elapsed),
+                "what": self.what}
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "CampaignSummary":
+        """The summary back from :meth:`to_dict` (parsed JSON); unknown keys (a later
+        release's, ``bayespilot_version``) are ignored.
+
+        Parameters
+        ----------
+        d : mapping
+            A dict of :meth:`to_dict`, e.g. ``json.loads`` of a file it was written to.
+
+        Returns
+        -------
+        CampaignSummary
+
+        Raises
+        ------
+        ValueError
+            If ``d`` lacks one of the keys :meth:`to_dict` writes (another kind of dict).
+        """
+        from ._files import require_keys
+
+        require_keys(d, ("total", "completed", "skipped", "failed", "errors", "out_dir",
+                         "elapsed_seconds"), "a campaign summary")
+        return cls(int(d["total"]), int(d["completed"]), int(d["skipped"]), int(d["failed"]),
+                   dict(d["errors"] or {}), Path(d["out_dir"]), float(d["elapsed_seconds"]),
+                   d.get("what", "fits"))
 
 
 def _result_path(out_dir: Path, job: Job) -> Path:
