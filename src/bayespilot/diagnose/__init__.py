@@ -56,7 +56,8 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .._files import dumps, json_ready, number, numbers, read_json, write_text_atomic
+from .._files import (dumps, json_ready, number, numbers, read_result, require_keys,
+                      write_text_atomic)
 from .catalogue import (CATALOGUE, NAMES, Extension, _candidate_name, candidate_names,
                         get_extension, register_extension, registered_extensions,
                         unregister_extension)
@@ -92,10 +93,31 @@ MAX_REBASE = 2
 
 
 class _JSONSummary:
-    """``to_json`` and ``from_json`` for a result that has ``to_dict`` and ``from_dict``."""
+    """``to_json`` and ``from_json`` for a result that has ``to_dict`` and ``from_dict``: the
+    diagnoses (:class:`_DiagnosisJSON`), the Bayes factor
+    (:class:`~bayespilot.diagnose.nested.ExtensionBayesFactor`) and the shared posterior
+    (:class:`~bayespilot.diagnose.posterior.SharedPosterior`).  A class sets
+    :attr:`_file_keys`, the keys a file of its kind has, or overrides :meth:`_from_file`."""
+
+    #: Keys every file of this kind has (its ``from_dict``'s required ones): ``from_json``
+    #: refuses a file without them as another kind of result, naming the file.
+    _file_keys: tuple[str, ...] = ()
 
     def to_json(self, path: str | Path | None = None) -> str:
-        """The JSON summary as text; also written to ``path`` when given."""
+        """The JSON summary as text; also written to ``path`` when given.
+
+        Parameters
+        ----------
+        path : str or Path, optional
+            Also write the text to this file (atomically: a reader never sees half of
+            it; parent folders are created).
+
+        Returns
+        -------
+        str
+            The JSON text (standard JSON: no NaN or Infinity tokens), whether or not
+            ``path`` is given.
+        """
         text = dumps(self.to_dict())
         if path is not None:
             write_text_atomic(path, text)
@@ -103,13 +125,15 @@ class _JSONSummary:
 
     @classmethod
     def from_json(cls, path: str | Path):
-        """The result a :meth:`to_json` file holds (``diagnosis.json`` of a report, the JSON
-        of ``bayespilot diagnose --json``, a batch's per-recording file).
+        """The result a :meth:`to_json` file holds.
 
-        What a result file keeps: the decision, the ranking, the located
-        evidence, the fits' numbers, the posterior's summary; not the signals,
-        fitted models and noise models a diagnosis carries in memory (see
-        :meth:`from_dict`).
+        For a diagnosis: ``diagnosis.json`` of a report, the JSON of
+        ``bayespilot diagnose --json``, a batch's per-recording file; it keeps
+        the decision, the ranking, the located evidence, the fits' numbers and
+        the posterior's summary, not the signals, fitted models and noise
+        models a diagnosis carries in memory (see its ``from_dict``).  For a
+        shared posterior also the file ``bayespilot diagnose --posterior
+        X.json`` writes for several runs.
 
         Parameters
         ----------
@@ -118,20 +142,41 @@ class _JSONSummary:
 
         Returns
         -------
-        DiagnosisResult or PooledDiagnosisResult
-            Of the class it is called on; a file of the other kind is refused.
+        DiagnosisResult, PooledDiagnosisResult, ExtensionBayesFactor or SharedPosterior
+            Of the class it is called on; a file of another kind is refused.
 
         Raises
         ------
         FileNotFoundError
             No file at ``path``.
         ValueError
-            The file is not JSON, or holds another kind of result.
+            The file is not JSON, or holds another kind of result (the message
+            names the file).
         """
-        d = read_json(path, f"a {cls.__name__}")
+        return read_result(path, lambda d: cls._from_file(d, str(path)), cls._kind())
+
+    @classmethod
+    def _kind(cls) -> str:
+        """The kind of result, for messages: "a DiagnosisResult", "an ExtensionBayesFactor"."""
+        return f"{'an' if cls.__name__[0] in 'AEIOU' else 'a'} {cls.__name__}"
+
+    @classmethod
+    def _from_file(cls, d: Mapping[str, Any], source_file: str):
+        """The result of the dict ``d`` read from ``source_file``; WrongKind (named with the file
+        by :func:`~bayespilot._files.read_result`) without :attr:`_file_keys`."""
+        require_keys(d, cls._file_keys, cls._kind())
+        return cls.from_dict(d)
+
+
+class _DiagnosisJSON(_JSONSummary):
+    """:class:`_JSONSummary` of a diagnosis: it also reads a diagnose-batch file (its
+    settings, then the diagnosis), and its ``from_dict`` names the file in its messages."""
+
+    @classmethod
+    def _from_file(cls, d: Mapping[str, Any], source_file: str):
         if isinstance(d.get("diagnosis"), Mapping) and "physics" not in d:
             d = d["diagnosis"]  # a diagnose-batch file: its settings, then the diagnosis
-        return cls.from_dict(d, source_file=str(path))
+        return cls.from_dict(d, source_file=source_file)
 
 
 def _short_repr(result: Any, what: str, source: Any = None) -> str:
@@ -245,7 +290,7 @@ def _calibration_lines(ranking) -> list[str]:
 
 
 @dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
-class DiagnosisResult(_JSONSummary):
+class DiagnosisResult(_DiagnosisJSON):
     """What :func:`diagnose` found.
 
     Attributes
@@ -319,16 +364,23 @@ class DiagnosisResult(_JSONSummary):
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict: ``mismatch``, ``physics``, ``ranking``, ``where``, ``base``, ... ."""
+        from .decide import json_number
+
+        def num(x):  # absent stays None
+            return None if x is None else json_number(x)
+
         chosen = None
         if self.chosen is not None:
+            # the numbers as the ranking writes them (its to_dict): an infinity as "inf" or
+            # "-inf" in both, not "inf" in the ranking and null here for the same candidate
             cd = self.chosen.to_dict()
-            chosen = {"physics": self.chosen.physics, "params": self.chosen.params,
-                      "stderr": self.chosen.stderr, "all_params": self.chosen.all_params,
-                      "delta_neg_log_lik": self.chosen.delta_neg_log_lik,
-                      "neg_log_lik_before": self.arrays.get("before_eq4_neg_log_lik"),
-                      "neg_log_lik_after": self.arrays.get("after_eq4_neg_log_lik"),
-                      "vaf_before": self.arrays.get("before_vaf"),
-                      "vaf_after": self.arrays.get("after_vaf"),
+            chosen = {"physics": self.chosen.physics, "params": cd["params"],
+                      "stderr": cd["stderr"], "all_params": cd["all_params"],
+                      "delta_neg_log_lik": cd["delta_neg_log_lik"],
+                      "neg_log_lik_before": num(self.arrays.get("before_eq4_neg_log_lik")),
+                      "neg_log_lik_after": num(self.arrays.get("after_eq4_neg_log_lik")),
+                      "vaf_before": num(self.arrays.get("before_vaf")),
+                      "vaf_after": num(self.arrays.get("after_vaf")),
                       "refit": cd["refit"], "interval": cd["interval"],
                       "posterior": self._posterior_dict()}
         return json_ready({
@@ -418,7 +470,9 @@ class DiagnosisResult(_JSONSummary):
         is kept and shown) and the base model; :meth:`report`,
         :func:`~bayespilot.diagnose.posterior.sample_chosen` and
         :func:`~bayespilot.diagnose.nested.bayes_factor` need the diagnosis
-        made again.
+        made again.  An infinity is ``"inf"``/``"-inf"`` in ``ranking`` and
+        ``chosen`` alike; files written before 2026-11-29 have null for one in
+        ``chosen``, read as missing.
 
         Parameters
         ----------
@@ -448,8 +502,10 @@ class DiagnosisResult(_JSONSummary):
             for key, name in (("before_vaf", "vaf_before"), ("after_vaf", "vaf_after"),
                               ("before_eq4_neg_log_lik", "neg_log_lik_before"),
                               ("after_eq4_neg_log_lik", "neg_log_lik_after")):
+                # a number, or "inf"/"-inf"; null (absent, or an infinity as files
+                # written before 2026-11-29 wrote it) leaves it out, as before
                 if c.get(name) is not None:
-                    arrays[key] = float(c[name])
+                    arrays[key] = number(c[name])
             if c.get("posterior") is not None:
                 arrays["posterior_summary"] = c["posterior"]
         bf = d.get("bayes_factor")

@@ -112,9 +112,14 @@ FIR_SPAN = 0.6
 FIR_MIN_TAPS = 61
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # by identity: == on its arrays raised ValueError
 class NoiseModel:
     """How the decision likelihood pre-whitens: low-pass, decimate, AR filter.
+
+    Compared by identity: ``==`` is True only for the same object (a copy,
+    e.g. pickled and read back, is not equal; compare ``fir`` and ``ar`` with
+    ``numpy.array_equal``), and it is hashed by identity.  Its repr gives the
+    numbers of taps and AR coefficients, not the arrays.
 
     Attributes
     ----------
@@ -135,6 +140,11 @@ class NoiseModel:
     ar: np.ndarray
     skip: int
     omega_c: float
+
+    def __repr__(self) -> str:
+        """One line (the dataclass's printed every FIR tap and AR coefficient)."""
+        return (f"NoiseModel(omega_c={self.omega_c:g}, decimation={self.decimation}, "
+                f"fir_taps={np.size(self.fir)}, ar_order={np.size(self.ar)}, skip={self.skip})")
 
     def reduce(self, x: np.ndarray) -> np.ndarray:
         """Low-pass (causal) and decimate along the first axis, after ``skip``.
@@ -773,6 +783,25 @@ def report_final_fit(chosen: "CandidateResult", base_model: PilotModel, recordin
     chosen.interval = found
 
 
+def json_number(x: float) -> float | str | None:
+    """A number as a diagnosis file writes it: finite as a float, NaN (missing) as None,
+    infinities as ``"inf"``/``"-inf"`` (an exact flat top's infinite delta BIC is a finding,
+    not a missing value; standard JSON has no Infinity).  :func:`bayespilot._files.number`
+    reads all three back.
+
+    Parameters
+    ----------
+    x : float
+        The number (a numpy scalar or an int is taken as a float).
+
+    Returns
+    -------
+    float, str or None
+    """
+    x = float(x)
+    return x if math.isfinite(x) else (None if math.isnan(x) else ("inf" if x > 0 else "-inf"))
+
+
 @dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
 class CandidateResult:
     """The test of one catalogue extension against the base model.
@@ -861,13 +890,29 @@ class CandidateResult:
     noise: Any = None
     interval: dict[str, Any] = field(default_factory=dict)
 
+    def __repr__(self) -> str:
+        """One line: the test's outcome and the new parameters (the dataclass's printed the
+        fit's covariance, the model and the noise model's taps, thousands of characters)."""
+        def g(x):  # never raises: a repr of a half-built or hand-made result
+            try:
+                return f"{float(x):.4g}"
+            except (TypeError, ValueError):
+                return repr(x)
+
+        if not self.testable:
+            return (f"CandidateResult(physics={self.physics!r}, testable=False, "
+                    f"reason={self.reason!r})")
+        params = ", ".join(f"{k!r}: {g(v)}" for k, v in self.params.items())
+        return (f"CandidateResult(physics={self.physics!r}, justified={self.justified}, "
+                f"p_value={g(self.p_value)}{', calibrated=True' if self.calibration else ''}, "
+                f"delta_neg_log_lik={g(self.delta_neg_log_lik)}, delta_bic={g(self.delta_bic)}, "
+                f"params={{{params}}})")
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of the attributes except ``fit``, ``model`` and ``noise`` (the
         calibration and intervals by their own ``to_dict``; NaN as None, infinities as
-        ``"inf"``/``"-inf"``)."""
-        def num(x):
-            x = float(x)
-            return x if math.isfinite(x) else (None if math.isnan(x) else ("inf" if x > 0 else "-inf"))
+        ``"inf"``/``"-inf"``: :func:`json_number`)."""
+        num = json_number
         return {"physics": self.physics, "testable": self.testable, "reason": self.reason,
                 "delta_neg_log_lik": num(self.delta_neg_log_lik), "statistic": num(self.statistic),
                 "df": self.df, "p_value": num(self.p_value), "delta_bic": num(self.delta_bic),

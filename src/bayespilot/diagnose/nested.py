@@ -58,6 +58,7 @@ from .._seeds import resolve_seed, spawn_seeds, stream_seed
 from ..model import PilotModel
 from ..noise import ARNoise
 from ..recording import Recording
+from . import _JSONSummary
 from .catalogue import get_extension
 
 __all__ = ["ExtensionBayesFactor", "EvidenceSummary", "bayes_factor", "nested_bayes_factor"]
@@ -101,8 +102,11 @@ class EvidenceSummary:
 
 
 @dataclass(eq=False)
-class ExtensionBayesFactor:
+class ExtensionBayesFactor(_JSONSummary):
     """ln BF(extended : base) of one catalogue extension on one recording.
+
+    Saved and read back by :meth:`to_json` and :meth:`from_json` (or
+    :meth:`to_dict` and :meth:`from_dict`), as a diagnosis is.
 
     Attributes
     ----------
@@ -144,6 +148,9 @@ class ExtensionBayesFactor:
     prior: dict = field(default_factory=dict)
     settings: dict = field(default_factory=dict, repr=False)
     elapsed: float = 0.0
+
+    # (from_json: a file without these is another kind of result; from_dict needs them)
+    _file_keys = ("physics", "log_bayes_factor", "log_bayes_factor_err", "category", "favours")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the evidences without their draws)."""

@@ -44,7 +44,7 @@ from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
                _at_bounds_lines, _base_from, _bic, _calibration_lines, _calibrator, _check,
-               _dropped_why, _fitted_lines, _JSONSummary, _ranking_and_chosen, _short_repr,
+               _dropped_why, _fitted_lines, _DiagnosisJSON, _ranking_and_chosen, _short_repr,
                _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -106,7 +106,7 @@ def pooling_disagreements(recordings: Sequence[Recording]) -> str | None:
 
 
 @dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
-class PooledDiagnosisResult(_JSONSummary):
+class PooledDiagnosisResult(_DiagnosisJSON):
     """What :func:`diagnose_pooled` found.
 
     Attributes
@@ -129,7 +129,9 @@ class PooledDiagnosisResult(_JSONSummary):
         ``base_at_bounds`` (its base fit's parameters on a bound, a
         BaseFitWarning; as a single run's ``settings["base_at_bounds"]``).
     where : dict
-        Located statistics with Fisher-combined p-values over the runs.
+        Located statistics with Fisher-combined p-values over the runs: per
+        key, ``p_value`` (NaN when a run has none) and ``values`` (each run's
+        value), floats also after :meth:`from_dict`.
     chosen : CandidateResult or None
     settings : dict
     elapsed : float
@@ -267,8 +269,14 @@ class PooledDiagnosisResult(_JSONSummary):
             if r.get("params") is not None:
                 run["params"] = numbers(r["params"])
             runs.append(run)
+        # the combined statistics as diagnose_pooled made them: NaN, not None, for a p-value
+        # or value the file has as null (an unbootstrapped run), so that comparisons such
+        # as where[k]["p_value"] < 0.05 work on a result read back
+        where = {k: dict(v, p_value=number(v.get("p_value")),
+                         values=[number(x) for x in v.get("values", ())])
+                 for k, v in d["where"].items()}
         post = d.get("posterior")
-        return cls(bool(d["mismatch"]), d["physics"], ranking, runs, dict(d["where"]), chosen,
+        return cls(bool(d["mismatch"]), d["physics"], ranking, runs, where, chosen,
                    dict(d.get("settings") or {}), number(d.get("elapsed_seconds", 0.0)),
                    posterior=None if post is None else SharedPosterior.from_dict(post))
 

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
@@ -39,7 +39,9 @@ from scipy.interpolate import CubicSpline
 
 from .._files import number, numbers
 from ..recording import Recording
+from . import _JSONSummary
 from .catalogue import get_extension
+from .decide import json_number
 
 if TYPE_CHECKING:
     from ..sample import Posterior
@@ -155,6 +157,11 @@ def posterior_dict(post: Any, names: tuple[str, ...]) -> dict[str, Any]:
 
 # --- the posterior of a pooled diagnosis's shared parameters --------------------------------------
 
+def _nested(f, x):
+    """``f`` applied to every number of the nested lists ``x`` (a grid's values)."""
+    return [_nested(f, v) for v in x] if isinstance(x, list) else f(x)
+
+
 #: Grid points per shared parameter (one parameter; two parameters take ``GRID_2D`` each).
 GRID_1D = 41
 GRID_2D = 15
@@ -168,8 +175,13 @@ MAX_WIDEN = 3
 
 
 @dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
-class SharedPosterior:
+class SharedPosterior(_JSONSummary):
     """The marginal posterior of a pooled diagnosis's shared extension parameters.
+
+    Saved and read back by :meth:`to_json` and :meth:`from_json` (or
+    :meth:`to_dict` and :meth:`from_dict`); :meth:`from_json` also reads the
+    file ``bayespilot diagnose --posterior X.json`` writes for several runs.
+    Its repr leaves out the grid, the densities and the settings.
 
     Attributes
     ----------
@@ -203,30 +215,40 @@ class SharedPosterior:
 
     physics: str
     names: tuple
-    grid: list
-    log_density: np.ndarray
-    marginals: dict
+    # (not in the repr: arrays and the marginals' densities, hundreds of numbers)
+    grid: list = field(repr=False)
+    log_density: np.ndarray = field(repr=False)
+    marginals: dict = field(repr=False)
     ml: dict
     stderr: dict
     edge_mass: float
-    settings: dict
+    settings: dict = field(repr=False)
     elapsed: float
     log_bayes_factor: float = math.nan
 
+    # (from_json: a file without these is another kind of result; from_dict needs them)
+    _file_keys = ("physics", "names", "grid", "density", "marginals")
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready: the marginals, the grid and its density, the Bayes factor, the
-        settings."""
+        """JSON-ready: the marginals, the grid, its log density (``log_density``; an
+        infinity as ``"-inf"``) and density (``density``, which older readers take), the
+        Bayes factor, the settings."""
         lbf = self.log_bayes_factor if math.isfinite(self.log_bayes_factor) else None
+        log_density = np.asarray(self.log_density, dtype=float)
         return {"physics": self.physics, "names": list(self.names),
                 "log_bayes_factor": lbf,
                 "marginals": self.marginals, "ml": self.ml, "stderr": self.stderr,
                 "grid": [g.tolist() for g in self.grid],
-                "density": np.exp(self.log_density).tolist(), "edge_mass": self.edge_mass,
+                # the log itself: exp underflows to 0 below about -745, whose log is -inf
+                "log_density": _nested(json_number, log_density.tolist()),
+                "density": np.exp(log_density).tolist(), "edge_mass": self.edge_mass,
                 "settings": self.settings, "elapsed_seconds": self.elapsed}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "SharedPosterior":
-        """The posterior a :meth:`to_dict` holds (the log density from its density).
+        """The posterior a :meth:`to_dict` holds: the log density as written
+        (``log_density``), or, in a file written before 2026-11-29, the log of its
+        density (-inf where the density underflowed).
 
         Parameters
         ----------
@@ -240,14 +262,17 @@ class SharedPosterior:
         Raises
         ------
         KeyError
-            If ``physics``, ``names``, ``grid``, ``density`` or ``marginals`` is
-            missing.
+            If ``physics``, ``names``, ``grid``, ``density`` (without
+            ``log_density``) or ``marginals`` is missing.
         """
         marginals = {n: {k: ([number(x) for x in v] if isinstance(v, list) else number(v))
                          for k, v in m.items()}
                      for n, m in d["marginals"].items()}
-        with np.errstate(divide="ignore"):
-            log_density = np.log(np.asarray(d["density"], dtype=float))
+        if d.get("log_density") is not None:
+            log_density = np.asarray(_nested(number, d["log_density"]), dtype=float)
+        else:
+            with np.errstate(divide="ignore"):
+                log_density = np.log(np.asarray(d["density"], dtype=float))
         return cls(d["physics"], tuple(d["names"]),
                    [np.asarray(g, dtype=float) for g in d["grid"]], log_density, marginals,
                    numbers(d.get("ml")), numbers(d.get("stderr")), number(d.get("edge_mass")),
