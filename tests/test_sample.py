@@ -254,6 +254,18 @@ def test_netcdf_round_trip(coloured_run, tmp_path):
                                   coloured_run.idata.sample_stats["lp"].values)
 
 
+def test_netcdf_variables_carry_the_model_units(coloured_run, model, tmp_path):
+    """Each posterior variable has a CF-style ``units`` attribute, the model's parameter unit
+    ("-" for the dimensionless pacf_j), in memory and in the file."""
+    expected = {n: model.parameter(n).unit for n in model.parameter_names}
+    expected.update(pacf_1="-", pacf_2="-")
+    back = Posterior.from_netcdf(coloured_run.to_netcdf(tmp_path / "u.nc"))
+    for post in (coloured_run, back):
+        assert {n: post.idata.posterior[n].attrs.get("units")
+                for n in post.parameter_names} == expected
+    assert expected["delta_abs"] == "IPUT" and expected["omega_nm"] == "rad/s"
+
+
 def test_netcdf_metadata_is_standard_json_with_nan_tau(tmp_path):
     """A tau that is not finite (a chain too short to estimate it) is written as JSON null, not
     as Python's NaN token that strict JSON parsers refuse, and is NaN again when read back."""

@@ -70,13 +70,17 @@ def write_csv_atomic(path: str | os.PathLike, fieldnames: Sequence[str],
 
 
 def json_ready(x: Any) -> Any:
-    """Nested dicts, lists and tuples with numpy scalars as Python numbers and non-finite
-    floats as None: what standard JSON can hold (NaN and Infinity are not JSON; many parsers
-    outside Python refuse them)."""
+    """Nested dicts, lists, tuples and numpy arrays (as nested lists) with numpy scalars as
+    Python numbers and non-finite floats as None: what standard JSON can hold (NaN and
+    Infinity are not JSON; many parsers outside Python refuse them)."""
     if isinstance(x, dict):
         return {k: json_ready(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [json_ready(v) for v in x]
+    if isinstance(x, np.ndarray):
+        # tolist gives Python scalars (nested lists), whose non-finite floats the float
+        # branch below then makes None; json.dumps refuses the array itself
+        return json_ready(x.tolist())
     if isinstance(x, (float, np.floating)):
         return float(x) if math.isfinite(x) else None
     if isinstance(x, np.integer):
@@ -91,9 +95,17 @@ VERSION_KEY = "bayespilot_version"
 
 
 def dumps(obj: Any, *, version: bool = True) -> str:
-    """The standard JSON text of a result's ``to_dict()``: non-finite numbers as null
-    (:func:`json_ready`; a reader's ``from_dict`` makes a float field's null NaN again,
-    :func:`nan_for_null`).
+    """The standard JSON text of a result's ``to_dict()``: NaN, +inf and -inf as null
+    (:func:`json_ready`; standard JSON has no token for them).
+
+    The package's convention: a null in a result file is NaN, or a non-finite number (+inf
+    or -inf, its sign not kept) written where a finite one was expected; a reader's
+    ``from_dict`` makes it NaN (:func:`number`, :func:`nan_for_null`).  A field whose None
+    is a value of its own (e.g. the ln BF of a Savage-Dickey estimate that is not valid)
+    reads a null as None.  The one exception: a diagnosis ranking
+    (``CandidateResult.to_dict``) keeps +inf and -inf as the strings ``"inf"`` and
+    ``"-inf"`` (written before this function sees them), apart from a missing value;
+    :func:`number` reads them back as infinities.
 
     A dict is written with :data:`VERSION_KEY`, the release that wrote it (readers ignore
     it), so that a result file says which code made its numbers; ``version=False`` leaves
@@ -108,9 +120,14 @@ def dumps(obj: Any, *, version: bool = True) -> str:
 
 
 def number(v: Any) -> float:
-    """A number as a result file holds it, as a float: null is NaN, and the strings
-    ``"inf"`` and ``"-inf"`` (a diagnosis ranking's infinite delta BIC, kept apart from a
-    missing value) are infinities."""
+    """A number as a result file holds it, as a float.
+
+    Null is NaN: a null stands for NaN, or for a non-finite number written where a finite
+    one was expected (:func:`dumps` writes both as null and keeps no sign), so NaN is all a
+    reader can restore.  The strings ``"inf"`` and ``"-inf"`` are infinities: a diagnosis ranking
+    (``CandidateResult.to_dict``, e.g. an infinite delta BIC) keeps +/-inf as these
+    strings, apart from a missing value.
+    """
     return math.nan if v is None else float(v)
 
 
@@ -154,6 +171,20 @@ def read_result(path: str | os.PathLike, from_dict: Any, what: str) -> Any:
         return from_dict(d)
     except WrongKind as exc:
         raise ValueError(f"{path}: {exc}") from None
+
+
+def dataclass_fields(cls: type, d: Mapping[str, Any], what: str) -> dict[str, Any]:
+    """The entries of a result file's dict ``d`` that are fields of the dataclass ``cls``.
+
+    A key ``cls`` does not have (a field a later release added) is left out, so that an
+    older reader still loads a newer file; a field without a default that ``d`` lacks is
+    refused (:class:`WrongKind`, naming it and ``what``), not a TypeError from ``cls``.
+    """
+    fields = dataclasses.fields(cls)
+    require_keys(d, [f.name for f in fields if f.default is dataclasses.MISSING
+                     and f.default_factory is dataclasses.MISSING], what)
+    names = {f.name for f in fields}
+    return {k: v for k, v in d.items() if k in names}
 
 
 def nan_for_null(cls: type, d: Mapping[str, Any]) -> dict[str, Any]:

@@ -104,7 +104,8 @@ from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from ._files import dumps, nan_for_null, read_result, require_keys, write_text_atomic
+from ._files import (WrongKind, dataclass_fields, dumps, nan_for_null, number, numbers,
+                     read_result, require_keys, write_text_atomic)
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
@@ -391,15 +392,21 @@ class Evidence:
         Returns
         -------
         Evidence
-            With ``samples`` and ``weights`` None.
+            With ``samples`` and ``weights`` None; ``best`` and ``mean`` with
+            NaN for null.  A key an Evidence does not have (a field of a later
+            release) is ignored.
 
         Raises
         ------
-        TypeError
-            If ``d`` lacks a field or has one an Evidence does not.
+        bayespilot._files.WrongKind
+            A ValueError: ``d`` lacks a field without a default (the message
+            names it).
         """
-        d = nan_for_null(cls, {k: v for k, v in d.items() if k not in ("samples", "weights")})
+        d = nan_for_null(cls, dataclass_fields(
+            cls, {k: v for k, v in d.items() if k not in ("samples", "weights")},
+            "a nested-sampling evidence"))
         d["parameter_names"] = tuple(d["parameter_names"])
+        d["best"], d["mean"] = numbers(d["best"]), numbers(d["mean"])
         return cls(**d)
 
 
@@ -686,6 +693,39 @@ class SavageDickey:
     def to_dict(self) -> dict[str, Any]:
         """Every attribute by name (:func:`dataclasses.asdict`)."""
         return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "SavageDickey":
+        """The estimate a :meth:`to_dict` holds, as read from JSON.
+
+        A null float is NaN (:func:`~bayespilot._files.dumps` wrote a
+        non-finite number as null), except where None is what the field
+        means: ``log_bayes_factor`` of an estimate that is not valid and
+        ``lower_bound`` stay None.  A key a SavageDickey does not have (a
+        field of a later release) is ignored.
+
+        Parameters
+        ----------
+        d : mapping
+            A :meth:`to_dict`.
+
+        Returns
+        -------
+        SavageDickey
+
+        Raises
+        ------
+        bayespilot._files.WrongKind
+            A ValueError: ``d`` lacks a field (the message names it).
+        """
+        d = nan_for_null(cls, dataclass_fields(cls, d, "a Savage-Dickey estimate"))
+        valid = bool(d["valid"])
+        lbf = d["log_bayes_factor"]
+        # None is what an estimate that is not valid has; a valid one was a number (a null
+        # there is a non-finite one).  A lower bound that is null was not computed.
+        d["log_bayes_factor"] = None if lbf is None and not valid else number(lbf)
+        d["lower_bound"] = None if d["lower_bound"] is None else number(d["lower_bound"])
+        return cls(**{**d, "valid": valid})
 
 
 def savage_dickey(draws: Sequence[float] | np.ndarray, *, lower: float = 0.0, upper: float = 0.1,
@@ -1134,25 +1174,44 @@ class Comparison:
         ValueError
             ``d`` lacks what a comparison's dict has (``log_bayes_factor``,
             ``log_bayes_factor_err``, ``decision``, the two evidences,
-            ``information_criteria``; the message names what is missing):
-            another kind of file.
+            ``information_criteria``), or an evidence or ``savage_dickey``
+            lacks a field (the message names what is missing): another kind of
+            file.  A key of a later release is ignored.
+
+        Notes
+        -----
+        A null number is NaN in the numbers of ``information_criteria`` (all
+        but the counts ``k_threshold``, ``k_none`` and ``n``, and in the
+        ``ml_*`` parameter dicts), the evidences' ``best`` and ``mean``, and
+        ``savage_dickey`` (see :meth:`SavageDickey.from_dict`).
+        ``plateau_probability`` is NaN for a null only where one was computed
+        (``settings["plateau_onset"]`` is not None, as :func:`compare`
+        makes it); otherwise None, not computed.
         """
         require_keys(d, ("log_bayes_factor", "log_bayes_factor_err", "decision",
                          "evidence_threshold", "evidence_none", "information_criteria"),
                      "a comparison")
-        sd = d.get("savage_dickey")
-        def num(v):
-            return math.nan if v is None else float(v)
+        settings = dict(d.get("settings") or {})
 
-        ic = {k: num(v) if k.startswith(("delta_", "aic", "bic")) else v
-              for k, v in d["information_criteria"].items()}
-        return cls(num(d["log_bayes_factor"]), num(d["log_bayes_factor_err"]), d["decision"],
-                   Evidence.from_dict(d["evidence_threshold"]),
-                   Evidence.from_dict(d["evidence_none"]),
-                   None if sd is None else SavageDickey(**nan_for_null(SavageDickey, sd)), ic,
-                   dict(d.get("settings", {})), d.get("seed"),
-                   num(d.get("elapsed_seconds")), d.get("source"),
-                   d.get("plateau_probability"))
+        def part(key, from_dict):  # the message says which part lacks a field
+            try:
+                return from_dict(d[key])
+            except WrongKind as exc:
+                raise WrongKind(f"{key}: {exc}") from None
+
+        sd = None if d.get("savage_dickey") is None else part("savage_dickey",
+                                                              SavageDickey.from_dict)
+        pp = d.get("plateau_probability")
+        if pp is not None or settings.get("plateau_onset") is not None:
+            # compare computes a probability wherever there is a plateau onset, so a null
+            # there was a number (NaN); before that field existed, or without an onset, None
+            pp = number(pp)
+        return cls(number(d["log_bayes_factor"]), number(d["log_bayes_factor_err"]),
+                   d["decision"], part("evidence_threshold", Evidence.from_dict),
+                   part("evidence_none", Evidence.from_dict), sd,
+                   _information_criteria_from_dict(d["information_criteria"]),
+                   settings, d.get("seed"), number(d.get("elapsed_seconds")), d.get("source"),
+                   pp)
 
     @classmethod
     def from_json(cls, path: str | os.PathLike) -> "Comparison":
@@ -1219,6 +1278,29 @@ class Comparison:
         return (f"<Comparison: ln BF = {_num(self.log_bayes_factor, '+.2f')} +- "
                 f"{_num(self.log_bayes_factor_err, '.2f')} -> {self.decision}"
                 f"{'' if n is None else f', N = {n}'}{_source(self.source)}>")
+
+
+#: The counts among :func:`information_criteria`'s entries (ints; every other entry is a float
+#: or, ``ml_*``, a dict of floats).
+_IC_COUNTS = ("k_threshold", "k_none", "n")
+
+
+def _information_criteria_from_dict(ic: Mapping[str, Any]) -> dict[str, Any]:
+    """:attr:`Comparison.information_criteria` as a file holds it, with NaN for each null
+    number (the counts are kept as they are; an entry that is not a number, null or an
+    ``ml_*`` dict, e.g. one of a later release, too)."""
+    out: dict[str, Any] = {}
+    for k, v in ic.items():
+        if k in _IC_COUNTS:
+            out[k] = v
+        elif isinstance(v, Mapping):
+            out[k] = numbers(v) if k.startswith("ml_") else dict(v)
+        elif v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)) \
+                or (isinstance(v, str) and v in ("inf", "-inf")):
+            out[k] = number(v)
+        else:
+            out[k] = v
+    return out
 
 
 def _num(v, spec: str) -> str:

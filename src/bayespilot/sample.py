@@ -330,6 +330,12 @@ class Posterior:
     def to_netcdf(self, path: str | os.PathLike) -> Path:
         """Write the InferenceData (with everything needed by :meth:`from_netcdf`) to ``path``.
 
+        The posterior's fields as they are now (``parameter_names``, ``tau``,
+        ``converged``, ``settings``, ``seed``; a changed setting included) are
+        written in the groups' attributes, as :func:`sample` writes them, in
+        place of those the InferenceData was given when the chain ended.
+        ``idata`` itself is not changed.
+
         Parameters
         ----------
         path : str or os.PathLike
@@ -343,8 +349,16 @@ class Posterior:
         """
         from ._files import replacing
 
+        meta = {"parameter_names": list(self.parameter_names), "tau": dict(self.tau),
+                "converged": bool(self.converged), "settings": dict(self.settings or {}),
+                "seed": self.seed}
+        # a shallow copy of each group: the draws are shared, the attributes are its own
+        az = _arviz()
+        idata = az.InferenceData(**{g: getattr(self.idata, g).copy(deep=False)
+                                    for g in self.idata.groups()})
+        _set_meta_attrs(idata, meta)
         with replacing(path) as tmp:  # the old file is kept if the write fails
-            self.idata.to_netcdf(str(tmp))
+            idata.to_netcdf(str(tmp))
         return Path(path)
 
     @classmethod
@@ -752,7 +766,50 @@ def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str
 
 
 # --- the chain as InferenceData ----------------------------------------------------------------
-def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
+def _meta_attrs(meta: Mapping[str, Any]) -> dict[str, Any]:
+    """The attributes of a posterior's groups that hold ``meta`` (``parameter_names``,
+    ``tau``, ``converged``, ``settings``, ``seed``): :data:`_META_ATTR`, the JSON that
+    :meth:`Posterior.from_netcdf` reads back, and, for other netCDF readers, each scalar
+    setting, ``true_<name>`` for each true parameter and ``converged`` (0 or 1) on their own;
+    with :data:`~bayespilot._files.VERSION_KEY`, the release that wrote them."""
+    from . import __version__
+
+    # Standard JSON (non-finite numbers as null, as every result file of the project), which
+    # strict parsers outside Python read; from_netcdf makes tau's nulls NaN again.
+    attrs: dict[str, Any] = {_files.VERSION_KEY: __version__, _META_ATTR: _files.dumps(meta)}
+    for k, v in meta["settings"].items():
+        if isinstance(v, (str, int, float)) and not isinstance(v, bool):
+            attrs[k] = v
+        elif isinstance(v, bool):
+            attrs[k] = int(v)
+    for k, v in (meta["settings"].get("true_parameters") or {}).items():
+        attrs[f"true_{k}"] = float(v)
+    attrs["converged"] = int(meta["converged"])
+    return attrs
+
+
+def _set_meta_attrs(idata, meta: Mapping[str, Any]) -> None:
+    """Write :func:`_meta_attrs` of ``meta`` on ``idata``'s posterior and sample_stats groups
+    (:func:`_to_idata` and :meth:`Posterior.to_netcdf`), first removing those of the meta they
+    held before (a setting since removed must not stay behind as an attribute)."""
+    new = _meta_attrs(meta)
+    for name in ("posterior", "sample_stats"):
+        group = getattr(idata, name, None)
+        if group is None:
+            continue
+        stale: set[str] = set()
+        if _META_ATTR in group.attrs:
+            try:
+                stale = set(_meta_attrs(json.loads(group.attrs[_META_ATTR])))
+            except (ValueError, KeyError, TypeError, AttributeError):
+                pass  # not a meta this release can read: its attributes are overwritten only
+        for k in stale - set(new) - {_files.VERSION_KEY}:
+            group.attrs.pop(k, None)
+        group.attrs.update(new)
+
+
+def _to_idata(sampler, names, tau: np.ndarray, meta: dict,
+              units: Mapping[str, str] | None = None):
     chain = np.asarray(sampler.get_chain(), dtype=float)  # (steps, walkers, ndim)
     lp = np.asarray(sampler.get_log_prob(), dtype=float)
     n = chain.shape[0]
@@ -775,22 +832,8 @@ def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
     stats = {"lp": lp[idx].T.copy(), "acceptance": acc.T.copy()}
     meta = dict(meta)
     meta["settings"] = dict(meta["settings"], discard=discard, thin=thin, n_draws=int(idx.size))
-    # Standard JSON (non-finite numbers as null, as every result file of the project), which
-    # strict parsers outside Python read; from_netcdf makes tau's nulls NaN again.
     import emcee
 
-    from . import __version__
-
-    attrs = {"inference_library": "emcee", "inference_library_version": emcee.__version__,
-             _files.VERSION_KEY: __version__, _META_ATTR: _files.dumps(meta)}
-    for k, v in meta["settings"].items():
-        if isinstance(v, (str, int, float)) and not isinstance(v, bool):
-            attrs[k] = v
-        elif isinstance(v, bool):
-            attrs[k] = int(v)
-    for k, v in (meta["settings"].get("true_parameters") or {}).items():
-        attrs[f"true_{k}"] = float(v)
-    attrs["converged"] = int(meta["converged"])
     az = _arviz()
     with warnings.catch_warnings():
         # arviz guesses the axes were swapped when there are more chains than draws; here
@@ -798,7 +841,14 @@ def _to_idata(sampler, names, tau: np.ndarray, meta: dict):
         warnings.filterwarnings("ignore", message="More chains", category=UserWarning)
         idata = az.from_dict(posterior=posterior, sample_stats=stats)
     for group in (idata.posterior, idata.sample_stats):
-        group.attrs.update(attrs)
+        group.attrs.update({"inference_library": "emcee",
+                            "inference_library_version": emcee.__version__})
+    _set_meta_attrs(idata, meta)
+    # CF-style units of each variable (the model's notation: "-" is dimensionless), for
+    # netCDF readers; Posterior.from_netcdf does not need them
+    for nm, unit in (units or {}).items():
+        if nm in idata.posterior:
+            idata.posterior[nm].attrs["units"] = unit
     return idata, meta
 
 
@@ -1135,7 +1185,9 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     tau = {n: float(t) for n, t in zip(names, run.tau)}
     meta = {"parameter_names": list(names), "tau": tau, "converged": bool(run.converged),
             "settings": settings, "seed": seed}
-    idata, meta = _to_idata(run.sampler, names, run.tau, meta)
+    # the AR model's partial autocorrelations are dimensionless
+    units = {n: (model.parameter(n).unit if n in model.parameter_names else "-") for n in names}
+    idata, meta = _to_idata(run.sampler, names, run.tau, meta, units)
     return Posterior(idata, tuple(names), tau, bool(run.converged), meta["settings"], seed)
 
 
