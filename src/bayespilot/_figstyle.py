@@ -18,8 +18,28 @@ VECTOR_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
 
 def save_figure(fig, path, dpi: int = PLOT_DPI) -> None:
     """Write ``fig`` to ``path`` (format from its suffix) at ``dpi``, a vector format with
-    its text kept (:data:`VECTOR_TEXT`); the figure stays open (the caller closes it)."""
+    its text kept (:data:`VECTOR_TEXT`); the figure stays open (the caller closes it).
+
+    The file is written atomically (:func:`bayespilot._files.replacing`: a temporary file
+    beside it, then renamed), so an interrupt or a full disk leaves the old file or the new
+    one, never a truncated one.  A ``path`` without a suffix gets matplotlib's default
+    format's, as ``savefig`` gives it; a file object is written to directly.
+    """
+    import os
+
     import matplotlib
 
-    with matplotlib.rc_context(VECTOR_TEXT):
-        fig.savefig(path, dpi=dpi)
+    from ._files import replacing
+
+    if not isinstance(path, (str, os.PathLike)):  # a file object: nothing to replace
+        with matplotlib.rc_context(VECTOR_TEXT):
+            fig.savefig(path, dpi=dpi)
+        return
+    path = os.fspath(path)
+    fmt = os.path.splitext(path)[1][1:]
+    if not fmt:  # as savefig does: the default format, its suffix appended
+        fmt = matplotlib.rcParams["savefig.format"]
+        path = f"{path.rstrip('.')}.{fmt}"
+    # format= given: savefig would take it from the temporary file's suffix (".tmp")
+    with matplotlib.rc_context(VECTOR_TEXT), replacing(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format=fmt)

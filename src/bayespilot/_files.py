@@ -16,11 +16,29 @@ from typing import Any, Iterable, Iterator, Mapping, Sequence
 import numpy as np
 
 
+#: The longest file name (one path component) most file systems take, in bytes (ext4,
+#: XFS, btrfs, APFS, tmpfs; NTFS counts 255 UTF-16 units, which the bytes never exceed).
+NAME_MAX = 255
+
+
 def temporary_sibling(path: str | os.PathLike) -> Path:
     """A hidden file name beside ``path``, unique to this process and call (two writers of
-    one path never share it)."""
+    one path never share it).
+
+    The name is ``.<name>.<pid>-<8 hex>.tmp``, with ``<name>`` cut short (whole characters)
+    so that it is at most :data:`NAME_MAX` bytes: a legal long name of up to 255 bytes
+    stays writable (the ~22 bytes added made it "File name too long").  The pid and the
+    random part keep it unique; it stays in ``path``'s folder, so the rename is atomic.
+    """
     path = Path(path)
-    return path.with_name(f".{path.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
+    tail = f".{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp"
+    budget = NAME_MAX - len(os.fsencode(f".{tail}"))
+    stem = path.name
+    # by characters, not bytes: a cut inside a UTF-8 sequence would give a name that is
+    # not valid text (and os.fsencode of a str counts its bytes as the OS will see them)
+    while len(os.fsencode(stem)) > budget:
+        stem = stem[:-1]
+    return path.with_name(f".{stem}{tail}")
 
 
 @contextlib.contextmanager
@@ -43,8 +61,34 @@ def replacing(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
+def utf8_text(s: str) -> str:
+    """``s`` as text that UTF-8 can hold: a lone surrogate made valid.
+
+    Under a C/POSIX locale with UTF-8 mode off (``LC_ALL=C PYTHONUTF8=0``), Python decodes
+    the command line and file names as ASCII with ``surrogateescape``, so "Müller" arrives
+    as ``"M\\udcc3\\udcbcller"``: written as it is, such text crashes a strict UTF-8
+    write (``surrogates not allowed``) or goes into a JSON file as lone surrogates (mojibake
+    for its readers, refused by strict parsers).  Those escaped bytes are turned back into
+    the bytes they stood for and decoded as UTF-8, which restores the original text
+    ("Müller"); bytes that are not UTF-8, and any other lone surrogate, become U+FFFD.
+    Text without surrogates is returned as it is.
+    """
+    try:
+        s.encode("utf-8")
+        return s
+    except UnicodeEncodeError:
+        pass
+    # a surrogate outside U+DC80-U+DCFF stands for no byte (surrogateescape refuses it): one
+    # U+FFFD each, the escaped bytes beside it still restored
+    s = "".join("\ufffd" if "\ud800" <= c <= "\udfff" and not "\udc80" <= c <= "\udcff"
+                else c for c in s)
+    return s.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+
+
 def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
-    """Write ``text`` (UTF-8) to ``path`` atomically (:func:`replacing`); returns ``path``."""
+    """Write ``text`` (UTF-8, :func:`utf8_text`) to ``path`` atomically (:func:`replacing`);
+    returns ``path``."""
+    text = utf8_text(text)
     with replacing(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
@@ -72,9 +116,14 @@ def write_csv_atomic(path: str | os.PathLike, fieldnames: Sequence[str],
 def json_ready(x: Any) -> Any:
     """Nested dicts, lists, tuples and numpy arrays (as nested lists) with numpy scalars as
     Python numbers and non-finite floats as None: what standard JSON can hold (NaN and
-    Infinity are not JSON; many parsers outside Python refuse them)."""
+    Infinity are not JSON; many parsers outside Python refuse them), and strings (values
+    and keys) as valid text (:func:`utf8_text`: a path given under ``LC_ALL=C PYTHONUTF8=0``
+    holds lone surrogates)."""
+    if isinstance(x, str):
+        return utf8_text(x)
     if isinstance(x, dict):
-        return {k: json_ready(v) for k, v in x.items()}
+        return {json_ready(k) if isinstance(k, str) else k: json_ready(v)
+                for k, v in x.items()}
     if isinstance(x, (list, tuple)):
         return [json_ready(v) for v in x]
     if isinstance(x, np.ndarray):

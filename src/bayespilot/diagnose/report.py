@@ -12,14 +12,16 @@ layout are left as they are.
 from __future__ import annotations
 
 import base64
+import hashlib
 import html
+import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
-from .._files import write_text_atomic
+from .._files import dumps, write_text_atomic
 from .._labels import parameter_label, symbol
 from .._figstyle import PLOT_DPI, PLOT_FORMATS, save_figure
 from ..plots import PAGE_WIDTH, _figsize
@@ -875,24 +877,113 @@ def _checked_formats(formats: str | Sequence[str]) -> tuple[str, ...]:
     return formats
 
 
+#: The file in a report's folder that lists the figure files the report wrote, each with
+#: its SHA-256.  A later report removes a figure it does not write again (stale, of another
+#: diagnosis) only when it is listed here and unchanged: a file of the user's that has a
+#: figure's name (``paper/posterior.pdf``) is never removed.  A file of its own, not a key
+#: of ``diagnosis.json``: that is the diagnosis (the result file ``--json`` writes), both
+#: reports' result writers would have to know of their figures, and it is written after
+#: them, while this list is kept up to date figure by figure.  Hidden: bookkeeping.
+MANIFEST = ".bayespilot-report.json"
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _is_figure_file(name: Any) -> bool:
+    """Whether a manifest's entry is a plain figure file name (``<name>.<format>``, in the
+    folder itself): an edited or damaged manifest cannot make a report remove anything
+    else (``../x``, ``report.html``)."""
+    return (isinstance(name, str) and name == Path(name).name and "/" not in name
+            and "\\" not in name and not name.startswith(".")
+            and Path(name).suffix[1:] in FORMATS)
+
+
+def _earlier_figures(out: Path, figures: Mapping[str, Any]) -> dict[str, str]:
+    """The figure files an earlier report in ``out`` wrote (file name -> SHA-256), which a
+    report may remove: those its :data:`MANIFEST` lists; nothing when the manifest cannot
+    be read.  A folder without one (new, or a report of a release before the manifest):
+    only a PNG of one of ``figures`` whose bytes ``out/report.html`` embeds, a page of this
+    package's; that image is provably an earlier report's figure, and the page that shows
+    it is being replaced.  Its PDF and SVG copies, which no page embeds, are left."""
+    try:
+        files = json.loads((out / MANIFEST).read_text(encoding="utf-8"))["files"]
+        return {n: h for n, h in files.items() if _is_figure_file(n) and isinstance(h, str)}
+    except FileNotFoundError:
+        pass
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return {}  # unreadable: nothing is provably ours
+    try:
+        page = (out / "report.html").read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return {}
+    if "<title>bayespilot " not in page:
+        return {}
+    found = {}
+    for name in figures:
+        png = out / f"{name}.png"
+        try:
+            data = png.read_bytes()
+        except OSError:
+            continue
+        if f'base64,{base64.b64encode(data).decode("ascii")}"' in page:
+            found[png.name] = hashlib.sha256(data).hexdigest()
+    return found
+
+
+def _remove_if_unchanged(path: Path, digest: str) -> None:
+    """Remove ``path`` if it is a file (not a link) whose SHA-256 is ``digest``: the figure
+    an earlier report wrote, not a file put in its place since."""
+    try:
+        if path.is_symlink() or not path.is_file() or _digest(path) != digest:
+            return
+    except OSError:
+        return
+    path.unlink(missing_ok=True)
+
+
 def _write_figures(figures: Mapping[str, Any], out: Path,
                    formats: Sequence[str]) -> dict[str, Path]:
     """Draw and save each of ``figures`` (name -> a function drawing it, or None for a figure
     with nothing to draw) as ``out/<name>.png`` and its other ``formats`` beside it; the
-    files by name (``<name>``, ``<name>_pdf``, ...).  A file of a name or format not written
-    now (left from an earlier report, of another diagnosis) is removed, so the folder holds
-    only this report's figures."""
+    files by name (``<name>``, ``<name>_pdf``, ..., and ``manifest``, :data:`MANIFEST`).
+
+    A figure file an earlier report wrote and this one does not (a figure or format not
+    drawn now, of another diagnosis) is removed, so the folder holds only this report's
+    figures; only one the earlier report's :data:`MANIFEST` lists (or, without a manifest,
+    one its page embeds: :func:`_earlier_figures`), and only if unchanged since.  Any other
+    file of a figure's name is the user's and is left.  Each figure is written atomically
+    (:func:`~bayespilot._figstyle.save_figure`), and the manifest is rewritten after each
+    one, so that an interrupted report leaves a manifest that lists every file of ours.
+    """
+    earlier = _earlier_figures(out, figures)
+    manifest = out / MANIFEST
     paths: dict[str, Path] = {}
+    written: dict[str, str] = {}
     for name, draw in figures.items():
+        if draw is None:
+            continue
         png = out / f"{name}.png"
-        if draw is not None:
-            paths[name] = _png(draw(), png, formats)
-            for fmt in formats[1:]:
-                paths[f"{name}_{fmt}"] = png.with_suffix(f".{fmt}")
-        for fmt in FORMATS:
-            if draw is None or fmt not in formats:
-                png.with_suffix(f".{fmt}").unlink(missing_ok=True)
+        paths[name] = _png(draw(), png, formats)
+        for fmt in formats[1:]:
+            paths[f"{name}_{fmt}"] = png.with_suffix(f".{fmt}")
+        for fmt in formats:
+            f = png.with_suffix(f".{fmt}")
+            written[f.name] = _digest(f)
+        _write_manifest(manifest, {**earlier, **written})
+    for name, digest in earlier.items():
+        if name not in written:
+            _remove_if_unchanged(out / name, digest)
+    paths["manifest"] = _write_manifest(manifest, written)
     return paths
+
+
+def _write_manifest(path: Path, files: Mapping[str, str]) -> Path:
+    """Write the :data:`MANIFEST` ``path``: ``files`` (file name -> SHA-256), atomically."""
+    return write_text_atomic(path, dumps({"what": "the figure files a bayespilot report "
+                                          "wrote here (a later report removes only these)",
+                                          "files": dict(sorted(files.items()))}))
 
 
 def _png(fig, path: Path, formats: Sequence[str] = ("png",)) -> Path:
@@ -991,7 +1082,9 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         :meth:`PooledDiagnosisResult.report`).
     directory : str or Path
         Created, with its parents, if missing; files of the same names in it
-        are replaced.
+        are replaced.  A figure file an earlier report wrote there and this
+        one does not is removed; any other file is left, also one of a
+        figure's name (``posterior.pdf`` of the user's): see ``manifest``.
     recording : Recording, optional
         The recording diagnosed, for a result without its sample interval
         (:func:`plot_residuals`).
@@ -1008,13 +1101,22 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         chosen extension has profile intervals), ``posterior`` (PNG, when
         ``result.posterior`` is set), each figure's other formats as
         ``<name>_pdf`` and ``<name>_svg``, ``json`` (``diagnosis.json``,
-        :meth:`DiagnosisResult.to_json`) and ``html`` (``report.html``, the
-        figures embedded).  A figure that would be empty is not written (a
-        file of its name left from an earlier report is removed) and the
-        page says why in words: ``frequency_response`` without a describing
-        function (a record that is not whole periods of the forcing),
-        ``evidence`` without bootstrap p-values (``n_bootstrap=0``, or the
-        bootstrap skipped).
+        :meth:`DiagnosisResult.to_json`), ``html`` (``report.html``, the
+        figures embedded) and ``manifest`` (:data:`MANIFEST`, the hidden
+        list of the figure files written, with their SHA-256: a later report
+        removes a stale figure only if this list has it and it is unchanged;
+        in a folder without one, of a release before it, only a stale PNG
+        that the old ``report.html`` embeds).  A figure that would be empty
+        is not written (one an earlier report left is removed, as above) and
+        the page says why in words: ``frequency_response`` without a
+        describing function (a record that is not whole periods of the
+        forcing), ``evidence`` without bootstrap p-values
+        (``n_bootstrap=0``, or the bootstrap skipped).
+
+        The figures are written first, each atomically (a temporary file,
+        then renamed: an interrupt leaves the old file or the new one), then
+        ``diagnosis.json``, then ``report.html``: a new page always comes
+        with its own figures.
 
     Raises
     ------
@@ -1045,7 +1147,8 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         figures["profile"] = None  # (one left from an earlier report is removed)
     if post is None:
         figures["posterior"] = None
-    # no empty placeholder, nor a figure left from an earlier report
+    # no empty placeholder, nor a figure left from an earlier report; the figures first,
+    # the page last (an interrupted report never has a new page beside old figures)
     paths = _write_figures(figures, out, formats)
     paths["json"] = out / "diagnosis.json"
     result.to_json(paths["json"])
