@@ -289,7 +289,9 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         ----------
         directory : str or Path
             Created, with its parents, if missing; files of the same names in
-            it are replaced.
+            it are replaced.  A figure file an earlier report wrote there and
+            this one does not is removed; any other file is left, also one of a
+            figure's name (see ``manifest``).
         formats : sequence of str, optional
             Also write each figure in these formats beside its PNG (``"pdf"``,
             ``"svg"``), as :meth:`DiagnosisResult.report` does.
@@ -299,7 +301,10 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         dict of str to Path
             The files by name: ``candidates``, ``runs``, ``posterior`` (when
             set), each figure's other formats as ``<name>_pdf`` and
-            ``<name>_svg``, ``json`` and ``html``.
+            ``<name>_svg``, ``json``, ``html`` and ``manifest``
+            (:data:`~bayespilot.diagnose.report.MANIFEST`, the hidden list of
+            the figure files written, as :meth:`DiagnosisResult.report`
+            writes it).
 
         Raises
         ------
