@@ -22,6 +22,14 @@ exactly those files).  Our cache's source stamp therefore also holds a
 digest of every source file in the kernel's folder and of this file
 (``_FolderCache``): an edit to any of them recompiles every kernel in the
 folder at its first call.
+
+Where numba finds no writable folder for that cache (a read-only install with
+an unwritable home folder: a container image, a site-wide install on a
+cluster), numba refuses every ``cache=True`` kernel at import.  ``njit`` then
+points numba's cache at a private folder under :func:`tempfile.gettempdir`
+(through ``NUMBA_CACHE_DIR``, numba's own setting, so worker processes use it
+too), or compiles without a cache if that is not writable either, with one
+warning (``_jit``).  Where numba finds a folder, nothing changes.
 """
 
 from __future__ import annotations
@@ -29,6 +37,9 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import stat
+import tempfile
+import warnings
 from pathlib import Path
 
 # numba's OpenMP threading layer spin-waits between parallel regions by
@@ -42,6 +53,10 @@ import numba  # noqa: E402
 from numba.core.caching import FunctionCache  # noqa: E402
 
 JIT_OPTIONS = {"cache": True, "error_model": "numpy", "nogil": True}
+
+# How the cache is kept when numba found no folder for it: None (numba's own choice, the
+# normal case), "temporary" (NUMBA_CACHE_DIR set to _temporary_cache_dir()) or "off".
+_cache_fallback: str | None = None
 
 
 @functools.lru_cache(maxsize=None)
@@ -83,6 +98,83 @@ def _with_folder_cache(dispatcher):
     return dispatcher
 
 
+def _temporary_cache_dir() -> Path | None:
+    """A folder under the temporary folder that only this user can write, or None.
+
+    numba loads its cache files with pickle, so a folder another user could write into would
+    let them run code in this process: a shared name is used only if it is a real folder,
+    owned by this user and writable by no one else; otherwise a fresh private folder."""
+    try:
+        base = Path(tempfile.gettempdir())  # raises when no candidate folder is writable
+    except OSError:
+        return None
+    if hasattr(os, "getuid"):
+        shared = base / f"bayespilot-numba-cache-{os.getuid()}"
+        try:
+            shared.mkdir(mode=0o700, exist_ok=True)
+            st = os.lstat(shared)
+            if (stat.S_ISDIR(st.st_mode) and st.st_uid == os.getuid()
+                    and not st.st_mode & (stat.S_IWGRP | stat.S_IWOTH)):
+                tempfile.TemporaryFile(dir=shared).close()  # numba's own writability test
+                return shared
+        except OSError:
+            pass
+    try:
+        return Path(tempfile.mkdtemp(prefix="bayespilot-numba-cache-"))
+    except OSError:
+        return None
+
+
+def _warn_fallback(tried: str, where: str) -> None:
+    shown = f"NUMBA_CACHE_DIR={tried}, " if tried else ""
+    # stacklevel: _warn_fallback, _jit, njit (or its lambda), then the kernel's module
+    warnings.warn(f"bayespilot: numba finds no writable folder for its cache of compiled kernels "
+                  f"({shown}the package's __pycache__ folders or the user's cache folder); "
+                  f"{where}. Set NUMBA_CACHE_DIR to a writable folder to choose where.",
+                  RuntimeWarning, stacklevel=4)
+
+
+def _jit(opts: dict, func):
+    """``numba.njit(**opts)(func)``; where numba refuses to cache for want of a writable
+    folder (it raises at decoration, so at the import of a kernel module), the same with the
+    cache in :func:`_temporary_cache_dir`, else without a cache, from then on for every
+    kernel, with one warning."""
+    global _cache_fallback
+    if _cache_fallback == "off":
+        opts = {**opts, "cache": False}
+    try:
+        return numba.njit(**opts)(func)
+    except RuntimeError as exc:
+        if not opts.get("cache") or "no locator available" not in str(exc):
+            raise
+    tried = numba.config.CACHE_DIR
+    folder = _temporary_cache_dir() if _cache_fallback is None else None
+    if folder is not None:
+        before = os.environ.get("NUMBA_CACHE_DIR")
+        # numba's documented setting, in the environment: numba re-reads it before each
+        # compilation (setting numba.config alone would not last), and worker processes
+        # inherit it; reload_config applies it at once
+        os.environ["NUMBA_CACHE_DIR"] = str(folder)
+        numba.config.reload_config()
+        try:
+            dispatcher = numba.njit(**opts)(func)
+        except RuntimeError as exc:
+            if "no locator available" not in str(exc):
+                raise
+            if before is None:  # useless: numba's setting as it was
+                del os.environ["NUMBA_CACHE_DIR"]
+            else:
+                os.environ["NUMBA_CACHE_DIR"] = before
+            numba.config.reload_config()
+        else:
+            _cache_fallback = "temporary"
+            _warn_fallback(tried, f"caching them in {folder}")
+            return dispatcher
+    _cache_fallback = "off"
+    _warn_fallback(tried, "compiling them anew in every process (slower to start)")
+    return numba.njit(**{**opts, "cache": False})(func)
+
+
 def njit(*args, **kwargs):
     """``numba.njit`` with the package defaults; keyword arguments override them.
 
@@ -91,11 +183,11 @@ def njit(*args, **kwargs):
     opts = dict(JIT_OPTIONS)
     opts.update(kwargs)
     if args and callable(args[0]):
-        return _with_folder_cache(numba.njit(**opts)(args[0]))
+        return _with_folder_cache(_jit(opts, args[0]))
     if args:
         raise TypeError("bayespilot's njit takes no signature (kernels compile lazily, so that "
                         "their disk cache is keyed on the kernels' sources)")
-    return lambda func: _with_folder_cache(numba.njit(**opts)(func))
+    return lambda func: _with_folder_cache(_jit(opts, func))
 
 
 def pjit(*args, **kwargs):

@@ -52,6 +52,11 @@ _NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?", re.ASCII)
 _FAST_BODY = re.compile(r"[0-9eE+\-.,\r\n \t]*")
 _NAN = re.compile(r"[+-]?nan", re.IGNORECASE)
 _INF = re.compile(r"[+-]?inf(?:inity)?", re.IGNORECASE)
+# A number with a decimal comma (German Excel: "0,5", "1.234,5"); the cell is quoted, since
+# ',' also separates the fields.
+_DECIMAL_COMMA = re.compile(r"[+-]?(?:\d+(?:\.\d{3})*)?,\d+(?:[eE][+-]?\d+)?", re.ASCII)
+# Excel's separator hint, a first line "sep=," (or "sep=;", "sep=<tab>").
+_SEP_LINE = re.compile(r"\s*sep=\S?\s*", re.IGNORECASE)
 
 
 # ---------------------------------------------------------------------------
@@ -133,6 +138,48 @@ def _check_metadata(where: Any, obj: Mapping[str, Any], *, what: str = "key") ->
     return float(rate), float(kth), task, rest
 
 
+def _multiples(t: np.ndarray, unit: np.ndarray | float) -> bool:
+    """Whether every t is a whole multiple of ``unit`` (to a few float64 rounding units)."""
+    slack = 4.0 * np.spacing(np.maximum(np.abs(t), 1.0))
+    return bool(np.all(np.abs(t - np.round(t / unit) * unit) <= slack))
+
+
+def _rounding_hint(t: np.ndarray, rate: float) -> str:
+    """Why ``t``, refused as not uniform, may be so: rounded when it was written ('' if not).
+
+    An exporting tool that keeps a few decimals (an Excel "0.000" format: 1 ms, too coarse
+    at 120 Hz) or a few significant digits (MATLAB's csvwrite: 5) makes the steps alternate
+    between two values a rounding unit apart, which the reader rightly refuses.  The hint is
+    given only when every t is a multiple of that unit and lies within half a unit of the
+    exact time k / sample_rate_hz, the unit finer than a step: a dropped, repeated or
+    jittered sample is not explained by it.  Decimals are tried first, then significant
+    digits (whose unit grows with t)."""
+    dt = 1.0 / rate
+    exact = np.arange(t.size) / rate
+    slack = 4.0 * np.spacing(np.maximum(np.abs(t), 1.0))
+    for d in range(10):
+        unit = 10.0 ** -d
+        if unit >= dt or not _multiples(t, unit):
+            continue
+        if np.all(np.abs(t - exact) <= unit / 2 + slack):
+            return (f"; t looks rounded to {unit:g} s (written with {d} decimal"
+                    f"{'' if d == 1 else 's'}): write t with more digits")
+        break  # the coarsest unit t is made of does not explain it: significant digits?
+    nonzero = np.abs(t) > 0
+    scale = np.zeros_like(t)
+    scale[nonzero] = np.floor(np.log10(np.abs(t[nonzero])))
+    for digits in range(1, 16):
+        unit = np.where(nonzero, 10.0 ** (scale - digits + 1), 1.0)
+        if not _multiples(t, unit):
+            continue
+        coarsest = float(np.max(unit[nonzero], initial=0.0))  # (a t of 0 is exact)
+        if coarsest < dt and np.all(np.abs(t - exact) <= np.where(nonzero, unit, 0.0) / 2 + slack):
+            return (f"; t looks rounded to {digits} significant digits ({coarsest:g} s at its "
+                    f"end; MATLAB's csvwrite keeps 5): write t with more digits")
+        return ""
+    return ""
+
+
 def _build(signals: dict[str, np.ndarray], rate: float, kth: float, task: str,
            metadata: dict, where: Any, stem: Path) -> Recording:
     """Make the Recording; any problem it finds is reported against ``where``."""
@@ -144,6 +191,8 @@ def _build(signals: dict[str, np.ndarray], rate: float, kth: float, task: str,
         prefix = f"{source}: "
         if msg.startswith(prefix):
             msg = msg[len(prefix):]
+        if msg.startswith("t is not uniformly spaced") and "t" in signals:
+            msg += _rounding_hint(np.asarray(signals["t"], dtype=np.float64), rate)
         raise _fail(where, msg) from None
     # valid but unlike the paper's data (short, slow): warn, at the reader's caller
     _warn_if_questionable(rec)
@@ -198,7 +247,11 @@ def _parse_column(path: Path, name: str, values: list[str], lines: list[int]) ->
         if _INF.fullmatch(s):
             raise _fail(path, f"infinite value {cell!r} {where} (values must be finite)")
         if not _NUMBER.fullmatch(s):
-            raise _fail(path, f"non-numeric value {cell!r} {where}")
+            hint = ""
+            if _DECIMAL_COMMA.fullmatch(s):
+                hint = (f" (a decimal comma? the format writes numbers with '.' as the decimal "
+                        f"point, {s.replace('.', '').replace(',', '.')!r}, and ',' between fields)")
+            raise _fail(path, f"non-numeric value {cell!r} {where}{hint}")
         v = float(s)
         if not math.isfinite(v):
             raise _fail(path, f"infinite value {cell!r} {where} (overflows a float; values must be finite)")
@@ -226,6 +279,16 @@ def _header_hint(header: list[str], missing: list[str]) -> str:
 
 
 def _check_header(path: Path, header: list[str]) -> list[str]:
+    line = ",".join(header)
+    if _SEP_LINE.fullmatch(line):  # (else: "empty column name in the header (column 2)")
+        raise _fail(path, f"the first line reads {line!r}, Excel's separator hint: the format "
+                          f"has no such line; its first line is the header row of column names "
+                          f"(delete that line)")
+    for j, h in enumerate(header):
+        if "\ufeff" in h:  # the file's first BOM is gone when decoded: this is another one
+            raise _fail(path, f"a byte-order mark (U+FEFF) in the header, column {j + 1} "
+                              f"({h.strip()!r}): the file has a second one after the first "
+                              f"(saved again with a BOM added, or files joined?); remove it")
     names = [h.strip() for h in header]
     for j, h in enumerate(names):
         if not h:
@@ -267,6 +330,11 @@ def _read_csv_fast(path: Path, text: str) -> dict[str, np.ndarray] | None:
     return {name: np.ascontiguousarray(arr[:, j]) for j, name in enumerate(names)}
 
 
+def _is_blank(row: list[str]) -> bool:
+    """A CSV row that is an empty line or one holding only blanks (spaces, tabs)."""
+    return not row or (len(row) == 1 and not row[0].strip())
+
+
 def _read_csv(path: Path) -> dict[str, np.ndarray]:
     raw = _read_bytes(path)
     if not raw:
@@ -281,7 +349,7 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
     reader = csv.reader(_stdio.StringIO(text, newline=""), strict=True)
     try:
         header = next(reader, None)
-        while header == []:  # blank lines before the header
+        while header is not None and _is_blank(header):  # blank lines before the header
             header = next(reader, None)
         if header is None:
             raise _fail(path, "file is empty (expected a header row and data rows)")
@@ -291,11 +359,18 @@ def _read_csv(path: Path) -> dict[str, np.ndarray]:
         lines: list[int] = []
         blank_at: int | None = None
         for row in reader:
-            if not row:
+            if _is_blank(row):  # blank lines at the end are allowed, as editors leave them
                 if blank_at is None:
                     blank_at = reader.line_num
                 continue
             if blank_at is not None:
+                stray = text.find("\r\r\n")
+                if stray >= 0:  # csv reads "\r\r\n" as a line end and a blank line
+                    line_no = text.count("\n", 0, stray) + 1
+                    raise _fail(path, f"line {line_no} ends in "
+                                      f"\\r\\r\\n: stray carriage returns (line ends converted "
+                                      f"twice, e.g. Python's csv.writer on Windows without "
+                                      f"newline=''); end lines in \\n or \\r\\n")
                 raise _fail(path, f"line {blank_at} is blank (expected {ncol} fields)")
             if len(row) != ncol:
                 fields = f"{len(row)} field" + ("" if len(row) == 1 else "s")
@@ -372,11 +447,15 @@ def read_recording(path: PathLike) -> Recording:
         folder or a file that is not a recording (``post.nc``); a file is
         missing, unreadable or empty; the CSV has a missing, duplicate or
         empty column name (with a hint when the header is separated by ``;``
-        or tabs, is a ``#`` comment, or misspells a required name), a row
-        with too few or too many fields, no data rows, or an empty,
-        non-numeric, NaN or infinite value; ``t`` does not start at 0, is not
-        uniform or disagrees with ``sample_rate_hz`` (with a hint when ``t``
-        looks like milliseconds or sample counts); the JSON is not valid
+        or tabs, is a ``#`` comment, or misspells a required name; named: a
+        first line ``sep=,``, Excel's separator hint, and a second byte-order
+        mark), a row with too few or too many fields, a blank line before
+        more data (named: lines ending in ``\\r\\r\\n``), no data rows, or an
+        empty, non-numeric (with a hint for a decimal comma), NaN or infinite
+        value; ``t`` does not start at 0, is not uniform or disagrees with
+        ``sample_rate_hz`` (with a hint when ``t`` looks like milliseconds or
+        sample counts, or rounded to a few decimals or significant digits);
+        the JSON is not valid
         JSON, not an object, lacks a required key, has an unknown ``format``
         or a key of the wrong type or value (``controlled_element`` without
         numeric ``num``/``den``, with a zero or improper plant, or together
@@ -399,9 +478,11 @@ def read_recording(path: PathLike) -> Recording:
     Notes
     -----
     CSV cells are decimal numbers (surrounding blanks allowed); header names
-    are stripped of surrounding blanks.  ``NaN``/``Infinity`` are refused in
-    both files, as are duplicate JSON keys.  The files are only opened for
-    reading.
+    are stripped of surrounding blanks; empty lines, or lines of blanks only,
+    at the end are ignored.  ``NaN``/``Infinity`` are refused in both files,
+    as are duplicate JSON keys.  A ``run`` of ``1.0`` is read as ``1`` (JSON
+    does not tell them apart; :func:`read_mat` does the same).  The files are
+    only opened for reading.
 
     Examples
     --------
@@ -435,6 +516,7 @@ def read_recording(path: PathLike) -> Recording:
         if not json_exists:
             raise _fail(csv_path, f"no sidecar {json_path} found")
     meta = _read_json(json_path)
+    _integral_run(meta)
     rate, kth, task, rest = _check_metadata(json_path, meta)
     signals = _read_csv(csv_path)
     return _build(signals, rate, kth, task, rest, csv_path, stem)
@@ -481,11 +563,18 @@ def _as_list(x: Any) -> Any:
     return [x] if _is_number(x) else x
 
 
-def _mat_normalise(meta: dict[str, Any]) -> None:
-    """Undo MATLAB conventions for the keys whose types the format fixes."""
+def _integral_run(meta: dict[str, Any]) -> None:
+    """``run`` 1.0 as the integer 1: JSON has one kind of number, so 1.0 is the number 1
+    (tools that write every number as a float, MATLAB and pandas' to_json, write it so);
+    1.5 and true stay refused."""
     run = meta.get("run")
     if isinstance(run, float) and run.is_integer():
         meta["run"] = int(run)
+
+
+def _mat_normalise(meta: dict[str, Any]) -> None:
+    """Undo MATLAB conventions for the keys whose types the format fixes."""
+    _integral_run(meta)
     ce = meta.get("controlled_element")
     if isinstance(ce, dict):
         for part in ("num", "den"):
@@ -643,15 +732,37 @@ def read_mat(path: PathLike) -> Recording:
 # ---------------------------------------------------------------------------
 # writing
 # ---------------------------------------------------------------------------
+def _clean_text(s: str) -> str:
+    """``s`` with lone surrogates made text again, so that it can be written as UTF-8.
+
+    Under the C locale without UTF-8 mode (``LC_ALL=C PYTHONUTF8=0``) Python hands over
+    command-line arguments and file names undecodable as ASCII with each byte escaped as a
+    lone surrogate (``--subject Müller`` arrives as ``'M\\udcc3\\udcbcller'``), which strict
+    UTF-8 refuses.  The escaped bytes are decoded as UTF-8 (``'Müller'``); bytes that are no
+    UTF-8, and surrogates that escape no byte, become U+FFFD or ``?``."""
+    try:
+        s.encode("utf-8")
+        return s
+    except UnicodeEncodeError:
+        pass
+    try:
+        return s.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
+    except UnicodeEncodeError:  # a surrogate outside U+DC80..U+DCFF escapes no byte
+        return s.encode("utf-8", "replace").decode("utf-8")
+
+
 def _to_json(where: Any, name: str, value: Any) -> Any:
-    """Plain JSON types for metadata values (numpy arrays and scalars allowed)."""
+    """Plain JSON types for metadata values (numpy arrays and scalars allowed); strings are
+    passed through :func:`_clean_text`."""
     if isinstance(value, Mapping):
         out = {}
         for k, v in value.items():
             if not isinstance(k, str):
                 raise _fail(where, f"metadata key {name}.{k!r} is not a string")
-            out[k] = _to_json(where, f"{name}.{k}", v)
+            out[_clean_text(k)] = _to_json(where, f"{name}.{k}", v)
         return out
+    if isinstance(value, str):
+        return _clean_text(value)
     if isinstance(value, (list, tuple)):
         return [_to_json(where, f"{name}[{i}]", v) for i, v in enumerate(value)]
     if isinstance(value, np.ndarray):
@@ -665,10 +776,33 @@ def _to_json(where: Any, name: str, value: Any) -> Any:
     raise _fail(where, f"metadata {name} of type {type(value).__name__} cannot be written as JSON")
 
 
+#: Bytes per file name on common file systems (ext4, XFS, btrfs, APFS, NTFS in UTF-16 units).
+_NAME_MAX = 255
+
+
+def _temp_name(directory: Path, name: str, tail: str = ".tmp") -> str:
+    """``.{name}.{12 random hex digits}{tail}``, with ``name`` cut short when needed so that
+    the whole stays within the folder's limit of bytes per file name.
+
+    The 18 to 22 bytes added made a legal long target name (234 to 255 bytes) fail with
+    "File name too long" although the file itself could be written; the random digits, not
+    the name, keep the temporary file unique (it is created with ``O_EXCL``)."""
+    try:
+        limit = min(_NAME_MAX, os.pathconf(directory, "PC_NAME_MAX"))
+    except (AttributeError, OSError, ValueError):  # no pathconf (Windows), or no answer
+        limit = _NAME_MAX
+    token = secrets.token_hex(6)
+    room = limit - len(os.fsencode(f"..{token}{tail}"))
+    keep = name
+    while keep and len(os.fsencode(keep)) > room:  # by characters: never half a UTF-8 one
+        keep = keep[:-1]
+    return f".{keep}.{token}{tail}"
+
+
 def _open_temp(directory: Path, name: str) -> tuple[Path, int]:
     """Create a new, empty temporary file next to its target (mode honours umask)."""
     while True:
-        tmp = directory / f".{name}.{secrets.token_hex(6)}.tmp"
+        tmp = directory / _temp_name(directory, name)
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
         except FileExistsError:  # pragma: no cover - 48 random bits
@@ -727,7 +861,10 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
     Notes
     -----
     Columns come in the order ``t, e, u, theta_ddot_m``, then the others in
-    the recording's order.  Numbers are written with ``repr`` (the shortest
+    the recording's order.  Text (column names, metadata) is written as UTF-8;
+    lone surrogates in it, as Python gives command-line arguments under the C
+    locale (``--subject Müller`` with ``LC_ALL=C PYTHONUTF8=0``), are first
+    decoded as the UTF-8 bytes they escape.  Numbers are written with ``repr`` (the shortest
     text that reads back as the same float), so a round trip is exact.
     Both files are first written in full to temporary files in the target
     directory, then moved into place with :func:`os.replace`, the JSON last;
@@ -770,7 +907,7 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
             raise _fail(csv_path, f"column name {name!r} cannot be written (empty, surrounding "
                                   f"blanks or a line break)")
     head = _stdio.StringIO()
-    csv.writer(head, lineterminator="\n").writerow(names)
+    csv.writer(head, lineterminator="\n").writerow([_clean_text(c) for c in names])
     columns = [recording.signals[c].tolist() for c in names]
     body = "\n".join(",".join(map(repr, row)) for row in zip(*columns))
     csv_bytes = (head.getvalue() + body + "\n").encode("utf-8")
@@ -794,7 +931,7 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
         tmp_csv = _write_temp(directory, csv_path.name, csv_bytes, temps)
         tmp_json = _write_temp(directory, json_path.name, json_bytes, temps)
         if csv_path.exists():  # keep the previous CSV until the JSON is in place
-            backup = directory / f".{csv_path.name}.{secrets.token_hex(6)}.bak.tmp"
+            backup = directory / _temp_name(directory, csv_path.name, ".bak.tmp")
             temps.append(backup)
             try:
                 os.link(csv_path, backup)
