@@ -139,9 +139,9 @@ def test_simulate_params_override(tmp_path, capsys):
     pfile = _write_json(tmp_path / "mine.json", override)
     common = ["simulate", "--task", "FD", "--remnant-fraction", "0.2", "--seed", "1",
               "--duration", "10", "-q"]
-    assert _run(capsys, *common, "--params", pfile, "-o", tmp_path / "mine")[0] == 0
+    assert _run(capsys, *common, "--params", pfile, "-o", tmp_path / "mine-run")[0] == 0
     assert _run(capsys, *common, "-o", tmp_path / "paper")[0] == 0
-    rec = read_recording(tmp_path / "mine")
+    rec = read_recording(tmp_path / "mine-run")
     truth = dict(presets.paper_parameters("FD"), **override)
     assert rec.metadata["simulation"]["parameters"] == truth
     assert not np.array_equal(rec.u, read_recording(tmp_path / "paper").u)

@@ -13,6 +13,7 @@ import argparse
 import contextlib
 import json
 import math
+import os
 import sys
 import traceback
 import warnings
@@ -95,6 +96,16 @@ def _whole_number(minimum: int):
 
 
 _seed = _whole_number(0)
+
+
+def _output_path(text: str) -> str:
+    """An argparse type: an output file or folder.  An empty path is refused (an unset
+    ``$OUT`` in a script: it was skipped, or meant the current folder), and a leading ``~``
+    is expanded: the shell leaves ``--json=~/fit.json`` as it is, which made a folder
+    named ``~``."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path; give a file or folder name")
+    return os.path.expanduser(text)
 
 
 def _oversample(text: str) -> int:
@@ -506,6 +517,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     if args.duration is not None and args.duration * rate < 2:
         raise UsageError(f"argument --duration: {args.duration:g} s is shorter than 2 samples "
                          f"at {rate:g} Hz")
+    _refuse_overwriting([("-o/--output", f) for f in _stem_files(args.output)],
+                        [("the --params file", args.params),
+                         *_code_files(args.extended_by, "--with")])
     model = _paper_model_with(args, fitted=False)
     params = presets.paper_parameters(args.task)
     if args.params is not None:
@@ -564,6 +578,9 @@ def _cmd_fit(args: argparse.Namespace) -> int:
         raise UsageError("argument --iterate: it repeats Steps II and III of --method paper")
     from .recording import RecordingError
 
+    _refuse_overwriting([("--json", args.json)],
+                        [*_recording_files(args.recording),
+                         *_code_files(args.extended_by, "--with")])
     rec = _read(args.recording)
     if args.json:  # checked before the fit: its seconds are not lost to a bad path
         _check_writable(args.json, "fit")
@@ -811,6 +828,7 @@ def _read_posterior(path: str):
         raise UsageError(f"{p}: posterior file not found")
     if p.is_dir():
         raise UsageError(f"{p}: is a directory, not a posterior (.nc) file")
+    _import_arviz()  # (outside the try below: its failure is not the file's)
     try:
         return Posterior.from_netcdf(p)
     except ValueError as exc:  # (the library names its method: said in the command's words)
@@ -821,6 +839,22 @@ def _read_posterior(path: str):
     except Exception as exc:  # netCDF4/h5netcdf/xarray raise many types for a file that is not netCDF
         raise UsageError(f"{p}: is not a netCDF posterior written by '{PROG} sample' (or "
                          f"Posterior.to_netcdf): reading it raised {type(exc).__name__}") from None
+
+
+def _import_arviz():
+    """arviz (``sample._arviz``), or a failure (exit 1) that names why it cannot be imported.
+
+    arviz writes below HOME when imported (``~/.cache/arviz``): with an unwritable HOME its
+    import raises OSError, which the handlers of a posterior's reading or the sampler's
+    backend took for a problem with the user's file.
+    """
+    from .sample import _arviz
+
+    try:
+        return _arviz()
+    except Exception as exc:  # noqa: BLE001 - whatever arviz's import raises
+        hint = "; is HOME writable? arviz writes to ~/.cache" if isinstance(exc, OSError) else ""
+        raise CommandFailed(f"cannot import arviz ({type(exc).__name__}: {exc}){hint}") from None
 
 
 def _write_json(path: str, obj, *, version: bool = True) -> None:
@@ -849,8 +883,9 @@ def _check_writable(path: str | Path, what: str) -> None:
     from ._files import temporary_sibling
 
     p = Path(path)
-    if p.is_dir():
-        raise UsageError(f"{p}: is a folder; give a file name for the {what}")
+    # (Path drops a trailing slash: 'dir/' not yet there wrote a file named 'dir')
+    if p.is_dir() or str(path).endswith(("/", os.sep)):
+        raise UsageError(f"{path}: is a folder; give a file name for the {what}")
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         probe = temporary_sibling(p)
@@ -858,6 +893,102 @@ def _check_writable(path: str | Path, what: str) -> None:
         probe.unlink()
     except OSError as exc:
         raise CommandFailed(f"{p}: cannot write the {what} ({_os_reason(exc)})") from None
+
+
+def _recording_files(spec: str) -> list[tuple[str, Path]]:
+    """(what, path) of each file a recording argument can be read from, as
+    ``io.read_recording`` resolves it: a ``.mat`` file; a ``.csv`` or ``.json`` with its
+    partner; a stem's ``STEM.csv``, ``STEM.json`` and ``STEM.mat``."""
+    p = Path(spec)
+    where = f"the recording REC {spec}"
+    suffix = p.suffix.lower()
+    if suffix == ".mat":
+        return [(where, p)]
+    stem = p.with_suffix("") if suffix in (".csv", ".json") else p
+    files = [(f"the CSV of {where}", stem.parent / (stem.name + ".csv")),
+             (f"the JSON sidecar of {where}", stem.parent / (stem.name + ".json"))]
+    if suffix not in (".csv", ".json"):
+        files.append((f"the .mat file of {where}", stem.parent / (stem.name + ".mat")))
+    return files
+
+
+def _code_files(specs: Sequence[str], option: str) -> list[tuple[str, Path]]:
+    """(what, path) of the Python files among --with/--extension's ``FILE.py:NAME``."""
+    out = []
+    for spec in specs:
+        where, sep, _ = spec.rpartition(":")
+        if sep and where.endswith(".py"):
+            out.append((f"the {option} file", Path(where)))
+    return out
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` are one file: :func:`os.path.samefile` where both exist (a
+    hard link, a symlink, another case on a case-insensitive disk), else the resolved
+    paths."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return os.path.realpath(a) == os.path.realpath(b)
+
+
+def _refuse_overwriting(outputs: Sequence[tuple[str, str | Path | None]],
+                        inputs: Sequence[tuple[str, str | Path | None]]) -> None:
+    """Refuse (exit 2), before anything is computed, an output that is a file the command
+    reads, or another output of it.
+
+    The outputs are replaced atomically and the command says it succeeded, so a typo
+    (``--json out/run.json`` for ``out/run-fit.json``) destroyed the recording's sidecar,
+    the ``--params`` file or the posterior read, without a word.
+
+    Parameters
+    ----------
+    outputs : sequence of (option, path)
+        Each file the command will write, with the option that names it; a None path is
+        not given.
+    inputs : sequence of (what, path)
+        Each file the command reads, said as ``what`` (e.g. "the --params file"); None is
+        not given.  An input that is also an output (``sample --backend``) is left out of
+        ``inputs``: writing it is what the option asks for.
+
+    Raises
+    ------
+    UsageError
+        An output is one of the inputs, or two outputs are one file.
+    """
+    read = [(what, Path(path)) for what, path in inputs if path is not None]
+    seen: list[tuple[str, Path]] = []
+    for option, path in outputs:
+        if path is None:
+            continue
+        out = Path(path)
+        for what, src in read:
+            if _same_file(out, src):
+                said = what if out == src else f"{src}, {what}"
+                raise UsageError(f"argument {option}: {out} is {said}, which this command "
+                                 f"reads: writing it would destroy that input; give another "
+                                 f"file name")
+        for other, earlier in seen:
+            if _same_file(out, earlier):
+                raise UsageError(f"argument {option}: {out} is also the file of {other}; give "
+                                 f"each output its own file name")
+        seen.append((option, out))
+
+
+def _stem_files(out: str) -> list[Path]:
+    """The CSV and JSON that ``write_recording(..., out)`` writes (a stem, or its .csv or
+    .json)."""
+    p = Path(out)
+    stem = p.with_suffix("") if p.suffix.lower() in (".csv", ".json") else p
+    return [stem.parent / (stem.name + ".csv"), stem.parent / (stem.name + ".json")]
+
+
+#: The files ``DiagnosisResult.report`` writes (or, as a stale figure, removes) in its folder.
+_REPORT_FILES = ("diagnosis.json", "report.html") + tuple(
+    f"{name}.{fmt}" for name in ("frequency_response", "residuals", "evidence", "candidates",
+                                 "profile", "posterior", "runs") for fmt in PLOT_FORMATS)
 
 
 def _check_folder(path: str | Path, what: str) -> None:
@@ -879,9 +1010,15 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         raise UsageError("argument --ar-order: 0 with --ar profiled: a profiled AR model needs "
                          "an order >= 1; leave --ar-order out for the order chosen by BIC, or "
                          "give --likelihood eq4 for white output error")
+    # (--backend is read and written: it is an output here, never the recording's)
+    _refuse_overwriting([("-o/--output", args.output), ("--json", args.json),
+                         ("--backend", args.backend)],
+                        [*_recording_files(args.recording),
+                         *_code_files(args.extended_by, "--with")])
     rec = _read(args.recording)
     model = _paper_model_with(args, rec)
-    _check_writable(out, "posterior")  # hours of sampling are not lost to an unwritable file
+    _import_arviz()  # (before the sampler: its failure is not the backend's, nor lost hours)
+    _check_writable(args.output, "posterior")  # hours of sampling are not lost to an unwritable file
     if args.json:
         _check_writable(args.json, "summary")
     _say(args, f"sampling the posterior of {rec.source} ({args.likelihood} likelihood, at most "
@@ -899,10 +1036,14 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         except ValueError as exc:  # e.g. a backend file of another run
             raise UsageError(str(exc)) from None
         except OSError as exc:  # the HDF5 backend cannot be created or opened
+            if args.backend is None:  # (not the backend's: unexpected, said as such)
+                raise
             raise CommandFailed(f"{args.backend}: cannot open the sampler's backend file "
                                 f"({_os_reason(exc)})") from None
     _print_warnings(w for w in caught if _said_to_user(w))
-    print(post)  # (before the file: a write that fails still leaves the summary)
+    # (before the file: a write that fails still leaves the summary; a stdout that fails
+    # does not stop the command before the file, see _GuardedStdout)
+    print(post)
     try:
         post.to_netcdf(out)
     except OSError as exc:
@@ -917,6 +1058,10 @@ def _cmd_sample(args: argparse.Namespace) -> int:
 def _cmd_compare(args: argparse.Namespace) -> int:
     from .compare import compare
 
+    _refuse_overwriting([("--json", args.json)],
+                        [*_recording_files(args.recording),
+                         ("the --posterior file", args.posterior),
+                         *_code_files(args.extended_by, "--with")])
     posterior = _read_posterior(args.posterior) if args.posterior else None
     rec = _read(args.recording)
     model = _paper_model_with(args, rec)
@@ -949,6 +1094,11 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     from . import presets
     from .plots import _posterior_model, plot_chains, plot_marginal, plot_pair
 
+    figures = [Path(args.output) / f"{name}.{args.format}" for name in ("pair", "trace")]
+    if Path(args.posterior).name.startswith("marginal_"):  # (marginal_<parameter>.<format>)
+        figures.append(Path(args.output) / Path(args.posterior).name)
+    _refuse_overwriting([("-o/--output", f) for f in figures],
+                        [("the posterior POST.nc", args.posterior)])
     post = _read_posterior(args.posterior)
     # a posterior of a catalogue extension (written by 'diagnose'): its model gives the units
     model = _posterior_model(post)
@@ -1017,6 +1167,18 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                              + ("(a netCDF file of the draws)" if want == ".nc" else
                                 "(several runs: the shared parameters' posterior on a grid, "
                                 "as JSON)"))
+    report = []
+    if args.report:
+        from .diagnose.report import MANIFEST  # (the report's list of the figures it wrote)
+
+        report = [Path(args.report) / name for name in _REPORT_FILES + (MANIFEST,)]
+    if args.json:  # (the report's diagnosis.json is the --json's content: the same file is fine)
+        report = [f for f in report if not (f.name == "diagnosis.json"
+                                            and _same_file(f, Path(args.json)))]
+    _refuse_overwriting([("--json", args.json), ("--posterior", args.posterior),
+                         *(("--report", f) for f in report)],
+                        [*(f for r in args.recording for f in _recording_files(r)),
+                         *_code_files(args.extension, "--extension")])
     _load_extensions(args.extension)
     recs = [_read(r) for r in args.recording]
     for path, what in ((args.posterior, "posterior"), (args.json, "diagnosis")):
@@ -1100,7 +1262,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise CommandFailed(f"{args.report}: cannot write the report "
                                 f"({_os_reason(exc)})") from None
-        _say(args, f"wrote {paths['html']} (with {', '.join(p.name for k, p in paths.items() if k not in ('html',))})")
+        _say(args, f"wrote {paths['html']} (with {', '.join(p.name for k, p in paths.items() if k not in ('html', 'manifest'))})")
     return EXIT_OK
 
 
@@ -1142,6 +1304,12 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
                          "not both")
     _load_extensions(args.extension)
     paths = _recordings_in(args.recording)
+    read = [f for p in paths for f in _recording_files(p)]
+    # a <key>.json is named after a recording's stem: one in --out itself would be replaced
+    written = dict.fromkeys([Path(args.out) / "summary.csv", Path(args.out) / "summary.png",
+                             *(Path(args.out) / f.name for _, f in read if f.suffix == ".json")])
+    _refuse_overwriting([("--out", f) for f in written],
+                        [*read, *_code_files(args.extension, "--extension")])
     where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
     # (said before the recordings are read: a refusal of one of them may follow, and nothing
     # has run then)
@@ -1695,7 +1863,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = subs.add_parser("simulate", formatter_class=fmt, epilog=SIMULATE_EPILOG,
                         help="simulate a tracking run and write it as a recording",
                         description="Simulate one tracking run with the paper's pilot model.")
-    p.add_argument("-o", "--output", required=True, metavar="OUT",
+    p.add_argument("-o", "--output", type=_output_path, required=True, metavar="OUT",
                    help="output stem (or .csv path): writes OUT.csv and OUT.json, creating "
                         "missing directories")
     p.add_argument("--task", choices=("FD", "FT"), default="FD",
@@ -1763,7 +1931,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(with --method paper; the paper runs them once, which stops short on "
                         "remnant-free or low-remnant records, see docs/fitting.md)")
     _seed_argument(p, "seed of the genetic algorithm / starting points (default 0)")
-    p.add_argument("--json", metavar="OUT",
+    p.add_argument("--json", type=_output_path, metavar="OUT",
                    help="write the result (params, neg_log_lik, vaf, method, seed and every "
                         "step) to this JSON file")
     _oversample_argument(p)
@@ -1774,7 +1942,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = subs.add_parser("demo", formatter_class=fmt, epilog=DEMO_EPILOG,
                         help="simulate, evaluate and plot a built-in example",
                         description="The main job of bayespilot on a built-in example.")
-    p.add_argument("--out", default="bayespilot-demo", metavar="DIR",
+    p.add_argument("--out", default="bayespilot-demo", type=_output_path, metavar="DIR",
                    help="output directory (default bayespilot-demo/)")
     _seed_argument(p, "seed of the remnant noise, fits and samplers, an integer >= 0 "
                    "(default 0)")
@@ -1809,7 +1977,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="number the realizations from K (default 0): each number seeds its "
                         "remnant and fit, so '--first-realization 100' is an independent "
                         "repeat of the study (same folder or another)")
-    p.add_argument("--out", required=True, metavar="DIR",
+    p.add_argument("--out", type=_output_path, required=True, metavar="DIR",
                    help="folder for one JSON per fit and the summary (created if missing; "
                         "fits already in it are not redone)")
     _cluster_arguments(p)
@@ -1853,16 +2021,16 @@ def build_parser() -> argparse.ArgumentParser:
                         help="sample the posterior of the pilot parameters (emcee)",
                         description="Posterior of the pilot-model parameters with emcee.")
     _recording_argument(p)
-    p.add_argument("-o", "--output", required=True, metavar="POST.nc",
+    p.add_argument("-o", "--output", type=_output_path, required=True, metavar="POST.nc",
                    help="the posterior as a netCDF file (ArviZ InferenceData)")
     _likelihood_arguments(p, profiled=True)
     _with_argument(p)
-    p.add_argument("--json", metavar="SUMMARY",
+    p.add_argument("--json", type=_output_path, metavar="SUMMARY",
                    help="write the per-parameter summary to this JSON file")
     _seed_argument(p, "seed of the initial fit and the sampler (default 0)")
     p.add_argument("--max-steps", type=_count, default=20000, metavar="N",
                    help="stop after N steps even if not converged (default 20000)")
-    p.add_argument("--backend", metavar="FILE.h5",
+    p.add_argument("--backend", type=_output_path, metavar="FILE.h5",
                    help="emcee HDF5 file: a run interrupted or stopped at --max-steps resumes "
                         "from it")
     _common(p, sub=True)
@@ -1872,7 +2040,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="Bayes factor of the model with threshold against the one without",
                         description="Model comparison: with against without threshold.")
     _recording_argument(p)
-    p.add_argument("--json", metavar="OUT", help="write the result to this JSON file")
+    p.add_argument("--json", metavar="OUT", type=_output_path,
+                   help="write the result to this JSON file")
     _seed_argument(p, "seed of the nested sampler and the sampler (default 0)")
     _likelihood_arguments(p)
     _with_argument(p)
@@ -1890,7 +2059,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="plot a posterior: marginal of delta_abs, pair plot, traces",
                         description="Plots of a posterior written by 'bayespilot sample'.")
     p.add_argument("posterior", metavar="POST.nc", help="netCDF file from 'bayespilot sample'")
-    p.add_argument("-o", "--output", required=True, metavar="DIR",
+    p.add_argument("-o", "--output", type=_output_path, required=True, metavar="DIR",
                    help="folder for the figures (created if missing)")
     p.add_argument("--format", choices=PLOT_FORMATS, default="png",
                    help="file format of the figures (default png; pdf and svg are vector)")
@@ -1907,15 +2076,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording", metavar="REC", nargs="+",
                    help="the recording: its stem (out/run), its .csv or .json path, or a .mat "
                         "file; several runs of one condition are diagnosed together (pooled)")
-    p.add_argument("--json", metavar="OUT", help="write the diagnosis to this JSON file")
-    p.add_argument("--report", metavar="DIR",
+    p.add_argument("--json", metavar="OUT", type=_output_path,
+                   help="write the diagnosis to this JSON file")
+    p.add_argument("--report", type=_output_path, metavar="DIR",
                    help="write PNG figures, report.html and diagnosis.json to this folder")
     p.add_argument("--report-format", action="append", choices=("pdf", "svg"), default=[],
                    metavar="{pdf,svg}",
                    help="with --report, also write each figure in this vector format beside "
                         "its PNG, for a paper (fonts as TrueType; may be given twice)")
     _diagnose_arguments(p)
-    p.add_argument("--posterior", metavar="POST.nc",
+    p.add_argument("--posterior", type=_output_path, metavar="POST.nc",
                    help="one recording: also sample the posterior of the chosen extended model "
                         "(emcee, coloured likelihood) and write it to this netCDF file; "
                         "several (POST.json): the posterior of the extension's shared "
@@ -1934,7 +2104,7 @@ def build_parser() -> argparse.ArgumentParser:
                                     "subject and condition pooled, as a resumable batch.")
     p.add_argument("recording", metavar="REC", nargs="+",
                    help="recordings (stems, .csv, .json or .mat paths) or folders of them")
-    p.add_argument("--out", required=True, metavar="DIR",
+    p.add_argument("--out", type=_output_path, required=True, metavar="DIR",
                    help="folder for one <key>.json per diagnosis and summary.csv (created if "
                         "missing; diagnoses already in it are not redone)")
     p.add_argument("--pool", action="store_true",
@@ -1961,6 +2131,73 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _GuardedStdout:
+    """``sys.stdout`` while a command runs: a write or flush that fails (the reader of a
+    pipe went away, ``| head``; a full disk, ``> /dev/full``) is kept in :attr:`error` and
+    the rest of the output is dropped, instead of raising out of a ``print``.
+
+    A command prints its summary before it writes its files, so that a file that cannot be
+    written still leaves the result on the screen (``_cmd_sample``); a stdout that fails
+    must then not cost the files either: the print carries on, the files are written, and
+    :func:`main` says what became of stdout and sets the exit code.  Everything else is the
+    wrapped stream's.
+    """
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+        self.error: OSError | None = None
+
+    def write(self, text: str) -> int:
+        if self.error is None:
+            try:
+                return self.stream.write(text)
+            except OSError as exc:
+                self.error = exc
+        return len(text)
+
+    def flush(self) -> None:
+        if self.error is None:
+            try:
+                self.stream.flush()
+            except OSError as exc:
+                self.error = exc
+
+    def __getattr__(self, name: str):
+        return getattr(self.stream, name)
+
+
+def _stdout_to_devnull(stream) -> None:
+    """Point ``stream``'s file descriptor at the null device, so that the interpreter's
+    flush at exit of what it still holds does not fail again (the Python docs' advice for
+    SIGPIPE); a stream without one (a test's capture) is left alone."""
+    try:
+        fd = stream.fileno()
+    except (AttributeError, OSError, ValueError):
+        return
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, fd)
+    finally:
+        if null != fd:
+            os.close(null)
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` is, or was raised while handling or because of, a KeyboardInterrupt
+    (its ``__cause__``/``__context__`` chain): Ctrl-C inside a numba kernel reaches the
+    command as a SystemError ("returned a result with an exception set")."""
+    todo, seen = [exc], set()
+    while todo:
+        e = todo.pop()
+        if e is None or id(e) in seen:
+            continue
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        todo += [e.__cause__, e.__context__]
+    return False
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the ``bayespilot`` command with ``argv`` (default ``sys.argv[1:]``); return the exit code.
 
@@ -1977,15 +2214,57 @@ def main(argv: Sequence[str] | None = None) -> int:
         (:data:`EXIT_OK`, 0); :data:`EXIT_USAGE` (2) for bad input or usage,
         including ``-q`` given with ``-v``; :data:`EXIT_FAILURE` (1) when the
         computation or writing the output fails, or for an unexpected error
-        (one line on stderr; the traceback too with ``-v``); 130 on
-        KeyboardInterrupt; 0 after ``--help`` and ``--version``.
+        (one line on stderr; the traceback too with ``-v``), and when standard
+        output cannot be written (a full disk: ``cannot write to standard
+        output``); 130 on KeyboardInterrupt, also one that reaches the command
+        as another exception (numba's SystemError); 0 after ``--help`` and
+        ``--version``.
 
     Notes
     -----
     Nothing is raised to the caller: every refusal or failure is one line
     ``bayespilot: error: <message>`` on stderr and an exit code, and
-    argparse's SystemExit is turned into its exit code.
+    argparse's SystemExit is turned into its exit code.  A standard output
+    that goes away (``| head``) or fails stops only the printing: the
+    command still writes its files, and the exit code is theirs (0 after a
+    closed pipe).  Standard output replaces what it cannot encode by
+    backslash escapes, as standard error does; with standard error closed
+    (``2>&-``) its messages are dropped, not mixed into the results.
     """
+    stdout, stderr = sys.stdout, sys.stderr
+    if stderr is None:  # (2>&-: print(file=None) wrote the messages into stdout's results)
+        sys.stderr = open(os.devnull, "w", encoding="utf-8")
+    guard = None
+    if stdout is not None:
+        # (a non-ASCII path on an ASCII or latin-1 stdout: '\xfc' printed, not a crash after
+        # the computation; stderr has this handler already)
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            stdout.reconfigure(errors="backslashreplace")
+        guard = sys.stdout = _GuardedStdout(stdout)
+    try:
+        code = _main(argv)
+        if guard is None:
+            return code
+        guard.flush()  # (here, not at the interpreter's exit: "Exception ignored", exit 120)
+        if guard.error is None:
+            return code
+        _stdout_to_devnull(stdout)
+        if isinstance(guard.error, BrokenPipeError):  # the reader went away: not an error
+            return code
+        print(f"{PROG}: error: cannot write to standard output "
+              f"({_os_reason(guard.error)})", file=sys.stderr)
+        return code or EXIT_FAILURE
+    finally:
+        if guard is not None:
+            sys.stdout = stdout
+        if stderr is None:
+            sys.stderr.close()
+            sys.stderr = None
+
+
+def _main(argv: Sequence[str] | None) -> int:
+    """:func:`main` once its standard streams are set up: the command run, its refusals
+    and failures turned into one line on stderr and an exit code."""
     parser = build_parser()
     verbose = 0
     try:
@@ -2017,6 +2296,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # the reader went away (bayespilot fit ... | head): not an error
+        # (main's _GuardedStdout keeps the prints from raising it; this is for a write that
+        # bypassed it)
         # (stdout is closed: point it at devnull so that the interpreter's flush at exit does
         # not raise again, as the Python docs advise for SIGPIPE)
         import os
@@ -2024,6 +2305,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_OK
     except Exception as exc:  # a bug: say so in one line; the traceback with -v
+        if _interrupted(exc):  # Ctrl-C in a numba kernel: a SystemError caused by it
+            print(f"{PROG}: interrupted", file=sys.stderr)
+            return 130
         if verbose:
             traceback.print_exc()
         print(f"{PROG}: error: unexpected {type(exc).__name__}: {exc} "

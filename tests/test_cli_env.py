@@ -1,0 +1,381 @@
+"""The ``bayespilot`` command in unusual environments (findings of the environment audit).
+
+An output option that names one of the command's inputs, a standard output that goes away
+or fails, a non-UTF-8 standard output, a closed standard error, Ctrl-C inside a numba
+kernel, arviz that cannot be imported, and output paths that are empty, end in a slash or
+start with ``~``.  The commands run in-process through ``main([...])``; what needs a real
+process (pipes, environment variables, a closed file descriptor) runs ``python -m
+bayespilot.cli``.  Computations are replaced by stubs where the test is about what happens
+around them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bayespilot import cli
+from bayespilot.cli import main
+
+PARAMS = {"K_v": 1.057, "T_vl": 0.409, "tau_v": 0.279, "K_m": 0.532, "tau_m": 0.203,
+          "omega_nm": 12.0, "zeta_nm": 0.22, "delta_abs": 0.0075}
+
+
+def _run(capsys, *argv):
+    """main(argv) -> (exit code, stdout, stderr)."""
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def _process(*argv, env=None, **kwargs) -> subprocess.CompletedProcess:
+    """``python -m bayespilot.cli ARGV`` in a real process, bytes in and out."""
+    base = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    base["NUMBA_NUM_THREADS"] = "1"
+    base.update(env or {})
+    return subprocess.run([sys.executable, "-m", "bayespilot.cli", *map(str, argv)],
+                          env=base, stdin=subprocess.DEVNULL, timeout=300, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory):
+    """A folder with a 20-s recording (run.csv + run.json) and params.json."""
+    d = tmp_path_factory.mktemp("lab")
+    assert main(["simulate", "--seed", "1", "--duration", "20", "--remnant-fraction", "0.2",
+                 "-q", "-o", str(d / "run")]) == 0
+    (d / "params.json").write_text(json.dumps(PARAMS))
+    return d
+
+
+@pytest.fixture
+def rc(lab, tmp_path):
+    """A fresh copy of ``lab`` (the tests try to overwrite its files)."""
+    for name in ("run.csv", "run.json", "params.json"):
+        (tmp_path / name).write_bytes((lab / name).read_bytes())
+    return tmp_path
+
+
+class _StubFit:
+    """What _cmd_fit uses of a FitResult: the fit itself is not what these tests are about."""
+    neg_log_lik = -1.0
+
+    def summary(self) -> str:
+        return "fit of Versuchsperson M\u00fcller: -ln L = -1"
+
+    def to_json(self, path) -> None:
+        Path(path).write_text('{"stub": true}\n', encoding="utf-8")
+
+
+@pytest.fixture
+def stub_fit(monkeypatch):
+    import bayespilot.fit.fast
+
+    monkeypatch.setattr(bayespilot.fit.fast, "fit_fast", lambda *a, **k: _StubFit())
+
+
+# --- 1: an output that is one of the inputs ---------------------------------------------------
+@pytest.mark.parametrize("target", ["run.json", "run.csv", "./run.json"])
+def test_fit_json_cannot_overwrite_the_recording(capsys, rc, stub_fit, target):
+    before = {n: (rc / n).read_bytes() for n in ("run.csv", "run.json")}
+    code, _, err = _run(capsys, "fit", rc / "run", "--method", "fast", "-q",
+                        "--json", f"{rc}/{target}")
+    assert code == 2, err
+    assert err.startswith("bayespilot: error: argument --json: ") and "REC" in err, err
+    assert {n: (rc / n).read_bytes() for n in before} == before
+
+
+def test_a_link_to_the_recording_is_the_recording(capsys, rc, stub_fit):
+    (rc / "link.json").symlink_to(rc / "run.json")
+    os.link(rc / "run.csv", rc / "hard.csv")
+    for target in ("link.json", "hard.csv"):
+        code, _, err = _run(capsys, "fit", rc / "run.csv", "--method", "fast", "-q",
+                            "--json", rc / target)
+        assert code == 2 and "argument --json" in err, err
+
+
+def test_simulate_cannot_overwrite_its_params_file(capsys, rc):
+    before = (rc / "params.json").read_bytes()
+    code, _, err = _run(capsys, "simulate", "--params", rc / "params.json", "--duration", "20",
+                        "-o", rc / "params")
+    assert code == 2
+    assert "argument -o/--output" in err and "--params" in err, err
+    assert (rc / "params.json").read_bytes() == before and not (rc / "params.csv").exists()
+
+
+@pytest.mark.parametrize("argv", [
+    ["diagnose", "{rc}/run", "--json", "{rc}/run.json"],
+    ["diagnose", "{rc}/run", "--report", "{rc}", "--posterior", "{rc}/x.nc"],  # no clash
+    ["sample", "{rc}/run", "-o", "{rc}/p.nc", "--json", "{rc}/run.json"],
+    ["sample", "{rc}/run", "-o", "{rc}/p.nc", "--backend", "{rc}/run.csv"],
+    ["sample", "{rc}/run", "-o", "{rc}/p.nc", "--json", "{rc}/p.nc"],
+    ["compare", "{rc}/run", "--json", "{rc}/run.csv"],
+    ["compare", "{rc}/run", "--posterior", "{rc}/post.nc", "--json", "{rc}/post.nc"],
+    ["plot", "{rc}/trace.png", "-o", "{rc}"],
+    ["diagnose-batch", "{rc}/run", "--out", "{rc}"],
+])
+def test_every_command_refuses_to_overwrite_an_input(capsys, rc, monkeypatch, argv):
+    """Refused before anything runs: the computations are made to fail if they start."""
+    import bayespilot.compare
+    import bayespilot.diagnose
+    import bayespilot.diagnose.batch
+    import bayespilot.sample
+
+    def started(*a, **k):
+        raise AssertionError("the computation started")
+
+    for module, name in ((bayespilot.diagnose, "diagnose"), (bayespilot.sample, "sample"),
+                         (bayespilot.compare, "compare"),
+                         (bayespilot.diagnose.batch, "diagnose_batch")):
+        monkeypatch.setattr(module, name, started)
+    (rc / "post.nc").write_bytes(b"x")
+    (rc / "trace.png").write_bytes(b"x")
+    before = {p.name: p.read_bytes() for p in rc.iterdir()}
+    argv = [a.format(rc=rc) for a in argv]
+    code, _, err = _run(capsys, *argv)
+    if argv[0] == "diagnose" and "--report" in argv:
+        # the report's files are not the recording's: accepted, and stopped at the computation
+        assert code == 1 and "the computation started" in err, err
+        return
+    assert code == 2, err
+    assert err.startswith("bayespilot: error: argument ") and "give" in err, err
+    assert {p.name: p.read_bytes() for p in rc.iterdir() if p.name in before} == before
+
+
+def test_refuse_overwriting_unit(tmp_path):
+    (tmp_path / "a.json").write_text("{}")
+    cli._refuse_overwriting([("--json", tmp_path / "b.json")],
+                            [("the --params file", tmp_path / "a.json"), ("x", None)])
+    with pytest.raises(cli.UsageError, match="argument --json: .*the --params file"):
+        cli._refuse_overwriting([("--json", tmp_path / "sub" / ".." / "a.json")],
+                                [("the --params file", tmp_path / "a.json")])
+    names = [p.name for _, p in cli._recording_files("d/run")]
+    assert names == ["run.csv", "run.json", "run.mat"]
+    assert [p.name for _, p in cli._recording_files("d/run.v2.CSV")] == ["run.v2.csv",
+                                                                         "run.v2.json"]
+    assert [p for _, p in cli._code_files(["motion-washout", "my.py:X"], "--with")] == \
+        [Path("my.py")]
+
+
+# --- 2 and 10: a standard output that goes away or fails ----------------------------------
+class _Broken:
+    """A standard output whose reader is gone (or, with ``error``, a full disk)."""
+
+    def __init__(self, error=BrokenPipeError(32, "Broken pipe")):
+        self.error = error
+
+    def write(self, text):
+        raise self.error
+
+    def flush(self):
+        raise self.error
+
+
+def test_fit_writes_its_json_when_stdout_goes_away(rc, stub_fit, monkeypatch):
+    monkeypatch.setattr(sys, "stdout", _Broken())
+    code = main(["fit", str(rc / "run"), "--method", "fast", "--json", str(rc / "f.json")])
+    monkeypatch.undo()
+    assert code == 0
+    assert json.loads((rc / "f.json").read_text()) == {"stub": True}
+
+
+def test_fit_writes_its_json_when_stdout_is_full(rc, stub_fit, monkeypatch, capsys):
+    full = _Broken(OSError(28, "No space left on device"))
+    monkeypatch.setattr(sys, "stdout", full)
+    code = main(["fit", str(rc / "run"), "--method", "fast", "--json", str(rc / "f.json")])
+    monkeypatch.undo()
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.strip().splitlines()[-1] == ("bayespilot: error: cannot write to standard output "
+                                           "(No space left on device)"), err
+    assert json.loads((rc / "f.json").read_text()) == {"stub": True}
+
+
+def test_a_failing_file_write_still_prints_the_summary(rc, stub_fit, capsys, monkeypatch):
+    """The summary comes before the file: it is on the screen when the file cannot be
+    written (the reason for that order, kept)."""
+    def fails(self, path):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(_StubFit, "to_json", fails)
+    code, out, err = _run(capsys, "fit", rc / "run", "--method", "fast", "--json", rc / "f.json")
+    assert code == 1 and "-ln L = -1" in out and "cannot write the fit" in err
+
+
+@pytest.mark.parametrize("unbuffered", ["1", ""])
+def test_closed_pipe_real_process(tmp_path, unbuffered):
+    """`bayespilot simulate ... | true`: a block-buffered stdout failed at the interpreter's
+    exit ("Exception ignored ... BrokenPipeError", exit 120); an unbuffered one is quiet."""
+    env = {"PYTHONUNBUFFERED": unbuffered} if unbuffered else {}
+    proc = subprocess.Popen([sys.executable, "-m", "bayespilot.cli", "simulate", "-o",
+                             str(tmp_path / "run"), "--duration", "20", "--seed", "1"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            stdin=subprocess.DEVNULL,
+                            env={**{k: v for k, v in os.environ.items()
+                                    if k != "PYTHONUNBUFFERED"}, "NUMBA_NUM_THREADS": "1",
+                                 **env})
+    proc.stdout.close()  # the reader is gone before anything is written
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=300) == 0, err
+    assert err == "", err
+    assert (tmp_path / "run.csv").is_file() and (tmp_path / "run.json").is_file()
+
+
+def test_full_disk_on_stdout_real_process(tmp_path):
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full")
+    with open("/dev/full", "wb") as full:
+        proc = _process("simulate", "-o", tmp_path / "run", "--duration", "20", "--seed", "1",
+                        stdout=full, stderr=subprocess.PIPE)
+    err = proc.stderr.decode()
+    assert proc.returncode == 1, err
+    assert err == ("bayespilot: error: cannot write to standard output (No space left on "
+                   "device)\n"), err
+    assert (tmp_path / "run.csv").is_file() and (tmp_path / "run.json").is_file()
+
+
+# --- 5: a standard output that cannot encode a path --------------------------------------
+def test_ascii_stdout_and_a_non_ascii_path(tmp_path, rc, stub_fit, capsys, monkeypatch):
+    out = tmp_path / "Versuchsperson M\u00fcller" / "Lauf 1"
+    proc = _process("simulate", "--seed", "1", "--duration", "20", "-o", out,
+                    env={"PYTHONIOENCODING": "ascii"}, capture_output=True)
+    assert proc.returncode == 0, proc.stderr.decode()
+    assert b"M\\xfcller" in proc.stdout
+    # in-process: the fit's summary names the recording; the JSON is still written
+    import io
+
+    ascii_out = io.TextIOWrapper(io.BytesIO(), encoding="ascii")
+    monkeypatch.setattr(sys, "stdout", ascii_out)
+    code = main(["fit", str(rc / "run"), "--method", "fast", "--json", str(rc / "f.json")])
+    monkeypatch.undo()
+    assert code == 0, capsys.readouterr().err
+    assert b"M\\xfcller" in ascii_out.buffer.getvalue()
+    assert (rc / "f.json").is_file()
+
+
+# --- 7: Ctrl-C inside a numba kernel ----------------------------------------------------
+def _numba_interrupt(*args, **kwargs):
+    """What numba raises on Ctrl-C in a kernel: a SystemError, the KeyboardInterrupt in its
+    chain (here two levels down, as seen: KeyboardInterrupt -> SystemError -> SystemError)."""
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("_numba_unpickle returned a result with an exception set")
+    except SystemError as exc:
+        raise SystemError("CPUDispatcher(<function jacobian>) returned a result with an "
+                          "exception set") from exc
+
+
+def test_interrupted_sees_the_chain():
+    with pytest.raises(SystemError) as info:
+        _numba_interrupt()
+    assert cli._interrupted(info.value)
+    assert cli._interrupted(KeyboardInterrupt())
+    assert not cli._interrupted(SystemError("x"))
+    a = ValueError("a")
+    b = ValueError("b")
+    a.__context__, b.__context__ = b, a  # a cycle ends
+    assert not cli._interrupted(a)
+
+
+def test_numba_interrupt_is_an_interrupt(capsys, monkeypatch):
+    monkeypatch.setattr(cli, "_cmd_loglik", _numba_interrupt)
+    code, _, err = _run(capsys, "loglik", "run", "--params", "params.json")
+    assert code == 130 and err == "bayespilot: interrupted\n", err
+
+
+# --- 9: arviz cannot be imported ---------------------------------------------------------
+@pytest.fixture
+def no_arviz(monkeypatch):
+    import bayespilot.sample
+
+    def fails():
+        raise OSError(30, "Read-only file system", "/home/ro/.cache/arviz")
+
+    monkeypatch.setattr(bayespilot.sample, "_arviz", fails)
+
+
+def test_plot_does_not_blame_the_posterior_for_arviz(capsys, tmp_path, no_arviz):
+    (tmp_path / "post.nc").write_bytes(b"\x89HDF\r\n\x1a\n")
+    code, _, err = _run(capsys, "plot", tmp_path / "post.nc", "-o", tmp_path / "plots")
+    assert code == 1, err
+    assert "cannot import arviz" in err and "HOME" in err and "post.nc" not in err, err
+
+
+def test_sample_does_not_blame_a_backend_for_arviz(capsys, rc, no_arviz, monkeypatch):
+    import bayespilot.sample
+
+    monkeypatch.setattr(bayespilot.sample, "sample", lambda *a, **k: pytest.fail("sampled"))
+    code, _, err = _run(capsys, "sample", rc / "run", "-o", rc / "p.nc", "--max-steps", "20",
+                        "-q")
+    assert code == 1, err
+    assert "cannot import arviz" in err and "backend" not in err and "None" not in err, err
+
+
+def test_sample_oserror_without_backend_is_not_the_backends(capsys, rc, monkeypatch):
+    import bayespilot.sample
+
+    def fails(*a, **k):
+        raise OSError(5, "Input/output error")
+
+    monkeypatch.setattr(bayespilot.sample, "sample", fails)
+    code, _, err = _run(capsys, "sample", rc / "run", "-o", rc / "p.nc", "-q")
+    assert code == 1 and "backend" not in err and "None" not in err, err
+
+
+# --- 11, 12 and suggestion 1: output paths ------------------------------------------------
+def test_json_ending_in_a_slash_is_a_folder(capsys, rc, stub_fit):
+    code, _, err = _run(capsys, "fit", rc / "run", "--method", "fast", "-q",
+                        "--json", f"{rc}/nd/")
+    assert code == 2 and "is a folder" in err, err
+    assert not (rc / "nd").exists()
+
+
+@pytest.mark.parametrize("argv,option", [
+    (["fit", "run", "--json", ""], "--json"),
+    (["diagnose", "run", "--report", ""], "--report"),
+    (["diagnose", "run", "--json", ""], "--json"),
+    (["diagnose", "run", "--posterior", ""], "--posterior"),
+    (["plot", "post.nc", "-o", ""], "-o/--output"),
+    (["sample", "run", "-o", ""], "-o/--output"),
+    (["sample", "run", "-o", "p.nc", "--backend", ""], "--backend"),
+    (["simulate", "-o", ""], "-o/--output"),
+    (["compare", "run", "--json", ""], "--json"),
+])
+def test_an_empty_output_path_is_refused(capsys, argv, option):
+    code, _, err = _run(capsys, *argv)
+    assert code == 2
+    assert err.startswith(f"bayespilot: error: argument {option}: an empty path"), err
+
+
+def test_tilde_is_expanded(capsys, rc, stub_fit, monkeypatch, tmp_path):
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    monkeypatch.chdir(rc)
+    code, _, err = _run(capsys, "fit", "run", "--method", "fast", "-q", "--json=~/fit.json")
+    assert code == 0, err
+    assert (home / "fit.json").is_file() and not (rc / "~").exists()
+
+
+# --- 15: standard error closed ------------------------------------------------------------
+def test_closed_stderr_does_not_write_into_stdout(tmp_path):
+    """`bayespilot ... 2>&-`: Python starts with sys.stderr None."""
+    proc = _process("fit", tmp_path / "missing", "--method", "fast", stdout=subprocess.PIPE,
+                    preexec_fn=lambda: os.close(2))
+    assert proc.returncode == 2
+    assert proc.stdout == b""
+
+
+def test_closed_stderr_in_process(capsys, monkeypatch):
+    monkeypatch.setattr(sys, "stderr", None)
+    code = main(["fit", "missing-recording", "--method", "fast"])
+    restored = sys.stderr is None
+    monkeypatch.undo()
+    out, _ = capsys.readouterr()
+    assert code == 2 and out == "" and restored
