@@ -1783,7 +1783,7 @@ them). About 21 s per recording of 81.92 s on one core (with --bootstrap
 Examples:
   bayespilot diagnose-batch recordings/ --out diagnoses
   bayespilot diagnose-batch recordings/ --out pooled --pool --reports
-  bayespilot diagnose-batch recordings/ --out pooled --pool --posterior
+  bayespilot diagnose-batch recordings/ --out pooled-post --pool --posterior
   bayespilot diagnose-batch recordings/ --out diagnoses --scheduler tcp://10.0.0.5:8786
 """
 

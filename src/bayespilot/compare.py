@@ -106,6 +106,7 @@ import numpy as np
 
 from ._files import (WrongKind, dataclass_fields, dumps, nan_for_null, number, numbers,
                      read_result, require_keys, write_text_atomic)
+from ._interrupt import interrupt_between_steps
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
@@ -496,7 +497,28 @@ def nested_evidence(log_likelihood: Callable[[np.ndarray], float], lower: Sequen
     rng = np.random.default_rng(np.random.SeedSequence(seed))
     sampler = dynesty.NestedSampler(loglike, prior_transform, lo.size, nlive=nlive,
                                     sample=sample, bound=bound, rstate=rng)
-    sampler.run_nested(dlogz=dlogz, print_progress=progress)
+    # A Ctrl-C at the end of an iteration, raised from print_func (called between them,
+    # outside dynesty's wrapper of loglike, which printed the point and a traceback first);
+    # so print_func is always called, and draws dynesty's own progress bar when asked to.
+    from dynesty.utils import print_fn
+
+    pbar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        pbar = tqdm()
+    with interrupt_between_steps() as check_interrupt:
+        def print_func(results, niter, ncall, **kwargs):
+            check_interrupt()
+            if pbar is not None:
+                print_fn(results, niter, ncall, pbar=pbar, **kwargs)
+
+        try:
+            sampler.run_nested(dlogz=dlogz, print_progress=True, print_func=print_func)
+        finally:
+            if pbar is not None:
+                pbar.close()
+        check_interrupt()
     res = sampler.results
     logz = float(res["logz"][-1])
     logz_err = float(res["logzerr"][-1])

@@ -63,6 +63,7 @@ import numba
 import numpy as np
 
 from . import _files
+from ._interrupt import interrupt_between_steps
 from .fit.result import FitResult
 from .kernels import _coloured as C
 from .likelihood import Likelihood, _checked_discard, _startup_default
@@ -628,22 +629,27 @@ def _run_emcee(log_prob: Callable[[np.ndarray], np.ndarray], p0: np.ndarray | No
     remaining = max_steps - start
     if remaining > 0:
         gen = sampler.sample(state, iterations=remaining, progress=progress)
-        try:
-            for _ in gen:
-                it = sampler.iteration
-                if it % check_every:
-                    continue
-                tau = _autocorr(sampler)
-                history.append([int(it), float(np.max(tau))])
-                converged = _criterion(tau, old_tau, it, min_steps=min_steps,
-                                       tau_factor=tau_factor, tau_rtol=tau_rtol)
-                old_tau = tau
-                if backend is not None:
-                    _write_backend_attr(backend, _TAU_ATTR, tau)
-                if converged:
-                    break
-        finally:
-            gen.close()
+        # (a Ctrl-C at the end of a step: inside emcee's call of log_prob its wrapper printed
+        # the ensemble and a traceback; a backend then holds the whole last step)
+        with interrupt_between_steps() as check_interrupt:
+            try:
+                for _ in gen:
+                    check_interrupt()
+                    it = sampler.iteration
+                    if it % check_every:
+                        continue
+                    tau = _autocorr(sampler)
+                    history.append([int(it), float(np.max(tau))])
+                    converged = _criterion(tau, old_tau, it, min_steps=min_steps,
+                                           tau_factor=tau_factor, tau_rtol=tau_rtol)
+                    old_tau = tau
+                    if backend is not None:
+                        _write_backend_attr(backend, _TAU_ATTR, tau)
+                    if converged:
+                        break
+            finally:
+                gen.close()
+            check_interrupt()  # (pressed during the last step)
     n = int(sampler.iteration)
     if not converged:
         tau = _autocorr(sampler)

@@ -1,0 +1,55 @@
+"""Ctrl-C between a sampler's steps, not inside its call of the likelihood.
+
+emcee and dynesty call the likelihood through a wrapper whose bare ``except:`` prints the
+parameters, the arguments and a traceback before it re-raises, so a Ctrl-C that lands in the
+likelihood (nearly always: that is where the time goes) put about 40 lines of debris on
+stdout and stderr before ``bayespilot: interrupted``.  While a sampler runs, the first Ctrl-C
+only sets a flag, which the sampler's loop (our code, outside the wrapper) turns into a
+KeyboardInterrupt at the end of the step; a second Ctrl-C interrupts at once, as usual.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+from typing import Callable, Iterator
+
+__all__ = ["interrupt_between_steps"]
+
+
+@contextlib.contextmanager
+def interrupt_between_steps() -> Iterator[Callable[[], None]]:
+    """Defer the first Ctrl-C to the next call of the function this yields.
+
+    Yields
+    ------
+    callable
+        ``check()``: raises KeyboardInterrupt if Ctrl-C was pressed since the context was
+        entered; call it between the sampler's steps.
+
+    Notes
+    -----
+    Only in the main thread with Python's default SIGINT handler installed (a command-line
+    run, a script); elsewhere (a dask worker's thread, a notebook's own handler) nothing is
+    changed and ``check`` never raises.  The handler in place before is restored on exit.
+    """
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield lambda: None
+        return
+    pressed: list[bool] = []
+
+    def defer(signum, frame) -> None:
+        pressed.append(True)
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # a second one: at once
+
+    def check() -> None:
+        if pressed:
+            raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, defer)
+    try:
+        yield check
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
