@@ -413,6 +413,8 @@ def test_a_simulation_writes_its_truth_with_the_recording(tmp_path):
     assert truth["parameters"] == sim.params and truth["seed"] == 5
     assert truth["remnant_fraction"] == pytest.approx(0.2, abs=1e-3)
     assert truth["remnant_gain"] == sim.remnant_gain and truth["T_n"] == sim.settings["T_n"]
+    # what a replay needs beside the seed (the forcing scale, run-in, noise convention, ...)
+    assert truth["settings"] == sim.settings
     np.testing.assert_array_equal(rec.u, sim.recording.u)
     assert _true_parameters(rec, list(sim.params)) == sim.params
     assert "simulation" not in sim.recording.metadata  # the simulation's own is untouched

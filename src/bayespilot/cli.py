@@ -1570,7 +1570,8 @@ SIMULATE_EPILOG = """\
 Simulates one run of the closed-loop tracking task (Fig. 2 of the paper) with
 the multimodal pilot model (Fig. 4) and writes it as OUT.csv + OUT.json in the
 recording format. The JSON sidecar also records the true parameters, K_n,
-F_n, T_n and the seed under the key "simulation". The same seed gives the same
+F_n, T_n, the seed and the simulation's settings (run-in, oversampling,
+forcing scale) under the key "simulation". The same seed gives the same
 files, bit for bit.
 
 --sample-rate sets the recording's rate (default 100 Hz, the paper's); the

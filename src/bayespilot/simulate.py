@@ -31,6 +31,7 @@ import numpy as np
 from scipy import optimize, signal
 
 from . import presets
+from ._files import json_ready
 from ._seeds import resolve_seed
 from .forcing import Multisine
 from .kernels import _closed_loop as CL
@@ -249,10 +250,13 @@ class Simulation:
         """The recording with the truth in its metadata, under ``"simulation"``.
 
         ``metadata["simulation"]`` holds ``parameters`` (the true parameters),
-        ``seed``, ``remnant_gain``, ``remnant_fraction`` and ``T_n``: what
-        ``bayespilot simulate`` writes, so that a posterior of the recording
-        shows the truth (``Posterior.truth``) and the file keeps it.  The
-        diagnosis never reads it.
+        ``seed``, ``remnant_gain``, ``remnant_fraction``, ``T_n`` and
+        ``settings`` (:attr:`settings`: the integration's oversampling, the
+        run-in, the noise convention, the forcing scale, the fraction asked
+        for; what a replay needs beside the seed): what ``bayespilot
+        simulate`` writes, so that a posterior of the recording shows the
+        truth (``Posterior.truth``) and the file keeps it.  The diagnosis
+        never reads it.
 
         Returns
         -------
@@ -263,7 +267,8 @@ class Simulation:
                               "seed": None if self.seed is None else int(self.seed),
                               "remnant_gain": float(self.remnant_gain),
                               "remnant_fraction": float(self.remnant_fraction),
-                              "T_n": self.settings.get("T_n")}
+                              "T_n": self.settings.get("T_n"),
+                              "settings": json_ready(dict(self.settings))}
         return replace(self.recording, metadata=meta)
 
     def write(self, path: str | os.PathLike) -> tuple[Path, Path]:
