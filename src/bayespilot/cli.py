@@ -1591,7 +1591,7 @@ the entry's new parameters, e.g. --with motion-washout and {"omega_w": 0.3}.
 
 Examples:
   bayespilot simulate --task FT --motion-gain 1 --remnant-fraction 0.2 --seed 3 -o out/run
-  bayespilot simulate --task FD --motion-gain 0.5 --params mine.json --duration 40 -o out/short
+  bayespilot simulate --task FD --motion-gain 0.5 --params params.json --duration 40 -o out/short
   bayespilot simulate --task FD --remnant-fraction 0.2 --sample-rate 50 -o out/run50
   bayespilot simulate --task FD --params out/run-fit.json --seed 4 -o out/refit
   bayespilot simulate --task FT --remnant-fraction 0.15 --with motion-washout --params washout.json -o out/washout
