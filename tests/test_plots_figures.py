@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -359,9 +360,14 @@ def test_demo_figures_use_the_cli_resolution(tmp_path):
     assert cli.PLOT_DPI == 200
     seen = {}
     fig = plt.figure()
-    fig.savefig = lambda path, **kw: seen.update(kw, path=path)
+
+    def savefig(path, **kw):  # (it writes the temporary file that then replaces x.png)
+        seen.update(kw, path=path)
+        Path(path).write_bytes(b"")
+
+    fig.savefig = savefig
     example._save(fig, tmp_path / "x.png")
-    assert seen["dpi"] == cli.PLOT_DPI
+    assert seen["dpi"] == cli.PLOT_DPI and (tmp_path / "x.png").is_file()
 
 
 # --- 6. printable sizes --------------------------------------------------------------------------
