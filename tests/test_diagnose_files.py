@@ -223,6 +223,26 @@ def test_shared_posterior_to_json_and_from_json(tmp_path):
     assert SharedPosterior.from_json(old).log_density[3] == -1.0
 
 
+def test_shared_posterior_from_json_needs_what_from_dict_needs(tmp_path):
+    """from_json asks for the density as from_dict does: ``log_density``, or ``density``
+    without it.  A file with log_density alone was refused by from_json ("no density") though
+    from_dict loads it (review 2026-11-29, finding 8); one with neither is refused, named."""
+    sp = _shared_posterior()
+    d = {k: v for k, v in sp.to_dict().items() if k != "density"}
+    _check_same_posterior(SharedPosterior.from_dict(_strict(dumps(d))), sp)
+    path = tmp_path / "log_only.json"
+    write_text_atomic(path, dumps(d))
+    _check_same_posterior(SharedPosterior.from_json(path), sp)
+    neither = tmp_path / "neither.json"
+    write_text_atomic(neither, dumps({k: v for k, v in d.items() if k != "log_density"}))
+    with pytest.raises(ValueError, match="neither.json.*not a SharedPosterior.*log_density"):
+        SharedPosterior.from_json(neither)
+    # a null log_density is as missing (from_dict then takes the density)
+    write_text_atomic(neither, dumps(dict(d, log_density=None)))
+    with pytest.raises(ValueError, match="neither.json.*not a SharedPosterior"):
+        SharedPosterior.from_json(neither)
+
+
 # --- C2: the Bayes factor's file --------------------------------------------------------------
 
 def _bayes_factor() -> ExtensionBayesFactor:

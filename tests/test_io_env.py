@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import bayespilot.io as bio
+from bayespilot._files import dumps, temporary_sibling, utf8_text
 from bayespilot.io import FORMAT, read_recording, write_recording
 from bayespilot.recording import Recording, RecordingError
 
@@ -127,14 +127,45 @@ def test_write_recording_with_the_longest_legal_names(tmp_path, stem):
 
 
 def test_temporary_names_stay_within_255_bytes_and_unique(tmp_path):
+    # (the one helper, _files.temporary_sibling, that write_recording uses too)
     for name in ["run.csv", "x" * 255, "\u00fc" * 127 + ".", "\u20ac" * 85]:
-        names = {bio._temp_name(tmp_path, name) for _ in range(20)}
+        names = {temporary_sibling(tmp_path / name).name for _ in range(20)}
         assert len(names) == 20
         for tmp in names:
             assert len(os.fsencode(tmp)) <= 255 and tmp.startswith(".") and tmp.endswith(".tmp")
             assert tmp.isprintable()  # never half a UTF-8 character
-    assert re.fullmatch(r"\.run\.csv\.[0-9a-f]{12}\.tmp", bio._temp_name(tmp_path, "run.csv"))
-    assert len(os.fsencode(bio._temp_name(tmp_path, "x" * 255, ".bak.tmp"))) <= 255
+    assert re.fullmatch(rf"\.run\.csv\.{os.getpid()}-[0-9a-f]{{8}}\.tmp",
+                        temporary_sibling(tmp_path / "run.csv").name)
+    backup = temporary_sibling(tmp_path / ("x" * 255), ".bak.tmp").name
+    assert len(os.fsencode(backup)) <= 255 and backup.endswith(".bak.tmp")
+
+
+def test_write_recording_names_its_temporaries_by_the_shared_rule(tmp_path, monkeypatch):
+    """write_recording's temporary and backup names are _files.temporary_sibling's: within
+    the folder's PC_NAME_MAX (here said to be 100 bytes), the pid in them.  io had a second
+    helper of its own (review 2026-11-29, finding 6)."""
+    created = []
+    real_open, real_link = os.open, os.link
+
+    def spy_open(path, *args, **kwargs):
+        created.append(Path(path).name)
+        return real_open(path, *args, **kwargs)
+
+    def spy_link(src, dst, *args, **kwargs):
+        created.append(Path(dst).name)
+        return real_link(src, dst, *args, **kwargs)
+
+    monkeypatch.setattr(os, "pathconf", lambda folder, name: 100)
+    monkeypatch.setattr(os, "open", spy_open)
+    monkeypatch.setattr(os, "link", spy_link)
+    stem = tmp_path / ("r" * 120)  # its files' names are legal here (255), longer than 100
+    write_recording(_rec(), stem)
+    write_recording(_rec(), stem)  # again: with a backup of the previous CSV
+    temps = [n for n in created if n.endswith(".tmp")]
+    assert len(temps) == 5 and sum(n.endswith(".bak.tmp") for n in temps) == 1
+    for n in temps:
+        assert len(os.fsencode(n)) <= 100 and f".{os.getpid()}-" in n
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r" * 120 + ".csv", "r" * 120 + ".json"]
 
 
 # ---------------------------------------------------------------------------
@@ -149,11 +180,22 @@ def test_write_recording_decodes_surrogate_escaped_text(tmp_path):
     csv_path, json_path = write_recording(rec, tmp_path / "run")
     doc = json.loads(json_path.read_bytes().decode("utf-8"))
     assert doc["subject"] == "M\u00fcller"
-    assert doc["notes"] == "bad: ?"  # a surrogate that escapes no byte
+    assert doc["notes"] == "bad: \ufffd"  # a surrogate that escapes no byte: as json_ready
     assert doc["lab"] == {"Gr\u00fc\u00dfe": "M\u00fcller"}
     back = read_recording(tmp_path / "run")
     assert back.metadata["subject"] == "M\u00fcller"
     assert "kraft_M\u00fcller" in back.signals
+
+
+def test_a_sidecar_and_a_result_file_spell_the_same_subject_the_same_way(tmp_path):
+    """One normaliser of lone surrogates (_files.utf8_text): the recording's JSON and a result
+    file agree, also for text with escaped bytes and a surrogate that escapes none (the
+    sidecar wrote "M??ller ?", the result "Müller \ufffd"; review 2026-11-29, finding 5)."""
+    subject = "M\udcc3\udcbcller \ud800"
+    _, json_path = write_recording(_rec(subject=subject), tmp_path / "run")
+    sidecar = json.loads(json_path.read_bytes().decode("utf-8"))["subject"]
+    result = json.loads(dumps({"subject": subject}))["subject"]
+    assert sidecar == result == utf8_text(subject) == "M\u00fcller \ufffd"
 
 
 # ---------------------------------------------------------------------------

@@ -190,6 +190,26 @@ def test_a_short_name_keeps_its_temporary_name(tmp_path):
     assert a.name.startswith(".x.nc.") and str(os.getpid()) in a.name
 
 
+def test_temporary_names_follow_the_folders_name_max(tmp_path, monkeypatch):
+    """The folder's PC_NAME_MAX is the limit where it is smaller than 255 (it was 255
+    regardless); where pathconf cannot answer, 255.  A tail (a backup's ".bak.tmp") counts."""
+    name = "\u00fc" * 100 + ".json"
+    monkeypatch.setattr(os, "pathconf", lambda folder, key: 64)
+    for tail in (".tmp", ".bak.tmp"):
+        a = temporary_sibling(tmp_path / name, tail)
+        assert len(os.fsencode(a.name)) <= 64 and a.name.endswith(tail) and a.name.isprintable()
+    assert temporary_sibling(tmp_path / "x.nc").name.startswith(".x.nc.")
+
+    def no_answer(folder, key):
+        raise OSError("no answer")
+
+    monkeypatch.setattr(os, "pathconf", no_answer)
+    a = temporary_sibling(tmp_path / name)
+    assert 64 < len(os.fsencode(a.name)) <= 255
+    monkeypatch.delattr(os, "pathconf")  # as on Windows
+    assert 64 < len(os.fsencode(temporary_sibling(tmp_path / name).name)) <= 255
+
+
 # -- 6. lone surrogates -------------------------------------------------------------------------
 
 

@@ -17,28 +17,56 @@ import numpy as np
 
 
 #: The longest file name (one path component) most file systems take, in bytes (ext4,
-#: XFS, btrfs, APFS, tmpfs; NTFS counts 255 UTF-16 units, which the bytes never exceed).
+#: XFS, btrfs, APFS, tmpfs; NTFS counts 255 UTF-16 units, which the bytes never exceed): the
+#: limit of :func:`temporary_sibling` where the folder's own cannot be asked (no
+#: ``os.pathconf``, as on Windows) or is larger.
 NAME_MAX = 255
 
 
-def temporary_sibling(path: str | os.PathLike) -> Path:
+def _name_max(folder: Path) -> int:
+    """The longest file name ``folder`` takes, in bytes: its ``PC_NAME_MAX``, at most
+    :data:`NAME_MAX`; :data:`NAME_MAX` where that cannot be asked."""
+    try:
+        return min(NAME_MAX, os.pathconf(folder, "PC_NAME_MAX"))
+    except (AttributeError, OSError, ValueError):  # no pathconf (Windows), or no answer
+        return NAME_MAX
+
+
+def temporary_sibling(path: str | os.PathLike, tail: str = ".tmp") -> Path:
     """A hidden file name beside ``path``, unique to this process and call (two writers of
     one path never share it).
 
-    The name is ``.<name>.<pid>-<8 hex>.tmp``, with ``<name>`` cut short (whole characters)
-    so that it is at most :data:`NAME_MAX` bytes: a legal long name of up to 255 bytes
-    stays writable (the ~22 bytes added made it "File name too long").  The pid and the
-    random part keep it unique; it stays in ``path``'s folder, so the rename is atomic.
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file the temporary one stands in for (or backs up).
+    tail : str, default ".tmp"
+        The end of the name (``".bak.tmp"`` for a backup of ``path``).
+
+    Returns
+    -------
+    Path
+        ``.<name>.<pid>-<8 hex><tail>`` in ``path``'s folder.
+
+    Notes
+    -----
+    The one rule for temporary and backup names (:func:`replacing`,
+    :func:`bayespilot.io.write_recording`).  ``<name>`` is cut short (whole characters)
+    so that the whole name fits the folder's limit (``PC_NAME_MAX``, at most
+    :data:`NAME_MAX`; :data:`NAME_MAX` where it cannot be asked): a legal long name of up
+    to 255 bytes stays writable (the ~22 bytes added made it "File name too long").  The
+    pid and the random part, not the name, keep it unique; it stays in ``path``'s folder,
+    so the rename is atomic.
     """
     path = Path(path)
-    tail = f".{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp"
-    budget = NAME_MAX - len(os.fsencode(f".{tail}"))
+    end = f".{os.getpid()}-{uuid.uuid4().hex[:8]}{tail}"
+    budget = _name_max(path.parent) - len(os.fsencode(f".{end}"))
     stem = path.name
     # by characters, not bytes: a cut inside a UTF-8 sequence would give a name that is
     # not valid text (and os.fsencode of a str counts its bytes as the OS will see them)
-    while len(os.fsencode(stem)) > budget:
+    while stem and len(os.fsencode(stem)) > budget:
         stem = stem[:-1]
-    return path.with_name(f".{stem}{tail}")
+    return path.with_name(f".{stem}{end}")
 
 
 @contextlib.contextmanager
@@ -151,10 +179,13 @@ def dumps(obj: Any, *, version: bool = True) -> str:
     or -inf, its sign not kept) written where a finite one was expected; a reader's
     ``from_dict`` makes it NaN (:func:`number`, :func:`nan_for_null`).  A field whose None
     is a value of its own (e.g. the ln BF of a Savage-Dickey estimate that is not valid)
-    reads a null as None.  The one exception: a diagnosis ranking
-    (``CandidateResult.to_dict``) keeps +inf and -inf as the strings ``"inf"`` and
-    ``"-inf"`` (written before this function sees them), apart from a missing value;
-    :func:`number` reads them back as infinities.
+    reads a null as None.  The exception: the diagnosis files keep +inf and -inf, apart
+    from a missing value, as the strings ``"inf"`` and ``"-inf"``, through
+    :func:`bayespilot.diagnose.decide.json_number` (before this function sees them): the
+    ranking (``CandidateResult.to_dict``), the single-run ``chosen``
+    (``DiagnosisResult.to_dict``) and a shared posterior's ``log_density``
+    (``SharedPosterior.to_dict``).  :func:`number` reads them back as infinities, in
+    whichever file it meets them.
 
     A dict is written with :data:`VERSION_KEY`, the release that wrote it (readers ignore
     it), so that a result file says which code made its numbers; ``version=False`` leaves
@@ -173,9 +204,12 @@ def number(v: Any) -> float:
 
     Null is NaN: a null stands for NaN, or for a non-finite number written where a finite
     one was expected (:func:`dumps` writes both as null and keeps no sign), so NaN is all a
-    reader can restore.  The strings ``"inf"`` and ``"-inf"`` are infinities: a diagnosis ranking
-    (``CandidateResult.to_dict``, e.g. an infinite delta BIC) keeps +/-inf as these
-    strings, apart from a missing value.
+    reader can restore.  The strings ``"inf"`` and ``"-inf"`` are +inf and -inf, wherever
+    they are read: the diagnosis files write an infinity so (apart from a missing value),
+    through :func:`bayespilot.diagnose.decide.json_number`, in the ranking
+    (``CandidateResult.to_dict``, e.g. an infinite delta BIC), the single-run ``chosen``
+    (``DiagnosisResult.to_dict``) and a shared posterior's ``log_density``
+    (``SharedPosterior.to_dict``).
     """
     return math.nan if v is None else float(v)
 

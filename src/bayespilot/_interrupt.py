@@ -32,17 +32,25 @@ def interrupt_between_steps() -> Iterator[Callable[[], None]]:
     -----
     Only in the main thread with Python's default SIGINT handler installed (a command-line
     run, a script); elsewhere (a dask worker's thread, a notebook's own handler) nothing is
-    changed and ``check`` never raises.  The handler in place before is restored on exit.
+    changed and ``check`` never raises.  The handler in place before (the one
+    ``signal.getsignal`` returned on entry) is restored on exit, and at the first Ctrl-C so
+    that a second one acts at once.
     """
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: None
+        return
+    # what is restored, on exit and at the first Ctrl-C: the handler getsignal reports,
+    # not signal.default_int_handler by name, so that the restore stays right if the test
+    # below is ever relaxed
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is not signal.default_int_handler:
         yield lambda: None
         return
     pressed: list[bool] = []
 
     def defer(signum, frame) -> None:
         pressed.append(True)
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # a second one: at once
+        signal.signal(signal.SIGINT, previous)  # a second one: at once
 
     def check() -> None:
         if pressed:
@@ -52,4 +60,4 @@ def interrupt_between_steps() -> Iterator[Callable[[], None]]:
     try:
         yield check
     finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, previous)

@@ -19,7 +19,6 @@ import json
 import math
 import os
 import re
-import secrets
 import shutil
 from collections.abc import Mapping
 from pathlib import Path
@@ -27,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from bayespilot._files import temporary_sibling, utf8_text
 from bayespilot.recording import (OPTIONAL_KEYS, OPTIONAL_SIGNALS, REQUIRED_SIGNALS, TASKS,
                                   Recording, RecordingError)
 from bayespilot.recording import (_describe, _is_number, _metadata_problems, _near_miss,
@@ -732,37 +732,19 @@ def read_mat(path: PathLike) -> Recording:
 # ---------------------------------------------------------------------------
 # writing
 # ---------------------------------------------------------------------------
-def _clean_text(s: str) -> str:
-    """``s`` with lone surrogates made text again, so that it can be written as UTF-8.
-
-    Under the C locale without UTF-8 mode (``LC_ALL=C PYTHONUTF8=0``) Python hands over
-    command-line arguments and file names undecodable as ASCII with each byte escaped as a
-    lone surrogate (``--subject Müller`` arrives as ``'M\\udcc3\\udcbcller'``), which strict
-    UTF-8 refuses.  The escaped bytes are decoded as UTF-8 (``'Müller'``); bytes that are no
-    UTF-8, and surrogates that escape no byte, become U+FFFD or ``?``."""
-    try:
-        s.encode("utf-8")
-        return s
-    except UnicodeEncodeError:
-        pass
-    try:
-        return s.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
-    except UnicodeEncodeError:  # a surrogate outside U+DC80..U+DCFF escapes no byte
-        return s.encode("utf-8", "replace").decode("utf-8")
-
-
 def _to_json(where: Any, name: str, value: Any) -> Any:
     """Plain JSON types for metadata values (numpy arrays and scalars allowed); strings are
-    passed through :func:`_clean_text`."""
+    passed through :func:`bayespilot._files.utf8_text`, as a result file's are (so that a
+    recording's sidecar and a result of it spell a C-locale argument the same way)."""
     if isinstance(value, Mapping):
         out = {}
         for k, v in value.items():
             if not isinstance(k, str):
                 raise _fail(where, f"metadata key {name}.{k!r} is not a string")
-            out[_clean_text(k)] = _to_json(where, f"{name}.{k}", v)
+            out[utf8_text(k)] = _to_json(where, f"{name}.{k}", v)
         return out
     if isinstance(value, str):
-        return _clean_text(value)
+        return utf8_text(value)
     if isinstance(value, (list, tuple)):
         return [_to_json(where, f"{name}[{i}]", v) for i, v in enumerate(value)]
     if isinstance(value, np.ndarray):
@@ -776,36 +758,14 @@ def _to_json(where: Any, name: str, value: Any) -> Any:
     raise _fail(where, f"metadata {name} of type {type(value).__name__} cannot be written as JSON")
 
 
-#: Bytes per file name on common file systems (ext4, XFS, btrfs, APFS, NTFS in UTF-16 units).
-_NAME_MAX = 255
-
-
-def _temp_name(directory: Path, name: str, tail: str = ".tmp") -> str:
-    """``.{name}.{12 random hex digits}{tail}``, with ``name`` cut short when needed so that
-    the whole stays within the folder's limit of bytes per file name.
-
-    The 18 to 22 bytes added made a legal long target name (234 to 255 bytes) fail with
-    "File name too long" although the file itself could be written; the random digits, not
-    the name, keep the temporary file unique (it is created with ``O_EXCL``)."""
-    try:
-        limit = min(_NAME_MAX, os.pathconf(directory, "PC_NAME_MAX"))
-    except (AttributeError, OSError, ValueError):  # no pathconf (Windows), or no answer
-        limit = _NAME_MAX
-    token = secrets.token_hex(6)
-    room = limit - len(os.fsencode(f"..{token}{tail}"))
-    keep = name
-    while keep and len(os.fsencode(keep)) > room:  # by characters: never half a UTF-8 one
-        keep = keep[:-1]
-    return f".{keep}.{token}{tail}"
-
-
 def _open_temp(directory: Path, name: str) -> tuple[Path, int]:
-    """Create a new, empty temporary file next to its target (mode honours umask)."""
+    """Create a new, empty temporary file next to its target (mode honours umask); its name
+    by :func:`bayespilot._files.temporary_sibling`, as every temporary file's."""
     while True:
-        tmp = directory / _temp_name(directory, name)
+        tmp = temporary_sibling(directory / name)
         try:
             fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-        except FileExistsError:  # pragma: no cover - 48 random bits
+        except FileExistsError:  # pragma: no cover - the pid and 32 random bits
             continue
         return tmp, fd
 
@@ -864,7 +824,9 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
     the recording's order.  Text (column names, metadata) is written as UTF-8;
     lone surrogates in it, as Python gives command-line arguments under the C
     locale (``--subject Müller`` with ``LC_ALL=C PYTHONUTF8=0``), are first
-    decoded as the UTF-8 bytes they escape.  Numbers are written with ``repr`` (the shortest
+    decoded as the UTF-8 bytes they escape, and any other one, or bytes that
+    are not UTF-8, become U+FFFD: as in the result files
+    (:func:`bayespilot._files.utf8_text`).  Numbers are written with ``repr`` (the shortest
     text that reads back as the same float), so a round trip is exact.
     Both files are first written in full to temporary files in the target
     directory, then moved into place with :func:`os.replace`, the JSON last;
@@ -907,7 +869,7 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
             raise _fail(csv_path, f"column name {name!r} cannot be written (empty, surrounding "
                                   f"blanks or a line break)")
     head = _stdio.StringIO()
-    csv.writer(head, lineterminator="\n").writerow([_clean_text(c) for c in names])
+    csv.writer(head, lineterminator="\n").writerow([utf8_text(c) for c in names])
     columns = [recording.signals[c].tolist() for c in names]
     body = "\n".join(",".join(map(repr, row)) for row in zip(*columns))
     csv_bytes = (head.getvalue() + body + "\n").encode("utf-8")
@@ -931,7 +893,7 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
         tmp_csv = _write_temp(directory, csv_path.name, csv_bytes, temps)
         tmp_json = _write_temp(directory, json_path.name, json_bytes, temps)
         if csv_path.exists():  # keep the previous CSV until the JSON is in place
-            backup = directory / _temp_name(directory, csv_path.name, ".bak.tmp")
+            backup = temporary_sibling(csv_path, ".bak.tmp")
             temps.append(backup)
             try:
                 os.link(csv_path, backup)

@@ -37,7 +37,7 @@ import numpy as np
 from scipy.integrate import trapezoid
 from scipy.interpolate import CubicSpline
 
-from .._files import number, numbers
+from .._files import WrongKind, number, numbers, require_keys
 from ..recording import Recording
 from . import _JSONSummary
 from .catalogue import get_extension
@@ -226,8 +226,9 @@ class SharedPosterior(_JSONSummary):
     elapsed: float
     log_bayes_factor: float = math.nan
 
-    # (from_json: a file without these is another kind of result; from_dict needs them)
-    _file_keys = ("physics", "names", "grid", "density", "marginals")
+    # (from_json: a file without these is another kind of result; from_dict needs them, and
+    # the density as log_density or, without it, density: checked by _from_file)
+    _file_keys = ("physics", "names", "grid", "marginals")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the marginals, the grid, its log density (``log_density``; an
@@ -278,6 +279,21 @@ class SharedPosterior(_JSONSummary):
                    numbers(d.get("ml")), numbers(d.get("stderr")), number(d.get("edge_mass")),
                    dict(d.get("settings") or {}), number(d.get("elapsed_seconds", 0.0)),
                    number(d.get("log_bayes_factor")))
+
+    @classmethod
+    def _from_file(cls, d: dict[str, Any], source_file: str) -> "SharedPosterior":
+        """:meth:`from_dict` of a file's dict; a file without :attr:`_file_keys`, or without
+        both ``log_density`` and ``density``, is another kind of result (WrongKind).
+
+        The density is required as :meth:`from_dict` requires it: ``log_density``, or
+        ``density`` when that is missing or null (a file of before 2026-11-29).  A file with
+        ``log_density`` alone loads here as it does through :meth:`from_dict`.
+        """
+        require_keys(d, cls._file_keys, cls._kind())
+        if d.get("log_density") is None and "density" not in d:
+            raise WrongKind(f"not {cls._kind()}: no log_density or density (this one has "
+                            f"{', '.join(list(d)[:6]) or 'nothing'})")
+        return cls.from_dict(d)
 
     def summary_lines(self) -> list[str]:
         """Lines for a summary: per parameter the median and central 90 % interval."""
