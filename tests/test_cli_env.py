@@ -146,6 +146,63 @@ def test_every_command_refuses_to_overwrite_an_input(capsys, rc, monkeypatch, ar
     assert {p.name: p.read_bytes() for p in rc.iterdir() if p.name in before} == before
 
 
+def _no_batch(monkeypatch):
+    import bayespilot.diagnose.batch
+
+    def started(*a, **k):
+        raise AssertionError("the computation started")
+
+    monkeypatch.setattr(bayespilot.diagnose.batch, "diagnose_batch", started)
+
+
+def test_batch_guard_checks_the_files_the_batch_writes(capsys, rc, monkeypatch, tmp_path):
+    """The guard takes the batch's keys (plan_batch): two recordings of one stem are keyed
+    by folder (a_run, out_run), so `a/run out/run --out out` writes nothing over out/run.json
+    and is taken; a recording whose sidecar is a result file is still refused."""
+    _no_batch(monkeypatch)
+    for folder in ("a", "out"):
+        (tmp_path / folder).mkdir()
+        for name in ("run.csv", "run.json"):
+            (tmp_path / folder / name).write_bytes((rc / name).read_bytes())
+    code, _, err = _run(capsys, "diagnose-batch", tmp_path / "a" / "run",
+                        tmp_path / "out" / "run", "--out", tmp_path / "out", "-q")
+    assert code == 1 and "the computation started" in err, err
+    # out/a_run.json (the key of a/run) is the sidecar of the recording out/a_run
+    for name in ("run.csv", "run.json"):
+        (tmp_path / "out" / name).rename(tmp_path / "out" / name.replace("run", "a_run"))
+    code, _, err = _run(capsys, "diagnose-batch", tmp_path / "a" / "run",
+                        tmp_path / "out" / "a_run", "--out", tmp_path / "out", "-q")
+    assert code == 2, err
+    assert f"argument --out: {tmp_path / 'out' / 'a_run.json'} is the JSON sidecar" in err, err
+    # with --reports, the report's files in <key>/ too
+    code, _, err = _run(capsys, "diagnose-batch", tmp_path / "a" / "run", "--out",
+                        tmp_path / "a" / "x", "--reports", "-q")
+    assert code == 1 and "the computation started" in err, err
+    (tmp_path / "a" / "x" / "run").mkdir(parents=True)
+    for name in ("diagnosis.csv", "diagnosis.json"):
+        (tmp_path / "a" / "x" / "run" / name).write_bytes((rc / name.replace("diagnosis",
+                                                                             "run")).read_bytes())
+    code, _, err = _run(capsys, "diagnose-batch", tmp_path / "a" / "run",
+                        tmp_path / "a" / "x" / "run" / "diagnosis", "--out", tmp_path / "a" / "x",
+                        "--reports", "-q")
+    assert code == 2 and "argument --out" in err and "diagnosis.json" in err, err
+
+
+def test_report_files_are_the_reports_figures(tmp_path):
+    """The guard's report files come from report.FIGURES, which both reports' figures must be
+    in (write_report and PooledDiagnosisResult.report pass them through report._listed): a
+    figure added to a report but not to the list is refused before anything is written."""
+    from bayespilot.diagnose import report
+
+    names = {p.name for p in cli._report_files(tmp_path)}
+    assert {"diagnosis.json", "report.html", report.MANIFEST} <= names
+    assert {f"{f}.{fmt}" for f in report.FIGURES for fmt in report.FORMATS} <= names
+    assert report._listed({"candidates": None, "runs": None}) == {"candidates": None,
+                                                                  "runs": None}
+    with pytest.raises(ValueError, match="not in FIGURES"):
+        report._listed({"candidates": None, "new_figure": None})
+
+
 def test_refuse_overwriting_unit(tmp_path):
     (tmp_path / "a.json").write_text("{}")
     cli._refuse_overwriting([("--json", tmp_path / "b.json")],
@@ -153,12 +210,51 @@ def test_refuse_overwriting_unit(tmp_path):
     with pytest.raises(cli.UsageError, match="argument --json: .*the --params file"):
         cli._refuse_overwriting([("--json", tmp_path / "sub" / ".." / "a.json")],
                                 [("the --params file", tmp_path / "a.json")])
-    names = [p.name for _, p in cli._recording_files("d/run")]
-    assert names == ["run.csv", "run.json", "run.mat"]
-    assert [p.name for _, p in cli._recording_files("d/run.v2.CSV")] == ["run.v2.csv",
-                                                                         "run.v2.json"]
     assert [p for _, p in cli._code_files(["motion-washout", "my.py:X"], "--with")] == \
         [Path("my.py")]
+
+
+def test_recording_files_are_the_ones_read(tmp_path):
+    """The guard's files are io._resolve's: a suffix's case kept (up.CSV is read as up.CSV,
+    not up.csv), a stem's three candidates, nothing for a spec that is no recording."""
+    from bayespilot import io as recording_io
+
+    for spec in ("d/run.v2.CSV", "d/run.JSON", "d/run.Mat"):
+        _, _, first, second = recording_io._resolve(Path(spec))
+        assert [p for _, p in cli._recording_files(spec)] == list(dict.fromkeys([first, second]))
+    assert [p.name for _, p in cli._recording_files("d/run.v2.CSV")] == ["run.v2.CSV",
+                                                                         "run.v2.json"]
+    (tmp_path / "run.csv").write_text("")
+    names = [p.name for _, p in cli._recording_files(str(tmp_path / "run"))]
+    assert names == ["run.csv", "run.json", "run.mat"]
+    assert cli._recording_files(str(tmp_path / "nothere")) == []  # (the read says so)
+
+
+def _case_sensitive(folder: Path) -> bool:
+    (folder / "case.probe").write_text("")
+    try:
+        return not (folder / "CASE.PROBE").exists()
+    finally:
+        (folder / "case.probe").unlink()
+
+
+def test_an_upper_case_suffix_is_guarded_as_read(capsys, rc, stub_fit):
+    """fit up.CSV --json up.CSV replaced the recording (the guard protected up.csv); on a
+    case-sensitive disk --json up.csv is another file and is written."""
+    (rc / "run.csv").rename(rc / "up.CSV")
+    (rc / "run.json").rename(rc / "up.json")
+    before = (rc / "up.CSV").read_bytes()
+    code, _, err = _run(capsys, "fit", rc / "up.CSV", "--method", "fast", "-q",
+                        "--json", rc / "up.CSV")
+    assert code == 2 and "argument --json" in err and "REC" in err, err
+    assert (rc / "up.CSV").read_bytes() == before
+    if not _case_sensitive(rc):
+        pytest.skip("a case-insensitive disk: up.csv is up.CSV")
+    code, _, err = _run(capsys, "fit", rc / "up.CSV", "--method", "fast", "-q",
+                        "--json", rc / "up.csv")
+    assert code == 0, err
+    assert (rc / "up.CSV").read_bytes() == before
+    assert json.loads((rc / "up.csv").read_text()) == {"stub": True}
 
 
 # --- 2 and 10: a standard output that goes away or fails ----------------------------------
@@ -255,6 +351,46 @@ def test_ascii_stdout_and_a_non_ascii_path(tmp_path, rc, stub_fit, capsys, monke
     assert code == 0, capsys.readouterr().err
     assert b"M\\xfcller" in ascii_out.buffer.getvalue()
     assert (rc / "f.json").is_file()
+
+
+@pytest.mark.parametrize("errors", ["strict", "surrogateescape"])
+def test_main_leaves_stdout_as_it_found_it(monkeypatch, errors):
+    """An in-process caller's stdout keeps its error handler (main switched a strict one to
+    backslashreplace for good, and any other one too)."""
+    import io
+
+    out = io.TextIOWrapper(io.BytesIO(), encoding="ascii", errors=errors)
+    monkeypatch.setattr(sys, "stdout", out)
+    code = main(["--version"])
+    monkeypatch.undo()
+    assert code == 0
+    assert sys.stdout is not out and out.errors == errors
+    assert out.buffer.getvalue().startswith(b"bayespilot ")
+
+
+def test_main_leaves_the_real_stdout_as_it_found_it(capsys):
+    if not hasattr(sys.stdout, "reconfigure"):
+        pytest.skip("this stdout cannot be reconfigured")
+    before = sys.stdout.errors
+    assert main(["--version"]) == 0
+    assert sys.stdout.errors == before
+
+
+def test_surrogateescape_stdout_writes_the_paths_bytes(tmp_path, monkeypatch):
+    """The C locale's stdout (ascii, surrogateescape) writes a path from argv back as its
+    bytes (the terminal shows M\u00fcller), not as backslash escapes of the surrogates."""
+    import io
+
+    out = io.TextIOWrapper(io.BytesIO(), encoding="ascii", errors="surrogateescape")
+    monkeypatch.setattr(sys, "stdout", out)
+    name = b"M\xc3\xbcller".decode("ascii", "surrogateescape")  # argv under LC_ALL=C
+    code = main(["simulate", "--seed", "1", "--duration", "20", "-o", str(tmp_path / name / "run")])
+    out.flush()
+    monkeypatch.undo()
+    assert code == 0
+    written = out.buffer.getvalue()
+    assert b"M\xc3\xbcller" in written and b"\\udc" not in written, written
+    assert (tmp_path / "M\u00fcller" / "run.csv").is_file()
 
 
 # --- 7: Ctrl-C inside a numba kernel ----------------------------------------------------

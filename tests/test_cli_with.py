@@ -27,6 +27,20 @@ MY_WASHOUT = dataclasses.replace(get_extension("motion-washout"), name="my-washo
 '''
 
 
+@pytest.fixture(autouse=True)
+def _registry_restored():
+    """An entry of one's own that a command registered (``--with FILE.py:NAME``) is removed
+    after the test: the registry is the process's, and an entry left there became a
+    candidate of every later diagnosis in the same test worker."""
+    from bayespilot.diagnose.catalogue import registered_extensions, unregister_extension
+
+    before = {e.name for e in registered_extensions()}
+    yield
+    for e in registered_extensions():
+        if e.name not in before:
+            unregister_extension(e.name)
+
+
 @pytest.fixture(scope="module")
 def washout_fit(tmp_path_factory):
     """A 10-s FT run (K_theta = 1, F_n = 0.15) and its fast fit with the washout, by the CLI."""
@@ -156,3 +170,56 @@ def test_simulate_with_control_saturation_clips_the_control(tmp_path, capsys):
     assert code == 0, err
     u = read_recording(tmp_path / "s").u
     assert abs(u).max() == 0.02 and (abs(u) == 0.02).sum() > 10  # flat tops at the limit
+
+
+def _paper(task: str) -> dict:
+    from bayespilot import presets
+
+    return dict(presets.paper_parameters(task))
+
+
+@pytest.mark.parametrize("argv", [
+    ["compare", "{run}", "--with", "threshold-shape"],
+    ["loglik", "{run}", "--params", "{params}", "--no-threshold", "--with", "threshold-shape"],
+    ["fit", "{run}", "--method", "fast", "--no-threshold", "--with", "threshold-shape"],
+])
+def test_threshold_shape_without_threshold_is_refused(washout_fit, tmp_path, capsys,
+                                                      monkeypatch, argv):
+    """compare's and --no-threshold's model holds delta_abs at 0, where the soft dead zone is
+    not the identity: "without threshold" would keep a nonlinearity (a different -ln L)."""
+    import bayespilot.compare
+    import bayespilot.fit.fast
+
+    def started(*a, **k):
+        raise AssertionError("the computation started")
+
+    monkeypatch.setattr(bayespilot.compare, "compare", started)
+    monkeypatch.setattr(bayespilot.fit.fast, "fit_fast", started)
+    run, _ = washout_fit
+    params = tmp_path / "soft.json"
+    params.write_text(json.dumps({**_paper("FT"), "w_soft": 0.01}))
+    code, out, err = _run(capsys, *[a.format(run=run, params=params) for a in argv])
+    assert code == 2 and out == "", err
+    shown = "compare" if argv[0] == "compare" else "--no-threshold"
+    assert (f"argument --with: threshold-shape with {shown}: its SoftDeadZone is not the "
+            f"identity at delta_abs = 0") in err, err
+
+
+def test_threshold_shape_with_a_free_threshold_is_taken(washout_fit, tmp_path, capsys):
+    run, _ = washout_fit
+    params = tmp_path / "soft.json"
+    params.write_text(json.dumps({**_paper("FT"), "w_soft": 0.01}))
+    code, out, err = _run(capsys, "loglik", run, "--params", params, "--with", "threshold-shape")
+    assert code == 0, err
+    assert _loglik_value(out) < 0
+
+
+def test_loglik_loads_a_file_of_ones_own_once(washout_fit, tmp_path, capsys):
+    """The model is built once: the file ran twice (for the model, then for the columns)."""
+    run, fit_json = washout_fit
+    entry = tmp_path / "loud.py"
+    entry.write_text(ENTRY_FILE + 'print("loading loud.py")\n')
+    code, out, err = _run(capsys, "loglik", run, "--params", fit_json,
+                          "--with", f"{entry}:MY_WASHOUT")
+    assert code == 0, err
+    assert out.count("loading loud.py") == 1, out

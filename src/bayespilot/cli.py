@@ -549,13 +549,17 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 
 def _cmd_loglik(args: argparse.Namespace) -> int:
-    model = _paper_model_with(args, threshold=not args.no_threshold)
+    # (the model is built once, before the recording is read: the parameter file is checked
+    # against it first; built again for the entries' columns, a --with FILE.py ran twice)
+    model, entries = _paper_model_and_entries(
+        args, threshold=not args.no_threshold,
+        without_threshold="--no-threshold" if args.no_threshold else None)
     params = _read_params(args.params, model, require=model.parameter_names,
                           detail=lambda text: _detail(args, text), with_hint=True)
     if args.no_threshold and "delta_abs" in params:
         _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
     rec = _read(args.recording)
-    _paper_model_with(args, rec, threshold=not args.no_threshold)  # (an entry's columns: checked once the recording is read)
+    _check_columns(entries, rec)
     _detail(args, f"{rec!r}\n{model.summary()}\ninitial conditions: {args.initial}")
     from .likelihood import _startup_default, _startup_reason
 
@@ -585,7 +589,8 @@ def _cmd_fit(args: argparse.Namespace) -> int:
     if args.json:  # checked before the fit: its seconds are not lost to a bad path
         _check_writable(args.json, "fit")
     threshold = not args.no_threshold
-    model = _paper_model_with(args, rec)
+    model = _paper_model_with(args, rec,
+                              without_threshold=None if threshold else "--no-threshold")
     try:
         if args.method == "paper":
             _say(args, f"fitting {rec.source} with the paper's three-step procedure "
@@ -896,20 +901,33 @@ def _check_writable(path: str | Path, what: str) -> None:
 
 
 def _recording_files(spec: str) -> list[tuple[str, Path]]:
-    """(what, path) of each file a recording argument can be read from, as
-    ``io.read_recording`` resolves it: a ``.mat`` file; a ``.csv`` or ``.json`` with its
-    partner; a stem's ``STEM.csv``, ``STEM.json`` and ``STEM.mat``."""
+    """(what, path) of each file a recording argument is read from.
+
+    The files are ``io._resolve``'s, the resolution ``io.read_recording`` itself uses (a
+    copy of it here had lower-cased ``up.CSV`` to ``up.csv``: the file read went
+    unguarded, and another file was refused): a ``.mat`` file; a ``.csv`` or ``.json``, as
+    given, with its partner; for a stem, all of ``STEM.csv``, ``STEM.json`` and
+    ``STEM.mat``: the ones it reads and the ones it would read instead (a ``STEM.json``
+    written beside a lone ``STEM.mat`` hides the recording).  None for a spec that names
+    no recording: the read refuses it before anything is written.
+    """
+    from . import io as recording_io
+    from .recording import RecordingError
+
     p = Path(spec)
     where = f"the recording REC {spec}"
-    suffix = p.suffix.lower()
-    if suffix == ".mat":
-        return [(where, p)]
-    stem = p.with_suffix("") if suffix in (".csv", ".json") else p
-    files = [(f"the CSV of {where}", stem.parent / (stem.name + ".csv")),
-             (f"the JSON sidecar of {where}", stem.parent / (stem.name + ".json"))]
-    if suffix not in (".csv", ".json"):
-        files.append((f"the .mat file of {where}", stem.parent / (stem.name + ".mat")))
-    return files
+    try:
+        kind, stem, first, second = recording_io._resolve(p, spec)
+    except (RecordingError, OSError):  # (said by the read, in its words)
+        return []
+    if stem != p:  # a file named: it (and a CSV's or JSON's partner) is what is read
+        if kind == "mat":
+            return [(where, first)]
+        return [(f"the CSV of {where}", first), (f"the JSON sidecar of {where}", second)]
+    added = recording_io._with_suffix_added
+    return [(f"the CSV of {where}", added(p, ".csv")),
+            (f"the JSON sidecar of {where}", added(p, ".json")),
+            (f"the .mat file of {where}", added(p, ".mat"))]
 
 
 def _code_files(specs: Sequence[str], option: str) -> list[tuple[str, Path]]:
@@ -985,10 +1003,16 @@ def _stem_files(out: str) -> list[Path]:
     return [stem.parent / (stem.name + ".csv"), stem.parent / (stem.name + ".json")]
 
 
-#: The files ``DiagnosisResult.report`` writes (or, as a stale figure, removes) in its folder.
-_REPORT_FILES = ("diagnosis.json", "report.html") + tuple(
-    f"{name}.{fmt}" for name in ("frequency_response", "residuals", "evidence", "candidates",
-                                 "profile", "posterior", "runs") for fmt in PLOT_FORMATS)
+def _report_files(folder: str | Path) -> list[Path]:
+    """The files a diagnosis's report writes (or, as a stale figure, removes) in ``folder``:
+    its figures in every format (the report module's list of them, ``FIGURES``: a figure
+    added there is guarded here too), ``diagnosis.json``, ``report.html`` and the
+    manifest."""
+    from .diagnose.report import FIGURES, FORMATS, MANIFEST
+
+    return [Path(folder) / name for name in (
+        "diagnosis.json", "report.html", MANIFEST,
+        *(f"{figure}.{fmt}" for figure in FIGURES for fmt in FORMATS))]
 
 
 def _check_folder(path: str | Path, what: str) -> None:
@@ -1064,7 +1088,8 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                          *_code_files(args.extended_by, "--with")])
     posterior = _read_posterior(args.posterior) if args.posterior else None
     rec = _read(args.recording)
-    model = _paper_model_with(args, rec)
+    # (compare's model without threshold is this one with delta_abs fixed at 0)
+    model = _paper_model_with(args, rec, without_threshold="compare")
     if args.json:
         _check_writable(args.json, "comparison")
     _say(args, f"comparing the model with and without threshold on {rec.source} "
@@ -1167,11 +1192,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                              + ("(a netCDF file of the draws)" if want == ".nc" else
                                 "(several runs: the shared parameters' posterior on a grid, "
                                 "as JSON)"))
-    report = []
-    if args.report:
-        from .diagnose.report import MANIFEST  # (the report's list of the figures it wrote)
-
-        report = [Path(args.report) / name for name in _REPORT_FILES + (MANIFEST,)]
+    report = _report_files(args.report) if args.report else []
     if args.json:  # (the report's diagnosis.json is the --json's content: the same file is fine)
         report = [f for f in report if not (f.name == "diagnosis.json"
                                             and _same_file(f, Path(args.json)))]
@@ -1291,6 +1312,56 @@ def _recordings_in(args_paths: Sequence[str]) -> list[str]:
     return out
 
 
+def _batch_files(paths: Sequence[str], out: str | Path, *, pool: bool,
+                 reports: bool) -> list[Path]:
+    """The files ``diagnose_batch(paths, out, pool=pool, reports=reports)`` may write.
+
+    ``summary.csv`` and ``summary.png``, and for each diagnosis ``<key>.json`` (or
+    ``<key>.error.json``) and, with ``reports``, its report in ``<key>/``.  The keys are
+    the batch's own (``plan_batch`` on the recordings, a recording named twice counted
+    once, as the batch does): guessed from the recordings' names, ``a/run out/run --out
+    out`` was refused for ``out/run.json``, which the batch (keys ``a_run``, ``out_run``)
+    never writes.  The recordings are read for it (milliseconds each; a pooled key is
+    their subject and condition).  When one cannot be read or the keys clash, only the
+    summary's files: the batch refuses that before it writes anything.
+
+    Parameters
+    ----------
+    paths : sequence of str
+        The recordings, as the batch is given them.
+    out : str or Path
+        The batch's ``--out`` folder.
+    pool, reports : bool
+        As ``diagnose_batch`` takes them.
+
+    Returns
+    -------
+    list of Path
+    """
+    from .diagnose.batch import _the_recording, plan_batch
+    from .io import read_recording
+    from .recording import RecordingError
+
+    out = Path(out)
+    files = [out / "summary.csv", out / "summary.png"]
+    first: dict[str, str] = {}
+    for p in paths:
+        first.setdefault(_the_recording(p), p)
+    unique = list(first.values())
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (the batch's own read says them, once)
+            recordings = [read_recording(p) for p in unique]
+        tasks = plan_batch(unique, recordings, pool=pool)
+    except (RecordingError, ValueError, OSError):
+        return files
+    for task in tasks:
+        files += [out / f"{task.key}.json", out / f"{task.key}.error.json"]
+        if reports:
+            files += _report_files(out / task.key)
+    return files
+
+
 def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     import csv
 
@@ -1305,10 +1376,8 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     _load_extensions(args.extension)
     paths = _recordings_in(args.recording)
     read = [f for p in paths for f in _recording_files(p)]
-    # a <key>.json is named after a recording's stem: one in --out itself would be replaced
-    written = dict.fromkeys([Path(args.out) / "summary.csv", Path(args.out) / "summary.png",
-                             *(Path(args.out) / f.name for _, f in read if f.suffix == ".json")])
-    _refuse_overwriting([("--out", f) for f in written],
+    _refuse_overwriting([("--out", f) for f in _batch_files(paths, args.out, pool=args.pool,
+                                                            reports=args.reports)],
                         [*read, *_code_files(args.extension, "--extension")])
     where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
     # (said before the recordings are read: a refusal of one of them may follow, and nothing
@@ -1441,14 +1510,40 @@ def _with_argument(p: argparse.ArgumentParser, simulated: bool = False) -> None:
 
 
 def _paper_model_with(args: argparse.Namespace, recording=None, *, threshold: bool = True,
-                      fitted: bool = True):
+                      fitted: bool = True, without_threshold: str | None = None):
+    """The model of :func:`_paper_model_and_entries` (which see), without its entries."""
+    return _paper_model_and_entries(args, recording, threshold=threshold, fitted=fitted,
+                                    without_threshold=without_threshold)[0]
+
+
+def _check_columns(entries: Sequence, recording) -> None:
+    """Refuse, as bad input, a ``--with`` entry that ``recording`` lacks a column for."""
+    for ext in entries:
+        missing = [c for c in ext.needs if c not in recording]
+        if missing:
+            raise UsageError(f"argument --with: {ext.name} needs the recording column(s) "
+                             f"{', '.join(missing)}, which {recording.source} lacks")
+
+
+def _paper_model_and_entries(args: argparse.Namespace, recording=None, *,
+                             threshold: bool = True, fitted: bool = True,
+                             without_threshold: str | None = None) -> tuple:
     """The paper's model (``--oversample``; ``threshold``: with a free delta_abs), extended by
-    each ``--with`` entry in turn; an entry the recording lacks a column for, or (``fitted``:
-    a command that fits or evaluates the likelihood) one that only ``diagnose`` fits (its
-    likelihood is not Eq. 4's), is refused as bad input."""
-    from .model import paper_model
+    each ``--with`` entry in turn, and the entries (for :func:`_check_columns` once the
+    recording is read: a ``FILE.py:NAME`` is run once, by this call).
+
+    Refused as bad input: an entry the recording lacks a column for; (``fitted``: a command
+    that fits or evaluates the likelihood) one that only ``diagnose`` fits (its likelihood
+    is not Eq. 4's); and, when the command uses the model without threshold
+    (``without_threshold``: how it says so, e.g. ``"--no-threshold"``), one that puts on
+    delta_abs a nonlinearity other than the paper's dead zone (``threshold-shape``'s soft
+    dead zone): held at delta_abs = 0 that is not the identity (slope 1/2 at 0), so the
+    model "without threshold" would still have a nonlinearity there.
+    """
+    from .model import DeadZone, paper_model
 
     model = paper_model(threshold=threshold, oversample=getattr(args, "oversample", 1))
+    used: list = []
     for spec in args.extended_by:
         if ":" in spec:
             entries = _load_extensions([spec], "--with")
@@ -1465,16 +1560,27 @@ def _paper_model_with(args: argparse.Namespace, recording=None, *, threshold: bo
                 raise UsageError(f"argument --with: {ext.name} is fitted by the "
                                  f"{ext.likelihood} likelihood, which only 'bayespilot "
                                  f"diagnose' has")
-            missing = [c for c in ext.needs if recording is not None and c not in recording]
-            if missing:
-                raise UsageError(f"argument --with: {ext.name} needs the recording column(s) "
-                                 f"{', '.join(missing)}, which {recording.source} lacks")
+            if recording is not None:
+                _check_columns([ext], recording)
             try:
                 model = ext.build(model)
             except (TypeError, ValueError, KeyError) as exc:
                 raise UsageError(f"argument --with: {ext.name} cannot extend "
                                  f"{model.name!r} ({exc})") from None
-    return model
+            # (the fitters and compare make "no threshold" by fixing delta_abs at 0: only
+            # the paper's dead zone is then no nonlinearity at all)
+            kept = [nl for nl in [c.nonlinearity for c in model.channels] + [model.output]
+                    if without_threshold and nl is not None and "delta_abs" in nl.thresholds
+                    and not isinstance(nl, DeadZone)]
+            if kept:
+                raise UsageError(f"argument --with: {ext.name} with {without_threshold}: its "
+                                 f"{type(kept[0]).__name__} is not the identity at delta_abs = "
+                                 f"0 (a soft dead zone keeps a slope of 1/2 at 0), so the model "
+                                 f"without threshold would still hold a nonlinearity; "
+                                 f"{ext.name} goes with a free threshold (fit or sample "
+                                 f"without --no-threshold)")
+            used.append(ext)
+    return model, used
 
 
 def _diagnose_arguments(p: argparse.ArgumentParser, seed_help: str | None = None) -> None:
@@ -2228,19 +2334,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     argparse's SystemExit is turned into its exit code.  A standard output
     that goes away (``| head``) or fails stops only the printing: the
     command still writes its files, and the exit code is theirs (0 after a
-    closed pipe).  Standard output replaces what it cannot encode by
-    backslash escapes, as standard error does; with standard error closed
-    (``2>&-``) its messages are dropped, not mixed into the results.
+    closed pipe).  A standard output with the strict error handler (an
+    ASCII or latin-1 one) replaces what it cannot encode by backslash
+    escapes while the command runs, as standard error does, and gets its
+    handler back at the end; any other handler is kept (the C locale's
+    ``surrogateescape`` writes a path's undecodable bytes back as given).
+    With standard error closed (``2>&-``) its messages are dropped, not
+    mixed into the results.
     """
     stdout, stderr = sys.stdout, sys.stderr
     if stderr is None:  # (2>&-: print(file=None) wrote the messages into stdout's results)
         sys.stderr = open(os.devnull, "w", encoding="utf-8")
     guard = None
+    errors = None  # stdout's own error handler, put back at the end, when it was changed
     if stdout is not None:
         # (a non-ASCII path on an ASCII or latin-1 stdout: '\xfc' printed, not a crash after
-        # the computation; stderr has this handler already)
-        with contextlib.suppress(AttributeError, ValueError, OSError):
-            stdout.reconfigure(errors="backslashreplace")
+        # the computation; stderr has this handler already.  Only a strict one is replaced:
+        # the C locale's surrogateescape writes a path's undecodable bytes back as they
+        # came, which a terminal shows as the name, where a backslash escape would not)
+        if getattr(stdout, "errors", None) == "strict":
+            with contextlib.suppress(AttributeError, ValueError, OSError):
+                stdout.reconfigure(errors="backslashreplace")
+                errors = "strict"
         guard = sys.stdout = _GuardedStdout(stdout)
     try:
         code = _main(argv)
@@ -2258,6 +2373,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if guard is not None:
             sys.stdout = stdout
+        if errors is not None:  # (a caller in this process keeps its stdout as it was)
+            with contextlib.suppress(AttributeError, ValueError, OSError):
+                stdout.reconfigure(errors=errors)
         if stderr is None:
             sys.stderr.close()
             sys.stderr = None

@@ -315,7 +315,7 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         """
         import html
 
-        from .report import (_STYLE, _candidate_table, _checked_formats, _img,
+        from .report import (_STYLE, _candidate_table, _checked_formats, _img, _listed,
                              _write_figures, _yes_no, plot_candidates, plot_shared_posterior)
 
         formats = _checked_formats(formats)
@@ -324,7 +324,7 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         figures = {"candidates": lambda: plot_candidates(self), "runs": lambda: plot_runs(self),
                    "posterior": None if self.posterior is None
                    else (lambda: plot_shared_posterior(self.posterior))}
-        paths = _write_figures(figures, out, formats)
+        paths = _write_figures(_listed(figures), out, formats)  # (names in report.FIGURES)
         paths["json"] = out / "diagnosis.json"
         self.to_json(paths["json"])
 

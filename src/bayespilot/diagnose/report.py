@@ -886,6 +886,25 @@ def _checked_formats(formats: str | Sequence[str]) -> tuple[str, ...]:
 #: them, while this list is kept up to date figure by figure.  Hidden: bookkeeping.
 MANIFEST = ".bayespilot-report.json"
 
+#: The name of every figure a report can write (``<name>.<format>`` in its folder): a
+#: single run's (:func:`write_report`) and a pooled diagnosis's
+#: (:meth:`~bayespilot.diagnose.pooled.PooledDiagnosisResult.report`).  The one list:
+#: both reports' figures must be in it (:func:`_listed` refuses another name) and
+#: ``bayespilot diagnose --report`` guards these files, so that no figure of a report is
+#: written over a file the command reads for want of being listed there.
+FIGURES = ("frequency_response", "residuals", "evidence", "candidates", "profile",
+           "posterior", "runs")
+
+
+def _listed(figures: Mapping[str, Any]) -> Mapping[str, Any]:
+    """``figures`` (a report's, name -> how to draw it) once each name is in
+    :data:`FIGURES`; ValueError, before anything is written, for one that is not (its file
+    would escape ``bayespilot diagnose --report``'s overwrite guard)."""
+    unknown = [name for name in figures if name not in FIGURES]
+    if unknown:
+        raise ValueError(f"figure(s) {', '.join(unknown)} not in FIGURES: add them there")
+    return figures
+
 
 def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
@@ -1149,7 +1168,7 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         figures["posterior"] = None
     # no empty placeholder, nor a figure left from an earlier report; the figures first,
     # the page last (an interrupted report never has a new page beside old figures)
-    paths = _write_figures(figures, out, formats)
+    paths = _write_figures(_listed(figures), out, formats)
     paths["json"] = out / "diagnosis.json"
     result.to_json(paths["json"])
 
