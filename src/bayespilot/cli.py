@@ -997,10 +997,10 @@ def _refuse_overwriting(outputs: Sequence[tuple[str, str | Path | None]],
 
 def _stem_files(out: str) -> list[Path]:
     """The CSV and JSON that ``write_recording(..., out)`` writes (a stem, or its .csv or
-    .json)."""
-    p = Path(out)
-    stem = p.with_suffix("") if p.suffix.lower() in (".csv", ".json") else p
-    return [stem.parent / (stem.name + ".csv"), stem.parent / (stem.name + ".json")]
+    .json): io's own rule."""
+    from .io import _pair_paths
+
+    return list(_pair_paths(Path(out)))
 
 
 def _report_files(folder: str | Path) -> list[Path]:

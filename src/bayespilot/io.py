@@ -88,6 +88,13 @@ def _with_suffix_added(stem: Path, suffix: str) -> Path:
     return stem.parent / (stem.name + suffix)
 
 
+def _pair_paths(path: Path) -> tuple[Path, Path]:
+    """The CSV and JSON :func:`write_recording` writes for ``path``: a stem, or the ``.csv``
+    or ``.json`` path of the pair (any case)."""
+    stem = path.with_suffix("") if path.suffix.lower() in (".csv", ".json") else path
+    return _with_suffix_added(stem, ".csv"), _with_suffix_added(stem, ".json")
+
+
 def _read_bytes(path: Path) -> bytes:
     try:
         with open(path, "rb") as fh:
@@ -855,12 +862,9 @@ def write_recording(recording: Recording, path: PathLike) -> tuple[Path, Path]:
     if shown.endswith(("/", os.sep)):  # ("out/" wrote out.csv and out.json beside the folder)
         raise _fail(shown, f"a folder; give the recording's stem in it ({shown}NAME, written "
                            f"as NAME.csv and NAME.json)")
-    suffix = p.suffix.lower()
-    if suffix == ".mat":
+    if p.suffix.lower() == ".mat":
         raise _fail(p, "write_recording writes the CSV + JSON pair; give a stem, .csv or .json path")
-    stem = p.with_suffix("") if suffix in (".csv", ".json") else p
-    csv_path = _with_suffix_added(stem, ".csv")
-    json_path = _with_suffix_added(stem, ".json")
+    csv_path, json_path = _pair_paths(p)
 
     # -- build both files in memory, and check them as the reader would ----
     names = list(REQUIRED_SIGNALS) + [c for c in recording.signals if c not in REQUIRED_SIGNALS]
