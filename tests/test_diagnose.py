@@ -317,6 +317,12 @@ def test_diagnose_correct_model_says_none(control_result):
     assert {r["physics"] for r in d["ranking"]} == set(NAMES)
     for r in d["ranking"]:
         assert set(r) >= {"physics", "delta_neg_log_lik", "p_value", "params"}
+    # every parameter's unit as the paper gives it (Table 1) and as the catalogue declares it
+    assert {k: d["units"][k] for k in ("K_v", "tau_v", "omega_nm", "delta_abs", "omega_w",
+                                        "K_ot", "w_soft")} == {
+        "K_v": "-", "tau_v": "s", "omega_nm": "rad/s", "delta_abs": "IPUT",
+        "omega_w": "rad/s", "K_ot": "rad/(m/s^2)", "w_soft": "IPUT"}
+    assert all(set(r["params"]) <= set(d["units"]) for r in d["ranking"])
     # the tests are against the final GLS base fit (threshold-shape: or its refinement)
     ref = res.base["gls_neg_log_lik"]
     for c in res.ranking:

@@ -305,3 +305,40 @@ def test_reprs_are_short_and_say_what_matters():
     text = repr(_shared_posterior())
     assert len(text) < 600 and "array" not in text and "density" not in text, text
     assert "'motion-washout'" in text and "log_bayes_factor=2.5" in text
+
+
+# --- units: every parameter's, in the files, the summaries and the batch's table ---------------
+
+def test_units_are_kept_through_the_file_and_shown_beside_the_fitted_values(tmp_path):
+    from bayespilot.diagnose import _parameter_units
+    from bayespilot.diagnose.batch import DiagnoseTask, batch_summary_rows
+
+    base = paper_model()
+    washout = get_extension("motion-washout").build(base)
+    units = _parameter_units(base, None, washout)
+    # the paper's Table 1 units, then the entry's own (the base model's names come first)
+    assert units["tau_m"] == "s" and units["K_m"] == "rad/IPUT" and units["delta_abs"] == "IPUT"
+    assert units["omega_w"] == "rad/s" and list(units)[:8] == list(base.all_names)
+    chosen = CandidateResult("motion-washout", True, "GLS", 8.0, 16.0, 1, 1e-5, 10.0, 5.0,
+                             {"omega_w": 0.31}, {"omega_w": 0.02}, justified=True)
+    res = DiagnosisResult(True, "motion-washout", [chosen], {},
+                          {"params": {}, "neg_log_lik": -1.0, "vaf": 80.0},
+                          chosen, {"alpha": 0.01, "n_tested": 1, "skip_seconds": 5.0}, 1.0,
+                          "run.csv", units=units)
+    assert "  omega_w            0.31 +- 0.02 rad/s" in res.summary().splitlines()
+    res.to_json(tmp_path / "d.json")
+    back = DiagnosisResult.from_json(tmp_path / "d.json")
+    assert back.units == units and back.summary() == res.summary()
+    assert _strict((tmp_path / "d.json").read_text())["units"]["omega_w"] == "rad/s"
+    # the batch's table: the chosen parameters' units, as JSON; none from an older file
+    task = DiagnoseTask("run", ("run.csv",), None, "FD", 1.0)
+    row, = batch_summary_rows([task], tmp_path, {"run": res.to_dict()})
+    assert json.loads(row["units"]) == {"omega_w": "rad/s"}
+    old = {k: v for k, v in res.to_dict().items() if k != "units"}
+    row, = batch_summary_rows([task], tmp_path, {"run": old})
+    assert row["units"] == "" and json.loads(row["params"]) == {"omega_w": 0.31}
+    assert DiagnosisResult.from_dict(old).units == {}
+    # the report's candidate table (also the pooled one's)
+    from bayespilot.diagnose.report import _candidate_table
+    assert "0.31 &plusmn; 0.02 rad/s" in _candidate_table([chosen], units)
+    assert "0.31 &plusmn; 0.02</td>" in _candidate_table([chosen])

@@ -171,6 +171,9 @@ def test_pooled_names_a_shared_washout(washout_result):
     d = json.loads(res.to_json())
     assert d["pooled"] is True and d["n_runs"] == 2 and d["physics"] == "motion-washout"
     assert {"physics", "delta_neg_log_lik", "p_value", "params"} <= set(d["ranking"][0])
+    assert d["units"]["omega_w"] == "rad/s" and d["units"]["tau_m"] == "s"
+    assert "rad/s" in next(line for line in res.summary().splitlines()
+                           if line.strip().startswith("omega_w"))
 
 
 def test_pooled_fit_matches_a_profile_over_the_shared_parameter(washout_runs, washout_result):

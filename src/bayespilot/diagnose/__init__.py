@@ -179,6 +179,26 @@ class _DiagnosisJSON(_JSONSummary):
         return cls.from_dict(d, source_file=source_file)
 
 
+def _parameter_units(*models: Any) -> dict[str, str]:
+    """Each parameter's unit as the models declare it (``"-"``: dimensionless), by name; the
+    first model to declare a name gives its unit (a name shared by the models has one unit:
+    :meth:`~bayespilot.model.PilotModel.extend` refuses another).  None is skipped.
+
+    A diagnosis keeps this for the base model and every candidate's extended model, so that
+    a result file says what unit each of its numbers has (``units`` in its JSON)."""
+    units: dict[str, str] = {}
+    for m in models:
+        for p in getattr(m, "parameters", ()) if m is not None else ():
+            units.setdefault(p.name, p.unit)
+    return units
+
+
+def _unit_suffix(units: Mapping[str, str], name: str) -> str:
+    """" rad/s" after a number in the summary; "" for a dimensionless or unknown unit."""
+    u = units.get(name)
+    return "" if not u or u == "-" else f" {u}"
+
+
 def _short_repr(result: Any, what: str, source: Any = None) -> str:
     """``<Class: decision, what, source>`` on one line, for a diagnosis in a notebook; it
     does not raise on a result read back from its JSON (or half built)."""
@@ -243,14 +263,15 @@ def _bic(c) -> str:
     return "inf" if c.delta_bic > 0 else "-"
 
 
-def _fitted_lines(chosen) -> list[str]:
-    """The chosen extension's reported parameters +- standard errors, and how they were made
-    when refitted after the test (beside the test's estimate)."""
+def _fitted_lines(chosen, units: Mapping[str, str] | None = None) -> list[str]:
+    """The chosen extension's reported parameters +- standard errors with their units, and
+    how they were made when refitted after the test (beside the test's estimate)."""
     ref = chosen.refit
     lines = []
     for k, v in chosen.params.items():
         was = f"   (test's fit {ref['test_params'][k]:.5g}; s.e. the test's)" if ref else ""
-        lines.append(f"  {k:<10} {v:12.5g} +- {chosen.stderr.get(k, math.nan):.2g}{was}")
+        lines.append(f"  {k:<10} {v:12.5g} +- {chosen.stderr.get(k, math.nan):.2g}"
+                     f"{_unit_suffix(units or {}, k)}{was}")
         if k in chosen.interval:
             iv = chosen.interval[k]
             lines.append(f"  {'':<10} {100 * iv.level:.0f} % profile-likelihood interval {iv}")
@@ -333,6 +354,9 @@ class DiagnosisResult(_DiagnosisJSON):
         :func:`~bayespilot.diagnose.nested.bayes_factor` has computed it.
     base_model : PilotModel or None
         The base model the candidates extend.
+    units : dict of str to str
+        Each parameter's unit (``"-"``: dimensionless), by name: the base
+        model's and every candidate's new parameters; ``units`` in the JSON.  Empty for a file written before 2026-11-30.
     """
 
     mismatch: bool
@@ -348,6 +372,7 @@ class DiagnosisResult(_DiagnosisJSON):
     posterior: Any = field(default=None, repr=False)
     bayes_factor: Any = field(default=None, repr=False)
     base_model: Any = field(default=None, repr=False)
+    units: dict = field(default_factory=dict, repr=False)
 
     def __repr__(self) -> str:
         """One line (the dataclass's would print every candidate's arrays)."""
@@ -389,7 +414,8 @@ class DiagnosisResult(_DiagnosisJSON):
             "where": {k: e.to_dict() for k, e in self.where.items()},
             "base": self.base, "chosen": chosen, "settings": self.settings,
             "bayes_factor": None if self.bayes_factor is None else self.bayes_factor.to_dict(),
-            "elapsed_seconds": self.elapsed, "source": self.source})
+            "elapsed_seconds": self.elapsed, "source": self.source,
+            "units": dict(self.units)})
 
     def summary(self) -> str:
         """A readable account: the decision, the ranking, the located evidence."""
@@ -417,7 +443,8 @@ class DiagnosisResult(_DiagnosisJSON):
                          f"{c.signature_score:5.2f}  {ps}{'  *' if c.justified else ''}")
         lines += _calibration_lines(self.ranking)
         if self.chosen is not None:
-            lines += ["", f"fitted {self.chosen.physics}:", *_fitted_lines(self.chosen)]
+            lines += ["", f"fitted {self.chosen.physics}:",
+                      *_fitted_lines(self.chosen, self.units)]
             after = self.arrays.get("after_vaf")
             if after is not None:
                 lines.append(f"  VAF {self.arrays['before_vaf']:.2f} % -> {after:.2f} %, "
@@ -513,7 +540,8 @@ class DiagnosisResult(_DiagnosisJSON):
                    {k: Evidence.from_dict(e) for k, e in d["where"].items()},
                    _base_from(d["base"]), chosen, dict(d.get("settings") or {}),
                    number(d.get("elapsed_seconds", 0.0)), d.get("source"), arrays,
-                   bayes_factor=None if bf is None else ExtensionBayesFactor.from_dict(bf))
+                   bayes_factor=None if bf is None else ExtensionBayesFactor.from_dict(bf),
+                   units=dict(d.get("units") or {}))
 
     def report(self, directory: str | Path, *,
                formats: Sequence[str] = ("png",)) -> dict[str, Path]:
@@ -1321,7 +1349,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         settings["base_at_bounds"] = [dict(d) for d in run.base_at_bounds]  # (BaseFitWarning)
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
                            where, base_d, chosen, settings, time.perf_counter() - t0,
-                           recording.source, arrays, base_model=base_model)
+                           recording.source, arrays, base_model=base_model,
+                           units=_parameter_units(base_model, *(c.model for c in ranking)))
 
 
 def _saturation(recording, base_model, base, where, boot_info):

@@ -120,7 +120,7 @@ class ResultConflictError(CampaignError, ValueError):
 #: Columns of ``summary.csv``.
 SUMMARY_FIELDS = ("key", "n_runs", "subject", "task", "motion_gain", "physics", "mismatch",
                   "p_value", "delta_neg_log_lik", "params", "interval", "posterior",
-                  "smallest_p_candidate", "smallest_p_value", "error", "seed")
+                  "smallest_p_candidate", "smallest_p_value", "error", "seed", "units")
 
 @dataclass(frozen=True)
 class DiagnoseTask:
@@ -897,7 +897,10 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
         the answer is ``none``); without one, ``error`` (the error file's
         ``"<error>: <message>"``, or ``"no result"``); and ``seed``, the
         seed the diagnosis ran with (:func:`task_seed`; ``diagnose(recording,
-        seed=...)`` repeats it).  Fields that do not apply are ''.
+        seed=...)`` repeats it); ``units`` (JSON text: name -> unit of each
+        parameter in ``params``, ``interval`` and ``posterior``; ``"-"``
+        dimensionless; '' for a file written before 2026-11-30).  Fields
+        that do not apply are ''.
     """
     from .. import campaign as C
 
@@ -910,7 +913,8 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
                "task": t.task, "motion_gain": t.motion_gain, "physics": "", "mismatch": "",
                "p_value": "", "delta_neg_log_lik": "", "params": "", "interval": "",
                "posterior": "",
-               "smallest_p_candidate": "", "smallest_p_value": "", "error": "", "seed": ""}
+               "smallest_p_candidate": "", "smallest_p_value": "", "error": "", "seed": "",
+               "units": ""}
         d = diagnoses.get(t.key)
         if d is not None:
             row.update(physics=d["physics"], mismatch=d["mismatch"])
@@ -923,6 +927,10 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
                            interval=_cell({n: [iv["lower"], iv["upper"]] for n, iv in
                                            (chosen.get("interval") or {}).items()}),
                            posterior=_posterior_cell(d, chosen))
+                units = d.get("units") or {}
+                if units:
+                    row["units"] = _cell({n: units[n] for n in chosen.get("params") or {}
+                                          if n in units})
             tested = [c for c in d["ranking"] if isinstance(c.get("p_value"), (int, float))]
             if tested:  # the nearest miss when the answer is none
                 best = min(tested, key=lambda c: c["p_value"])

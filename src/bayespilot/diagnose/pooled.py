@@ -45,7 +45,7 @@ from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
                _at_bounds_lines, _base_from, _bic, _calibration_lines, _calibrator, _check,
                _dropped_why, _fitted_lines, _DiagnosisJSON, _ranking_and_chosen, _short_repr,
-               _prepare, _saturation)
+               _parameter_units, _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
 if TYPE_CHECKING:
@@ -145,6 +145,9 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         refit), whose delta_abs it also reads.
     posterior : SharedPosterior or None
         Set by :func:`~bayespilot.diagnose.shared_posterior`.
+    units : dict of str to str
+        Each parameter's unit (``"-"``: dimensionless), by name, as
+        :attr:`DiagnosisResult.units`; ``units`` in the JSON.
     """
 
     mismatch: bool
@@ -157,6 +160,7 @@ class PooledDiagnosisResult(_DiagnosisJSON):
     elapsed: float
     arrays: dict = field(default_factory=dict, repr=False)
     posterior: Any = field(default=None, repr=False)
+    units: dict = field(default_factory=dict, repr=False)
 
     def __repr__(self) -> str:
         """One line (the dataclass's would print every run's and candidate's numbers)."""
@@ -173,7 +177,8 @@ class PooledDiagnosisResult(_DiagnosisJSON):
                       "ranking": [c.to_dict() for c in self.ranking],
                       "where": self.where, "runs": runs, "chosen": chosen,
                       "posterior": None if self.posterior is None else self.posterior.to_dict(),
-                      "settings": self.settings, "elapsed_seconds": self.elapsed})
+                      "settings": self.settings, "elapsed_seconds": self.elapsed,
+                      "units": dict(self.units)})
 
     def summary(self) -> str:
         """A readable account: the decision, the ranking, each run's share."""
@@ -201,7 +206,7 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         lines += _calibration_lines(self.ranking)
         if self.chosen is not None and self.chosen.params:
             lines += ["", f"fitted {self.chosen.physics} (shared by the {R} runs):",
-                      *_fitted_lines(self.chosen)]
+                      *_fitted_lines(self.chosen, self.units)]
             if self.posterior is not None:
                 lines += self.posterior.summary_lines()
         lines += ["", "runs:"]
@@ -278,7 +283,8 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         post = d.get("posterior")
         return cls(bool(d["mismatch"]), d["physics"], ranking, runs, where, chosen,
                    dict(d.get("settings") or {}), number(d.get("elapsed_seconds", 0.0)),
-                   posterior=None if post is None else SharedPosterior.from_dict(post))
+                   posterior=None if post is None else SharedPosterior.from_dict(post),
+                   units=dict(d.get("units") or {}))
 
     def report(self, directory: str | Path, *,
                formats: Sequence[str] = ("png",)) -> dict[str, Path]:
@@ -335,7 +341,7 @@ class PooledDiagnosisResult(_DiagnosisJSON):
                 f"run. Mismatch: <b>{_yes_no(self.mismatch)}</b>. Decision at family-wise "
                 f"level alpha = {self.settings['alpha']:g} "
                 f"({self.settings['level_per_candidate']:.2g} per candidate).</p>"
-                f"<h2>Candidates (pooled)</h2>{_candidate_table(self.ranking)}"
+                f"<h2>Candidates (pooled)</h2>{_candidate_table(self.ranking, self.units)}"
                 + _img(paths["candidates"],
                        "Improvement of the pooled decision likelihood (summed over the runs) by "
                        "each candidate with its parameters shared; the black mark is what its "
@@ -997,4 +1003,6 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                                  {"noise": [run.noise for run in runs],
                                   "base_model": runs[0].base_model,
                                   "fits": {n: [dict(q) for q in ps] for n, ps in fits.items()},
-                                  "final_fits": final})
+                                  "final_fits": final},
+                                 units=_parameter_units(runs[0].base_model,
+                                                       *(c.model for c in ranking)))

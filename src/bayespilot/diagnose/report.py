@@ -1046,9 +1046,16 @@ def _yes_no(flag: Any) -> str:
     return "yes" if flag else "no"
 
 
-def _candidate_table(ranking: Sequence[Any]) -> str:
+def _candidate_table(ranking: Sequence[Any], units: Mapping[str, str] | None = None) -> str:
     """The candidates' HTML table of a report (single-run or pooled): one row per candidate,
-    a justified one bold; "—" where a number does not apply (a censored fit's Delta BIC)."""
+    a justified one bold; "—" where a number does not apply (a censored fit's Delta BIC);
+    each parameter with its unit from ``units`` (none for "-" or an unknown one)."""
+    units = units or {}
+
+    def unit(k):
+        u = units.get(k)
+        return "" if not u or u == "-" else f" {html.escape(u)}"
+
     rows = []
     for c in ranking:
         if not c.testable:
@@ -1057,7 +1064,7 @@ def _candidate_table(ranking: Sequence[Any]) -> str:
             continue
         interval = getattr(c, "interval", None) or {}
         ps = ", ".join(f"{html.escape(k)} = {_number(v, '.4g')} &plusmn; "
-                       f"{_number(c.stderr.get(k), '.2g')}"
+                       f"{_number(c.stderr.get(k), '.2g')}{unit(k)}"
                        + (f" ({100 * interval[k].level:.0f} % profile interval "
                           f"{html.escape(str(interval[k]))})" if k in interval else "")
                        for k, v in c.params.items())
@@ -1213,7 +1220,7 @@ Base model: -ln L (Eq. 4) = {result.base['neg_log_lik']:.2f}, VAF = {result.base
 Decision at family-wise level alpha = {result.settings['alpha']:g}
 ({result.settings['level_per_candidate']:.2g} per candidate). Time {result.elapsed:.1f} s.</p>
 <h2>Candidates</h2>
-{_candidate_table(result.ranking)}
+{_candidate_table(result.ranking, result.units)}
 {cal}
 {_img(paths['candidates'], "Improvement of the decision likelihood by each candidate; the black "
       "mark is what its test needs, the p-values are at the right.")}
