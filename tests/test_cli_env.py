@@ -515,3 +515,28 @@ def test_closed_stderr_in_process(capsys, monkeypatch):
     monkeypatch.undo()
     out, _ = capsys.readouterr()
     assert code == 2 and out == "" and restored
+
+
+def test_simulate_replaces_a_simulated_recording_but_not_a_labs(capsys, rc):
+    """A lab's recording at -o's stem is a measurement that cannot be made again: refused
+    (exit 2, both files unchanged) unless --force; a simulated one is replaced, as before."""
+    argv = ("simulate", "--seed", "2", "--duration", "20", "-q", "-o", rc / "run")
+    simulated = (rc / "run.csv").read_bytes()
+    assert _run(capsys, *argv)[0] == 0  # the fixture's run is simulated: replaced
+    assert (rc / "run.csv").read_bytes() != simulated
+    # a lab's sidecar (no "simulation"), and a CSV without a sidecar
+    side = json.loads((rc / "run.json").read_text())
+    del side["simulation"]
+    (rc / "run.json").write_text(json.dumps(side))
+    before = {n: (rc / n).read_bytes() for n in ("run.csv", "run.json")}
+    code, _, err = _run(capsys, *argv)
+    assert code == 2 and "did not write" in err and "--force" in err
+    assert {n: (rc / n).read_bytes() for n in before} == before
+    (rc / "run.json").unlink()
+    code, _, err = _run(capsys, *argv)
+    assert code == 2 and f"{rc / 'run.csv'} holds a recording" in err
+    assert (rc / "run.csv").read_bytes() == before["run.csv"]
+    # --force replaces it: the files are those of a fresh simulation with that seed
+    assert _run(capsys, *argv, "--force")[0] == 0
+    assert _run(capsys, *argv[:-1], rc / "fresh")[0] == 0
+    assert (rc / "run.csv").read_bytes() == (rc / "fresh.csv").read_bytes()

@@ -520,6 +520,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     _refuse_overwriting([("-o/--output", f) for f in _stem_files(args.output)],
                         [("the --params file", args.params),
                          *_code_files(args.extended_by, "--with")])
+    if not args.force:
+        _refuse_replacing_a_recording(args.output)
     model = _paper_model_with(args, fitted=False)
     params = presets.paper_parameters(args.task)
     if args.params is not None:
@@ -993,6 +995,36 @@ def _refuse_overwriting(outputs: Sequence[tuple[str, str | Path | None]],
                 raise UsageError(f"argument {option}: {out} is also the file of {other}; give "
                                  f"each output its own file name")
         seen.append((option, out))
+
+
+def _refuse_replacing_a_recording(out: str) -> None:
+    """Refuse (exit 2) to replace a recording that ``bayespilot simulate`` did not write.
+
+    A simulated recording's sidecar says so (its ``"simulation"`` key): simulating onto it
+    again is the common case (a changed seed) and replaces it, as ``-o`` says.  A lab's
+    recording at that stem (a sidecar without it, or a CSV without a sidecar) is a
+    measurement that cannot be made again; ``--force`` replaces it all the same.
+
+    Raises
+    ------
+    UsageError
+        A file of the stem exists and is not a simulated recording's.
+    """
+    csv_path, json_path = _stem_files(out)
+    if not (csv_path.exists() or json_path.exists()):
+        return
+    try:
+        sidecar = json.loads(json_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):  # no sidecar, or one no simulation wrote
+        sidecar = None
+    if isinstance(sidecar, dict) and isinstance(sidecar.get("simulation"), dict):
+        return
+    there = " and ".join(str(p) for p in (csv_path, json_path) if p.exists())
+    raise UsageError(f"argument -o/--output: {there} "
+                     f"{'hold' if ' and ' in there else 'holds'} a recording that "
+                     f"'bayespilot simulate' did not write (no \"simulation\" in its sidecar): "
+                     f"simulating onto it would replace it; give another name, or --force to "
+                     f"replace it")
 
 
 def _stem_files(out: str) -> list[Path]:
@@ -1678,7 +1710,8 @@ the multimodal pilot model (Fig. 4) and writes it as OUT.csv + OUT.json in the
 recording format. The JSON sidecar also records the true parameters, K_n,
 F_n, T_n, the seed and the simulation's settings (run-in, oversampling,
 forcing scale) under the key "simulation". The same seed gives the same
-files, bit for bit.
+files, bit for bit. A simulated recording at OUT is replaced; any other
+recording there (a lab's) is refused unless --force.
 
 --sample-rate sets the recording's rate (default 100 Hz, the paper's); the
 loop is integrated at 1 kHz or finer whatever the rate, and the remnant gain
@@ -1997,6 +2030,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--subject", type=_subject_name, default=None, metavar="S",
                    help="the sidecar's subject (what 'diagnose-batch --pool' groups runs by; "
                         "default: none)")
+    p.add_argument("--force", action="store_true",
+                   help="replace a recording at OUT that 'bayespilot simulate' did not write "
+                        "(refused without it; a simulated one is always replaced)")
     _with_argument(p, simulated=True)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_simulate)
