@@ -517,3 +517,34 @@ def test_output_piped_to_a_reader_that_goes_away_is_not_an_error(tmp_path):
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 0, err
     assert "BrokenPipeError" not in err and "unexpected" not in err
+
+
+def test_command_defaults_are_the_librarys():
+    """The command line restates the library's defaults as literals (so that --help shows
+    them without importing the library); each must be the function's own default."""
+    import inspect
+
+    from bayespilot.campaign import run_campaign
+    from bayespilot.cli import build_parser
+    from bayespilot.compare import compare
+    from bayespilot.diagnose import diagnose, diagnose_pooled
+    from bayespilot.diagnose.batch import diagnose_batch
+    from bayespilot.sample import sample
+
+    def default(fn, name):
+        return inspect.signature(fn).parameters[name].default
+
+    def parsed(*argv):
+        return vars(build_parser().parse_args(list(argv)))
+
+    d = parsed("diagnose", "run")
+    for fn in (diagnose, diagnose_pooled):
+        assert (d["alpha"], d["bootstrap"], d["calibrate"], d["noise_passes"]) == (
+            default(fn, "alpha"), default(fn, "n_bootstrap"), default(fn, "n_calibrate"),
+            default(fn, "noise_passes")), fn.__name__
+    b = parsed("diagnose-batch", "run", "--out", "o")
+    assert b["connect_timeout"] == default(diagnose_batch, "connect_timeout")
+    if "connect_timeout" in inspect.signature(run_campaign).parameters:
+        assert b["connect_timeout"] == default(run_campaign, "connect_timeout")
+    assert parsed("sample", "run", "-o", "p.nc")["max_steps"] == default(sample, "max_steps")
+    assert parsed("compare", "run")["nlive"] == default(compare, "nlive")

@@ -251,3 +251,22 @@ def test_step_one_bad_input(short_likelihood):
         step_one(short_likelihood, repetitions=2, n_best=3)
     with pytest.raises(ValueError, match="repetitions"):
         step_one(short_likelihood, repetitions=0)
+
+
+def test_paper_settings_are_the_papers_and_every_fitters_default():
+    """Section III.A's GA (population 160, 100 generations, crossover 0.7, mutation 0.01,
+    20 bits, 20 repetitions, the best 5): the constant, and the defaults of the three
+    functions that restate them in their signatures (so that help() shows them), agree."""
+    import inspect
+
+    from bayespilot.fit.genetic import PAPER_SETTINGS, genetic_algorithm, step_one
+    from bayespilot.fit.three_step import fit_paper
+
+    paper = {"population": 160, "generations": 100, "p_crossover": 0.7, "p_mutation": 0.01,
+             "bits": 20, "repetitions": 20, "n_best": 5}
+    assert dict(PAPER_SETTINGS) == paper
+    for fn in (genetic_algorithm, step_one, fit_paper):
+        params = inspect.signature(fn).parameters
+        given = {k: params[k].default for k in paper if k in params}
+        assert given == {k: paper[k] for k in given}, fn.__name__
+    assert set(inspect.signature(fit_paper).parameters) >= set(paper)

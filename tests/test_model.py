@@ -412,3 +412,15 @@ def test_a_parameter_no_block_reads_is_refused_and_a_replaced_blocks_are_dropped
     assert drift.with_modulation("visual", None).all_names == m.all_names
     sat = m.with_output(Saturation("u_max"), [Parameter("u_max", 1e-6, 10.0, 1.0)]).fix(u_max=2.0)
     assert sat.with_output(None).all_names == m.all_names and sat.with_output(None).fixed == {}
+
+
+def test_source_codes_are_the_closed_loop_kernels():
+    """A channel's source is a name in the model and a code in the simulator's kernel; the
+    kernel takes every code it does not know as theta, so the two tables must be one."""
+    from bayespilot.kernels import _closed_loop as K
+    from bayespilot.model import SOURCE_CODES, SOURCES
+
+    assert set(SOURCE_CODES) == set(SOURCES)
+    assert SOURCE_CODES == {"e": K.SRC_E, "theta_ddot_m": K.SRC_THETA_DDOT_M,
+                            "theta_m": K.SRC_THETA_M, "theta": K.SRC_THETA}
+    assert sorted(SOURCE_CODES.values()) == list(range(len(SOURCES)))

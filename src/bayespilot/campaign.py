@@ -71,8 +71,8 @@ __all__ = ["Job", "CampaignError", "CampaignSummary", "paper_study", "run_job", 
 
 #: Root entropy of every seed of a campaign (arbitrary, fixed: the paper's year and issue).
 SEED_ROOT = 2012_035_003
-#: The true threshold of the simulation study (Table 3), IPUT.
-TRUE_DELTA_ABS = 0.0075
+#: The true threshold of the simulation study (Table 3, both tasks), IPUT.
+TRUE_DELTA_ABS = presets.TABLE3["FD"]["delta_abs"]
 _TASK_CODE = {"FD": 1, "FT": 2}
 _STREAMS = {"remnant": 0, "fit": 1}
 _METHODS = ("paper", "fast")

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Sequence
 import numpy as np
 
 from .._labels import symbol
+from ..presets import TABLE3
 from ..plots import _figsize, _legend_columns, _new_figure, _param_label, _pyplot
 from .result import FitResult
 
@@ -37,8 +38,10 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["plot_step_one_thresholds", "plot_ga_convergence", "plot_step_two", "plot_step_three"]
 
-#: Groen et al.'s passive pitch threshold, the line of Fig. 6, IPUT (= the paper's true value).
-PASSIVE_THRESHOLD = 0.0075
+#: The true delta_abs of the paper's simulations (Table 3), IPUT: the dashed line these
+#: figures draw by default.  (The paper's Fig. 6, of measured data, draws Groen et al.'s
+#: passive threshold instead, ``presets.DELTA_ABS_PASSIVE`` = 0.00734 IPUT.)
+TRUE_THRESHOLD = TABLE3["FD"]["delta_abs"]
 #: -ln L as the axes show it.
 _NLL = r"$-\ln L$"
 #: Line styles of the GA repetitions of Fig. 7 (with their colours: apart in grey print too).
@@ -96,7 +99,7 @@ def _legend_above(fig, handles, labels, ncols: int, **kw):
 
 def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
                              ncols: int | None = None,
-                             true_value: float | None = PASSIVE_THRESHOLD,
+                             true_value: float | None = TRUE_THRESHOLD,
                              figsize: tuple[float, float] | None = None) -> Figure:
     """Fig. 6: the Step I delta_abs of every repetition, ordered by -ln L.
 
@@ -113,7 +116,9 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
         Panels per row (default up to 4).
     true_value : float or None
         The true delta_abs, a dashed black horizontal line named in the
-        legend (default Groen et al.'s 0.0075 IPUT, the paper's true value);
+        legend (default 0.0075 IPUT, the true value of the paper's
+        simulations, Table 3; for measured data as in the paper's Fig. 6,
+        Groen et al.'s passive threshold ``presets.DELTA_ABS_PASSIVE``);
         None for no line.
     figsize : (float, float), optional
         Size of the figure, inches (default 3 in per panel and 2.6 in per
