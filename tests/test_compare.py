@@ -715,3 +715,46 @@ def test_evidence_leaves_out_by_default_what_compare_does(monkeypatch):
         "discard_seconds"] == COLOURED_DISCARD == 2.0
     assert C.evidence(cut, discard=0.5).settings["discard_seconds"] == 0.5
     assert C._default_discard(cut, "eq4") == 2.0  # what compare() uses
+
+
+def test_coloured_default_discard_is_fit_fasts_on_a_short_record(monkeypatch):
+    """With the coloured likelihood evidence(), compare() and the diagnosis's Bayes factor
+    (nested_bayes_factor) left a flat 2 s out while fit_fast(noise="ar") leaves min(2 s, a
+    quarter of the record): on a 3-s record 2 s against fit_fast's 0.75 (over half the
+    record).  Now one rule (likelihood.coloured_discard); 2 s exactly on a 20-s record, as
+    before.  The nested sampling itself is replaced: only what it is given is checked."""
+    import types
+
+    import bayespilot.compare as C
+    from bayespilot.diagnose.nested import nested_bayes_factor
+    from bayespilot.noise import ARNoise
+
+    given = []
+
+    class _Ev:
+        def __init__(self, discard=None):
+            given.append(discard)
+            self.settings = {"discard_seconds": discard}
+            self.log_z, self.log_z_err, self.max_log_lik = 0.0, 0.1, 0.0
+
+    monkeypatch.setattr(C, "nested_evidence", lambda *a, **k: _Ev())
+    short = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1,
+                     duration=3.0).recording
+    longer = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1,
+                      duration=20.0).recording
+    for rec, want in ((short, 0.75), (longer, 2.0)):
+        assert C.evidence(rec, likelihood="coloured", ar="sampled").settings[
+            "discard_seconds"] == want
+        assert C._default_discard(rec, "coloured") == want  # what compare() uses
+
+    def evidence(recording, model, *, discard, **kw):
+        return _Ev(discard)
+
+    monkeypatch.setattr(C, "evidence", evidence)
+    monkeypatch.setattr(C, "robust_evidence",
+                        lambda run, runs, ref: (run(0), [], True))
+    noise = ARNoise([0.5])
+    for rec, want in ((short, 0.75), (longer, 2.0)):
+        given.clear()
+        bf = nested_bayes_factor(rec, paper_model(), paper_model(), noise=noise, runs=1, seed=0)
+        assert bf.settings["discard_seconds"] == want and given == [want, want]

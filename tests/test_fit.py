@@ -415,7 +415,8 @@ def test_fast_prediction_error_fit(sim):
 
 
 def test_prediction_error_fit_leaves_the_start_out_by_default():
-    """noise="ar" without discard leaves 2 s out (COLOURED_DISCARD), as sample and the CLI do:
+    """noise="ar" without discard leaves 2 s out (likelihood.coloured_discard: min(2 s, a quarter
+    of the record)), as sample, compare and the CLI do:
     from 0 s the whitened start-up transient drew this full FD run's fit to T_vl 0.007 and
     tau_v 0.030 (truth 0.409, 0.279); the white fit still leaves nothing out."""
     rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1).recording

@@ -688,7 +688,26 @@ def test_either_forcing_column_tells_and_an_unknown_record_loses_its_start_up():
     assert "not known" in fit.summary()
 
 
-@pytest.mark.parametrize("name", ["whole_periods", "startup_discard"])
+def test_coloured_discard_is_one_rule_for_the_fitter_the_sampler_and_the_evidence():
+    """The default lead-in with an AR ("coloured") noise model was min(2 s, a quarter of the
+    record) in fit_fast but a flat 2 s in sample, compare, evidence and the diagnosis's Bayes
+    factors: on a 3-s record fit_fast left 0.75 s out and sample refused its own 2 s ("discard
+    must be ... in [0, 1.5]"); on 4-8-s records the two weighed different samples.  Now one
+    rule, in the likelihood, 2 s exactly on every record of 8 s or more (unchanged)."""
+    import bayespilot.likelihood as L
+    import bayespilot.sample as S
+    from bayespilot.simulate import simulate
+
+    assert S.COLOURED_DISCARD == L.COLOURED_DISCARD == 2.0  # still importable from sample
+    for duration, want in ((None, 2.0), (20.0, 2.0), (8.0, 2.0), (6.0, 1.5), (3.0, 0.75)):
+        rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1,
+                       **({} if duration is None else {"duration": duration})).recording
+        assert L.coloured_discard(rec) == want, duration  # exactly
+        assert S._default_discard(rec, "coloured") == want, duration  # sample, compare, evidence
+        assert L._coloured_default(rec.duration) == want, duration  # fit_fast(noise="ar")
+
+
+@pytest.mark.parametrize("name", ["whole_periods", "startup_discard", "coloured_discard"])
 def test_the_start_up_helpers_refuse_what_is_not_a_recording(name):
     """A path or a dict was read as far as its first attribute (AttributeError: 'str' object
     has no attribute 'n_samples'); now a TypeError names what it wants."""

@@ -219,6 +219,26 @@ def test_eq4_run_and_default_init(model):
     assert post.settings["n_steps"] == 300
 
 
+def test_coloured_default_discard_on_a_short_record_is_fit_fasts():
+    """sample(likelihood="coloured") without discard left a flat 2 s out while its own initial
+    fit, fit_fast(noise="ar"), leaves min(2 s, a quarter of the record): on a 3-s record it
+    raised "discard must be a number of seconds in [0, 1.5] (half the record), got 2.0", a
+    value the user never gave.  Now both leave 0.75 s out (a smoke test: a few steps)."""
+    from bayespilot.fit.fast import fit_fast
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.2, seed=1,
+                   duration=3.0).recording
+    assert rec.duration == 3.0 and rec.n_samples == 300
+    fit = fit_fast(rec, seed=0, noise="ar")
+    assert fit.settings["discard"] == 0.75
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        post = sample(rec, likelihood="coloured", seed=0,
+                      **dict(SHORT, n_walkers=16, max_steps=20, min_steps=0, check_every=20))
+    assert post.settings["init"] == "fit_fast"
+    assert post.settings["discard_seconds"] == fit.settings["discard"] == 0.75
+
+
 # --- (d) seeds ---------------------------------------------------------------------------------
 def test_same_seed_same_chain(short_sim, tmp_path):
     kw = dict(SHORT, n_walkers=16, max_steps=150, check_every=50, min_steps=0, init=short_sim.params)

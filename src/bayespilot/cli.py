@@ -1836,7 +1836,7 @@ attributes; for a simulated recording also the true values). Prints mean,
 median, 90% HDI, R-hat, ESS and the autocorrelation time of each parameter.
 'eq4' treats the output error as white (the paper's Eq. 4). 'coloured'
 models it as an AR process of an order chosen by BIC, with the first 2 s
-left out: by default (--ar profiled) re-fitted by least squares at every
+(a quarter of a record under 8 s) left out: by default (--ar profiled) re-fitted by least squares at every
 parameter vector, which widens the gains' intervals by what the noise model
 shares with them in closed loop; with --ar fixed estimated once from a
 prediction-error fit and held while the pilot parameters are sampled; with

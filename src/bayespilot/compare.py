@@ -557,7 +557,8 @@ def log_likelihood_at(model: PilotModel, recording: Recording, params: Mapping[s
         The fixed AR model of ``likelihood="coloured", ar="fixed"``; None: Eq. 4.
     discard : float, default 0
         Seconds at the start left out.  The default is 0, not :func:`evidence`'s
-        (:data:`bayespilot.sample.COLOURED_DISCARD`, 2 s, for ``"coloured"``;
+        (:func:`~bayespilot.likelihood.coloured_discard`, min(2 s, a quarter
+        of the record), for ``"coloured"``;
         :func:`~bayespilot.likelihood.startup_discard` for ``"eq4"`` on a record
         not known to be a whole number of forcing periods): to evaluate the
         likelihood an :func:`evidence` or :func:`compare` integrated, pass the
@@ -643,7 +644,9 @@ def evidence(recording: Recording, model: PilotModel | None = None, *, likelihoo
         from a prediction-error fit of ``model`` (:func:`~bayespilot.fit.fast.fit_fast`).
     discard : float, optional
         Seconds at the start left out of the likelihood.  Default as
-        :func:`compare`'s: :data:`bayespilot.sample.COLOURED_DISCARD` for
+        :func:`compare`'s: :func:`~bayespilot.likelihood.coloured_discard`
+        (min(2 s, a quarter of the record), as
+        :func:`~bayespilot.fit.fast.fit_fast` with ``noise="ar"``) for
         ``"coloured"``; for ``"eq4"`` 0 on a record of whole forcing periods,
         else :func:`~bayespilot.likelihood.startup_discard` (2 s).  (It was 0
         for both, so that ``evidence`` and ``compare`` weighed different
@@ -1562,9 +1565,10 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         :func:`bayespilot.sample.sample`.
     discard : float, optional
         Seconds at the start left out of the likelihood; default 0 for
-        ``"eq4"``, :data:`bayespilot.sample.COLOURED_DISCARD` for ``"coloured"``;
-        for ``"eq4"`` on a record not known to be a whole number of forcing
-        periods, :func:`~bayespilot.likelihood.startup_discard` (2 s), as
+        ``"eq4"``, :func:`~bayespilot.likelihood.coloured_discard` (min(2 s,
+        a quarter of the record)) for ``"coloured"``; for ``"eq4"`` on a
+        record not known to be a whole number of forcing periods,
+        :func:`~bayespilot.likelihood.startup_discard` (2 s), as
         :func:`~bayespilot.fit.fast.fit_fast` does.
     nlive, dlogz, sample
         dynesty settings (:func:`nested_evidence`).

@@ -116,7 +116,8 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     from .simulate import simulate
 
     from .noise import ARNoise
-    from .sample import COLOURED_DISCARD, ConvergenceWarning
+    from .likelihood import coloured_discard
+    from .sample import ConvergenceWarning
 
     from ._seeds import resolve_seed
 
@@ -153,9 +154,11 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         if likelihood == "coloured":
             # one AR noise model (from a prediction-error fit) for both fits, the posterior
             # and the comparison, so that all are judged by the same likelihood
-            pem = fit_fast(rec, threshold=True, seed=s, noise="ar", discard=COLOURED_DISCARD)
-            opts = {"noise": ARNoise.from_dict(pem.settings["noise"]),
-                    "discard": COLOURED_DISCARD}
+            # (the default lead-in of noise="ar", min(2 s, a quarter of the record), given
+            # explicitly so that the white-noise fits with this AR model leave it out too)
+            lead_in = coloured_discard(rec)
+            pem = fit_fast(rec, threshold=True, seed=s, noise="ar", discard=lead_in)
+            opts = {"noise": ARNoise.from_dict(pem.settings["noise"]), "discard": lead_in}
         fit = fit_fast(rec, threshold=True, seed=s, **opts)
         fit0 = fit_fast(rec, threshold=False, seed=s, **opts)
         fit.to_json(dirs["fits"] / f"{name}_threshold.json")
@@ -202,7 +205,8 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     write_text_atomic(out / "pooled_comparison.json", dumps(pooled.to_dict()))
     elapsed = time.perf_counter() - t_start
     report = out / "report.md"
-    report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood, seed),
+    report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
+                              coloured_discard(rec)),  # (every run is of one duration)
                       encoding="utf-8")
     say(f"wrote {report} ({elapsed:.0f} s)")
     plt.close("all")
@@ -230,7 +234,8 @@ def _warn_unconverged(runs: Sequence[tuple[str, float]], max_steps: int) -> None
         "(bayespilot demo --max-steps)", None, max_steps))
 
 
-def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed) -> str:
+def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
+            lead_in: float = 2.0) -> str:
     from .compare import DECISION_LEVEL, DECISION_Z
 
     true_d = truth["delta_abs"]
@@ -243,8 +248,8 @@ def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed) -> str:
         "estimator) with and without threshold, sampled with emcee from that fit (uniform priors "
         "on the Table 1 bounds), and the two models were compared by nested sampling (dynesty), "
         + ("all with the coloured (prediction-error) likelihood: the output error whitened by "
-           "one AR model per run, estimated from a prediction-error fit, the first 2 s left out. "
-           if likelihood == "coloured" else "all with the paper's Eq. 4 likelihood. ")
+           f"one AR model per run, estimated from a prediction-error fit, the first {lead_in:g} s "
+           "left out. " if likelihood == "coloured" else "all with the paper's Eq. 4 likelihood. ")
         + f"Made in {elapsed:.0f} s by `bayespilot demo` with seed {seed} (run i seeded "
         f"{seed} + i).",
         "",

@@ -34,8 +34,8 @@ from .noise import ARNoise
 from .recording import Recording
 
 __all__ = ["Likelihood", "PerfectFitWarning", "SilentChannelWarning", "NotWholePeriodsWarning",
-           "STARTUP_DISCARD", "channel_inputs", "neg_log_lik", "model_response", "vaf",
-           "whole_periods", "startup_discard"]
+           "STARTUP_DISCARD", "COLOURED_DISCARD", "channel_inputs", "neg_log_lik",
+           "model_response", "vaf", "whole_periods", "startup_discard", "coloured_discard"]
 
 INITIAL_CONDITIONS = ("periodic", "rest")
 
@@ -65,6 +65,10 @@ class NotWholePeriodsWarning(RuntimeWarning):
 #: Seconds of a record's start that carry the model's start-up (the neuromuscular filter and
 #: the delays) when its state at t = 0 is not known: what :func:`startup_discard` leaves out.
 STARTUP_DISCARD = 2.0
+#: Seconds of a record's start left out by default with an AR ("coloured") noise model, at most
+#: a quarter of the record: what :func:`coloured_discard` leaves out.  The whitening filter
+#: would otherwise amplify the model's start-up transient.
+COLOURED_DISCARD = 2.0
 
 
 def whole_periods(recording: Recording) -> bool | None:
@@ -160,6 +164,52 @@ def startup_discard(recording: Recording) -> float:
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
     return min(STARTUP_DISCARD, recording.duration / 4)
+
+
+def coloured_discard(recording: Recording) -> float:
+    """Seconds left out by default with an AR ("coloured") noise model:
+    :data:`COLOURED_DISCARD` (2 s), at most a quarter of the record.
+
+    The one rule of the default ``discard`` of
+    :func:`~bayespilot.fit.fast.fit_fast` with ``noise="ar"`` or an
+    :class:`~bayespilot.noise.ARNoise`, of :func:`~bayespilot.sample.sample`,
+    :func:`~bayespilot.compare.evidence` and :func:`~bayespilot.compare.compare`
+    with ``likelihood="coloured"``, and of the diagnosis's Bayes factors
+    (:mod:`bayespilot.diagnose.nested`).  2 s on every record of 8 s or more
+    (the paper's 81.92 s); a shorter record keeps three quarters of its samples.
+
+    Parameters
+    ----------
+    recording : Recording
+
+    Returns
+    -------
+    float
+        min(2, duration / 4), s.
+
+    Raises
+    ------
+    TypeError
+        If ``recording`` is not a :class:`~bayespilot.recording.Recording`.
+
+    Examples
+    --------
+    >>> from bayespilot.simulate import simulate
+    >>> coloured_discard(simulate(task="FD", motion_gain=1.0, seed=1).recording)  # 81.92 s
+    2.0
+    >>> coloured_discard(simulate(task="FD", motion_gain=1.0, seed=1, duration=3).recording)
+    0.75
+    """
+    if not isinstance(recording, Recording):
+        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
+    return _coloured_default(recording.duration)
+
+
+def _coloured_default(duration: float) -> float:
+    """:func:`coloured_discard` of a record of ``duration`` seconds (what
+    :func:`~bayespilot.fit.fast.fit_fast` asks of records it has not got, to name the shortest
+    one an AR model fits)."""
+    return min(COLOURED_DISCARD, duration / 4)
 
 
 def _checked_discard(recording: Recording, discard: object) -> float:

@@ -66,7 +66,8 @@ from . import _files
 from ._interrupt import interrupt_between_steps
 from .fit.result import FitResult
 from .kernels import _coloured as C
-from .likelihood import Likelihood, _checked_discard, _startup_default
+from .likelihood import (COLOURED_DISCARD, Likelihood, _checked_discard, _startup_default,
+                         coloured_discard)
 from .model import PilotModel, paper_model
 from .noise import MAX_AR_ORDER, ARNoise
 from .recording import Recording
@@ -82,8 +83,9 @@ LIKELIHOODS = ("eq4", "coloured")
 #: How the coloured likelihood treats its AR model: estimated once and held, sampled, or
 #: re-estimated (profiled out) at every parameter vector.
 AR_MODES = ("fixed", "sampled", "profiled")
-#: Seconds left out at the start by the coloured likelihood unless ``discard`` is given.
-COLOURED_DISCARD = 2.0
+# COLOURED_DISCARD (imported above, re-exported here): the cap of the coloured likelihood's
+# default discard, :func:`~bayespilot.likelihood.coloured_discard` (min(2 s, a quarter of
+# the record)); it lives in bayespilot.likelihood with the rule.
 #: Default prior on each partial autocorrelation: uniform(-PACF_BOUND, PACF_BOUND).
 PACF_BOUND = 0.99
 #: Half-width of the initial ball of walkers, as a fraction of each parameter's bound range.
@@ -97,10 +99,12 @@ _META_ATTR = "bayespilot_posterior"
 
 def _default_discard(recording: Recording, likelihood: str) -> float:
     """The seconds :func:`sample`, :func:`bayespilot.compare.compare` and
-    :func:`bayespilot.compare.evidence` leave out by default: :data:`COLOURED_DISCARD` for
-    ``"coloured"``; for ``"eq4"`` the start-up of a record not known to be whole periods, as
-    :func:`~bayespilot.fit.fast.fit_fast` does (0 on whole periods)."""
-    return COLOURED_DISCARD if likelihood == "coloured" else \
+    :func:`bayespilot.compare.evidence` leave out by default, as
+    :func:`~bayespilot.fit.fast.fit_fast` does:
+    :func:`~bayespilot.likelihood.coloured_discard` (min(2 s, a quarter of the record)) for
+    ``"coloured"``; for ``"eq4"`` the start-up of a record not known to be whole periods
+    (0 on whole periods)."""
+    return coloured_discard(recording) if likelihood == "coloured" else \
         _startup_default(recording, "periodic")
 
 
@@ -972,8 +976,10 @@ def sample(recording: Recording, model: PilotModel | None = None, *, likelihood:
     discard : float, optional
         Seconds at the start left out of the likelihood (see
         :class:`~bayespilot.likelihood.Likelihood`).  Default 0 for ``"eq4"``
-        (the paper's Eq. 4) and :data:`COLOURED_DISCARD` for ``"coloured"``;
-        for ``"eq4"`` on a record not known to be a whole number of forcing
+        (the paper's Eq. 4) and
+        :func:`~bayespilot.likelihood.coloured_discard` (min(2 s, a quarter
+        of the record), as :func:`~bayespilot.fit.fast.fit_fast` with
+        ``noise="ar"``) for ``"coloured"``; for ``"eq4"`` on a record not known to be a whole number of forcing
         periods, :func:`~bayespilot.likelihood.startup_discard` (2 s), as
         :func:`~bayespilot.fit.fast.fit_fast` does.
     init : FitResult or mapping, optional

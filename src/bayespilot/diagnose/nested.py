@@ -55,6 +55,7 @@ import numpy as np
 from .._blas import one_blas_thread
 from .._files import number
 from .._seeds import resolve_seed, spawn_seeds, stream_seed
+from ..likelihood import coloured_discard
 from ..model import PilotModel
 from ..noise import ARNoise
 from ..recording import Recording
@@ -229,7 +230,9 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
         The AR model that whitens the output error of both models.
     discard : float, optional
         Seconds at the start left out (default
-        :data:`bayespilot.sample.COLOURED_DISCARD`).
+        :func:`~bayespilot.likelihood.coloured_discard`, min(2 s, a quarter of
+        the record), as :func:`~bayespilot.compare.evidence` with
+        ``likelihood="coloured"``).
     base_params, extended_params : mapping, optional
         Fits of the two models (e.g. the diagnosis's): a nested-sampling run
         whose best ln L is more than :data:`bayespilot.compare.MODE_TOLERANCE`
@@ -260,7 +263,6 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
     """
     from ..compare import (decide, evidence, jeffreys_category, log_likelihood_at,
                            robust_evidence)
-    from ..sample import COLOURED_DISCARD
 
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
@@ -271,7 +273,7 @@ def nested_bayes_factor(recording: Recording, base_model: PilotModel, extended_m
         raise TypeError(f"noise must be an ARNoise, got {type(noise).__name__}")
     if isinstance(runs, bool) or not isinstance(runs, (int, np.integer)) or runs < 1:
         raise ValueError(f"runs must be an integer >= 1, got {runs!r}")
-    discard = COLOURED_DISCARD if discard is None else float(discard)
+    discard = coloured_discard(recording) if discard is None else float(discard)
     t0 = time.perf_counter()
     s0 = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     opts = dict(likelihood="coloured", ar="fixed", noise=noise, discard=discard, nlive=nlive,
@@ -396,7 +398,7 @@ def bayes_factor(result: Any, recording: Recording, *, physics: str | None = Non
     >>> print(bf.summary_line())                   # doctest: +SKIP
     """
     from .posterior import check_same_recording
-    from ..sample import COLOURED_DISCARD, _noise_at
+    from ..sample import _noise_at
 
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
@@ -404,7 +406,7 @@ def bayes_factor(result: Any, recording: Recording, *, physics: str | None = Non
     check_same_recording(result, recording)
     model = cand.model
     ext_params = {k: float(v) for k, v in cand.all_params.items() if k in model.parameter_names}
-    noise = _noise_at(ext_params, model, recording, COLOURED_DISCARD, None)
+    noise = _noise_at(ext_params, model, recording, coloured_discard(recording), None)
     base_model = getattr(result, "base_model", None)
     if base_model is None:
         raise ValueError("this diagnosis does not carry its base model (read back from JSON?); "

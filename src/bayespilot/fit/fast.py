@@ -42,7 +42,8 @@ import time
 import numpy as np
 from scipy.stats import qmc
 
-from ..likelihood import Likelihood, _checked_discard, _startup_default, _startup_reason
+from ..likelihood import (Likelihood, _checked_discard, _coloured_default, _startup_default,
+                          _startup_reason)
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, ARNoise
 from ..recording import Recording
@@ -90,9 +91,12 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     discard : float, optional
         Seconds at the start left out of the likelihood
         (:class:`~bayespilot.likelihood.Likelihood`).  Default: 0 for the
-        white output error, :data:`~bayespilot.sample.COLOURED_DISCARD`
-        (2 s; a quarter of a record shorter than 8 s) with an AR noise model,
-        whose whitening filter would otherwise
+        white output error, :func:`~bayespilot.likelihood.coloured_discard`
+        (min(2 s, a quarter of the record), as
+        :func:`~bayespilot.sample.sample` and
+        :func:`~bayespilot.compare.evidence` leave out with
+        ``likelihood="coloured"``) with an AR noise model, whose whitening
+        filter would otherwise
         amplify the model's start-up transient (from 0 s, a prediction-error
         fit of an 81.92-s FD run ended at T_vl 0.007 and tau_v 0.030 against
         the truth's 0.409 and 0.279).  With the white output error and
@@ -172,7 +176,7 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     discard_reason = None  # why the default discard is not 0 where it was picked for that
     default_discard = discard is None
     if discard is None:
-        discard = 0.0 if noise is None else _ar_default_discard(recording.duration)
+        discard = 0.0 if noise is None else _coloured_default(recording.duration)
         if discard == 0.0:
             # a record cut mid-period (or not known to be whole): the periodic start wraps the cut
             # (NotWholePeriodsWarning); 0 on whole periods, as before
@@ -273,22 +277,13 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     return fit
 
 
-def _ar_default_discard(duration: float) -> float:
-    """The default lead-in left out with an AR noise model: the sampler's
-    (:data:`~bayespilot.sample.COLOURED_DISCARD`), at most a quarter of a short record (the
-    likelihood keeps at least half)."""
-    from ..sample import COLOURED_DISCARD
-
-    return min(COLOURED_DISCARD, duration / 4)
-
-
 def _check_ar_fittable(recording: Recording, discard: float, order: int | None,
                        default_discard: bool) -> None:
     """Refuse (RecordingError), before fitting, a record too short for the AR noise model of
     ``noise="ar"``: an AR(p) model needs at least 4 (p + 1) residuals after ``discard``, with p
     up to :data:`~bayespilot.noise.MAX_AR_ORDER` when the order is chosen by BIC.  The message
-    names the shortest record that has them (with the default lead-in, min(2 s, a quarter of
-    the record), when ``default_discard``)."""
+    names the shortest record that has them (with the default lead-in,
+    :func:`~bayespilot.likelihood.coloured_discard`, when ``default_discard``)."""
     from ..recording import RecordingError
 
     p = MAX_AR_ORDER if order is None else int(order)
@@ -296,7 +291,7 @@ def _check_ar_fittable(recording: Recording, discard: float, order: int | None,
     rate = recording.sample_rate_hz
 
     def skipped(n: int) -> int:
-        d = _ar_default_discard(n / rate) if default_discard else discard
+        d = _coloured_default(n / rate) if default_discard else discard
         return int(round(d * rate)) if d else 0
 
     have = recording.n_samples - skipped(recording.n_samples)
