@@ -342,3 +342,97 @@ def test_units_are_kept_through_the_file_and_shown_beside_the_fitted_values(tmp_
     from bayespilot.diagnose.report import _candidate_table
     assert "0.31 &plusmn; 0.02 rad/s" in _candidate_table([chosen], units)
     assert "0.31 &plusmn; 0.02</td>" in _candidate_table([chosen])
+
+
+# --- a candidate's boundary null is kept in its file (audit_structure.md 7.8) ------------------
+
+def _custom_entry(name: str, boundary_null: bool):
+    """An entry of one's own, never registered (as a result file of another session's)."""
+    from bayespilot.diagnose.catalogue import Extension
+
+    def build(model):
+        return model
+
+    return Extension(name, "a custom entry", "nothing", (), build, ("T_vis",),
+                     boundary_null=boundary_null)
+
+
+def test_lr_verdict_records_the_boundary_null_in_the_result_and_its_file():
+    """One helper makes a GLS candidate's test (single-run and pooled): its statistic,
+    p-value, delta BIC and ``how``; the result keeps whether the null is on a boundary, its
+    JSON too, and reads it back."""
+    from bayespilot.diagnose import decide as D
+
+    washout, gains = get_extension("motion-washout"), get_extension("time-varying-gains")
+    v = D.lr_verdict(washout, 2.5, 1000)
+    assert (v.statistic, v.df, v.boundary_null) == (5.0, 1, True)
+    assert v.p_value == D.lr_p_value(5.0, washout)
+    assert v.delta_bic == 5.0 - math.log(1000)
+    assert v.how == "GLS likelihood-ratio test, 0.5 chi2(0) + 0.5 chi2(1) (boundary null)"
+    w = D.lr_verdict(gains, 2.5, 1000, test="pooled GLS likelihood-ratio test over 3 runs")
+    assert not w.boundary_null and w.delta_bic == 5.0 - gains.df * math.log(1000)
+    assert w.how == f"pooled GLS likelihood-ratio test over 3 runs, chi2({gains.df})"
+    # a test made again against another reference keeps its own penalty
+    assert D.lr_verdict(washout, 1.0, penalty=5.0 - v.delta_bic).delta_bic == 2.0 - math.log(1000)
+    with pytest.raises(ValueError, match="m or penalty"):
+        D.lr_verdict(washout, 1.0)
+    # the critical value is where the p-value reaches the level
+    for ext in (washout, gains):
+        crit = D.critical_value(ext.df, ext.boundary_null, 0.01)
+        assert D.lr_p_value(crit, ext) == pytest.approx(0.01, rel=1e-9)
+
+    res = v.result("motion-washout", {"omega_w": 0.3}, {"omega_w": 0.05}, {"omega_w": 0.3})
+    assert res.boundary_null and res.reason == v.how
+    assert (res.delta_neg_log_lik, res.statistic, res.p_value, res.delta_bic,
+            res.log_bayes_factor) == (2.5, 5.0, v.p_value, v.delta_bic, v.delta_bic / 2)
+    d = _strict(dumps(res.to_dict()))
+    assert d["boundary_null"] is True
+    back = CandidateResult.from_dict(d)
+    assert back.boundary_null is True and back.to_dict() == res.to_dict()
+    # read from the field, not from how the test is worded: an entry of one's own, its
+    # reason reworded
+    d["physics"], d["reason"] = "my-lag", "LR test, reference mixture at the edge"
+    assert CandidateResult.from_dict(d).boundary_null is True
+    d["boundary_null"], d["reason"] = False, v.how
+    assert CandidateResult.from_dict(d).boundary_null is False
+    # positional construction as before: the field comes after the others, default False
+    assert CandidateResult("motion-washout", True, "GLS", 0.4, 0.8, 1, 0.2, -5.0, -2.5,
+                           {"omega_w": 0.3}).boundary_null is False
+
+
+def test_a_file_written_before_boundary_null_reads_it_from_the_reason():
+    """A result file of before the field: its one-parameter test named a boundary null in
+    ``reason`` (as the decision wrote it); read so, and written with the field after."""
+    from bayespilot.diagnose import decide as D
+
+    v = D.lr_verdict(_custom_entry("my-lag", True), 2.5, 1000)
+    old = v.result("my-lag", {"T_vis": 0.1}, {}, {}).to_dict()
+    del old["boundary_null"]
+    back = CandidateResult.from_dict(old)
+    assert back.boundary_null is True and back.to_dict()["boundary_null"] is True
+    plain = D.lr_verdict(_custom_entry("my-lag", False), 2.5, 1000).result("my-lag", {}, {}, {})
+    old = plain.to_dict()
+    del old["boundary_null"]
+    assert CandidateResult.from_dict(old).boundary_null is False
+    # only a one-parameter test had the chi-bar-squared reference
+    assert CandidateResult.from_dict({"physics": "x", "testable": True, "df": 2,
+                                      "reason": "(boundary null)"}).boundary_null is False
+
+
+def test_eq4_neg_log_lik_is_floored_as_the_likelihoods():
+    """The report's before/after -ln L (Eq. 4, variance profiled out) by the kernels' one
+    helper: a perfect fit gives its floored finite value, no warning; otherwise the value is
+    N/2 ln(mean r^2) + N/2 as before (audit_structure.md 7.10)."""
+    import warnings
+
+    from bayespilot.diagnose import _eq4_neg_log_lik
+    from bayespilot.kernels._response import neg_log_lik_from_sse
+
+    floor = 1e-24 * 0.3 + 1e-300
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        got = _eq4_neg_log_lik(np.zeros(1000), floor)
+    assert math.isfinite(got) and got == neg_log_lik_from_sse(0.0, 1000, floor)[0]
+    r = make_rng(1).standard_normal(777)
+    n = r.size
+    assert _eq4_neg_log_lik(r, floor) == float(0.5 * n * math.log(np.mean(r * r)) + 0.5 * n)

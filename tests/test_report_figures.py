@@ -574,3 +574,115 @@ def test_standard_error_is_hatched_under_the_posterior(washout):
     ax = R.plot_profile(washout).axes[0]
     span = [p for p in ax.patches if "interval" in p.get_label()]
     assert span and span[0].get_zorder() == 0
+
+
+#: How the decision names a one-parameter test's reference (decide.lr_verdict).
+_CHIBAR = "GLS likelihood-ratio test, 0.5 chi2(0) + 0.5 chi2(1) (boundary null)"
+
+
+def _unregistered_file(tmp_path, level: float, entries: dict[str, tuple[str, bool | None]]):
+    """The diagnosis a result file of another session holds, read back here: a
+    one-parameter test of each of ``entries`` (name: (reason, boundary_null; None: a file of
+    before the field)), entries of one's own not registered here."""
+    import json
+
+    from bayespilot.diagnose import DiagnosisResult
+    from bayespilot.diagnose.decide import CandidateResult
+
+    ranking = []
+    for name in entries:
+        with pytest.raises(ValueError):
+            get_extension(name)  # not registered
+        ranking.append(CandidateResult(name, True, "", 2.0, 4.0, 1, 0.03, 4.0 - math.log(4000),
+                                       2.0 - 0.5 * math.log(4000), {"T_vis": 0.1},
+                                       {"T_vis": 0.02}, {"T_vis": 0.1}))
+    d = DiagnosisResult(False, "none", ranking, {},
+                        {"params": {}, "neg_log_lik": -1.0, "vaf": 80.0}, None,
+                        {"alpha": 0.01, "level_per_candidate": level, "n_tested": len(entries),
+                         "skip_seconds": 5.0}, 1.0, "run.csv").to_dict()
+    for c in d["ranking"]:
+        c["reason"], boundary = entries[c["physics"]]
+        c.pop("boundary_null", None)
+        if boundary is not None:
+            c["boundary_null"] = boundary
+    path = tmp_path / "other_session.json"
+    path.write_text(json.dumps(d))
+    return DiagnosisResult.from_json(path)
+
+
+def _marks(res):
+    fig = R.plot_candidates(res)
+    return [line.get_xdata()[0] for line in fig.axes[0].lines]
+
+
+def test_candidates_mark_of_an_unregistered_entry_follows_its_files_boundary_null(tmp_path):
+    """The black mark of an entry not registered where its result file is read sits at its own
+    test's threshold (chi-bar-squared for a boundary null) as the file records it
+    (``boundary_null``), however its ``reason`` is worded (the text used to decide it;
+    audit_structure.md 7.8); written again, the file keeps it."""
+    from scipy import stats
+
+    from bayespilot.diagnose import DiagnosisResult
+
+    level = 0.005
+    edge, inner = 0.5 * stats.chi2.isf(2 * level, 1), 0.5 * stats.chi2.isf(level, 1)
+    for entries in ({"my-edge": (_CHIBAR, True), "my-inner": ("GLS likelihood-ratio test, "
+                                                              "chi2(1)", False)},
+                    {"my-edge": ("likelihood-ratio test against the mixture at the edge", True),
+                     "my-inner": ("likelihood-ratio test, chi2(1): not a boundary null", False)}):
+        res = _unregistered_file(tmp_path, level, entries)
+        assert [c.boundary_null for c in res.ranking] == [True, False]
+        assert _marks(res) == pytest.approx([edge, inner], rel=1e-12)
+        res.to_json(tmp_path / "again.json")
+        again = DiagnosisResult.from_json(tmp_path / "again.json")
+        assert [c["boundary_null"] for c in again.to_dict()["ranking"]] == [True, False]
+        assert _marks(again) == pytest.approx([edge, inner], rel=1e-12)
+
+
+def test_candidates_mark_of_a_file_written_before_boundary_null(tmp_path):
+    """A result file of before the field: the boundary null is read from how the test was
+    made, as the decision worded it."""
+    from scipy import stats
+
+    level = 0.005
+    res = _unregistered_file(tmp_path, level, {"my-edge": (_CHIBAR, None),
+                                               "my-inner": ("GLS likelihood-ratio test, chi2(1)",
+                                                            None)})
+    assert [c.boundary_null for c in res.ranking] == [True, False]
+    assert _marks(res) == pytest.approx([0.5 * stats.chi2.isf(2 * level, 1),
+                                         0.5 * stats.chi2.isf(level, 1)], rel=1e-12)
+
+
+def test_report_neg_log_lik_of_a_perfect_fit_is_the_likelihoods_floored_value(monkeypatch):
+    """The report's before/after -ln L (Eq. 4) of the chosen extension uses the likelihood's
+    variance floor: a perfect fit gives its finite floored value (the inline formula failed
+    on it: ln 0; audit_structure.md 7.10)."""
+    from bayespilot.diagnose import locate as L
+    from bayespilot.kernels._response import neg_log_lik_from_sse
+    from bayespilot.likelihood import Likelihood
+
+    model = get_extension("motion-washout").build(paper_model())
+    p = dict(presets.paper_parameters("FD"), omega_w=0.8)
+    rec = simulate(model, p, task="FD", motion_gain=1.0, remnant_gain=0.063, seed=22,
+                   duration=40.96).recording
+    steady = L.steady_response
+
+    def perfect(m, recording, params):  # the extended model's response: the recording's u
+        return recording.u.copy() if "omega_w" in params else steady(m, recording, params)
+
+    monkeypatch.setattr(L, "steady_response", perfect)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = diagnose(rec, seed=0, n_bootstrap=0, n_starts=2, n_calibrate=0,
+                       candidates=["motion-washout"])
+    assert not [w for w in caught if "divide by zero" in str(w.message)]
+    assert res.physics == "motion-washout"
+    n = rec.u.size - int(round(res.settings["skip_seconds"] * rec.sample_rate_hz))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (NotWholePeriodsWarning: the floor is all it gives)
+        floor = Likelihood(paper_model(), rec).s2_floor
+    want, floored = neg_log_lik_from_sse(0.0, n, floor)
+    after, before = res.arrays["after_eq4_neg_log_lik"], res.arrays["before_eq4_neg_log_lik"]
+    assert floored and math.isfinite(after) and after == want
+    assert math.isfinite(before) and before > after
+    assert res.to_dict()["chosen"]["neg_log_lik_after"] == want

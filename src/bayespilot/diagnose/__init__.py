@@ -1317,11 +1317,9 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         arrays["after_u_hat"] = y
         arrays["after_residual"] = recording.u - y
         arrays["after_vaf"] = vaf(recording.u[sl], y[sl])
-        r = (recording.u - y)[sl]
-        r0 = (recording.u - y_before)[sl]
-        n = r.size
-        arrays["after_eq4_neg_log_lik"] = float(0.5 * n * math.log(np.mean(r * r)) + 0.5 * n)
-        arrays["before_eq4_neg_log_lik"] = float(0.5 * n * math.log(np.mean(r0 * r0)) + 0.5 * n)
+        arrays["after_eq4_neg_log_lik"] = _eq4_neg_log_lik((recording.u - y)[sl], lik0.s2_floor)
+        arrays["before_eq4_neg_log_lik"] = _eq4_neg_log_lik((recording.u - y_before)[sl],
+                                                            lik0.s2_floor)
         if forcing is not None and forcing.two_input:
             arrays["df_after"] = L.describing_function(y, recording.e, recording.theta_ddot_m,
                                                        forcing)
@@ -1351,6 +1349,17 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
                            where, base_d, chosen, settings, time.perf_counter() - t0,
                            recording.source, arrays, base_model=base_model,
                            units=_parameter_units(base_model, *(c.model for c in ranking)))
+
+
+def _eq4_neg_log_lik(r: np.ndarray, s2_floor: float) -> float:
+    """Eq. 4's -ln L of the output error ``r`` (independent samples, variance profiled out):
+    N/2 ln(mean r^2) + N/2, the variance floored at ``s2_floor`` (a :class:`Likelihood`'s) as
+    everywhere else (:func:`bayespilot.kernels._response.neg_log_lik_from_sse`): a perfect
+    fit gives a finite value."""
+    from ..kernels._response import neg_log_lik_from_sse
+
+    r = np.asarray(r, dtype=float)
+    return float(neg_log_lik_from_sse(float(np.sum(r * r)), r.size, float(s2_floor))[0])
 
 
 def _saturation(recording, base_model, base, where, boot_info):

@@ -86,7 +86,8 @@ __all__ = ["fit_ar", "NoiseModel", "noise_model", "Whitened", "FitSummary", "Can
            "fit_base_gls", "scan_threshold", "threshold_starts", "own_noise", "final_fit",
            "report_final_fit",
            "fit_candidate", "guide_fits", "refine_threshold", "null_refit", "null_refit_from",
-           "lr_p_value", "retest", "flat_tops", "fit_censored"]
+           "lr_p_value", "critical_value", "LRVerdict", "lr_verdict", "retest", "flat_tops",
+           "fit_censored"]
 
 #: How the chosen extension's reported fit is made (:func:`report_final_fit`).
 FINAL_FIT = ("refitted after the test: AR noise model re-estimated from the extended model's "
@@ -867,6 +868,13 @@ class CandidateResult:
         Profile-likelihood intervals of the new parameters
         (:class:`~bayespilot.diagnose.profile.ProfileInterval`), for the
         chosen extension of a single-run diagnosis; empty otherwise.
+    boundary_null : bool
+        Whether the base model is the extension at the edge of its parameter
+        range (its catalogue entry's ``boundary_null`` when it was tested,
+        :func:`lr_verdict`): with ``df`` 1 the test's reference was the
+        chi-bar-squared mixture (:func:`lr_p_value`, :func:`critical_value`).
+        Kept in the result file, so a file of an entry not registered where
+        it is read still says which test decided.
     """
 
     physics: str
@@ -889,6 +897,7 @@ class CandidateResult:
     refit: dict[str, Any] | None = None
     noise: Any = None
     interval: dict[str, Any] = field(default_factory=dict)
+    boundary_null: bool = False
 
     def __repr__(self) -> str:
         """One line: the test's outcome and the new parameters (the dataclass's printed the
@@ -926,7 +935,8 @@ class CandidateResult:
                     k: ({n: num(x) for n, x in v.items()} if k in ("test_params", "own_stderr")
                         else v)
                     for k, v in self.refit.items()},
-                "interval": {k: v.to_dict() for k, v in self.interval.items()}}
+                "interval": {k: v.to_dict() for k, v in self.interval.items()},
+                "boundary_null": self.boundary_null}
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]) -> "CandidateResult":
@@ -939,7 +949,10 @@ class CandidateResult:
         ----------
         d : mapping
             A :meth:`to_dict`, as read from JSON; only ``physics`` and
-            ``testable`` are required (the others take their defaults).
+            ``testable`` are required (the others take their defaults).  A
+            file written before ``boundary_null`` was kept has none: it is
+            then read from how the test was made (``reason``, the
+            chi-bar-squared reference :func:`lr_verdict` names).
 
         Returns
         -------
@@ -958,6 +971,9 @@ class CandidateResult:
             refit = {k: (numbers(v) if k in ("test_params", "own_stderr") else v)
                      for k, v in refit.items()}
         cal = d.get("calibration")
+        boundary = d.get("boundary_null")
+        if boundary is None:  # a file written before the field: how its test was made says it
+            boundary = int(d.get("df", 0)) == 1 and _BOUNDARY_TEXT in (d.get("reason") or "")
         return cls(d["physics"], bool(d["testable"]), d.get("reason", ""),
                    *(number(d.get(k, default)) for k, default in (
                        ("delta_neg_log_lik", 0.0), ("statistic", 0.0))),
@@ -968,7 +984,8 @@ class CandidateResult:
                    bool(d.get("justified", False)),
                    calibration=None if cal is None else Calibration.from_dict(cal), refit=refit,
                    interval={k: ProfileInterval.from_dict(k, v)
-                             for k, v in (d.get("interval") or {}).items()})
+                             for k, v in (d.get("interval") or {}).items()},
+                   boundary_null=bool(boundary))
 
     def report_fit(self, fit: "FitSummary", noise: "NoiseModel", how: str) -> None:
         """Report the estimates of ``fit`` (of this candidate's extended model) instead of
@@ -1060,6 +1077,132 @@ def lr_p_value(stat: float, ext: Extension) -> float:
     return p
 
 
+def critical_value(df: int, boundary_null: bool, level: float) -> float:
+    """The likelihood-ratio statistic 2 d(-ln L) at which :func:`lr_p_value` reaches ``level``.
+
+    Parameters
+    ----------
+    df : int
+        The test's degrees of freedom (>= 1).
+    boundary_null : bool
+        Whether the null is on a boundary (:attr:`CandidateResult.boundary_null`,
+        the catalogue entry's): with ``df`` 1 the chi-bar-squared mixture's
+        quantile, chi2(1)'s at twice ``level``.
+    level : float
+        The level (per candidate).
+
+    Returns
+    -------
+    float
+        chi2(df)'s upper ``level`` quantile; for a one-parameter boundary null
+        chi2(1)'s upper ``2 level`` quantile.
+    """
+    return float(stats.chi2.isf(2.0 * level if boundary_null and df == 1 else level, df))
+
+
+#: How a test with the chi-bar-squared reference is named in its ``reason``
+#: (:func:`lr_verdict`); result files written before ``boundary_null`` was kept
+#: are read by it (:meth:`CandidateResult.from_dict`).
+_BOUNDARY_TEXT = "boundary null"
+
+
+@dataclass(frozen=True)
+class LRVerdict:
+    """The likelihood-ratio test of one extension against the base model (:func:`lr_verdict`).
+
+    Attributes
+    ----------
+    delta_neg_log_lik : float
+        d = -ln L(base) - -ln L(extension), >= 0.
+    statistic : float
+        2 d.
+    df : int
+    p_value : float
+        :func:`lr_p_value` at ``statistic``.
+    delta_bic : float
+        ``statistic`` - df ln m.
+    how : str
+        How the test was made (a :class:`CandidateResult`'s ``reason``).
+    boundary_null : bool
+        The catalogue entry's ``boundary_null``.
+    """
+
+    delta_neg_log_lik: float
+    statistic: float
+    df: int
+    p_value: float
+    delta_bic: float
+    how: str
+    boundary_null: bool
+
+    def result(self, physics: str, params: Mapping[str, float], stderr: Mapping[str, float],
+               all_params: Mapping[str, float]) -> "CandidateResult":
+        """The testable :class:`CandidateResult` of this test (log Bayes factor delta_bic / 2).
+
+        Parameters
+        ----------
+        physics : str
+            The catalogue name tested.
+        params : mapping of str to float
+            The extension's new parameters at the fit.
+        stderr : mapping of str to float
+            Their standard errors (and those of the other refined parameters).
+        all_params : mapping of str to float
+            Every parameter of the extended model at the fit.
+
+        Returns
+        -------
+        CandidateResult
+        """
+        return CandidateResult(physics, True, self.how,
+                               delta_neg_log_lik=self.delta_neg_log_lik,
+                               statistic=self.statistic, df=self.df, p_value=self.p_value,
+                               delta_bic=self.delta_bic, log_bayes_factor=self.delta_bic / 2.0,
+                               params=dict(params), stderr=dict(stderr),
+                               all_params=dict(all_params), boundary_null=self.boundary_null)
+
+
+def lr_verdict(ext: Extension, d: float, m: float | None = None, *, penalty: float | None = None,
+               test: str = "GLS likelihood-ratio test") -> LRVerdict:
+    """The likelihood-ratio test of ``ext`` for an improvement ``d`` in -ln L.
+
+    The one place a GLS candidate's statistic, p-value, delta BIC and the
+    description of its test are made (single-run, pooled, :func:`retest`).
+
+    Parameters
+    ----------
+    ext : Extension
+        The extension tested: its ``df`` and ``boundary_null``.
+    d : float
+        -ln L(base) - -ln L(extension), >= 0.
+    m : float, optional
+        The number of (whitened) samples of the BIC penalty df ln m.
+    penalty : float, optional
+        The BIC penalty itself, instead of ``m`` (a test made again against
+        another reference keeps its own).
+    test : str
+        The first part of ``how``; the reference distribution follows.
+
+    Returns
+    -------
+    LRVerdict
+
+    Raises
+    ------
+    ValueError
+        Neither ``m`` nor ``penalty`` given.
+    """
+    if penalty is None:
+        if m is None:
+            raise ValueError("lr_verdict needs m or penalty")
+        penalty = ext.df * math.log(m)
+    stat = 2.0 * d
+    mixture = ext.boundary_null and ext.df == 1
+    reference = f"0.5 chi2(0) + 0.5 chi2(1) ({_BOUNDARY_TEXT})" if mixture else f"chi2({ext.df})"
+    return LRVerdict(d, stat, ext.df, lr_p_value(stat, ext), stat - penalty,
+                     f"{test}, {reference}", bool(ext.boundary_null))
+
+
 def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
                   base: FitSummary, noise: NoiseModel, *, profile_noise: bool = False,
                   extra_starts: Sequence[Mapping[str, float]] = ()
@@ -1137,17 +1280,9 @@ def fit_candidate(ext: Extension, base_model: PilotModel, recording: Recording,
     if profile_noise:
         best, noise = refit_with_noise(model, recording, best, noise, names)
         wl = Whitened(model, recording, noise)
-    d = max(0.0, base.neg_log_lik - best.neg_log_lik)
-    stat = 2.0 * d
-    p = lr_p_value(stat, ext)
-    dbic = stat - ext.df * math.log(wl.m)
-    se = best.stderr
-    new = {n: best.params[n] for n in ext.new_parameters}
-    how = ("GLS likelihood-ratio test, 0.5 chi2(0) + 0.5 chi2(1) (boundary null)"
-           if ext.boundary_null and ext.df == 1 else f"GLS likelihood-ratio test, chi2({ext.df})")
-    res = CandidateResult(ext.name, True, how, d, stat,
-                          ext.df, p, dbic, dbic / 2.0, new,
-                          {n: se[n] for n in se}, dict(model.as_dict(model.full_vector(best.params), full=True)))
+    verdict = lr_verdict(ext, max(0.0, base.neg_log_lik - best.neg_log_lik), wl.m)
+    res = verdict.result(ext.name, {n: best.params[n] for n in ext.new_parameters}, best.stderr,
+                         model.as_dict(model.full_vector(best.params), full=True))
     res.fit = best
     res.model = model
     return res, wl
@@ -1378,11 +1513,10 @@ def retest(res: CandidateResult, ext: Extension, reference: float) -> CandidateR
     d = max(0.0, reference - res.fit.neg_log_lik)
     if d >= res.delta_neg_log_lik:
         return res
-    stat = 2.0 * d
-    p = lr_p_value(stat, ext)
-    dbic = stat - (res.statistic - res.delta_bic)  # the same df ln m penalty
-    res.delta_neg_log_lik, res.statistic, res.p_value = d, stat, p
-    res.delta_bic, res.log_bayes_factor = dbic, dbic / 2.0
+    v = lr_verdict(ext, d, penalty=res.statistic - res.delta_bic)  # the same df ln m penalty
+    res.delta_neg_log_lik, res.statistic, res.p_value = v.delta_neg_log_lik, v.statistic, v.p_value
+    res.delta_bic, res.log_bayes_factor = v.delta_bic, v.delta_bic / 2.0
+    res.boundary_null = v.boundary_null
     return res
 
 

@@ -662,18 +662,11 @@ def _pooled_candidate(ext, runs, recordings, refined_base=None, guide=None):
         return D.CandidateResult(ext.name, False, "the pooled fit failed from every start",
                                  df=ext.df), None
     ps, f, cov = best
-    d = max(0.0, base_total - f)
-    stat = 2.0 * d
-    p = D.lr_p_value(stat, ext)
-    m = sum(wl.m for wl in wls)
-    dbic = stat - ext.df * math.log(m)
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
-    new = {n: ps[0][n] for n in ext.new_parameters}
-    how = (f"pooled GLS likelihood-ratio test over {len(runs)} runs, "
-           + ("0.5 chi2(0) + 0.5 chi2(1) (boundary null)" if ext.boundary_null and ext.df == 1
-              else f"chi2({ext.df})"))
-    res = D.CandidateResult(ext.name, True, how, d, stat, ext.df, p, dbic, dbic / 2.0, new,
-                            {n: float(s) for n, s in zip(ext.new_parameters, se)}, {})
+    verdict = D.lr_verdict(ext, max(0.0, base_total - f), sum(wl.m for wl in wls),
+                           test=f"pooled GLS likelihood-ratio test over {len(runs)} runs")
+    res = verdict.result(ext.name, {n: ps[0][n] for n in ext.new_parameters},
+                         {n: float(s) for n, s in zip(ext.new_parameters, se)}, {})
     res.model = model
     res.fit = D.FitSummary({}, f, (), np.zeros((0, 0)))  # the pooled -ln L, for a later retest
     if starts[0] is runs[0].base:

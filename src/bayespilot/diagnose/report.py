@@ -536,7 +536,7 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
         scale where the test was calibrated and the scale is above 1.
         The marks are the axes' only lines.
     """
-    from scipy import stats
+    from .decide import critical_value
 
     fig, ax = _figure_and_axes(ax)
     rows = [c for c in result.ranking if c.testable]
@@ -551,8 +551,7 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     for i, c in enumerate(rows):
         if c.df > 0:
             # the threshold of the test that decided (decide.lr_p_value, calibrate.Calibration)
-            boundary = _boundary_null(c)
-            crit = 0.5 * stats.chi2.isf(2.0 * level if boundary else level, c.df)
+            crit = 0.5 * critical_value(c.df, _boundary_null(c), level)
             if c.calibration is not None:
                 crit *= max(1.0, c.calibration.scale)
             crits.append(crit)
@@ -583,16 +582,21 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
 
 def _boundary_null(c: Any) -> bool:
     """Whether candidate ``c``'s test had the chi-bar-squared reference of a one-parameter
-    boundary null: its catalogue entry says so; an entry not registered here (a result file
-    of another session's own entry) is read from how its test was made (``reason``)."""
+    boundary null: as its test recorded it (``c.boundary_null``, kept in its result file, so
+    also for a file of another session's own entry, not registered here; a file written
+    before the field is read from how its test was made, ``reason``, by
+    :meth:`CandidateResult.from_dict`), or, for a result made without it, as its catalogue
+    entry says."""
     from .catalogue import get_extension
 
     if c.df != 1:
         return False
+    if getattr(c, "boundary_null", False):
+        return True
     try:
         return bool(get_extension(c.physics).boundary_null)
     except ValueError:
-        return "boundary null" in (c.reason or "")
+        return False
 
 
 def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = None) -> Figure:
