@@ -698,3 +698,154 @@ def test_resume_by_batch_seed_and_results_of_the_old_seeding_refused(twins, tmp_
     scope = [str(w.message) for w in said if w.category is SummaryScopeWarning]
     assert len(scope) == 1 and "made with other settings (a)" in scope[0]
     assert [r["key"] for r in csv.DictReader((out / "summary.csv").open())] == ["b"]
+
+
+# --- what the diagnosis reads of a sidecar, compared on resume ----------------------------------
+def _stub_batch(monkeypatch):
+    """diagnose_batch with no diagnosis at all: each pending task's result file is what the batch
+    records of how it was made (its context) and a placeholder diagnosis, and no summary is
+    drawn; what is tested is which tasks count as done (milliseconds a batch)."""
+    from bayespilot import campaign as C
+    import bayespilot.diagnose.batch as B
+
+    ran = []
+
+    def run_keyed(tasks, out, **kwargs):
+        for key, _, _, context in tasks:
+            ran.append(key)
+            C._write_json_atomic(out / f"{key}.json",
+                                 {"key": key, **context, "diagnosis": {"physics": "none"}})
+        return len(tasks), {}
+
+    monkeypatch.setattr(C, "run_keyed", run_keyed)
+    monkeypatch.setattr(B, "write_summary", lambda tasks, out: None)
+    return ran
+
+
+def _edit_sidecar(stem, **values):
+    """The recording's JSON sidecar with ``values`` set (None: the key removed); its CSV, the
+    signals, unchanged."""
+    path = f"{stem}.json"
+    with open(path, encoding="utf-8") as fh:
+        meta = json.load(fh)
+    for k, v in values.items():
+        if v is None:
+            meta.pop(k, None)
+        else:
+            meta[k] = v
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(meta, fh)
+
+
+def test_resume_view_tells_apart_one_run_under_two_motion_gains():
+    """The audit's check (audit_structure.md 7.2): the same signals with K_theta 0.5 and 1.0
+    gave equal resume views; they differ now, and the seed (of the signals alone) does not."""
+    from bayespilot.diagnose import batch as B
+
+    rec = simulate(task="FD", motion_gain=1.0, remnant_fraction=0.15, seed=1,
+                   duration=5.0).recording
+    recs = {k: Recording(rec.signals, rec.sample_rate_hz, k, rec.task, rec.metadata)
+            for k in (0.5, 1.0)}
+    task = plan_batch(["r"], [recs[1.0]])[0]
+    digests = {"r": _signals_digest(recs[1.0])}
+    assert _signals_digest(recs[0.5]) == digests["r"]
+    opts = {"seed": 0, "noise_passes": 1}
+    made = {k: B._settings(task, opts, digests, {"r": B._recording_metadata(r)})
+            for k, r in recs.items()}
+    views = {k: B._resume_view(m, {}, by_content=True, metadata=True) for k, m in made.items()}
+    assert views[0.5] != views[1.0]
+    assert made[0.5]["recording_metadata"][0]["motion_gain"] == 0.5
+    assert made[0.5]["settings"]["seed"] == made[1.0]["settings"]["seed"]
+    assert "motion_gain 0.5 there, 1.0 here" in B._differs(views[0.5], views[1.0])
+
+
+def test_a_sidecar_corrected_since_is_not_taken_as_done(tmp_path, monkeypatch):
+    """A recording whose sidecar's motion_gain (K_theta, which every theta_m channel, the
+    otolith entry and the bootstrap's loop use) was corrected after its diagnosis: the batch
+    run again took the old diagnosis as done (only the signals' digest was compared).  It is
+    refused now as a changed recording is, saying what changed; so is another sidecar value
+    the diagnosis reads (control_gain, the plant, the forcing), while one it does not read
+    (subject, notes) still resumes, and the diagnosis's seed stays that of the signals."""
+    ran = _stub_batch(monkeypatch)
+    stem = _write(tmp_path, "s5-run1", subject="s5", motion_gain=1.0, seed=5)
+    out = tmp_path / "out"
+    s = diagnose_batch([stem], out, **NOBOOT)
+    assert (s.completed, s.skipped) == (1, 0) and ran == ["s5-run1"]
+    seed = _result(out, "s5-run1")["settings"]["seed"]
+    assert diagnose_batch([stem], out, **NOBOOT).skipped == 1
+    _edit_sidecar(stem, motion_gain=0.5)
+    with pytest.raises(ResultConflictError, match=(
+            r"holds a diagnosis of s5-run1 from the same signals with other sidecar values, "
+            r"which the diagnosis reads \(motion_gain 1\.0 there, 0\.5 here\); use another "
+            r"output folder or delete it")):
+        diagnose_batch([stem], out, **NOBOOT)
+    assert ran == ["s5-run1"]  # (not redone behind the user's back either)
+    assert _result(out, "s5-run1")["recording_metadata"] == [
+        {"sample_rate_hz": 100.0, "motion_gain": 1.0, "task": "FD"}]
+    # deleted, it is redone with the corrected K_theta and the same seed (the signals')
+    (out / "s5-run1.json").unlink()
+    assert diagnose_batch([stem], out, **NOBOOT).completed == 1
+    redone = _result(out, "s5-run1")
+    assert redone["recording_metadata"][0]["motion_gain"] == 0.5
+    assert redone["settings"]["seed"] == seed
+    # what the diagnosis reads besides K_theta: the loop's control_gain, the plant
+    _edit_sidecar(stem, control_gain=0.8)
+    with pytest.raises(ResultConflictError, match=r"control_gain not given there, 0\.8 here"):
+        diagnose_batch([stem], out, **NOBOOT)
+    _edit_sidecar(stem, control_gain=None, controlled_element={"num": [2.0], "den": [1, 0, 0]})
+    with pytest.raises(ResultConflictError, match=r"controlled_element not given there, given "
+                                                  r"here\); use another output folder"):
+        diagnose_batch([stem], out, **NOBOOT)
+    forcing = simulate(task="FD", duration=5.0, seed=0).recording.metadata["forcing"]
+    _edit_sidecar(stem, controlled_element=None, forcing=json.loads(json.dumps(forcing)))
+    with pytest.raises(ResultConflictError, match=r"\(forcing not given there, given here\)"):
+        diagnose_batch([stem], out, **NOBOOT)
+    _edit_sidecar(stem, forcing=None)
+    # what it does not read: resumed
+    _edit_sidecar(stem, controlled_element=None, subject="s5b", notes="re-labelled")
+    assert diagnose_batch([stem], out, **NOBOOT).skipped == 1 and len(ran) == 2
+
+
+def test_a_pooled_run_corrected_since_is_named(tmp_path, monkeypatch):
+    """Pooled: a condition whose key is unchanged (K_theta 1 and 1.0000001 are both k1) but one
+    of whose runs' sidecars changed is refused, naming that run."""
+    _stub_batch(monkeypatch)
+    runs = [_write(tmp_path, f"s6-run{j}", subject="s6", seed=60 + j) for j in (1, 2)]
+    out = tmp_path / "out"
+    assert diagnose_batch(runs, out, pool=True, **NOBOOT).completed == 1
+    assert diagnose_batch(runs, out, pool=True, **NOBOOT).skipped == 1
+    for stem in runs:
+        _edit_sidecar(stem, motion_gain=1.0000001)
+    with pytest.raises(ResultConflictError, match=(
+            r"diagnosis of s6_FD_k1 from the same signals with other sidecar values, which the "
+            r"diagnosis reads \(.*s6-run1: motion_gain 1\.0 there, 1\.0000001 here; .*s6-run2: "
+            r"motion_gain 1\.0 there, 1\.0000001 here\)")):
+        diagnose_batch(runs, out, pool=True, **NOBOOT)
+
+
+def test_results_made_before_the_sidecar_was_recorded_resume_as_before(tmp_path, monkeypatch):
+    """A result written before recording_metadata was recorded resumes on its signals and
+    settings as it did (no batch redone for it), except where what it does record of the
+    sidecar, its condition's task and K_theta, says the recording changed since; one that
+    records neither resumes as before whatever the sidecar says."""
+    ran = _stub_batch(monkeypatch)
+    stem = _write(tmp_path, "s8-run1", subject="s8", motion_gain=1.0, seed=8)
+    out = tmp_path / "out"
+    diagnose_batch([stem], out, **NOBOOT)
+    stored = _result(out, "s8-run1")
+    old = {k: v for k, v in stored.items() if k != "recording_metadata"}
+    assert old["condition"] == {"subject": "s8", "task": "FD", "motion_gain": 1.0}
+    (out / "s8-run1.json").write_text(json.dumps(old))
+    _edit_sidecar(stem, control_gain=0.8)  # (not recorded by an old result: not compared)
+    s = diagnose_batch([stem], out, **NOBOOT)
+    assert (s.completed, s.skipped) == (0, 1) and ran == ["s8-run1"]
+    assert "recording_metadata" not in _result(out, "s8-run1")  # (kept as it was)
+    _edit_sidecar(stem, motion_gain=0.5)
+    with pytest.raises(ResultConflictError, match=r"other sidecar values, which the diagnosis "
+                                                  r"reads \(motion_gain 1\.0 there, 0\.5 here\)"):
+        diagnose_batch([stem], out, **NOBOOT)
+    # older still: no condition either (nor digests): the signals (the files) alone, as before
+    older = {k: v for k, v in old.items() if k not in ("condition", "recording_digests")}
+    (out / "s8-run1.json").write_text(json.dumps(older))
+    s = diagnose_batch([stem], out, **NOBOOT)
+    assert (s.completed, s.skipped) == (0, 1) and ran == ["s8-run1"]

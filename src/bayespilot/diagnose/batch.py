@@ -13,7 +13,15 @@ from others is an error that says what differs, not a silent mix.  "The same"
 recordings by their content (the digests of their signals, which each result
 records: a batch run again from another working folder, or with its
 recordings moved, resumes; results made before digests were recorded: as the
-files resolve), and the same settings with the defaults filled in (an option
+files resolve) and by what the diagnosis reads of their sidecars, which each
+result records too (``recording_metadata``: the sample rate, ``motion_gain``
+(K_theta), ``task``, and ``control_gain``, ``controlled_element_gain``,
+``controlled_element`` and ``forcing`` where given; not ``subject``, ``run``
+or ``notes``): a sidecar corrected since its diagnosis (another K_theta) is a
+changed recording, refused, saying which value differs, not taken as done.
+A result made before that was recorded is compared on the task and K_theta of
+its ``condition``, and resumes by its signals alone if it records no
+condition.  "The same" settings with the defaults filled in (an option
 left out is its default).  A recording named twice (a glob giving both its
 ``.csv`` and its ``.json``) is diagnosed once.  A lost cluster (the scheduler
 gone mid-run) stops the batch with what finished saved, to resume.  ``reports`` is
@@ -22,7 +30,9 @@ report is named by a :class:`MissingReportWarning`.
 
 Seeds: each diagnosis runs with its own seed, drawn from the batch's ``seed``
 and its recordings' content (:func:`task_seed`: ``stream_seed(seed, k)`` with
-``k`` taken from the SHA-256 of the recordings' signal digests), so that two
+``k`` taken from the SHA-256 of the recordings' signal digests; not of their
+sidecars: a run diagnosed again after its ``motion_gain`` was corrected keeps
+its seed), so that two
 recordings' bootstraps (and base-fit starts, and posterior chains) draw
 independent streams, and a diagnosis's seed does not depend on the order of
 the paths, on which other recordings are in the batch, or on resuming.  A
@@ -45,7 +55,8 @@ written here.
 
 Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``
 (the options, the diagnosis's own ``seed`` and the ``batch_seed``),
-``recording_digests``, ``diagnosis``: the same dict as ``bayespilot diagnose
+``recording_digests``, ``recording_metadata`` (one per recording, as
+``recordings``), ``condition``, ``diagnosis``: the same dict as ``bayespilot diagnose
 --json`` writes,
 ``elapsed_seconds``, ``host``, ``versions``), ``<key>/`` (the report, with
 ``reports=True``), ``summary.png`` (every candidate's p-value in every
@@ -396,16 +407,41 @@ def _task_options(task: DiagnoseTask, options: Mapping[str, Any],
     return {**options, "seed": task_seed(options["seed"], [digests[p] for p in task.paths])}
 
 
+#: The sidecar keys a diagnosis reads besides ``sample_rate_hz``, ``motion_gain`` and ``task``
+#: (the task description: the loop the bootstrap simulates, and the forcing functions; module
+#: docs of :mod:`bayespilot.diagnose`); ``subject``, ``run``, ``notes`` and unknown keys are not.
+_READ_KEYS = ("control_gain", "controlled_element_gain", "controlled_element", "forcing")
+
+
+def _recording_metadata(recording: Recording) -> dict[str, Any]:
+    """What a diagnosis reads of a recording besides its signals (a result file's
+    ``recording_metadata``, one per recording; what a resume compares with the signals'
+    digests): ``sample_rate_hz``, ``motion_gain`` (K_theta), ``task``, and each of
+    :data:`_READ_KEYS` the sidecar gives, as given (one left out is not filled in with its
+    default: the diagnosis says when it takes one).  Not in the seed (:func:`task_seed`)."""
+    d: dict[str, Any] = {"sample_rate_hz": float(recording.sample_rate_hz),
+                         "motion_gain": float(recording.motion_gain), "task": recording.task}
+    d.update({k: json_ready(recording.metadata[k]) for k in _READ_KEYS
+              if k in recording.metadata})
+    return d
+
+
 def _settings(task: DiagnoseTask, options: Mapping[str, Any],
-              digests: Mapping[str, str]) -> dict[str, Any]:
+              digests: Mapping[str, str],
+              metadata: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
     """What a result file records of how it was made: the recordings as given, their
     content's digests (``digests``: path -> :func:`~bayespilot.recording._signals_digest`;
-    what a resume compares) and the settings: the batch's ``options`` with ``seed`` the
-    task's own (:func:`_task_options`) and ``batch_seed`` the batch's."""
+    what a resume compares), what the diagnosis read of their sidecars (``metadata``: path ->
+    :func:`_recording_metadata`; compared too, when the result records it) and the settings:
+    the batch's ``options`` with ``seed`` the task's own (:func:`_task_options`) and
+    ``batch_seed`` the batch's."""
     d: dict[str, Any] = {"recordings": list(task.paths)}
     d["recording_digests"] = [digests[p] for p in task.paths]
+    if metadata is not None:
+        d["recording_metadata"] = [metadata[p] for p in task.paths]
     d["settings"] = {**_task_options(task, options, digests), "batch_seed": options["seed"]}
-    # (not compared on resume: the summary's columns of a diagnosis an earlier batch left)
+    # (the summary's columns of a diagnosis an earlier batch left; on resume compared only
+    # for a result that records no recording_metadata, which says more: _resume_view)
     d["condition"] = {"subject": task.subject, "task": task.task,
                       "motion_gain": task.motion_gain}
     return json.loads(json.dumps(d))
@@ -425,22 +461,48 @@ def _the_recording(path: Any) -> str:
 
 
 def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any], *,
-                 by_content: bool = False) -> Any:
+                 by_content: bool = False, metadata: bool = False,
+                 condition: bool = False) -> Any:
     """What must agree for a result file to count as done: its recordings and its settings
     with ``defaults`` filled in (``candidates=None`` as the whole built-in catalogue: a batch
     run with entries of one's own registered records its candidates by name).  The recordings
     by their content's digests (``by_content``, results that record them: the same runs
     from another working folder, or moved), else as the files they resolve to
     (:func:`_the_recording`); sorted either way (a pooled task's runs are in the files'
-    order, which results made before that was so may not have)."""
+    order, which results made before that was so may not have).  With ``metadata`` (results
+    that record ``recording_metadata``) also what the diagnosis read of each recording's
+    sidecar (:func:`_recording_metadata`: K_theta, the sample rate, the task, the plant, the
+    forcing), by its signals' digest; with ``condition`` (a result made before that was
+    recorded, which records its ``condition``) the condition's task and K_theta, the
+    sidecar values it does record."""
     recs = stored.get("recordings")
     if by_content:
         recs = stored.get("recording_digests")
     merged = _settings_view(stored, defaults)
     if not isinstance(recs, list) or merged is None:
         return None
-    return {"recordings": sorted(recs if by_content else (_the_recording(p) for p in recs)),
+    view = {"recordings": sorted(recs if by_content else (_the_recording(p) for p in recs)),
             "settings": merged}
+    if metadata:
+        meta, digests = stored.get("recording_metadata"), stored.get("recording_digests")
+        if not (isinstance(meta, list) and isinstance(digests, list)
+                and len(meta) == len(digests) and all(isinstance(m, dict) for m in meta)):
+            return None
+        view["metadata"] = dict(zip(map(str, digests), meta))
+    if condition:
+        cond = stored.get("condition")
+        cond = cond if isinstance(cond, dict) else {}
+        view["condition"] = {k: cond.get(k) for k in ("task", "motion_gain")}
+    return view
+
+
+def _compares_condition(stored: Mapping[str, Any]) -> bool:
+    """True for a result that records no ``recording_metadata`` (made before it was) but
+    records its condition's task and K_theta: those are compared on resume (a sidecar's
+    ``motion_gain`` corrected since); other sidecar values it cannot be compared on."""
+    cond = stored.get("condition")
+    return ("recording_metadata" not in stored and isinstance(cond, dict)
+            and cond.get("task") is not None and cond.get("motion_gain") is not None)
 
 
 def _settings_view(stored: Mapping[str, Any], defaults: Mapping[str, Any]) -> Any:
@@ -509,18 +571,50 @@ def _earlier_tasks(tasks: Sequence[DiagnoseTask], out: Path, settings: Any,
     return same, other
 
 
-def _differs(old: Any, new: Any) -> str:
-    """What of two :func:`_resume_view` differs, for the refusal's message."""
+def _value_change(key: str, old: Mapping[str, Any], new: Mapping[str, Any]) -> str:
+    """One sidecar value of two :func:`_recording_metadata`, for the refusal's message: a
+    number or a name as it is, a plant or a forcing by its name alone."""
+    def said(d: Mapping[str, Any]) -> str:
+        if key not in d:
+            return "not given"
+        return repr(d[key]) if isinstance(d[key], (str, int, float, type(None))) else "given"
+
+    if said(old) == said(new) == "given":
+        return f"{key} changed"
+    return f"{key} {said(old)} there, {said(new)} here"
+
+
+def _differs(old: Any, new: Any, names: Mapping[str, str] | None = None) -> str:
+    """What of two :func:`_resume_view` differs, for the refusal's message; ``names``: a
+    recording's signals' digest -> its path here (to say which run of a pooled task)."""
     if not (isinstance(old, dict) and isinstance(new, dict)):
         return "it is not a result of this batch"
     if old["recordings"] != new["recordings"]:
         return "other recordings"
+    said = []
+    if old.get("metadata") != new.get("metadata"):
+        runs = []
+        for digest in sorted(new.get("metadata") or {}):
+            was, now = (old.get("metadata") or {}).get(digest, {}), new["metadata"][digest]
+            keys = sorted(k for k in set(was) | set(now) if was.get(k) != now.get(k))
+            where = f"{(names or {}).get(digest, digest)}: " if len(new["metadata"]) > 1 else ""
+            runs += [where + ", ".join(_value_change(k, was, now) for k in keys)] if keys else []
+        said.append("the same signals with other sidecar values, which the diagnosis reads ("
+                    + "; ".join(runs) + ")")
+    if old.get("condition") != new.get("condition"):
+        said.append("the same signals with other sidecar values, which the diagnosis reads ("
+                    + ", ".join(_value_change(k, old["condition"], new["condition"])
+                                for k in ("task", "motion_gain")
+                                if old["condition"].get(k) != new["condition"].get(k)) + ")")
     keys = sorted(k for k in set(old["settings"]) | set(new["settings"])
                   if old["settings"].get(k) != new["settings"].get(k))
     if "batch_seed" in keys:  # (the diagnosis's seed follows from it)
         keys = [k for k in keys if k != "seed"]
-    return "other settings: " + ", ".join(f"{k} {old['settings'].get(k)!r} there, "
-                                          f"{new['settings'].get(k)!r} here" for k in keys)
+    if keys or not said:
+        said.append("other settings: " + ", ".join(f"{k} {old['settings'].get(k)!r} there, "
+                                                   f"{new['settings'].get(k)!r} here"
+                                                   for k in keys))
+    return " and ".join(said)
 
 
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
@@ -600,7 +694,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     ResultConflictError
         ``out_dir`` holds a result of the same key made from other recordings
         or settings (the message says which); nothing is run.  The recordings
-        are compared by their content (module docs), the settings with the
+        are compared by their content and by what the diagnosis reads of their
+        sidecars (K_theta, the sample rate, the task, the plant, the forcing:
+        a ``motion_gain`` corrected since is refused, named; module docs), the settings with the
         diagnosis's defaults filled in (``alpha=None`` and ``alpha=0.01`` are
         one), the seeds by ``batch_seed``.  Also results of the batch's keys
         written before seeds were drawn per diagnosis (they record no
@@ -694,6 +790,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     tasks = plan_batch(paths, recs, pool=pool)
     by_path = dict(zip(paths, recs))
     digests = {p: _signals_digest(r) for p, r in by_path.items()}
+    metadata = {p: _recording_metadata(r) for p, r in by_path.items()}
     twice = []  # one run under two names (a copy) in a pooled condition: refused now, not
     for t in tasks:  # by the diagnosis on a worker
         seen: dict[str, str] = {}
@@ -743,12 +840,19 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             pending.append(t)
             continue
         by_content = isinstance(old.get("recording_digests"), list)
-        was = _resume_view(old, implied, by_content=by_content)
-        now = _resume_view(_settings(t, options, digests), implied, by_content=by_content)
+        # what the diagnosis read of the sidecars (K_theta, the plant, the forcing) as the
+        # result records it: all of it, or (made before that was recorded) its condition's
+        # task and K_theta; a result that records neither resumes by its signals alone
+        compare = {"metadata": "recording_metadata" in old,
+                   "condition": _compares_condition(old)}
+        was = _resume_view(old, implied, by_content=by_content, **compare)
+        now = _resume_view(_settings(t, options, digests, metadata), implied,
+                           by_content=by_content, **compare)
         if was != now:
+            names = {digests[p]: p for p in t.paths}
             raise ResultConflictError(f"{out / (t.key + '.json')} holds a diagnosis of {t.key} "
-                                      f"from {_differs(was, now)}; use another output folder "
-                                      f"or delete it")
+                                      f"from {_differs(was, now, names)}; use another output "
+                                      f"folder or delete it")
         skipped += 1
         if reports and not (out / t.key / "report.html").is_file():
             unreported.append(t.key)
@@ -778,7 +882,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                                       f"({exc.strerror or exc})") from None
         for said in _notes(res):  # (silenced on the worker, said here once per text)
             noted.setdefault(said, []).append(key)
-        return C._jsonable({"key": key, **_settings(t, options, digests),
+        return C._jsonable({"key": key, **_settings(t, options, digests, metadata),
                             "diagnosis": res.to_dict(),
                             "elapsed_seconds": elapsed, "host": platform.node(),
                             "versions": C._versions()})
@@ -788,7 +892,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         completed, errors = C.run_keyed(
             [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths],
                                          _task_options(t, options, digests), shipped),
-              _settings(t, options, digests)) for t in pending], out,
+              _settings(t, options, digests, metadata)) for t in pending], out,
             total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
             progress=progress, connect_timeout=connect_timeout,
             warm=_warm if warm_cache else None, desc="diagnoses", unit="diagnosis",
