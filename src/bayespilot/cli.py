@@ -1903,7 +1903,8 @@ DIR/<key>.json as it finishes (key: the recording's stem, or
 <subject>_<task>_k<K_theta> with --pool); one that fails leaves
 DIR/<key>.error.json and the others go on; running the same command again
 skips the finished ones and retries the failed (the same recordings: a stem,
-its .csv or its .json; the same settings, defaults filled in); a <key>.json
+its .csv or its .json, with the same sidecar values; the same settings,
+defaults filled in); a <key>.json
 made from other recordings or settings is refused (exit 2). With --pool, one
 recording under two names (a copy) in a condition is refused before anything
 runs. --reports writes the reports of the diagnoses a run makes: one
