@@ -188,6 +188,13 @@ def test_savage_dickey_far_from_boundary_is_not_valid():
     assert not sd.valid and sd.log_bayes_factor is None
     assert "too small" in sd.reason
     assert sd.lower_bound is not None and 0 < sd.lower_bound < ng.log_bf
+    # the bound is the prior density over the mean posterior density between the boundary
+    # and the 10th-smallest draw, k / (N x_(k)), which bounds the density at the boundary
+    # from above for a posterior that rises away from it
+    x10 = np.sort(x)[9]
+    assert sd.lower_bound == pytest.approx(math.log(1 / ng.A) - math.log(10 / (4000 * x10)),
+                                           rel=1e-12)
+    assert ng.posterior().cdf(x10) / x10 > ng.posterior().pdf(0.0)  # (the bound's premise)
 
 
 def test_savage_dickey_bad_input():
@@ -277,6 +284,17 @@ def test_information_criteria_by_hand():
     assert ic["log_bayes_factor_bic"] == pytest.approx(10 - 0.5 * math.log(8192))
     with pytest.raises(ValueError, match="k_none"):
         information_criteria(-1.0, -1.0, 9, 0, 10)
+
+
+def test_summary_prints_each_information_criterion_under_its_own_name():
+    """The summary's dAIC and dBIC are information_criteria's, each under its name (and
+    the -ln L of both models), not one printed twice."""
+    ic = information_criteria(-1000.0, -990.0, 9, 8, 8192)
+    ev = Evidence(0.0, 0.1, 0.0, 0.0, {}, {}, (), 0, 0, 0.0, {"nlive": 40})
+    c = Comparison(3.0, 0.2, "threshold", ev, ev, None, ic, {"likelihood": "eq4"})
+    assert ("-ln L (ML) threshold = -1000.00, none = -990.00; dAIC = +18.00, dBIC = "
+            f"{20 - math.log(8192):+.2f} (none - threshold; > 0 favours threshold)"
+            in c.summary())
 
 
 def test_comparison_from_dict_without_the_bayes_factor_error_names_it():
