@@ -184,6 +184,15 @@ def test_pacf_from_residual_recovers_ar2():
     np.testing.assert_allclose(pacf_from_residual(x, 2), [0.8, -0.5], atol=0.02)
 
 
+def test_pacf_from_residual_uses_the_biased_autocovariance():
+    """By hand: +1, -1, ... (10 samples, mean 0) has biased autocovariances 1, -0.9, 0.8
+    (sums over n - k products divided by n), so Durbin-Levinson gives r1 = -0.9 and
+    r2 = (0.8 - 0.81) / (1 - 0.81) = -1/19.  (The unbiased estimate, dividing by n - k,
+    gives r1 = -1: a unit root, which the biased one keeps |r| < 1 from.)"""
+    x = np.tile([1.0, -1.0], 5)
+    np.testing.assert_allclose(pacf_from_residual(x, 2), [-0.9, -1 / 19], rtol=1e-12)
+
+
 # --- (c) a short run on a simulated recording -------------------------------------------------
 def test_short_run_on_simulated_recording(coloured_run, short_sim, model):
     post = coloured_run
@@ -321,6 +330,33 @@ def test_netcdf_metadata_is_standard_json_with_nan_tau(tmp_path):
     assert back.tau["a"] == 3.0 and np.isnan(back.tau["b"])
     assert back.settings["tau_history"][1] == [40, 3.0]
     assert np.isnan(back.settings["tau_history"][0][1])
+
+
+def test_draws_skip_twice_the_largest_tau_and_thin_by_half_the_smallest():
+    """The posterior keeps steps 2 max(tau), then every int(min(tau) / 2)-th (emcee's
+    advice, the docstring's rule): with tau = (4, 12) over 100 steps, steps 24, 26, ..., 98
+    of every walker, exactly those of the chain."""
+    from bayespilot.sample import _to_idata
+
+    class Chain:  # the two methods _to_idata reads from an emcee sampler
+        def __init__(self):
+            self.x = make_rng(3).standard_normal((100, 6, 2))
+
+        def get_chain(self):
+            return self.x
+
+        def get_log_prob(self):
+            return -0.5 * (self.x ** 2).sum(axis=2)
+
+    meta = {"parameter_names": ["a", "b"], "tau": {"a": 4.0, "b": 12.0}, "converged": True,
+            "seed": 1, "settings": {}}
+    idata, meta = _to_idata(Chain(), ["a", "b"], np.array([4.0, 12.0]), meta)
+    steps = np.arange(24, 100, 2)
+    assert (meta["settings"]["discard"], meta["settings"]["thin"],
+            meta["settings"]["n_draws"]) == (24, 2, steps.size)
+    np.testing.assert_array_equal(idata.posterior["b"].values, Chain().x[steps, :, 1].T)
+    np.testing.assert_array_equal(idata.sample_stats["lp"].values,
+                                  Chain().get_log_prob()[steps].T)
 
 
 def test_plots_return_figures(coloured_run, short_sim):
