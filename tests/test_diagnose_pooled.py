@@ -589,3 +589,18 @@ def test_each_runs_base_fit_on_a_bound_and_dropped_replicates_are_kept(washout_r
     assert runs[2] == ("    bootstrap: only 1 of 2 replicates survived (1 closed loop(s) "
                        "diverged): check the signs and units of u, e and control_gain")
     assert text.count("ON A BOUND") == 1 and "bootstrap: only" not in "\n".join(runs[3:])
+
+
+def test_pooled_bic_penalty_counts_every_runs_whitened_samples(washout_runs, washout_result):
+    """The pooled test's BIC penalty is df ln m with m the whitened samples of all runs
+    (each with its own noise model), not of one run; its Schwarz ln BF is delta_bic / 2."""
+    res = washout_result
+    ranked = [c for c in res.ranking if c.testable and c.fit is not None]
+    assert ranked
+    for c in ranked:
+        m = sum(D.Whitened(c.model, rec, nz).m
+                for rec, nz in zip(washout_runs, res.arrays["noise"]))
+        one = D.Whitened(c.model, washout_runs[0], res.arrays["noise"][0]).m
+        assert m > 1.5 * one
+        assert c.statistic - c.delta_bic == pytest.approx(c.df * math.log(m), rel=1e-12)
+        assert c.log_bayes_factor == pytest.approx(c.delta_bic / 2, rel=1e-12)
