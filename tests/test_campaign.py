@@ -226,6 +226,9 @@ def test_summarise_against_numpy():
         assert r["N50"] == np.sum((d >= 0.00375) & (d <= 0.01125))
         assert r["mean_neg_log_lik"] == np.mean(np.arange(d.size) * -3.0)
     assert rows[("FD", 0.2, 1.0, True)]["N50"] == 55 and rows[("FT", 0.2, 1.0, True)]["N50"] == 30
+    # "within 50 %" includes its edge: 0.00375 is exactly half of 0.0075 (in binary too)
+    edge, = summarise(_synthetic("FT", 0.1, 0.25, [0.00375, 0.0037499, 0.0075]))
+    assert edge["N50"] == 2
 
     # FD 0.2 / 1: N50 equal to the paper's -> no N50 flag; mu flag by the stated formula
     r = rows[("FD", 0.2, 1.0, True)]
