@@ -741,8 +741,6 @@ def test_coloured_default_discard_is_fit_fasts_on_a_short_record(monkeypatch):
     quarter of the record): on a 3-s record 2 s against fit_fast's 0.75 (over half the
     record).  Now one rule (likelihood.coloured_discard); 2 s exactly on a 20-s record, as
     before.  The nested sampling itself is replaced: only what it is given is checked."""
-    import types
-
     import bayespilot.compare as C
     from bayespilot.diagnose.nested import nested_bayes_factor
     from bayespilot.noise import ARNoise

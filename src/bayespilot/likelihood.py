@@ -66,9 +66,9 @@ class NotWholePeriodsWarning(RuntimeWarning):
 #: the delays) when its state at t = 0 is not known: what :func:`startup_discard` leaves out.
 STARTUP_DISCARD = 2.0
 #: Seconds of a record's start left out by default with an AR ("coloured") noise model, at most
-#: a quarter of the record: what :func:`coloured_discard` leaves out.  The whitening filter
-#: would otherwise amplify the model's start-up transient.
-COLOURED_DISCARD = 2.0
+#: a quarter of the record: what :func:`coloured_discard` leaves out.  The same start-up as
+#: :data:`STARTUP_DISCARD` (one constant), which the whitening filter would amplify.
+COLOURED_DISCARD = STARTUP_DISCARD
 
 
 def whole_periods(recording: Recording) -> bool | None:
@@ -167,16 +167,15 @@ def startup_discard(recording: Recording) -> float:
 
 
 def coloured_discard(recording: Recording) -> float:
-    """Seconds left out by default with an AR ("coloured") noise model:
-    :data:`COLOURED_DISCARD` (2 s), at most a quarter of the record.
+    """Seconds left out by default with an AR ("coloured") noise model: the model's start-up,
+    :func:`startup_discard` (min(2 s, a quarter of the record)), on every record, of whole
+    periods or not (the whitening filter amplifies the start-up transient wherever it is).
 
-    The one rule of the default ``discard`` of
-    :func:`~bayespilot.fit.fast.fit_fast` with ``noise="ar"`` or an
-    :class:`~bayespilot.noise.ARNoise`, of :func:`~bayespilot.sample.sample`,
-    :func:`~bayespilot.compare.evidence` and :func:`~bayespilot.compare.compare`
-    with ``likelihood="coloured"``, and of the diagnosis's Bayes factors
-    (:mod:`bayespilot.diagnose.nested`).  2 s on every record of 8 s or more
-    (the paper's 81.92 s); a shorter record keeps three quarters of its samples.
+    The one rule of the default ``discard`` of :func:`~bayespilot.fit.fast.fit_fast` with
+    ``noise="ar"`` or an :class:`~bayespilot.noise.ARNoise`, of
+    :func:`~bayespilot.sample.sample`, :func:`~bayespilot.compare.evidence` and
+    :func:`~bayespilot.compare.compare` with ``likelihood="coloured"``, and of the
+    diagnosis's Bayes factors (:mod:`bayespilot.diagnose.nested`).
 
     Parameters
     ----------
@@ -185,12 +184,7 @@ def coloured_discard(recording: Recording) -> float:
     Returns
     -------
     float
-        min(2, duration / 4), s.
-
-    Raises
-    ------
-    TypeError
-        If ``recording`` is not a :class:`~bayespilot.recording.Recording`.
+        ``startup_discard(recording)``, s: 2 on every record of 8 s or more.
 
     Examples
     --------
@@ -200,9 +194,7 @@ def coloured_discard(recording: Recording) -> float:
     >>> coloured_discard(simulate(task="FD", motion_gain=1.0, seed=1, duration=3).recording)
     0.75
     """
-    if not isinstance(recording, Recording):
-        raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    return _coloured_default(recording.duration)
+    return startup_discard(recording)  # (its TypeError for what is not a Recording)
 
 
 def _coloured_default(duration: float) -> float:
