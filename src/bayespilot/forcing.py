@@ -5,12 +5,14 @@ f(t) = sum_i A(i) sin(omega_0 n(i) t + phi(i))
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["Multisine", "SNAP_TOLERANCE"]
+__all__ = ["Multisine", "SNAP_TOLERANCE", "EXACT_TOLERANCE", "whole_periods_frequency",
+           "columns_whole_periods"]
 
 
 def _is_complex(x: Any) -> bool:
@@ -174,11 +176,122 @@ class Multisine:
 
 
 #: A forcing line within this many cycles (over the record) of a whole number of cycles counts
-#: as whole periods: the diagnosis snaps a sidecar's base frequency that puts every line this
-#: close to the nearest that puts them on the record's DFT bins (a rounded value, as printed in
-#: a paper), and :func:`bayespilot.likelihood.whole_periods` reads a record so; a line off by
-#: more is not a bin.  (0.05 cycle off its bin keeps 99.6 % of its amplitude there.)
+#: as whole periods: a sidecar's base frequency that puts every line this close is snapped to
+#: the nearest that puts them on the record's DFT bins (a rounded value, as printed in a
+#: paper), by :func:`whole_periods_frequency`, the one rule of
+#: :func:`bayespilot.likelihood.whole_periods` and :func:`bayespilot.diagnose.locate.forcing_of`;
+#: a line off by more is not a bin.  (0.05 cycle off its bin keeps 99.6 % of its amplitude
+#: there.)
 SNAP_TOLERANCE = 0.05
+#: A base frequency that puts every forcing line within this many cycles (over the record) of a
+#: whole number of cycles is taken as it is (:func:`whole_periods_frequency` does not snap it).
+EXACT_TOLERANCE = 1e-3
+
+
+def whole_periods_frequency(base_frequency: float, n: Any, amplitude: Any,
+                            duration: float) -> float | None:
+    """The base frequency at which a ``duration``-s record holds whole periods of forcing lines.
+
+    The one rule of "whole periods of the forcing" read from a sidecar, of
+    :func:`bayespilot.likelihood.whole_periods` (the start-up discard) and of
+    :func:`bayespilot.diagnose.locate.forcing_of` (the frequency evidence).  The lines
+    n(i) omega_0 sum to a signal of period 2 pi / (g omega_0), g the greatest common divisor
+    of the n: the record holds whole periods of it when one base frequency omega near
+    omega_0 makes the record j >= 1 such periods, T = 2 pi j / (g omega), and moves no line
+    by more than :data:`SNAP_TOLERANCE` cycle (a rounded omega_0, as printed in a paper).
+    Each line within 0.05 cycle of whole cycles at omega_0, but at no common omega, is not
+    whole periods (the lines' own roundings contradict their base frequency).
+
+    Only the lines of nonzero amplitude count (one of zero amplitude is not in the signal);
+    with none, every line given counts.
+
+    Parameters
+    ----------
+    base_frequency : float
+        omega_0, rad/s (> 0).
+    n : array_like of int
+        The lines' multiples of ``base_frequency``, of the target and the disturbance together.
+    amplitude : array_like of float
+        Their amplitudes (the same length as ``n``).
+    duration : float
+        The record's length, n_samples * dt, s (> 0).
+
+    Returns
+    -------
+    float or None
+        ``base_frequency`` itself when it puts every counted line within
+        :data:`EXACT_TOLERANCE` (1e-3) cycle of its whole cycles, else the nearest base
+        frequency that puts them on whole cycles when that moves none by more than
+        :data:`SNAP_TOLERANCE` (0.05) cycle; None when the record does not hold whole
+        periods (or is shorter than half of one).
+
+    Raises
+    ------
+    ValueError
+        If ``n`` and ``amplitude`` differ in length, or ``base_frequency`` or ``duration``
+        is not a positive finite number.
+
+    Examples
+    --------
+    >>> w0 = 2 * np.pi / 81.92
+    >>> whole_periods_frequency(w0, [5, 6], [1.0, 1.0], 81.92) == w0
+    True
+    >>> round(whole_periods_frequency(0.0767, [5, 211], [1.0, 1.0], 81.92), 6)  # as printed
+    0.076699
+    >>> whole_periods_frequency(w0, [5, 6], [1.0, 1.0], 40.0) is None
+    True
+    """
+    w0, T = float(base_frequency), float(duration)
+    if not (math.isfinite(w0) and w0 > 0 and math.isfinite(T) and T > 0):
+        raise ValueError(f"base_frequency and duration must be positive finite numbers, got "
+                         f"{base_frequency!r} and {duration!r}")
+    n = np.abs(np.rint(np.asarray(n, dtype=float).ravel()))
+    a = np.asarray(amplitude, dtype=float).ravel()
+    if n.shape != a.shape:
+        raise ValueError(f"n and amplitude must have the same length, got {n.size} and {a.size}")
+    if np.any(a != 0.0):
+        n = n[a != 0.0]
+    n = n[n != 0.0]  # (a constant is whole periods of any record)
+    if n.size == 0:
+        return w0
+    m = w0 * T / (2 * np.pi)  # base periods in the record
+    g = int(np.gcd.reduce(n.astype(np.int64)))  # the signal's period is 2 pi / (g w0)
+    j = int(np.rint(m * g))  # whole periods of the signal in the record
+    if j < 1:
+        return None
+    off = float(np.max(n * abs(m - j / g)))  # each line's distance from its bin at j / g
+    if off <= EXACT_TOLERANCE:
+        return w0
+    if off <= SNAP_TOLERANCE:
+        return 2 * np.pi * j / (g * T)
+    return None
+
+
+def columns_whole_periods(columns: Sequence[Any]) -> bool | None:
+    """Whether recorded forcing columns (``f_t``, ``f_d``: either or both) are whole periods.
+
+    The one rule of "whole periods" read from the columns, of
+    :func:`bayespilot.likelihood.whole_periods` and of
+    :func:`bayespilot.diagnose.locate.forcing_of`: each column that is not zero throughout
+    continues smoothly from its last sample to its first (its second differences across
+    the wrap no larger than 3 times the largest inside the record); a record cut
+    mid-period cuts every forcing function, so either column alone tells.
+
+    Parameters
+    ----------
+    columns : sequence of array_like
+        The forcing columns the record has.
+
+    Returns
+    -------
+    bool or None
+        None when there is none, or every one is zero throughout (not known).
+    """
+    cols = [np.asarray(x, dtype=float) for x in columns]
+    cols = [x for x in cols if np.any(x != 0.0)]
+    if not cols:
+        return None
+    return all(_wraps_smoothly(x) for x in cols)
 
 
 def _wraps_smoothly(x: np.ndarray) -> bool:

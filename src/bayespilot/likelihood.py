@@ -25,7 +25,7 @@ import numpy as np
 from scipy import signal
 
 from ._caller import warn_at_caller
-from .forcing import SNAP_TOLERANCE, _wraps_smoothly
+from .forcing import columns_whole_periods, whole_periods_frequency
 from .kernels import _coloured as C
 from .kernels import _response as R
 from .kernels import _segmented as SEG
@@ -82,15 +82,18 @@ def whole_periods(recording: Recording) -> bool | None:
     recording : Recording
         Read from its metadata's ``forcing`` (``base_frequency`` and the
         ``target`` and ``disturbance`` lines ``n``) if it has one: whole
-        periods when every line with a nonzero amplitude is within
-        :data:`~bayespilot.forcing.SNAP_TOLERANCE` (0.05) cycle of a
-        whole number of cycles of the record (n_samples * dt), as
-        :func:`~bayespilot.diagnose.locate.forcing_of` reads it (a rounded base
-        frequency, as printed in a paper, counts).  Else from its ``f_t`` and
-        ``f_d`` columns, either or both: whole periods when each it has that
-        is not zero throughout continues smoothly from its last sample to its
-        first (its second differences across the wrap no larger than 3 times
-        the largest inside the record, as the diagnosis reads them).
+        periods when one base frequency puts every line with a nonzero
+        amplitude on a whole number of cycles of the record (n_samples * dt)
+        and moves none by more than :data:`~bayespilot.forcing.SNAP_TOLERANCE`
+        (0.05) cycle (a rounded base frequency, as printed in a paper, counts):
+        :func:`~bayespilot.forcing.whole_periods_frequency`, the rule
+        :func:`~bayespilot.diagnose.locate.forcing_of` reads it by.  Else from
+        its ``f_t`` and ``f_d`` columns, either or both
+        (:func:`~bayespilot.forcing.columns_whole_periods`, as the diagnosis
+        reads them): whole periods when each it has that is not zero
+        throughout continues smoothly from its last sample to its first (its
+        second differences across the wrap no larger than 3 times the largest
+        inside the record).
 
     Returns
     -------
@@ -119,24 +122,18 @@ def whole_periods(recording: Recording) -> bool | None:
     if isinstance(meta, Mapping):
         try:
             w0 = float(meta["base_frequency"])
-            lines = [np.asarray(meta[k]["n"], dtype=float).ravel()[
-                np.asarray(meta[k]["amplitude"], dtype=float).ravel() != 0.0]
-                for k in ("target", "disturbance")]
+            n, a = (np.concatenate([np.asarray(meta[k][arr], dtype=float).ravel()
+                                    for k in ("target", "disturbance")])
+                    for arr in ("n", "amplitude"))
         except (KeyError, TypeError, ValueError, IndexError):
-            lines = None  # a malformed sidecar: read the columns, if any
-        if lines is not None and math.isfinite(w0) and w0 > 0:
-            n = np.concatenate(lines)
-            if n.size == 0:
+            n = a = None  # a malformed sidecar: read the columns, if any
+        if n is not None and n.shape == a.shape and math.isfinite(w0) and w0 > 0:
+            if not np.any(a != 0.0):
                 return None
-            cycles = n * w0 * T / (2.0 * np.pi)
-            return bool(np.all(np.abs(cycles - np.rint(cycles)) <= SNAP_TOLERANCE))
+            return whole_periods_frequency(w0, n, a, T) is not None
     # (either column alone tells: the format makes both optional, and a record cut mid-period
     # cuts both)
-    cols = [np.asarray(recording[k], dtype=float) for k in ("f_t", "f_d") if k in recording]
-    cols = [x for x in cols if np.any(x != 0.0)]
-    if not cols:
-        return None
-    return all(_wraps_smoothly(x) for x in cols)
+    return columns_whole_periods([recording[k] for k in ("f_t", "f_d") if k in recording])
 
 
 def startup_discard(recording: Recording) -> float:

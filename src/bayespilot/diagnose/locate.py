@@ -46,7 +46,8 @@ import numpy as np
 from scipy import integrate, optimize
 
 from .._files import number
-from ..forcing import SNAP_TOLERANCE, Multisine, _wraps_smoothly
+from ..forcing import (EXACT_TOLERANCE, SNAP_TOLERANCE, Multisine, columns_whole_periods,
+                       whole_periods_frequency)
 from ..likelihood import Likelihood
 from ..model import PilotModel
 from ..recording import Recording
@@ -219,12 +220,20 @@ def forcing_of(recording: Recording) -> Forcing | None:
 
     Notes
     -----
-    A sidecar's frequency is a bin when it is within 1e-3 cycle (over the
-    record) of a whole number of cycles.  A base frequency that puts every
-    line within :data:`SNAP_TOLERANCE` (0.05) cycle of whole cycles, as a
-    rounded value does (the paper prints 0.0767 rad/s for 2 pi / 81.92 s),
-    is taken as the nearest one that puts them on bins, and a note says so:
-    a line 0.05 cycle off its bin keeps 99.6 % of its amplitude there.
+    Whole periods are decided by the rule of
+    :func:`bayespilot.likelihood.whole_periods` (the start-up discard), so
+    the two never disagree about a record: from a sidecar,
+    :func:`~bayespilot.forcing.whole_periods_frequency`, from the columns,
+    :func:`~bayespilot.forcing.columns_whole_periods`.  A sidecar's
+    frequencies are bins when one base frequency puts every line of nonzero
+    amplitude on whole cycles of the record: the sidecar's own when it puts
+    them within 1e-3 cycle; one that puts every line within
+    :data:`SNAP_TOLERANCE` (0.05) cycle of whole cycles, as a rounded value
+    does (the paper prints 0.0767 rad/s for 2 pi / 81.92 s), is taken as the
+    nearest one that puts them on bins, and a note says so: a line 0.05 cycle
+    off its bin keeps 99.6 % of its amplitude there.  A line of zero
+    amplitude is not in the signal: it does not decide, and is left out of
+    the multisine when it is not on a bin.
     """
     meta = recording.metadata.get("forcing")
     t = recording.t
@@ -238,24 +247,27 @@ def forcing_of(recording: Recording) -> Forcing | None:
     else:
         return None
     T = recording.n_samples * recording.dt
-    kk = []
-    for f in (ft, fd):
-        k = f.frequencies * T / (2 * np.pi)
-        kk.append(np.rint(k).astype(int) if np.all(np.abs(k - np.rint(k)) < 1e-3) else None)
     notes = []
     if isinstance(meta, Mapping):
-        if kk[0] is None or kk[1] is None:
-            ft, fd, kk, note = _snapped(ft, fd, kk, T)
+        ft, fd, kk, note = _on_bins(ft, fd, T)
+        if note:
             notes.append(note)
     else:
-        wraps = _wraps_smoothly(recording["f_t"]) and _wraps_smoothly(recording["f_d"])
-        shared = np.intersect1d(ft.n, fd.n).size
-        if not wraps or shared:
-            # lines read from the columns are DFT bins by construction; the test above cannot
-            # tell a record of whole periods from a smeared one
+        # lines read from the columns are DFT bins by construction, so whether the record is
+        # whole periods is read from the columns themselves (the rule of whole_periods); the
+        # two-input estimate needs more: separate frequencies (a line of zero amplitude, the
+        # placeholder of a column zero throughout, is no frequency of the signal)
+        whole = columns_whole_periods([recording["f_t"], recording["f_d"]])
+        shared = np.intersect1d(ft.n[ft.amplitude != 0], fd.n[fd.amplitude != 0]).size
+        kk = [ft.n.copy(), fd.n.copy()]
+        if whole is None:
+            kk = [None, None]
+            notes.append("the frequency evidence (frequency.*) is missing: the f_t and f_d "
+                         "columns are zero throughout the record")
+        elif not whole or shared:
             kk = [None, None]
             why = ("do not continue smoothly from the record's end to its start (not whole "
-                   "periods)" if not wraps else f"share {shared} DFT line(s)")
+                   "periods)" if not whole else f"share {shared} DFT line(s)")
             notes.append(f"the frequency evidence (frequency.*) is missing: the f_t and f_d "
                          f"columns {why}, and the describing functions need whole periods of "
                          f"forcing functions at separate frequencies; give the forcing "
@@ -274,38 +286,57 @@ def forcing_of(recording: Recording) -> Forcing | None:
     return dataclasses.replace(out, notes=tuple(notes)) if notes else out
 
 
-def _snapped(ft: Multisine, fd: Multisine, kk: list, T: float
-             ) -> tuple[Multisine, Multisine, list, str]:
-    """A sidecar's forcing whose lines are not all DFT bins of a record of ``T`` s: snapped
-    to them when its base frequency is within :data:`SNAP_TOLERANCE` cycle of one that puts
-    them there (``kk`` the bins found, None where not); ``(ft, fd, kk, note)``."""
+def _on_bins(ft: Multisine, fd: Multisine, T: float
+             ) -> tuple[Multisine, Multisine, list, str | None]:
+    """A sidecar's forcing on the DFT bins of a record of ``T`` s, by the one rule of whole
+    periods (:func:`~bayespilot.forcing.whole_periods_frequency`): ``(ft, fd, kk, note)``.
+
+    Whole periods: ``kk`` the bins of the lines, at the base frequency snapped to them when
+    it is not exact (the note says so; None otherwise); a line of zero amplitude that is
+    not on a bin there is left out (it is not in the signal, and has no bin).  Not whole
+    periods: ``kk`` None and the note says why."""
     w0 = ft.base_frequency
     n = np.concatenate([ft.n, fd.n])
+    a = np.concatenate([ft.amplitude, fd.amplitude])
+    counted = a != 0 if np.any(a != 0) else np.ones(a.size, bool)  # (the rule's lines)
+    ws = whole_periods_frequency(w0, n, a, T)
+    if ws is not None:
+        out, kk = [], []
+        for f in (ft, fd):
+            k = f.n * (ws * T / (2 * np.pi))
+            keep = (f.amplitude != 0) | (np.abs(k - np.rint(k)) <= EXACT_TOLERANCE)
+            if ws != w0 or not np.all(keep):
+                f = Multisine(ws, f.n[keep], f.amplitude[keep], f.phase[keep])
+            out.append(f)
+            kk.append(np.rint(k[keep]).astype(int))
+        note = None
+        if ws != w0:
+            off = float(np.max(n[counted] * abs(w0 - ws) * T / (2 * np.pi)))
+            note = (f"forcing.base_frequency {w0:.6g} rad/s puts the forcing lines up to "
+                    f"{off:.2g} cycle off whole cycles of the {T:g}-s record (a rounded "
+                    f"value?); taken as {ws:.8g} rad/s, the nearest that puts them on the "
+                    f"record's DFT bins")
+        return out[0], out[1], kk, note
     m = w0 * T / (2 * np.pi)  # base periods in the record
-    g = int(np.gcd.reduce(n))  # the lines are bins if m is a whole multiple of 1 / g
-    j = int(np.rint(m * g))
-    off = n * abs(m - j / g)  # each line's distance from its bin at the snapped frequency
-    if j >= 1 and float(off.max()) <= SNAP_TOLERANCE:
-        ws = 2 * np.pi * j / (g * T)
-        ft, fd = (Multisine(ws, f.n, f.amplitude, f.phase) for f in (ft, fd))
-        note = (f"forcing.base_frequency {w0:.6g} rad/s puts the forcing lines up to "
-                f"{off.max():.2g} cycle off whole cycles of the {T:g}-s record (a rounded "
-                f"value?); taken as {ws:.8g} rad/s, the nearest that puts them on the record's "
-                f"DFT bins")
-        return ft, fd, [ft.n // g * j, fd.n // g * j], note
-    k = n * m
-    dist = np.abs(k - np.rint(k))
-    i = int(np.argmax(dist))
-    name = "target" if i < ft.n.size else "disturbance"
-    period = 2 * np.pi / w0
+    g = int(np.gcd.reduce(n[counted]))
+    period = 2 * np.pi / (g * w0)  # of the forcing functions' sum
     cure = ("give the exact base_frequency, or cut the record to whole periods"
             if T >= period else f"the record is shorter than one period of the forcing "
                                 f"({period:.4g} s)")
-    note = (f"the frequency evidence (frequency.*) is missing: the {name} line n = {n[i]} "
-            f"({n[i] * w0:.4g} rad/s) is {dist[i]:.2g} cycle off a whole number of cycles of "
-            f"the {T:g}-s record (forcing.base_frequency {w0:.6g} rad/s), and the describing "
-            f"functions need whole periods; {cure}")
-    return ft, fd, kk, note
+    k = n * m
+    dist = np.where(counted, np.abs(k - np.rint(k)), -1.0)
+    i = int(np.argmax(dist))
+    if dist[i] > SNAP_TOLERANCE:
+        name = "target" if i < ft.n.size else "disturbance"
+        why = (f"the {name} line n = {n[i]} ({n[i] * w0:.4g} rad/s) is {dist[i]:.2g} cycle off "
+               f"a whole number of cycles of the {T:g}-s record")
+    else:  # each line near whole cycles, but at no one base frequency
+        why = (f"the {T:g}-s record is {T / period:.4g} periods ({period:.4g} s) of the "
+               f"forcing functions, not a whole number (no one base frequency puts every "
+               f"line within {SNAP_TOLERANCE:g} cycle of whole cycles)")
+    note = (f"the frequency evidence (frequency.*) is missing: {why} (forcing.base_frequency "
+            f"{w0:.6g} rad/s), and the describing functions need whole periods; {cure}")
+    return ft, fd, [None, None], note
 
 
 def describing_function(u: np.ndarray, e: np.ndarray, m: np.ndarray, forcing: Forcing
