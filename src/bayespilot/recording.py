@@ -628,6 +628,10 @@ def _check_forcing(forcing: Any) -> None:
             if arr not in part:
                 raise RecordingError(f"forcing.{name} has no {arr!r} array")
             _check_number_list(f"forcing.{name}.{arr}", part[arr], integral=(arr == "n"))
+        low = [v for v in part["n"] if v < 1]
+        if low:  # (the multisine's harmonic numbers: a line at 0 or below has no frequency)
+            raise RecordingError(f"forcing.{name}.n must hold integers >= 1 (multiples of "
+                                 f"base_frequency), got {low[0]!r}")
         lengths = {arr: len(part[arr]) for arr in ("n", "amplitude", "phase")}
         if len(set(lengths.values())) != 1:
             raise RecordingError(f"forcing.{name} arrays have unequal lengths "
