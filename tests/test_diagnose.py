@@ -921,3 +921,30 @@ def test_nested_runs_of_neighbouring_seeds_share_no_stream(monkeypatch):
     seeds.clear()
     nested.nested_bayes_factor(rec, base, ext, noise=noise, seed=1, runs=3)
     assert set(seeds) == per_seed[0]  # and a seed repeats its runs
+
+
+def test_describing_function_leaves_out_a_line_listed_with_zero_amplitude():
+    """A sidecar may list a line with amplitude 0 (a placeholder): not in the signal, it has
+    no input to divide by; the estimate is the one without it, finite everywhere."""
+    import json
+
+    from bayespilot.recording import Recording
+
+    p = presets.paper_parameters("FD")
+    p["delta_abs"] = 0.0
+    rec = simulate(paper_model(), p, task="FD", motion_gain=1.0, remnant_gain=0.0,
+                   seed=0).recording
+    meta = json.loads(json.dumps(dict(rec.metadata)))
+    target = meta["forcing"]["target"]
+    used = set(target["n"]) | set(meta["forcing"]["disturbance"]["n"])
+    free = next(n for n in range(3, 200) if n not in used)  # a bin no forcing line is on
+    for key, v in (("n", free), ("amplitude", 0.0), ("phase", 0.0)):
+        target[key].append(v)
+    listed = Recording(dict(rec.signals), rec.sample_rate_hz, rec.motion_gain, rec.task, meta)
+    fo = forcing_of(listed)
+    assert fo.periodic and free in fo.target.n
+    df = describing_function(listed.u, listed.e, listed.theta_ddot_m, fo)
+    ref = describing_function(rec.u, rec.e, rec.theta_ddot_m, forcing_of(rec))
+    assert np.all(np.isfinite(df["H_v"])) and np.all(np.isfinite(df["H_m"]))
+    for k in ("omega", "H_v", "H_m"):
+        np.testing.assert_allclose(df[k], ref[k], rtol=1e-12)

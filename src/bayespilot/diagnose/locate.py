@@ -384,6 +384,10 @@ def describing_function(u: np.ndarray, e: np.ndarray, m: np.ndarray, forcing: Fo
     Ft, Fd = np.fft.rfft(forcing.f_t), np.fft.rfft(forcing.f_d)
     kt, kd = forcing.k_target, forcing.k_disturbance
     wt, wd = forcing.target.frequencies, forcing.disturbance.frequencies
+    # a line a sidecar lists with zero amplitude is not in the signal: no input to divide by
+    # (the ratios there would be noise over ~0), so it gives no equation
+    live_t, live_d = forcing.target.amplitude != 0, forcing.disturbance.amplitude != 0
+    kt, wt, kd, wd = kt[live_t], wt[live_t], kd[live_d], wd[live_d]
 
     def ratios(k, F):
         return U[k] / F[k], E[k] / F[k], M[k] / F[k]
