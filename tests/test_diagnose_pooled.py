@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from bayespilot import presets
 from bayespilot.diagnose import PooledDiagnosisResult, diagnose_pooled, get_extension
@@ -165,7 +166,11 @@ def test_pooled_names_a_shared_washout(washout_result):
     assert sum(shares) == pytest.approx(res.chosen.delta_neg_log_lik, abs=1e-6)
     # its test calibrated by replicates of both runs' base models, refitted together
     cal = res.chosen.calibration
-    assert cal.replicates == 3 and res.chosen.p_value == cal.p_value >= cal.p_nominal
+    assert cal.replicates == 3 and res.chosen.p_value == cal.p_value
+    d = res.chosen.delta_neg_log_lik  # chi-bar-squared, nominal and at 2 d / max(1, scale)
+    assert cal.p_nominal == pytest.approx(0.5 * stats.chi2.sf(2 * d, 1), rel=1e-9)
+    assert cal.p_value == pytest.approx(
+        0.5 * stats.chi2.sf(2 * d / max(1.0, cal.scale), 1), rel=1e-9)
     assert cal.statistics.max() < 0.5 * res.chosen.delta_neg_log_lik
     assert "calibrated by 3 replicates" in res.summary()
     d = json.loads(res.to_json())

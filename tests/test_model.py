@@ -14,8 +14,8 @@ import pytest
 import naive
 from bayespilot import presets
 from bayespilot.likelihood import Likelihood
-from bayespilot.model import (Channel, DeadZone, FixedFilter, LinearDrift, Parameter, Saturation,
-                              SoftDeadZone, Washout, paper_model)
+from bayespilot.model import (Channel, DeadZone, FixedFilter, LinearDrift, MotionSystem, Parameter,
+                              Saturation, SecondOrderWashout, SoftDeadZone, Washout, paper_model)
 from bayespilot.simulate import simulate
 
 FD = dict(presets.TABLE3["FD"])
@@ -124,6 +124,26 @@ def test_washout_response_matches_naive_periodic(fd_sim, fd_rec):
                                    lik.warm, extra_vestibular=[washout_tf],
                                    canal_output=lik.X[1])
         assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
+
+
+@pytest.mark.parametrize("stage, new, tf", [
+    (MotionSystem(), {"omega_ms": 6.0, "zeta_ms": 0.7},
+     lambda p: ([p["omega_ms"] ** 2], [1.0, 2 * p["zeta_ms"] * p["omega_ms"], p["omega_ms"] ** 2])),
+    (SecondOrderWashout(), {"omega_w": 0.5, "zeta_w": 0.7},
+     lambda p: ([1.0, 0.0, 0.0], [1.0, 2 * p["zeta_w"] * p["omega_w"], p["omega_w"] ** 2])),
+], ids=["motion-system", "second-order-washout"])
+def test_second_order_stage_matches_naive_periodic(fd_rec, stage, new, tf):
+    """The periodic steady state of a second-order parametric stage (the motion-system and
+    second-order washout entries) against naive.py's steady filter: reading the input's
+    history x[-1] for x[-2] moved u_hat by 4e-4 of its sd and passed every other test (the
+    first-order washout has no x[-2])."""
+    m = paper_model().add_stage("vestibular", stage,
+                                [Parameter(n, 0.01, 50.0, v) for n, v in new.items()])
+    params = dict(FD, **new)
+    lik = Likelihood(m, fd_rec, initial="periodic")
+    ref = naive.naive_response(params, fd_rec.e, fd_rec.theta_ddot_m, fd_rec.dt, "periodic",
+                               lik.warm, extra_vestibular=[tf])
+    assert np.max(np.abs(lik.response(params) - ref)) < 1e-10 * np.std(ref)
 
 
 def test_washout_tends_to_base_model(fd_sim):
@@ -424,3 +444,20 @@ def test_source_codes_are_the_closed_loop_kernels():
     assert SOURCE_CODES == {"e": K.SRC_E, "theta_ddot_m": K.SRC_THETA_DDOT_M,
                             "theta_m": K.SRC_THETA_M, "theta": K.SRC_THETA}
     assert sorted(SOURCE_CODES.values()) == list(range(len(SOURCES)))
+
+
+def test_soft_dead_zone_values_against_numpy():
+    """The soft dead zone's values, w [softplus((|x| - d)/w) - softplus(-d/w)] sign(x), by
+    numpy's logaddexp (a bug made in both the value and its tangent passed every test, which
+    compared the two with each other)."""
+    from bayespilot.kernels._blocks import NL_SOFT_DEADZONE, nonlinearity
+
+    d, w = 0.0075, 0.002
+    x = np.linspace(-0.05, 0.05, 2001)
+    got = np.array([nonlinearity(NL_SOFT_DEADZONE, v, d, w) for v in x])
+    want = np.sign(x) * w * (np.logaddexp(0.0, (np.abs(x) - d) / w) - np.logaddexp(0.0, -d / w))
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-18)
+    assert nonlinearity(NL_SOFT_DEADZONE, 0.0, d, w) == 0.0
+    # far beyond the corner it is the crisp dead zone, |x| - d, less w softplus(-d/w)
+    assert nonlinearity(NL_SOFT_DEADZONE, 0.05, d, w) == pytest.approx(
+        0.05 - d - w * np.logaddexp(0.0, -d / w), rel=1e-9)
