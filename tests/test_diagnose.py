@@ -977,3 +977,22 @@ def test_describing_function_leaves_out_a_line_listed_with_zero_amplitude():
     assert np.all(np.isfinite(df["H_v"])) and np.all(np.isfinite(df["H_m"]))
     for k in ("omega", "H_v", "H_m"):
         np.testing.assert_allclose(df[k], ref[k], rtol=1e-12)
+
+
+def test_located_evidence_p_values_by_hand():
+    """Each located statistic against its bootstrap replicates: p = (1 + #{r >= v}) / (B + 1)
+    (never 0: a correct model is not flagged with certainty by 39 replicates), the null's mean
+    and sd; a replicate that is not finite is dropped, a statistic without any keeps NaN."""
+    from bayespilot.diagnose.locate import EVIDENCE, calibrate
+
+    keys = list(EVIDENCE)[:3]
+    values = {keys[0]: 2.0, keys[1]: 5.0, keys[2]: 1.0}
+    null = {keys[0]: np.array([1.0, 2.0, 3.0, np.nan, 0.5]), keys[1]: np.array([1.0, 2.0]),
+            keys[2]: np.array([np.inf, np.nan])}
+    ev = calibrate(values, null)
+    assert ev[keys[0]].p_value == 3 / 5 and ev[keys[0]].replicates == 4  # 2.0 and 3.0 >= 2
+    assert ev[keys[0]].null_mean == 1.625
+    assert ev[keys[0]].null_sd == pytest.approx(np.std([1.0, 2.0, 3.0, 0.5], ddof=1))
+    assert ev[keys[1]].p_value == 1 / 3  # none as large: the smallest p two replicates give
+    assert math.isnan(ev[keys[2]].p_value) and ev[keys[2]].replicates == 0
+    assert all(math.isnan(e.p_value) for e in calibrate(values, None).values())
