@@ -530,11 +530,12 @@ def test_simulate_replaces_a_simulated_recording_but_not_a_labs(capsys, rc):
     (rc / "run.json").write_text(json.dumps(side))
     before = {n: (rc / n).read_bytes() for n in ("run.csv", "run.json")}
     code, _, err = _run(capsys, *argv)
-    assert code == 2 and "did not write" in err and "--force" in err
+    assert code == 2 and "--force" in err
+    assert "are not a recording 'bayespilot simulate' wrote (no \"simulation\"" in err
     assert {n: (rc / n).read_bytes() for n in before} == before
     (rc / "run.json").unlink()
     code, _, err = _run(capsys, *argv)
-    assert code == 2 and f"{rc / 'run.csv'} holds a recording" in err
+    assert code == 2 and f"{rc / 'run.csv'} is not a recording 'bayespilot simulate'" in err
     assert (rc / "run.csv").read_bytes() == before["run.csv"]
     # --force replaces it: the files are those of a fresh simulation with that seed
     assert _run(capsys, *argv, "--force")[0] == 0

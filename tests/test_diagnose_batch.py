@@ -800,10 +800,25 @@ def test_a_sidecar_corrected_since_is_not_taken_as_done(tmp_path, monkeypatch):
     _edit_sidecar(stem, controlled_element=None, forcing=json.loads(json.dumps(forcing)))
     with pytest.raises(ResultConflictError, match=r"\(forcing not given there, given here\)"):
         diagnose_batch([stem], out, **NOBOOT)
+    # ... but the forcing as the diagnosis reads it: lines written as 6.0, or a key of the
+    # lab's own inside the forcing object (unknown keys are ignored), resume
+    (out / "s5-run1.json").unlink()
+    assert diagnose_batch([stem], out, **NOBOOT).completed == 1
+    f = json.loads(json.dumps(forcing))
+    f["target"]["n"] = [float(n) for n in f["target"]["n"]]
+    f["lab_note"] = "sines from the 2011 set"
+    _edit_sidecar(stem, forcing=f)
+    assert diagnose_batch([stem], out, **NOBOOT).skipped == 1
+    f["target"]["amplitude"][0] *= 2  # what it reads: refused
+    _edit_sidecar(stem, forcing=f)
+    with pytest.raises(ResultConflictError, match=r"\(forcing changed\)"):
+        diagnose_batch([stem], out, **NOBOOT)
+    (out / "s5-run1.json").unlink()
     _edit_sidecar(stem, forcing=None)
+    assert diagnose_batch([stem], out, **NOBOOT).completed == 1
     # what it does not read: resumed
     _edit_sidecar(stem, controlled_element=None, subject="s5b", notes="re-labelled")
-    assert diagnose_batch([stem], out, **NOBOOT).skipped == 1 and len(ran) == 2
+    assert diagnose_batch([stem], out, **NOBOOT).skipped == 1 and len(ran) == 4
 
 
 def test_a_pooled_run_corrected_since_is_named(tmp_path, monkeypatch):

@@ -319,6 +319,12 @@ def test_units_are_kept_through_the_file_and_shown_beside_the_fitted_values(tmp_
     # the paper's Table 1 units, then the entry's own (the base model's names come first)
     assert units["tau_m"] == "s" and units["K_m"] == "rad/IPUT" and units["delta_abs"] == "IPUT"
     assert units["omega_w"] == "rad/s" and list(units)[:8] == list(base.all_names)
+    # control-saturation's reported numbers: the limits and the censored fit's sigma in u's
+    # unit, the count of censored samples a number
+    sat = _parameter_units(base, get_extension("control-saturation").build(base))
+    assert {k: sat[k] for k in ("u_max", "u_min", "sigma", "n_censored")} == {
+        "u_max": "rad", "u_min": "rad", "sigma": "rad", "n_censored": "-"}
+    assert "u_min" not in units  # (only with the entry)
     chosen = CandidateResult("motion-washout", True, "GLS", 8.0, 16.0, 1, 1e-5, 10.0, 5.0,
                              {"omega_w": 0.31}, {"omega_w": 0.02}, justified=True)
     res = DiagnosisResult(True, "motion-washout", [chosen], {},
@@ -395,9 +401,10 @@ def test_lr_verdict_records_the_boundary_null_in_the_result_and_its_file():
     assert CandidateResult.from_dict(d).boundary_null is True
     d["boundary_null"], d["reason"] = False, v.how
     assert CandidateResult.from_dict(d).boundary_null is False
-    # positional construction as before: the field comes after the others, default False
+    # positional construction as before: the field comes after the others, default None
+    # (not recorded: the report asks the catalogue)
     assert CandidateResult("motion-washout", True, "GLS", 0.4, 0.8, 1, 0.2, -5.0, -2.5,
-                           {"omega_w": 0.3}).boundary_null is False
+                           {"omega_w": 0.3}).boundary_null is None
 
 
 def test_a_file_written_before_boundary_null_reads_it_from_the_reason():
@@ -417,6 +424,11 @@ def test_a_file_written_before_boundary_null_reads_it_from_the_reason():
     # only a one-parameter test had the chi-bar-squared reference
     assert CandidateResult.from_dict({"physics": "x", "testable": True, "df": 2,
                                       "reason": "(boundary null)"}).boundary_null is False
+    # read from the reference the test names, not from the words: an entry of one's own
+    # whose reason says it is not a boundary null
+    assert CandidateResult.from_dict({"physics": "x", "testable": True, "df": 1,
+                                      "reason": "LR test, chi2(1) (not a boundary null)"}
+                                     ).boundary_null is False
 
 
 def test_eq4_neg_log_lik_is_floored_as_the_likelihoods():

@@ -249,8 +249,13 @@ def test_one_forcing_function_zero_skips_the_two_input_estimate_cleanly(on, zero
     assert zero in said[0] and only in said[0] and "frequency.visual" in said[0]
     for k in ("frequency.visual", "frequency.motion_low", "frequency.motion_high"):
         assert math.isnan(res.where[k].value)
-    for k in ("frequency.power_target", "frequency.power_disturbance"):
-        assert math.isfinite(res.where[k].value) and math.isfinite(res.where[k].p_value)
+    # the residual's power at the lines of the forcing function that is there; none at the
+    # zero one's (it forces no line: its placeholder's bin is not a forced frequency)
+    there, gone = (("target", "disturbance") if zero == "f_d" else ("disturbance", "target"))
+    k = f"frequency.power_{there}"
+    assert math.isfinite(res.where[k].value) and math.isfinite(res.where[k].p_value)
+    assert math.isnan(res.where[f"frequency.power_{gone}"].value)
+    assert f"frequency.power_{gone} (no forced lines)" in said[0]
     assert res.settings["bootstrap"]["replicates"] == 2
     assert (tmp_path / "report" / "report.html").exists()
 

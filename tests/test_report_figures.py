@@ -651,6 +651,27 @@ def test_candidates_mark_of_a_file_written_before_boundary_null(tmp_path):
     assert [c.boundary_null for c in res.ranking] == [True, False]
     assert _marks(res) == pytest.approx([0.5 * stats.chi2.isf(2 * level, 1),
                                          0.5 * stats.chi2.isf(level, 1)], rel=1e-12)
+    # an old reason that says "not a boundary null" is not read as one (the words are not
+    # the reference the test names)
+    res = _unregistered_file(tmp_path, level, {"my-inner": (
+        "likelihood-ratio test, chi2(1): not a boundary null", None)})
+    assert [c.boundary_null for c in res.ranking] == [False]
+    assert _marks(res) == pytest.approx([0.5 * stats.chi2.isf(level, 1)], rel=1e-12)
+
+
+def test_candidates_mark_follows_a_recorded_boundary_null_over_the_catalogue(tmp_path):
+    """A file's recorded boundary_null, False as well as True, decides the mark even for an
+    entry registered here whose catalogue says otherwise (a file of another release or of a
+    session with another definition); a result built by hand (None) asks the catalogue."""
+    from bayespilot.diagnose.decide import CandidateResult
+
+    assert get_extension("motion-washout").boundary_null
+    c = CandidateResult("motion-washout", True, "GLS likelihood-ratio test, chi2(1)", 2.0,
+                        4.0, 1, 0.03, 1.0, 0.5, {"omega_w": 0.3}, {"omega_w": 0.1},
+                        {"omega_w": 0.3}, boundary_null=False)
+    assert R._boundary_null(c) is False
+    c.boundary_null = None
+    assert R._boundary_null(c) is True
 
 
 def test_report_neg_log_lik_of_a_perfect_fit_is_the_likelihoods_floored_value(monkeypatch):

@@ -1020,9 +1020,11 @@ def _refuse_replacing_a_recording(out: str) -> None:
     if isinstance(sidecar, dict) and isinstance(sidecar.get("simulation"), dict):
         return
     there = " and ".join(str(p) for p in (csv_path, json_path) if p.exists())
+    why = ("no \"simulation\" in its sidecar" if sidecar is not None else
+           "a file without a simulated recording's sidecar")
     raise UsageError(f"argument -o/--output: {there} "
-                     f"{'hold' if ' and ' in there else 'holds'} a recording that "
-                     f"'bayespilot simulate' did not write (no \"simulation\" in its sidecar): "
+                     f"{'are' if ' and ' in there else 'is'} not a recording 'bayespilot "
+                     f"simulate' wrote ({why}: a lab's measurement, or another file): "
                      f"simulating onto it would replace it; give another name, or --force to "
                      f"replace it")
 

@@ -235,7 +235,7 @@ def _warn_unconverged(runs: Sequence[tuple[str, float]], max_steps: int) -> None
 
 
 def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
-            lead_in: float = 2.0) -> str:
+            lead_in: float) -> str:
     from .compare import DECISION_LEVEL, DECISION_Z
 
     true_d = truth["delta_abs"]

@@ -160,7 +160,7 @@ def startup_discard(recording: Recording) -> float:
     """
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording, got {type(recording).__name__}")
-    return min(STARTUP_DISCARD, recording.duration / 4)
+    return _coloured_default(recording.duration)  # (the one formula, below)
 
 
 def coloured_discard(recording: Recording) -> float:
@@ -195,10 +195,11 @@ def coloured_discard(recording: Recording) -> float:
 
 
 def _coloured_default(duration: float) -> float:
-    """:func:`coloured_discard` of a record of ``duration`` seconds (what
+    """:func:`startup_discard` and :func:`coloured_discard` of a record of ``duration``
+    seconds, min(2 s, a quarter of it): the one formula (also what
     :func:`~bayespilot.fit.fast.fit_fast` asks of records it has not got, to name the shortest
     one an AR model fits)."""
-    return min(COLOURED_DISCARD, duration / 4)
+    return min(STARTUP_DISCARD, duration / 4)
 
 
 def _checked_discard(recording: Recording, discard: object) -> float:

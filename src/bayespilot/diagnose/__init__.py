@@ -190,6 +190,11 @@ def _parameter_units(*models: Any) -> dict[str, str]:
     for m in models:
         for p in getattr(m, "parameters", ()) if m is not None else ():
             units.setdefault(p.name, p.unit)
+    if "u_max" in units:  # control-saturation also reports the flat tops' other limit, the
+        # censored fit's remnant sd (both in u's unit, as u_max) and the censored samples
+        units.setdefault("u_min", units["u_max"])
+        units.setdefault("sigma", units["u_max"])
+        units.setdefault("n_censored", "-")
     return units
 
 
@@ -356,7 +361,8 @@ class DiagnosisResult(_DiagnosisJSON):
         The base model the candidates extend.
     units : dict of str to str
         Each parameter's unit (``"-"``: dimensionless), by name: the base
-        model's and every candidate's new parameters; ``units`` in the JSON.  Empty for a file written before 2026-11-30.
+        model's and every candidate's new parameters; ``units`` in the JSON.  Empty for a file
+        written before units were recorded.
     """
 
     mismatch: bool

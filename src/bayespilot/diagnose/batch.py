@@ -423,6 +423,16 @@ def _recording_metadata(recording: Recording) -> dict[str, Any]:
                          "motion_gain": float(recording.motion_gain), "task": recording.task}
     d.update({k: json_ready(recording.metadata[k]) for k in _READ_KEYS
               if k in recording.metadata})
+    if "control_gain" in d:  # the value read, not how it was written (69e-2 is 0.69)
+        d["control_gain"] = float(d["control_gain"])
+    if isinstance(d.get("forcing"), dict):
+        # the fields the diagnosis reads, as numbers (6.0 is line 6; a key of the lab's own
+        # inside the forcing object is not read, as the format says of unknown keys)
+        f = d["forcing"]
+        d["forcing"] = {"base_frequency": float(f["base_frequency"]),
+                        **{part: {k: [float(x) for x in f[part][k]]
+                                  for k in ("n", "amplitude", "phase")}
+                           for part in ("target", "disturbance")}}
     return d
 
 
@@ -1002,8 +1012,8 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
         ``"<error>: <message>"``, or ``"no result"``); and ``seed``, the
         seed the diagnosis ran with (:func:`task_seed`; ``diagnose(recording,
         seed=...)`` repeats it); ``units`` (JSON text: name -> unit of each
-        parameter in ``params``, ``interval`` and ``posterior``; ``"-"``
-        dimensionless; '' for a file written before 2026-11-30).  Fields
+        parameter in ``params``, whose names ``interval`` and ``posterior`` share; ``"-"``
+        dimensionless; '' for a file written before units were recorded).  Fields
         that do not apply are ''.
     """
     from .. import campaign as C

@@ -868,13 +868,14 @@ class CandidateResult:
         Profile-likelihood intervals of the new parameters
         (:class:`~bayespilot.diagnose.profile.ProfileInterval`), for the
         chosen extension of a single-run diagnosis; empty otherwise.
-    boundary_null : bool
+    boundary_null : bool or None
         Whether the base model is the extension at the edge of its parameter
         range (its catalogue entry's ``boundary_null`` when it was tested,
         :func:`lr_verdict`): with ``df`` 1 the test's reference was the
         chi-bar-squared mixture (:func:`lr_p_value`, :func:`critical_value`).
         Kept in the result file, so a file of an entry not registered where
-        it is read still says which test decided.
+        it is read still says which test decided.  None: not recorded (a
+        result built by hand); the report then asks the catalogue.
     """
 
     physics: str
@@ -897,7 +898,7 @@ class CandidateResult:
     refit: dict[str, Any] | None = None
     noise: Any = None
     interval: dict[str, Any] = field(default_factory=dict)
-    boundary_null: bool = False
+    boundary_null: bool | None = None
 
     def __repr__(self) -> str:
         """One line: the test's outcome and the new parameters (the dataclass's printed the
@@ -972,8 +973,9 @@ class CandidateResult:
                      for k, v in refit.items()}
         cal = d.get("calibration")
         boundary = d.get("boundary_null")
-        if boundary is None:  # a file written before the field: how its test was made says it
-            boundary = int(d.get("df", 0)) == 1 and _BOUNDARY_TEXT in (d.get("reason") or "")
+        if "boundary_null" not in d:  # a file written before the field: how its test was
+            # made says it (null: not recorded, a result built by hand, stays None)
+            boundary = int(d.get("df", 0)) == 1 and _MIXTURE_TEXT in (d.get("reason") or "")
         return cls(d["physics"], bool(d["testable"]), d.get("reason", ""),
                    *(number(d.get(k, default)) for k, default in (
                        ("delta_neg_log_lik", 0.0), ("statistic", 0.0))),
@@ -985,7 +987,7 @@ class CandidateResult:
                    calibration=None if cal is None else Calibration.from_dict(cal), refit=refit,
                    interval={k: ProfileInterval.from_dict(k, v)
                              for k, v in (d.get("interval") or {}).items()},
-                   boundary_null=bool(boundary))
+                   boundary_null=None if boundary is None else bool(boundary))
 
     def report_fit(self, fit: "FitSummary", noise: "NoiseModel", how: str) -> None:
         """Report the estimates of ``fit`` (of this candidate's extended model) instead of
@@ -1101,9 +1103,12 @@ def critical_value(df: int, boundary_null: bool, level: float) -> float:
 
 
 #: How a test with the chi-bar-squared reference is named in its ``reason``
-#: (:func:`lr_verdict`); result files written before ``boundary_null`` was kept
-#: are read by it (:meth:`CandidateResult.from_dict`).
+#: (:func:`lr_verdict`) ...
 _BOUNDARY_TEXT = "boundary null"
+#: ... and the reference itself, which files written before ``boundary_null`` was kept are
+#: read by (:meth:`CandidateResult.from_dict`; not the words "boundary null", which a
+#: reason of one's own can hold as "not a boundary null")
+_MIXTURE_TEXT = "0.5 chi2(0) + 0.5 chi2(1)"
 
 
 @dataclass(frozen=True)
@@ -1198,7 +1203,7 @@ def lr_verdict(ext: Extension, d: float, m: float | None = None, *, penalty: flo
         penalty = ext.df * math.log(m)
     stat = 2.0 * d
     mixture = ext.boundary_null and ext.df == 1
-    reference = f"0.5 chi2(0) + 0.5 chi2(1) ({_BOUNDARY_TEXT})" if mixture else f"chi2({ext.df})"
+    reference = f"{_MIXTURE_TEXT} ({_BOUNDARY_TEXT})" if mixture else f"chi2({ext.df})"
     return LRVerdict(d, stat, ext.df, lr_p_value(stat, ext), stat - penalty,
                      f"{test}, {reference}", bool(ext.boundary_null))
 

@@ -279,10 +279,12 @@ def forcing_of(recording: Recording) -> Forcing | None:
         which = " and ".join({"f_t": "the target f_t", "f_d": "the disturbance f_d"}[z]
                              for z in out.zero)
         only = {("f_d",): " (target only)", ("f_t",): " (disturbance only)"}.get(out.zero, "")
+        power = " and ".join(f"frequency.power_{'target' if z == 'f_t' else 'disturbance'}"
+                             for z in out.zero)
         notes.append(f"{which} {'is' if len(out.zero) == 1 else 'are'} zero throughout the "
                      f"record{only}: the two-input describing-function estimate needs both "
                      f"forcing functions, so frequency.visual, frequency.motion_low and "
-                     f"frequency.motion_high are missing")
+                     f"frequency.motion_high are missing, and {power} (no forced lines)")
     return dataclasses.replace(out, notes=tuple(notes)) if notes else out
 
 
@@ -527,9 +529,15 @@ def statistics(recording: Recording, model: PilotModel, params: Mapping[str, flo
             values["frequency.motion_low"] = rel(df_res["H_m"], df_mod["H_m"], low)
             values["frequency.motion_high"] = rel(df_res["H_m"], df_mod["H_m"], ~low)
         P = np.abs(np.fft.rfft(eps)) ** 2
+        # the lines in the signal: one listed with zero amplitude (a zero forcing function's
+        # placeholder), or of a forcing function zero throughout the record, is not forced;
+        # a forcing function without any gives NaN
+        kt, kd = (np.asarray(k)[(f.amplitude != 0) & (col not in forcing.zero)]
+                  for k, f, col in ((forcing.k_target, forcing.target, "f_t"),
+                                    (forcing.k_disturbance, forcing.disturbance, "f_d")))
         forced = np.zeros(P.size, bool)
-        forced[forcing.k_target] = True
-        forced[forcing.k_disturbance] = True
+        forced[kt] = True
+        forced[kd] = True
         forced[0] = True
 
         def power_ratio(ks):
@@ -540,8 +548,8 @@ def statistics(recording: Recording, model: PilotModel, params: Mapping[str, flo
                 den += float(np.mean(P[nb])) if nb else 0.0
             return num / den if den > 0 else math.nan
 
-        values["frequency.power_target"] = power_ratio(forcing.k_target)
-        values["frequency.power_disturbance"] = power_ratio(forcing.k_disturbance)
+        values["frequency.power_target"] = power_ratio(kt)
+        values["frequency.power_disturbance"] = power_ratio(kd)
         if with_arrays and forcing.two_input:
             arrays["df_residual"] = df_res
             arrays["df_model"] = df_mod

@@ -703,6 +703,7 @@ def _pooled_saturation(recordings, runs):
     res = D.CandidateResult(ext.name, True, how, d, params["n_censored"], 0, p,
                             math.inf if p == 0.0 else 2.0 * d, math.inf if p == 0.0 else d,
                             params, {}, {})
+    res.model = withtops[0].model  # (the extended model, for its parameters' units)
     return res, per_run
 
 

@@ -65,7 +65,6 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass, field
-from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
@@ -76,11 +75,10 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["GAResult", "StepOneResult", "genetic_algorithm", "step_one", "decode", "encode",
            "resolution", "PAPER_SETTINGS"]
 
-#: Section III.A of the paper (read-only; the fitters' signatures restate these defaults so
-#: that help() shows them, and a test holds the two equal).
-PAPER_SETTINGS = MappingProxyType({"population": 160, "generations": 100, "p_crossover": 0.7,
-                                   "p_mutation": 0.01, "bits": 20, "repetitions": 20,
-                                   "n_best": 5})
+#: Section III.A of the paper (the fitters' signatures restate these defaults so that help()
+#: shows them; a test holds the two equal).
+PAPER_SETTINGS = {"population": 160, "generations": 100, "p_crossover": 0.7,
+                  "p_mutation": 0.01, "bits": 20, "repetitions": 20, "n_best": 5}
 
 MAX_BITS = 52  # k / (2**bits - 1) is exact in float64 up to here
 
