@@ -461,18 +461,21 @@ def _too_short_for_delays(model, recording, params: Mapping[str, float]) -> str 
     """Why ``recording`` is too short for ``model`` at ``params``, or None.
 
     The likelihood needs each channel's time delay to be shorter than the
-    record by more than 4 samples (at the channel's rate: the recording's,
-    times its ``oversample``); otherwise -ln L is +inf, as for an unstable model.
+    record by more than ``kernels._response.DELAY_MARGIN`` (4) samples (at the
+    channel's rate: the recording's, times its ``oversample``); otherwise -ln L
+    is +inf, as for an unstable model.
     """
+    from .kernels._response import DELAY_MARGIN  # (the kernel's own rule)
+
     values = model.as_dict(model.full_vector(params), full=True)
     dt = recording.dt
     for ch in model.channels:
         tau = abs(values[ch.delay])
         m = ch.oversample
         steps = tau / (dt / m)  # the delay in samples at the channel's rate, as the kernel has it
-        if not steps < recording.n_samples * m - 4:
+        if not steps < recording.n_samples * m - DELAY_MARGIN:
             need = recording.n_samples + 1
-            while not steps < need * m - 4:
+            while not steps < need * m - DELAY_MARGIN:
                 need += 1
             return (f"{recording.source or 'this recording'}: the record is too short for the "
                     f"pilot model: {recording.n_samples} sample(s) ({recording.duration:g} s), "

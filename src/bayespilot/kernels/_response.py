@@ -49,6 +49,10 @@ CHF_NFIELDS = 2
 # Output table.
 OUT_OMEGA, OUT_ZETA, OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1 = range(5)
 OUT_NFIELDS = 5
+#: A channel's delay must be shorter than its signal by more than this many samples (at the
+#: channel's rate): the interpolated delay reads up to that far back.  -ln L is +inf
+#: otherwise; the command line tells a record too short for the delays by the same rule.
+DELAY_MARGIN = 4
 
 
 @njit
@@ -200,7 +204,7 @@ def lead_in(theta, ch_int, dt, n):
         if oversampling(ch_int, c) > 1:
             continue  # its own recursion and lead-in (fine_lead_in)
         dd = theta[ch_int[c, CH_DELAY]] / dt
-        if abs(dd) < n - 4:
+        if abs(dd) < n - DELAY_MARGIN:
             m = int(math.floor(dd))
             if -m > P:
                 P = -m
@@ -322,7 +326,7 @@ def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, pe
             dtf = dt / M
             B0, B1, B2, fA1, fA2 = tustin(kg, kg * lead, 0.0, w2, 2.0 * zn * wn, 1.0, dtf)
             dd = theta[ch_int[c, CH_DELAY]] / dtf
-            if not (abs(dd) < n * M - 4):
+            if not (abs(dd) < n * M - DELAY_MARGIN):
                 return False
             m = int(math.floor(dd))
             K, _, A1p, A2p, _, _ = OV.coefficients(fA1, fA2, B0, B1, B2, dd - m, M,
@@ -368,7 +372,7 @@ def _response_core(theta, X, ch_int, ch_float, st_int, st_const, out_int, dt, pe
             src = q
         B0, B1, B2, _, _ = tustin(kg, kg * lead, 0.0, w2, 2.0 * zn * wn, 1.0, dt)
         dd = theta[ch_int[c, CH_DELAY]] / dt
-        if not (abs(dd) < n - 4):
+        if not (abs(dd) < n - DELAY_MARGIN):
             return False
         m = int(math.floor(dd))
         f = dd - m
@@ -581,7 +585,7 @@ def _fused_nll(theta, X, u, ch_int, ch_float, st_int, st_const, out_int, dt, per
         if ch_int[c, CH_MOD_KIND] != MOD_NONE:
             return np.inf, False, False
         dd = theta[ch_int[c, CH_DELAY]] / dt
-        if not (abs(dd) < pad - 4):
+        if not (abs(dd) < pad - DELAY_MARGIN):
             return np.inf, False, False
         m = int(math.floor(dd))
         if m < 0 and not periodic:
