@@ -177,6 +177,7 @@ def coloured_discard(recording: Recording) -> float:
     Parameters
     ----------
     recording : Recording
+        Its duration caps the lead-in.
 
     Returns
     -------
