@@ -295,6 +295,20 @@ def test_netcdf_variables_carry_the_model_units(coloured_run, model, tmp_path):
     assert expected["delta_abs"] == "IPUT" and expected["omega_nm"] == "rad/s"
 
 
+class _Chain:
+    """The two methods _to_idata reads from an emcee sampler, over a given chain x
+    (steps, walkers, parameters), log density -|x|^2 / 2."""
+
+    def __init__(self, x):
+        self.x = x
+
+    def get_chain(self):
+        return self.x
+
+    def get_log_prob(self):
+        return -0.5 * (self.x ** 2).sum(axis=2)
+
+
 def test_netcdf_metadata_is_standard_json_with_nan_tau(tmp_path):
     """A tau that is not finite (a chain too short to estimate it) is written as JSON null, not
     as Python's NaN token that strict JSON parsers refuse, and is NaN again when read back."""
@@ -302,21 +316,12 @@ def test_netcdf_metadata_is_standard_json_with_nan_tau(tmp_path):
 
     from bayespilot.sample import _META_ATTR, _to_idata
 
-    class Chain:  # the two methods _to_idata reads from an emcee sampler
-        def __init__(self):
-            self.x = make_rng(1).standard_normal((40, 6, 2))
-
-        def get_chain(self):
-            return self.x
-
-        def get_log_prob(self):
-            return -0.5 * (self.x ** 2).sum(axis=2)
-
     tau = np.array([3.0, np.nan])
     meta = {"parameter_names": ["a", "b"], "tau": {"a": 3.0, "b": float("nan")},
             "converged": False, "seed": 1,
             "settings": {"tau_history": [[20, float("nan")], [40, 3.0]]}}
-    idata, meta = _to_idata(Chain(), ["a", "b"], tau, meta)
+    idata, meta = _to_idata(_Chain(make_rng(1).standard_normal((40, 6, 2))), ["a", "b"],
+                            tau, meta)
     text = idata.posterior.attrs[_META_ATTR]
 
     def refuse(token):
@@ -338,25 +343,16 @@ def test_draws_skip_twice_the_largest_tau_and_thin_by_half_the_smallest():
     of every walker, exactly those of the chain."""
     from bayespilot.sample import _to_idata
 
-    class Chain:  # the two methods _to_idata reads from an emcee sampler
-        def __init__(self):
-            self.x = make_rng(3).standard_normal((100, 6, 2))
-
-        def get_chain(self):
-            return self.x
-
-        def get_log_prob(self):
-            return -0.5 * (self.x ** 2).sum(axis=2)
-
     meta = {"parameter_names": ["a", "b"], "tau": {"a": 4.0, "b": 12.0}, "converged": True,
             "seed": 1, "settings": {}}
-    idata, meta = _to_idata(Chain(), ["a", "b"], np.array([4.0, 12.0]), meta)
+    chain = _Chain(make_rng(3).standard_normal((100, 6, 2)))
+    idata, meta = _to_idata(chain, ["a", "b"], np.array([4.0, 12.0]), meta)
     steps = np.arange(24, 100, 2)
     assert (meta["settings"]["discard"], meta["settings"]["thin"],
             meta["settings"]["n_draws"]) == (24, 2, steps.size)
-    np.testing.assert_array_equal(idata.posterior["b"].values, Chain().x[steps, :, 1].T)
+    np.testing.assert_array_equal(idata.posterior["b"].values, chain.x[steps, :, 1].T)
     np.testing.assert_array_equal(idata.sample_stats["lp"].values,
-                                  Chain().get_log_prob()[steps].T)
+                                  chain.get_log_prob()[steps].T)
 
 
 def test_plots_return_figures(coloured_run, short_sim):
