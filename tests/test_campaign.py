@@ -544,3 +544,260 @@ def test_run_job_writes_seeds_as_text_and_the_fraction_reached(tmp_path):
     (back,) = load_results(out, [job])
     assert back["remnant_seed"] == job.remnant_seed and "F_n_reached" not in back
     assert summarise([back])[0]["F_n"] == 0.2  # summary.csv's F_n: the requested one
+
+
+# --- the cluster: interrupts, schedulers given as objects, the workers' version ----------
+class _FakeFuture:
+    def __init__(self, status, value=None):
+        self.status, self.value = status, value
+
+    def result(self):
+        return self.value
+
+    def release(self):
+        pass
+
+
+class _FakeClient:
+    """What run_keyed uses of a distributed.Client; records what is submitted."""
+
+    def __init__(self):
+        self.submitted = []
+
+    def submit(self, fn, *args, pure=False):
+        self.submitted.append(args)
+        return _FakeFuture("finished", {"x": len(self.submitted)})
+
+
+@pytest.fixture
+def fake_cluster(monkeypatch):
+    """run_keyed's connection replaced by a _FakeClient (returned) and as_completed by the list
+    of futures: the cluster loop without a cluster."""
+    import distributed
+
+    import bayespilot.campaign as C
+
+    client = _FakeClient()
+    monkeypatch.setattr(C, "_connect", lambda *a, **k: client)
+    monkeypatch.setattr(distributed, "as_completed", lambda futs: list(futs))
+    return client
+
+
+def test_ctrl_c_during_the_numba_warm_up_stops_the_campaign(tmp_path, monkeypatch, fake_cluster):
+    """Ctrl-C inside a numba kernel of the warm-up reaches Python as a SystemError whose context
+    is the KeyboardInterrupt: it stops the campaign (nothing submitted), it is not the
+    'warming failed' warning after which the campaign ran on; another failure still is."""
+    import bayespilot.campaign as C
+
+    def interrupted(methods):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            raise SystemError("CPUDispatcher(<function simulate_closed_loop>) returned a result "
+                              "with an exception set")
+
+    monkeypatch.setattr(C, "_warm_numba_cache", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(_jobs(), tmp_path / "a", progress=False)
+    assert fake_cluster.submitted == [] and list((tmp_path / "a").iterdir()) == []
+
+    def caused(methods):  # the same with the interrupt as the explicit cause
+        raise SystemError("returned a result with an exception set") from KeyboardInterrupt()
+
+    monkeypatch.setattr(C, "_warm_numba_cache", caused)
+    with pytest.raises(KeyboardInterrupt):
+        run_campaign(_jobs(), tmp_path / "a", progress=False)
+    assert fake_cluster.submitted == []
+
+    def broken(methods):
+        raise SystemError("something else")
+
+    monkeypatch.setattr(C, "_warm_numba_cache", broken)
+    with pytest.warns(RuntimeWarning, match="warming numba's cache failed .SystemError: "
+                                            "something else."):
+        s = run_campaign(_jobs(), tmp_path / "b", progress=False)
+    assert len(fake_cluster.submitted) == 2 and s.completed == 2
+
+
+def _stub_task(x):
+    """A task of the cluster tests: instant, JSON-ready."""
+    return {"x": x}
+
+
+def _live_clients(cluster):
+    """The clients connected to an in-process cluster's scheduler (not its fire-and-forget)."""
+    return {c for c in cluster.scheduler.clients if c != "fire-and-forget"}
+
+
+def test_scheduler_may_be_a_client_or_a_cluster_object(tmp_path):
+    """run_campaign(scheduler=Client(...)) failed with 'cannot reach the dask scheduler (TypeError
+    ...)': a Client is used as it is and left open, a Cluster gets a Client of its own, closed
+    at the end (the cluster left running); another type is a TypeError saying what is taken."""
+    import distributed
+
+    import bayespilot.campaign as C
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=":0") as cluster:
+        with distributed.Client(cluster) as client:
+            mine = _live_clients(cluster)
+            done, errors = C.run_keyed([("a", _stub_task, (1,), {})], tmp_path / "a", total=1,
+                                       skipped=0, scheduler=client, workers=None,
+                                       progress=False, connect_timeout=10.0)
+            assert (done, errors) == (1, {})
+            assert json.loads((tmp_path / "a" / "a.json").read_text())["x"] == 1
+            assert client.status == "running" and client.submit(_stub_task, 2).result() == {"x": 2}
+
+            # the public function, with a tiny fit
+            jobs = _jobs()[:1]
+            s = run_campaign(jobs, tmp_path / "c", scheduler=client, progress=False,
+                             warm_cache=False)
+            assert (s.completed, s.failed) == (1, 0) and client.status == "running"
+
+            done, errors = C.run_keyed([("b", _stub_task, (3,), {})], tmp_path / "b", total=1,
+                                       skipped=0, scheduler=cluster, workers=None,
+                                       progress=False, connect_timeout=10.0)
+            assert (done, errors) == (1, {})
+            assert json.loads((tmp_path / "b" / "b.json").read_text())["x"] == 3
+            deadline = time.monotonic() + 10  # run_keyed's own client is closed, not the cluster
+            while _live_clients(cluster) != mine and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert _live_clients(cluster) == mine
+            assert client.submit(_stub_task, 4).result() == {"x": 4}
+            with pytest.raises(ValueError, match="workers"):
+                run_campaign(jobs, tmp_path / "c", scheduler=client, workers=1)
+    with pytest.raises(CampaignError, match="the dask Client given is not connected to its "
+                                            "scheduler .status 'closed'."):
+        C.run_keyed([("d", _stub_task, (5,), {})], tmp_path / "d", total=1, skipped=0,
+                    scheduler=client, workers=None, progress=False, connect_timeout=1.0)
+
+    for bad in (8786, tmp_path, b"tcp://127.0.0.1:8786"):
+        with pytest.raises(TypeError, match=r"scheduler must be a dask scheduler's address .a "
+                                            r"str, e.g. 'tcp://host:8786'., a "
+                                            r"distributed.Client, a distributed.deploy.Cluster"):
+            run_campaign(_jobs(), tmp_path / "bad", scheduler=bad, progress=False)
+        with pytest.raises(TypeError, match="scheduler must be"):  # (diagnose_batch's way in)
+            C.run_keyed([], tmp_path / "bad", total=0, skipped=0, scheduler=bad, workers=None,
+                        progress=False, connect_timeout=1.0)
+    assert not (tmp_path / "bad").exists()  # refused before anything is made
+
+
+def test_workers_without_this_bayespilot_are_refused_before_anything_runs(tmp_path, monkeypatch,
+                                                                          capsys):
+    """A worker without bayespilot exited on its first task (the campaign then waited for ever
+    with no worker, or went on with fewer, silently); one with another version made results
+    that contradict their own version stamp.  The workers of a scheduler given are asked
+    first: those lacking it or with another version are named, nothing is submitted, and the
+    CLI exits 1 with that line."""
+    from importlib.metadata import PackageNotFoundError
+
+    import distributed
+
+    import bayespilot.campaign as C
+
+    real_run = distributed.Client.run
+    answers = {}
+
+    def run(self, function, *args, **kwargs):
+        got = real_run(self, function, *args, **kwargs)
+        return {**got, **answers}
+
+    submitted = []
+    real_submit = distributed.Client.submit
+
+    def submit(self, *args, **kwargs):
+        submitted.append(args)
+        return real_submit(self, *args, **kwargs)
+
+    monkeypatch.setattr(distributed.Client, "run", run)
+    monkeypatch.setattr(distributed.Client, "submit", submit)
+    # (in this process, but on TCP: the command takes tcp:// addresses, not inproc://)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  protocol="tcp", host="127.0.0.1",
+                                  dashboard_address=":0") as cluster:
+        # the workers of this process have this version: the check passes
+        done, _ = C.run_keyed([("a", _stub_task, (1,), {})], tmp_path / "ok", total=1,
+                              skipped=0, scheduler=cluster, workers=None, progress=False,
+                              connect_timeout=10.0)
+        assert done == 1 and len(submitted) == 1
+        submitted.clear()
+
+        answers.update({"tcp://10.0.0.2:4000": PackageNotFoundError("bayespilot"),
+                        "tcp://10.0.0.3:4000": "0.0.9",
+                        "tcp://10.0.0.4:4000": OSError("Timed out trying to connect")})
+        want = bayespilot.__version__
+        for scheduler in (cluster, cluster.scheduler_address):
+            with pytest.raises(CampaignError) as info:
+                run_campaign(_jobs(), tmp_path / "c", scheduler=scheduler, progress=False)
+            text = str(info.value)
+            assert f"must have bayespilot {want}, as this process has: 4 worker(s), " in text
+            assert ("2 without it (tcp://10.0.0.2:4000, tcp://10.0.0.4:4000: OSError: Timed out "
+                    "trying to connect) and 1 with another version (tcp://10.0.0.3:4000: "
+                    "0.0.9)") in text
+            assert f"install bayespilot=={want} in the workers' environment" in text
+            assert "\n" not in text
+        with distributed.Client(cluster) as client:
+            with pytest.raises(CampaignError, match="1 with another version"):
+                run_campaign(_jobs(), tmp_path / "c", scheduler=client, progress=False)
+            assert client.status == "running"  # the caller's client is left open
+        assert submitted == [] and list((tmp_path / "c").iterdir()) == []
+
+        # the command: one line, exit 1, nothing run
+        code = main(["replicate", "--out", str(tmp_path / "cli"), "--realizations", "1",
+                     "--tasks", "FD", "--motion-gains", "1", "--remnant-fractions", "0",
+                     "--method", "fast", "--duration", "4", "--scheduler",
+                     cluster.scheduler_address])
+        err = capsys.readouterr().err
+        assert code == 1 and "bayespilot: error: the dask workers of the scheduler at " in err
+        assert "1 with another version (tcp://10.0.0.3:4000: 0.0.9)" in err
+        assert submitted == []
+
+
+def test_the_client_logger_is_quiet_while_results_come_in(tmp_path, monkeypatch, caplog,
+                                                          fake_cluster):
+    """A lost scheduler is one line ('lost the dask cluster ...'); distributed.client's
+    reconnection printed a 25-line traceback before it.  That logger is silenced while the
+    results come in, left as it is when set to DEBUG, and restored afterwards, also when the
+    loop ends in an error."""
+    import logging
+
+    import distributed
+
+    import bayespilot.campaign as C
+
+    log = logging.getLogger("distributed.client")
+    heard = []
+
+    def as_completed(futs):
+        for f in list(futs):
+            heard.append(log.isEnabledFor(logging.ERROR))
+            log.error("Failed to reconnect to scheduler after 10.00 seconds, closing client")
+            yield f
+
+    monkeypatch.setattr(distributed, "as_completed", as_completed)
+    caplog.set_level(logging.WARNING, logger="distributed.client")  # (restored at the end)
+    tasks = [("a", _stub_task, (1,), {}), ("b", _stub_task, (2,), {})]
+    done, _ = C.run_keyed(tasks, tmp_path, total=2, skipped=0, scheduler=None, workers=1,
+                          progress=False, connect_timeout=1.0)
+    assert done == 2 and heard == [False, False] and log.level == logging.WARNING
+    assert not [r for r in caplog.records if r.name == "distributed.client"]
+
+    def lost(futs):  # the loop ends in the CampaignError: the level is restored all the same
+        heard.append(log.isEnabledFor(logging.ERROR))
+        for f in futs:
+            f.status = "lost"
+        return list(futs)
+
+    heard.clear()
+    monkeypatch.setattr(distributed, "as_completed", lost)
+    with pytest.raises(CampaignError, match="lost the dask cluster"):
+        C.run_keyed(tasks, tmp_path, total=2, skipped=0, scheduler=None, workers=1,
+                    progress=False, connect_timeout=1.0)
+    assert heard == [False] and log.level == logging.WARNING
+
+    heard.clear()  # asked for debugging: left as it is
+    monkeypatch.setattr(distributed, "as_completed", as_completed)
+    log.setLevel(logging.DEBUG)
+    C.run_keyed(tasks, tmp_path, total=2, skipped=0, scheduler=None, workers=1,
+                progress=False, connect_timeout=1.0)
+    assert heard == [True, True] and log.level == logging.DEBUG

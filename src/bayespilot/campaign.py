@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import logging
 import math
 import os
 import platform
@@ -58,12 +59,16 @@ import warnings
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from . import presets
 from ._caller import warn_at_caller
+
+if TYPE_CHECKING:  # (only named in annotations: distributed is imported when a campaign runs)
+    from distributed import Client
+    from distributed.deploy import Cluster
 
 __all__ = ["Job", "CampaignError", "CampaignSummary", "paper_study", "run_job", "run_campaign",
            "load_results", "summarise", "summary_markdown", "write_summary_csv", "job_seed",
@@ -653,9 +658,63 @@ def _first_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
-def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
+def _interrupted(exc: BaseException) -> bool:
+    """Whether ``exc`` is, or was raised while handling or because of, a KeyboardInterrupt
+    (its ``__cause__``/``__context__`` chain): Ctrl-C inside a numba kernel surfaces as a
+    SystemError ("returned a result with an exception set") with the interrupt as context."""
+    todo, seen = [exc], set()
+    while todo:
+        e = todo.pop()
+        if e is None or id(e) in seen:
+            continue
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        todo += [e.__cause__, e.__context__]
+    return False
+
+
+def _check_scheduler(scheduler: Any) -> None:
+    """A TypeError unless ``scheduler`` is None, an address, a Client or a Cluster."""
+    if scheduler is None or isinstance(scheduler, str):
+        return
+    try:
+        from distributed import Client
+        from distributed.deploy import Cluster
+    except ImportError:  # (then it cannot be one of theirs)
+        pass
+    else:
+        if isinstance(scheduler, (Client, Cluster)):
+            return
+    raise TypeError(f"scheduler must be a dask scheduler's address (a str, e.g. "
+                    f"'tcp://host:8786'), a distributed.Client, a distributed.deploy.Cluster "
+                    f"(e.g. dask_jobqueue.SLURMCluster) or None (a local cluster), got "
+                    f"{type(scheduler).__name__}")
+
+
+def _scheduler_name(scheduler: Any) -> str:
+    """How the messages name a scheduler: its address, also for a Client or a Cluster."""
+    if isinstance(scheduler, str):
+        return repr(scheduler)
+    address = None
+    try:
+        address = getattr(scheduler, "scheduler_address", None)  # a Cluster
+        if address is None:  # a Client
+            address = getattr(getattr(scheduler, "scheduler", None), "address", None)
+    except Exception:  # noqa: BLE001 - (a cluster that is gone: named by its type)
+        pass
+    kind = type(scheduler).__name__
+    return (f"{address!r} (of the {kind} given)" if isinstance(address, str)
+            else f"an unknown address (of the {kind} given)")
+
+
+def _connect(stack: ExitStack, scheduler: "str | Client | Cluster | None", workers: int | None,
              connect_timeout: float):
-    """A distributed.Client: to ``scheduler``, or to a LocalCluster closed with ``stack``."""
+    """A distributed.Client: to ``scheduler``, or to a LocalCluster closed with ``stack``.
+
+    A Client given is used as it is (not closed: it is the caller's); a Cluster given gets
+    a Client of its own, closed with ``stack`` (the cluster is left running).  The workers of
+    a cluster given must have this bayespilot (:func:`_check_workers`)."""
     from distributed import Client, LocalCluster
 
     if scheduler is None:
@@ -677,18 +736,83 @@ def _connect(stack: ExitStack, scheduler: str | None, workers: int | None,
                     raise CampaignError(f"cannot start a local dask cluster with {n} workers "
                                         f"({_first_line(exc)})") from None
         return stack.enter_context(Client(cluster))
-    client = _client_within(Client, scheduler, connect_timeout)
-    stack.enter_context(client)
+    _check_scheduler(scheduler)
+    where = _scheduler_name(scheduler)
+    if isinstance(scheduler, Client):
+        if scheduler.status != "running":
+            raise CampaignError(f"the dask Client given is not connected to its scheduler "
+                                f"(status {scheduler.status!r})")
+        client = scheduler  # the caller's: used as it is, and not closed here
+    else:
+        client = _client_within(Client, scheduler, connect_timeout, name=where)
+        stack.enter_context(client)
     try:
         client.wait_for_workers(1, timeout=connect_timeout)
     except (OSError, TimeoutError) as exc:
-        raise CampaignError(f"the dask scheduler at {scheduler!r} has no workers "
+        raise CampaignError(f"the dask scheduler at {where} has no workers "
                             f"(waited {connect_timeout:g} s: {_first_line(exc)})") from None
+    _check_workers(client, where)
     return client
 
 
-def _client_within(Client: Any, scheduler: str, connect_timeout: float):
+def _listed(items: Sequence[str], most: int = 5) -> str:
+    return ", ".join(items[:most]) + (f", ... ({len(items)} in all)" if len(items) > most else "")
+
+
+def _check_workers(client: Any, where: str) -> None:
+    """A CampaignError unless every worker of ``client`` has bayespilot at this process's version.
+
+    Asked with ``client.run(importlib.metadata.version, "bayespilot")`` (a function every
+    Python has, so that a worker without bayespilot answers with an error instead of failing
+    to unpickle ours; a worker sent a task it cannot unpickle exits, and the campaign waited
+    for ever with no worker, or lost that worker's capacity without a word)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        want = version("bayespilot")
+    except PackageNotFoundError:  # (not installed here, run from a source folder: no version)
+        return
+    try:
+        answers = client.run(version, "bayespilot", on_error="return")
+    except Exception as exc:  # noqa: BLE001 - the scheduler went away, ...
+        raise CampaignError(f"cannot ask the workers of the dask scheduler at {where} for "
+                            f"their bayespilot version ({_first_line(exc)})") from None
+    try:
+        names = {a: w.get("name") for a, w in client.scheduler_info()["workers"].items()}
+    except Exception:  # noqa: BLE001 - (the workers are then named by address only)
+        names = {}
+
+    def label(address: str) -> str:
+        name = names.get(address)
+        return address if name is None or str(name) == address else f"{name} ({address})"
+
+    lacking, other = [], []
+    for address, answer in sorted(answers.items()):
+        if isinstance(answer, PackageNotFoundError):
+            lacking.append(label(address))
+        elif isinstance(answer, BaseException):
+            lacking.append(f"{label(address)}: {_first_line(answer)}")
+        elif answer != want:
+            other.append(f"{label(address)}: {answer}")
+    if lacking or other:
+        said = []
+        if lacking:
+            said.append(f"{len(lacking)} without it ({_listed(lacking)})")
+        if other:
+            said.append(f"{len(other)} with another version ({_listed(other)})")
+        raise CampaignError(f"the dask workers of the scheduler at {where} must have "
+                            f"bayespilot {want}, as this process has: {len(answers)} "
+                            f"worker(s), {' and '.join(said)}; install bayespilot=={want} in "
+                            f"the workers' environment (or stop those workers); nothing was "
+                            f"run")
+
+
+def _client_within(Client: Any, scheduler: "str | Cluster", connect_timeout: float, *,
+                   name: str | None = None):
     """``Client(scheduler)``, or a CampaignError when it fails or does not answer in time.
+
+    ``scheduler``: an address or a Cluster; ``name``: how the messages call it (default:
+    its repr).
 
     Made in a thread that is given up after ``connect_timeout`` and a grace of
     :data:`CONNECT_GRACE` s: a port that answers but is not a dask scheduler (its
@@ -707,8 +831,9 @@ def _client_within(Client: Any, scheduler: str, connect_timeout: float):
     worker = threading.Thread(target=connect, name="bayespilot-connect", daemon=True)
     worker.start()
     worker.join(connect_timeout + CONNECT_GRACE)
+    where = repr(scheduler) if name is None else name
     if worker.is_alive():
-        raise CampaignError(f"cannot reach the dask scheduler at {scheduler!r}: no dask answer "
+        raise CampaignError(f"cannot reach the dask scheduler at {where}: no dask answer "
                             f"within {connect_timeout + CONNECT_GRACE:g} s (is it the "
                             f"scheduler's address, tcp://HOST:8786, not its dashboard's?)")
     if "error" in box:
@@ -718,7 +843,7 @@ def _client_within(Client: Any, scheduler: str, connect_timeout: float):
         said = ("something answered there, but not in dask's protocol (is it the scheduler's "
                 "address, tcp://HOST:8786, and not another service's?)"
                 if isinstance(exc, MemoryError) else _first_line(exc))
-        raise CampaignError(f"cannot reach the dask scheduler at {scheduler!r} within "
+        raise CampaignError(f"cannot reach the dask scheduler at {where} within "
                             f"{connect_timeout:g} s ({said})")
     return box["client"]
 
@@ -728,7 +853,8 @@ CONNECT_GRACE = 5.0
 
 
 def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: Path, *,
-              total: int, skipped: int, scheduler: str | None, workers: int | None,
+              total: int, skipped: int, scheduler: "str | Client | Cluster | None",
+              workers: int | None,
               progress: bool, connect_timeout: float, warm: Any = None, desc: str = "fits",
               unit: str = "fit", to_json: Any = None,
               scatter: bool = False) -> tuple[int, dict[str, str]]:
@@ -743,12 +869,20 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
     value)``, if given, turns a task's return value into that dict in this
     process (where it may also write files of its own).  ``warm``: called
     once in this process after connecting (numba's cache, module docs); a failure
-    there is a warning.  ``total`` and ``skipped`` set the progress bar (tasks
+    there is a warning, but an interrupt (Ctrl-C, which numba re-raises as a
+    SystemError caused by the KeyboardInterrupt) is a KeyboardInterrupt, raised
+    before anything is submitted.  ``total`` and ``skipped`` set the progress bar (tasks
     already done before the call).  ``scatter``: send each task's arguments to
     the cluster first (one future per argument), so that large data (recordings)
     is not embedded in the task graph.  Returns ``(completed, {key: one-line
-    error})``.
+    error})``.  ``scheduler``, ``workers``, ``connect_timeout``: as for
+    :func:`run_campaign` (a ``scheduler`` of another type is a TypeError, also with
+    no task to run).  While the results come in, and until the client is closed, the
+    ``distributed.client`` logger is silenced (a lost scheduler is this function's
+    one-line CampaignError), unless its level is DEBUG or lower; its level is
+    restored at the end.
     """
+    _check_scheduler(scheduler)
     completed, errors = 0, {}
     if not tasks:
         return completed, errors
@@ -756,12 +890,17 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
     from tqdm.auto import tqdm  # a widget in a notebook, text on a terminal
 
     with ExitStack() as stack:
+        # (restored last, after the client is closed: its closing logs the lost scheduler too)
+        client_log = logging.getLogger("distributed.client")
+        stack.callback(client_log.setLevel, client_log.level)
         # connect first, so that an unreachable scheduler is reported at once
         client = _connect(stack, scheduler, workers, connect_timeout)
         if warm is not None:
             try:
                 warm()
             except Exception as exc:  # not fatal: the workers then compile for themselves
+                if _interrupted(exc):  # Ctrl-C in a numba kernel: stop, submit nothing
+                    raise KeyboardInterrupt from exc
                 warn_at_caller(f"warming numba's cache failed ({_first_line(exc)}); each "
                                f"worker compiles the kernels itself", RuntimeWarning)
         futures = {}
@@ -773,6 +912,10 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
                                        disable=not progress, file=sys.stderr,
                                        smoothing=0.1, dynamic_ncols=True))
         lost = []
+        if client_log.getEffectiveLevel() > logging.DEBUG:  # (unless asked for debugging)
+            # a lost scheduler is reported below in one line; the client's reconnection
+            # logged a 25-line traceback of its own before it
+            client_log.setLevel(logging.CRITICAL)
         for fut in as_completed(futures):
             key, ctx = futures.pop(fut)
             if fut.status not in ("finished", "error"):  # cancelled, lost: not the task's fault
@@ -808,7 +951,8 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
     return completed, errors
 
 
-def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *, scheduler: str | None = None,
+def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
+                 scheduler: "str | Client | Cluster | None" = None,
                  workers: int | None = None, progress: bool = True, connect_timeout: float = 10.0,
                  warm_cache: bool = True) -> CampaignSummary:
     """Run the jobs on dask.distributed, writing ``out_dir/<key>.json`` as each fit finishes.
@@ -820,8 +964,15 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *, scheduler: str | N
     out_dir : str or Path
         Created if missing.  Jobs whose result file exists and parses are
         skipped (module docs, "Resume semantics").
-    scheduler : str, optional
-        Address of a running dask scheduler (``"tcp://host:8786"``).  Default:
+    scheduler : str, distributed.Client or distributed.deploy.Cluster, optional
+        A running dask cluster: the address of its scheduler
+        (``"tcp://host:8786"``), a connected ``distributed.Client`` (used as
+        it is and left open) or a ``Cluster`` object (``dask_jobqueue.SLURMCluster``,
+        ``LocalCluster``, ...: connected to with a Client of its own, closed at
+        the end; the cluster is left running).  Its workers must have
+        bayespilot at the version of this process: they are asked after
+        connecting, and a CampaignError names those that lack it or have
+        another before anything is submitted.  Default:
         a ``LocalCluster`` of ``workers`` single-threaded processes, started
         and closed here.  On a cluster of your own, start one single-threaded
         worker process per core, or set ``NUMBA_NUM_THREADS`` in the workers'
@@ -845,10 +996,14 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *, scheduler: str | N
     ------
     CampaignError
         The scheduler cannot be reached (within ``connect_timeout``) or has no
-        workers, a local cluster cannot start, a result cannot be written, or
-        ``out_dir`` holds a result of the same key for other settings.
+        workers, a worker lacks bayespilot or has another version of it (the
+        workers are named; nothing is run), a Client given is closed, a
+        local cluster cannot start, a result cannot be written, or ``out_dir``
+        holds a result of the same key for other settings.
     ValueError
         Duplicate keys, ``workers`` < 1 or given with ``scheduler``.
+    TypeError
+        A ``scheduler`` that is not an address, a Client or a Cluster.
 
     Examples
     --------
@@ -866,6 +1021,7 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *, scheduler: str | N
     if dupes:
         raise ValueError(f"duplicate job keys: {', '.join(dupes[:5])}"
                          f"{' ...' if len(dupes) > 5 else ''}")
+    _check_scheduler(scheduler)
     if workers is not None:
         if scheduler is not None:
             raise ValueError("workers sets the size of the local cluster; do not give it "
