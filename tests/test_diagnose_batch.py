@@ -864,3 +864,78 @@ def test_results_made_before_the_sidecar_was_recorded_resume_as_before(tmp_path,
     (out / "s8-run1.json").write_text(json.dumps(older))
     s = diagnose_batch([stem], out, **NOBOOT)
     assert (s.completed, s.skipped) == (0, 1) and ran == ["s8-run1"]
+
+
+# --- HPC audit 4 and 9: the worker's provenance, the notes' keys sorted --------------------------
+def _elsewhere(monkeypatch):
+    """diagnose_batch with its tasks run in this process as on another machine ("worker-7",
+    bayespilot 0.0.9), finishing in the reverse order of the batch's keys; the results are
+    written afterwards, outside it, as the client writes them."""
+    import platform
+
+    import bayespilot
+    from bayespilot import campaign as C
+
+    def run_keyed(tasks, out, *, to_json, **kwargs):
+        done = []
+        with monkeypatch.context() as worker:
+            worker.setattr(platform, "node", lambda: "worker-7")
+            worker.setattr(C, "_versions", lambda: {"python": "3.x", "bayespilot": "0.0.9"})
+            worker.setattr(bayespilot, "__version__", "0.0.9")
+            for key, fn, args, _ in reversed(tasks):
+                done.append((key, fn(*args)))
+        for key, value in done:
+            C._write_json_atomic(out / f"{key}.json", to_json(key, value))
+        return len(tasks), {}
+
+    monkeypatch.setattr(C, "run_keyed", run_keyed)
+
+
+def _stub_base_fit(monkeypatch):
+    """The base fit replaced by the paper's parameters (the batch's plumbing is tested)."""
+    from bayespilot import presets
+    from bayespilot.fit import fast
+    from bayespilot.fit.result import FitResult
+
+    monkeypatch.setattr(fast, "fit_fast", lambda rec, model, **kw: FitResult(
+        dict(presets.paper_parameters("FD")), -1.0e4, 80.0, "fast", 0, True,
+        bounds=dict(presets.TABLE1_BOUNDS)))
+
+
+def test_results_say_which_worker_and_release_made_them(recordings, tmp_path, monkeypatch):
+    """host and versions were the client's (to_json, in the process writing the files): a
+    diagnosis made by a bayespilot 0.0.9 worker said 0.1.0 and the client's machine.  Now the
+    worker's, and bayespilot_version is the worker's release too (not a contradiction)."""
+    import platform
+
+    _stub_base_fit(monkeypatch)
+    _elsewhere(monkeypatch)
+    out = tmp_path / "b"
+    with pytest.warns(QuestionableRecordingWarning, match=SHORT):
+        s = diagnose_batch(recordings[:2], out, progress=False, warm_cache=False, **OPTIONS)
+    assert (s.completed, s.failed) == (2, 0)
+    assert platform.node() != "worker-7"
+    for key in ("s1-run1", "s1-run2"):
+        got = json.loads((out / f"{key}.json").read_text())
+        assert got["host"] == "worker-7"
+        assert got["versions"] == {"python": "3.x", "bayespilot": "0.0.9"}
+        assert got["bayespilot_version"] == "0.0.9"
+
+
+def test_batch_notes_name_the_diagnoses_in_key_order(recordings, tmp_path, monkeypatch):
+    """A note several diagnoses kept named them in the order they finished ("run2, run1,
+    run3" on a cluster): sorted now, whatever the order."""
+    import warnings
+
+    from bayespilot.diagnose import EvidenceWarning
+
+    _stub_base_fit(monkeypatch)
+    _elsewhere(monkeypatch)  # (finishing s2-run1 first, s1-run1 last)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        diagnose_batch(recordings, tmp_path / "b", progress=False, warm_cache=False, **OPTIONS)
+    notes = [str(w.message) for w in caught if issubclass(w.category, EvidenceWarning)
+             and str(w.message).startswith("3 diagnoses (")]
+    assert notes, [str(w.message) for w in caught]
+    assert all(n.startswith("3 diagnoses (s1-run1, s1-run2, s2-run1): ") for n in notes), notes
+    assert notes == sorted(notes, key=lambda n: n.split("): ", 1)[1])

@@ -14,6 +14,7 @@ import contextlib
 import json
 import math
 import os
+import re
 import sys
 import traceback
 import warnings
@@ -108,6 +109,45 @@ def _output_path(text: str) -> str:
     return os.path.expanduser(text)
 
 
+#: A dask scheduler's address as ``Client`` takes it: ``[SCHEME://]HOST:PORT``, HOST a name,
+#: an IPv4 address or an IPv6 one in brackets.  Checked here, without importing distributed
+#: (which takes half a second): a trailing slash or a missing port failed in distributed as
+#: "invalid literal for int()", and not at all on a folder whose jobs were all done.
+_SCHEDULER_ADDRESS = re.compile(r"(?:(?P<scheme>[A-Za-z][A-Za-z0-9+.-]*)://)?"
+                                r"(?P<host>\[[0-9A-Fa-f:.]+(?:%[\w.-]+)?\]|[\w.-]+)"
+                                r":(?P<port>[0-9]{1,5})")
+#: The schemes of distributed's own transports a scheduler listens on (inproc:// is within
+#: one process only); another is taken if a package registers it (entry points of the group
+#: ``distributed.comm.backends``).
+_DASK_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def _scheduler_address(text: str) -> str:
+    """An argparse type: --scheduler, a dask scheduler's address (``_SCHEDULER_ADDRESS``).
+    An empty one is refused (an unset ``$SCHEDULER`` in a job script: the header called it
+    a local cluster, then the run failed to reach it)."""
+    if not text:
+        raise argparse.ArgumentTypeError(
+            "an empty address; give the scheduler's, e.g. tcp://HOST:8786, or leave "
+            "--scheduler out for a local cluster")
+    m = _SCHEDULER_ADDRESS.fullmatch(text)
+    if m is None or not 0 < int(m["port"]) < 65536:
+        raise argparse.ArgumentTypeError(
+            f"not a dask scheduler address (tcp://HOST:PORT, e.g. tcp://10.0.0.5:8786): "
+            f"{text!r}")
+    scheme = m["scheme"] or "tcp"  # (as distributed reads it: TCP:// is not tcp://)
+    if scheme not in _DASK_SCHEMES:
+        from importlib.metadata import entry_points
+
+        known = {e.name for e in entry_points(group="distributed.comm.backends")}
+        if scheme not in known:
+            raise argparse.ArgumentTypeError(
+                f"not a dask scheduler address: unknown scheme {m['scheme']!r} in {text!r} "
+                f"(dask's are {', '.join(_DASK_SCHEMES)}; tcp://HOST:PORT, e.g. "
+                f"tcp://10.0.0.5:8786)")
+    return text
+
+
 def _oversample(text: str) -> int:
     """An argparse type: an oversampling factor, 1 to model.MAX_OVERSAMPLE."""
     from .model import MAX_OVERSAMPLE
@@ -149,6 +189,106 @@ def _progress(args: argparse.Namespace) -> bool:
     """Whether to draw progress bars: not with --quiet, and only on a terminal (a bar
     redrawn with carriage returns is noise in a log file or a pipe)."""
     return not args.quiet and sys.stderr.isatty()
+
+
+#: Progress lines of replicate and diagnose-batch when stderr is not a terminal (a batch job's
+#: log, where the bar is off): one when another 5 % of the jobs has finished, and one at
+#: least every minute; the output folder is looked at every 2 s.
+_LINES_STEP = 0.05
+_LINES_EVERY = 60.0
+_LINES_POLL = 2.0
+
+
+def _clock(seconds: float) -> str:
+    """Seconds as H:MM:SS (tqdm's way)."""
+    s = int(round(seconds))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+
+
+class _ProgressLines:
+    """What a run of keyed jobs has done so far, from its output folder: ``<key>.json`` for
+    a job done (this run or before), ``<key>.error.json`` written during this run (new, or
+    another file than at the start) without its result for a job that failed
+    (campaign.run_keyed writes them in this process as each job finishes; a success
+    removes an old error file).  :meth:`line` is the progress line due at ``now``, if one is."""
+
+    def __init__(self, out: Path, keys: Sequence[str], what: str, now: float) -> None:
+        self.out, self.keys, self.what = out, list(keys), what
+        self.start = self.last = now
+        names = self._names()
+        self.before = sum(f"{k}.json" in names for k in self.keys)
+        self.old_errors = {k: self._stamp(k) for k in self.keys if f"{k}.error.json" in names}
+        self.said = self.before  # (finished at the last line)
+
+    def _names(self) -> set[str]:
+        try:
+            return {e.name for e in os.scandir(self.out)}
+        except OSError:  # (not made yet)
+            return set()
+
+    def _stamp(self, key: str) -> tuple[int, int] | None:
+        try:
+            st = os.stat(self.out / f"{key}.error.json")
+        except OSError:
+            return None
+        return st.st_mtime_ns, st.st_ino
+
+    def counts(self) -> tuple[int, int]:
+        """(done, failed): results there, errors written during this run without a result."""
+        names = self._names()
+        done = sum(f"{k}.json" in names for k in self.keys)
+        failed = sum(1 for k in self.keys if f"{k}.error.json" in names
+                     and f"{k}.json" not in names and self._stamp(k) != self.old_errors.get(k))
+        return done, failed
+
+    def line(self, now: float) -> str | None:
+        done, failed = self.counts()
+        total = len(self.keys)
+        step = max(1, math.ceil(_LINES_STEP * total))
+        if (done + failed) // step <= self.said // step and now - self.last < _LINES_EVERY:
+            return None
+        self.said, self.last = done + failed, now
+        elapsed = now - self.start
+        new = done + failed - self.before
+        left = total - done - failed
+        eta = (f", about {_clock(elapsed / new * left)} left" if new > 0 and left > 0 else "")
+        before = f", {self.before} before this run" if self.before else ""
+        return (f"{PROG}: {done}/{total} {self.what} done, {failed} failed{before} "
+                f"({_clock(elapsed)} elapsed{eta})")
+
+
+@contextlib.contextmanager
+def _progress_lines(args: argparse.Namespace, out: str | Path, keys: Sequence[str], what: str):
+    """Plain progress lines on stderr while replicate or diagnose-batch runs, when stderr is
+    not a terminal (:func:`_progress` turns the bar off there: a batch job's log showed the
+    header, then nothing for hours); nothing with --quiet or on a terminal (the bar)."""
+    import threading
+    import time
+
+    if args.quiet or _progress(args) or not keys:
+        yield
+        return
+    stream = sys.stderr
+    lines = _ProgressLines(Path(out), keys, what, time.monotonic())
+    stop = threading.Event()
+
+    def watch() -> None:
+        while not stop.wait(_LINES_POLL):
+            text = lines.line(time.monotonic())
+            if text is not None:
+                try:
+                    stream.write(text + "\n")  # (one write: not split by a warning's line)
+                    stream.flush()
+                except (OSError, ValueError):  # (stderr gone: the run goes on)
+                    return
+
+    thread = threading.Thread(target=watch, name="bayespilot-progress", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
 
 
 def _say(args: argparse.Namespace, text: str) -> None:
@@ -767,8 +907,10 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
                f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on {where} "
                f"-> {out}")
     try:
-        summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
-                               progress=_progress(args), connect_timeout=args.connect_timeout)
+        with _progress_lines(args, out, [j.key for j in jobs], "fits"):
+            summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
+                                   progress=_progress(args),
+                                   connect_timeout=args.connect_timeout)
     except CampaignError as exc:
         raise CommandFailed(str(exc)) from None
     _say(args, str(summary))
@@ -1349,8 +1491,31 @@ def _recordings_in(args_paths: Sequence[str]) -> list[str]:
     return out
 
 
+def _batch_keys(paths: Sequence[str], *, pool: bool) -> list[str] | None:
+    """The keys of ``diagnose_batch(paths, ..., pool=pool)``: ``plan_batch`` on the
+    recordings, a recording named twice counted once, as the batch does.  The recordings are
+    read for it (milliseconds each; a pooled key is their subject and condition).  None
+    when one cannot be read or the keys clash: the batch refuses that before it writes
+    anything."""
+    from .diagnose.batch import _the_recording, plan_batch
+    from .io import read_recording
+    from .recording import RecordingError
+
+    first: dict[str, str] = {}
+    for p in paths:
+        first.setdefault(_the_recording(p), p)
+    unique = list(first.values())
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # (the batch's own read says them, once)
+            recordings = [read_recording(p) for p in unique]
+        return [task.key for task in plan_batch(unique, recordings, pool=pool)]
+    except (RecordingError, ValueError, OSError):
+        return None
+
+
 def _batch_files(paths: Sequence[str], out: str | Path, *, pool: bool,
-                 reports: bool) -> list[Path]:
+                 reports: bool, keys: Sequence[str] | None = None) -> list[Path]:
     """The files ``diagnose_batch(paths, out, pool=pool, reports=reports)`` may write.
 
     ``summary.csv`` and ``summary.png``, and for each diagnosis ``<key>.json`` (or
@@ -1370,32 +1535,21 @@ def _batch_files(paths: Sequence[str], out: str | Path, *, pool: bool,
         The batch's ``--out`` folder.
     pool, reports : bool
         As ``diagnose_batch`` takes them.
+    keys : sequence of str, optional
+        The batch's keys, if :func:`_batch_keys` has given them already (None: taken here).
 
     Returns
     -------
     list of Path
     """
-    from .diagnose.batch import _the_recording, plan_batch
-    from .io import read_recording
-    from .recording import RecordingError
-
     out = Path(out)
     files = [out / "summary.csv", out / "summary.png"]
-    first: dict[str, str] = {}
-    for p in paths:
-        first.setdefault(_the_recording(p), p)
-    unique = list(first.values())
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # (the batch's own read says them, once)
-            recordings = [read_recording(p) for p in unique]
-        tasks = plan_batch(unique, recordings, pool=pool)
-    except (RecordingError, ValueError, OSError):
-        return files
-    for task in tasks:
-        files += [out / f"{task.key}.json", out / f"{task.key}.error.json"]
+    if keys is None:
+        keys = _batch_keys(paths, pool=pool) or ()
+    for key in keys:
+        files += [out / f"{key}.json", out / f"{key}.error.json"]
         if reports:
-            files += _report_files(out / task.key)
+            files += _report_files(out / key)
     return files
 
 
@@ -1413,8 +1567,9 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     _load_extensions(args.extension)
     paths = _recordings_in(args.recording)
     read = [f for p in paths for f in _recording_files(p)]
+    keys = _batch_keys(paths, pool=args.pool) or []  # (none: the batch refuses the input)
     _refuse_overwriting([("--out", f) for f in _batch_files(paths, args.out, pool=args.pool,
-                                                            reports=args.reports)],
+                                                            reports=args.reports, keys=keys)],
                         [*read, *_code_files(args.extension, "--extension")])
     where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
     # (said before the recordings are read: a refusal of one of them may follow, and nothing
@@ -1432,7 +1587,8 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
         # (the evidence's gaps: one line per kind of gap, after the diagnoses, from their
         # results; the workers keep them quiet)
         with _questionable_said(), _warnings_of(MissingReportWarning, said), \
-                _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line):
+                _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line), \
+                _progress_lines(args, args.out, keys, "diagnoses"):
             summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
                                      alpha=args.alpha, n_bootstrap=args.bootstrap,
                                      n_calibrate=args.calibrate,
@@ -1647,9 +1803,9 @@ def _diagnose_arguments(p: argparse.ArgumentParser, seed_help: str | None = None
 
 def _cluster_arguments(p: argparse.ArgumentParser) -> None:
     """--scheduler, --workers and --connect-timeout, as replicate and diagnose-batch take them."""
-    p.add_argument("--scheduler", metavar="ADDRESS",
-                   help="address of a running dask scheduler, e.g. tcp://host:8786 "
-                        "(default: a local cluster)")
+    p.add_argument("--scheduler", type=_scheduler_address, metavar="ADDRESS",
+                   help="address of a running dask scheduler, [tcp://]HOST:PORT, e.g. "
+                        "tcp://host:8786 (default: a local cluster)")
     p.add_argument("--workers", type=_count, metavar="N",
                    help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--connect-timeout", type=_positive, default=10.0, metavar="S",
@@ -1989,7 +2145,8 @@ def _common(parser: argparse.ArgumentParser, *, sub: bool) -> None:
     """-q/-v, on the top-level parser and (so they work after the command) on each subcommand."""
     parser.add_argument("-q", "--quiet", action="store_true",
                         default=argparse.SUPPRESS if sub else False,
-                        help="print only the results (no progress bars, summaries or VAF line)")
+                        help="print only the results (no progress bars or lines, summaries or "
+                             "VAF line)")
     parser.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS if sub else 0,
                         help="print details (parameters, model, recording) to stderr, and the "
                              "traceback of an unexpected error")

@@ -58,7 +58,9 @@ Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``
 ``recording_digests``, ``recording_metadata`` (one per recording, as
 ``recordings``), ``condition``, ``diagnosis``: the same dict as ``bayespilot diagnose
 --json`` writes,
-``elapsed_seconds``, ``host``, ``versions``), ``<key>/`` (the report, with
+``elapsed_seconds``, ``host``, ``versions`` and ``bayespilot_version``: those of
+the worker that made the diagnosis, not of the process that writes the file),
+``<key>/`` (the report, with
 ``reports=True``), ``summary.png`` (every candidate's p-value in every
 diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`) and
 ``summary.csv`` (one row per key: the decision, the
@@ -99,6 +101,9 @@ from ..recording import _signals_digest
 from .locate import BaseFitWarning, EvidenceWarning
 
 if TYPE_CHECKING:
+    from distributed import Client
+    from distributed.deploy import Cluster
+
     from ..campaign import CampaignSummary
     from ..recording import Recording
     from . import DiagnosisResult
@@ -371,6 +376,24 @@ def run_diagnose_task(task: DiagnoseTask, recordings: Sequence[Recording],
     return res, time.perf_counter() - t0
 
 
+def _run_on_worker(task: DiagnoseTask, recordings: Sequence[Recording],
+                   options: Mapping[str, Any], extensions: Sequence[Extension] = ()
+                   ) -> tuple[Any, float, dict[str, Any]]:
+    """:func:`run_diagnose_task` as the batch's task, with where and by which code it ran:
+    ``(result, elapsed, made)``, ``made`` the worker's ``host``, ``versions``
+    (:func:`bayespilot.campaign._versions`) and its bayespilot release under
+    :data:`~bayespilot._files.VERSION_KEY`.  Taken here, on the worker: the result file
+    (written by the client) named the client's machine and versions, whichever worker had
+    made its numbers (run_job records them so for replicate)."""
+    from .. import __version__
+    from .._files import VERSION_KEY
+    from ..campaign import _versions
+
+    res, elapsed = run_diagnose_task(task, recordings, options, extensions)
+    return res, elapsed, {"host": platform.node(), "versions": _versions(),
+                          VERSION_KEY: __version__}
+
+
 def _notes(res: Any) -> list[tuple[str, type[EvidenceWarning]]]:
     """The EvidenceWarnings a diagnosis kept (``settings["evidence_notes"]``; a pooled one's
     per run), each text once, with its category: :class:`BaseFitWarning` for the note of a
@@ -632,7 +655,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                    n_calibrate: int | None = None, noise_passes: int = 1,
                    candidates: Sequence[str | Extension] | None = None,
                    posterior: bool = False,
-                   reports: bool = False, scheduler: str | None = None,
+                   reports: bool = False, scheduler: "str | Client | Cluster | None" = None,
                    workers: int | None = None,
                    progress: bool = True, connect_timeout: float = 10.0,
                    warm_cache: bool = True) -> "CampaignSummary":
@@ -715,7 +738,13 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     CampaignError
         The cluster cannot be reached or started or is lost during the run
         (what finished is saved), ``out_dir`` cannot be written in (checked
-        before computing) or a result cannot be written.
+        before computing) or a result cannot be written; a worker of the
+        scheduler, Client or Cluster given lacks bayespilot or has another
+        version of it (the workers are named; nothing is run), or a Client
+        given is closed.
+    TypeError
+        A ``scheduler`` that is not an address (str), a
+        ``distributed.Client`` or a ``distributed.deploy.Cluster``.
 
     Warns
     -----
@@ -882,7 +911,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     by_key = {t.key: t for t in pending}
 
     def to_json(key: str, value) -> dict[str, Any]:
-        res, elapsed = value
+        res, elapsed, made = value  # (made: the worker's host and versions, _run_on_worker)
         t = by_key[key]
         if reports:
             try:
@@ -893,22 +922,23 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         for said in _notes(res):  # (silenced on the worker, said here once per text)
             noted.setdefault(said, []).append(key)
         return C._jsonable({"key": key, **_settings(t, options, digests, metadata),
-                            "diagnosis": res.to_dict(),
-                            "elapsed_seconds": elapsed, "host": platform.node(),
-                            "versions": C._versions()})
+                            "diagnosis": res.to_dict(), "elapsed_seconds": elapsed,
+                            # (the worker's release, which dumps keeps, not the client's)
+                            **made})
 
     noted: dict[tuple[str, type[EvidenceWarning]], list[str]] = {}
     try:
         completed, errors = C.run_keyed(
-            [(t.key, run_diagnose_task, (t, [by_path[p] for p in t.paths],
+            [(t.key, _run_on_worker, (t, [by_path[p] for p in t.paths],
                                          _task_options(t, options, digests), shipped),
               _settings(t, options, digests, metadata)) for t in pending], out,
             total=len(tasks), skipped=skipped, scheduler=scheduler, workers=workers,
             progress=progress, connect_timeout=connect_timeout,
             warm=_warm if warm_cache else None, desc="diagnoses", unit="diagnosis",
             to_json=to_json, scatter=True)
-    finally:
-        for (note, category), keys in noted.items():
+    finally:  # (by note and key, not in the order the diagnoses happened to finish)
+        for (note, category), keys in sorted(noted.items(), key=lambda item: item[0][0]):
+            keys = sorted(keys)
             n = len(keys)
             warnings.warn(f"{n} diagnos{'is' if n == 1 else 'es'} ({', '.join(keys[:3])}"
                           f"{' ...' if n > 3 else ''}): {note}", category, stacklevel=2)
