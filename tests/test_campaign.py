@@ -801,3 +801,22 @@ def test_the_client_logger_is_quiet_while_results_come_in(tmp_path, monkeypatch,
     C.run_keyed(tasks, tmp_path, total=2, skipped=0, scheduler=None, workers=1,
                 progress=False, connect_timeout=1.0)
     assert heard == [True, True] and log.level == logging.DEBUG
+
+
+def test_run_job_says_the_workers_release_and_the_file_keeps_it(tmp_path, monkeypatch):
+    """A fit made by a worker of another release said that release in ``versions`` and the
+    client's in ``bayespilot_version`` (stamped when the client wrote the file): the worker's
+    in both now, and the client's writer keeps it."""
+    import bayespilot
+    from bayespilot._files import VERSION_KEY
+    from bayespilot.campaign import _write_json_atomic, run_job
+
+    monkeypatch.setattr(bayespilot, "__version__", "0.0.9")
+    monkeypatch.setattr("bayespilot.campaign._versions", lambda: {"bayespilot": "0.0.9"})
+    res = run_job(Job("FD", 1.0, 0.2, 0, method="fast", fit_kwargs=TINY, duration=4.0))
+    assert res[VERSION_KEY] == "0.0.9" and res["versions"]["bayespilot"] == "0.0.9"
+    monkeypatch.undo()
+    assert bayespilot.__version__ != "0.0.9"
+    path = tmp_path / "fit.json"
+    _write_json_atomic(path, res)
+    assert json.loads(path.read_text())[VERSION_KEY] == "0.0.9"

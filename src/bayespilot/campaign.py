@@ -524,8 +524,13 @@ def run_job(job: Job) -> dict[str, Any]:
     if check is not None:  # how far short of a maximum the paper's single pass stopped
         out["check"] = {"gap": check["gap"], "neg_log_lik": check["neg_log_lik"],
                         "delta_abs": check["params"].get("delta_abs")}
+    from . import __version__
+    from ._files import VERSION_KEY
+
+    # the worker's release, which made the numbers (the file's writer, the client, keeps it
+    # and does not stamp its own)
     out.update({"elapsed_seconds": time.perf_counter() - t0, "host": platform.node(),
-                "versions": _versions()})
+                "versions": _versions(), VERSION_KEY: __version__})
     return _jsonable(out)
 
 
