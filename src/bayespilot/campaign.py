@@ -791,14 +791,35 @@ def _check_workers(client: Any, where: str) -> None:
         name = names.get(address)
         return address if name is None or str(name) == address else f"{name} ({address})"
 
-    lacking, other = [], []
+    lacking, other, silent = [], [], []
     for address, answer in sorted(answers.items()):
         if isinstance(answer, PackageNotFoundError):
-            lacking.append(label(address))
-        elif isinstance(answer, BaseException):
-            lacking.append(f"{label(address)}: {_first_line(answer)}")
+            lacking.append(address)
+        elif isinstance(answer, BaseException):  # (gone since it registered, unreachable)
+            silent.append(f"{label(address)}: {_first_line(answer)}")
         elif answer != want:
             other.append(f"{label(address)}: {answer}")
+    if lacking:
+        # no metadata is not no package: a worker importing bayespilot from a source folder
+        # (PYTHONPATH) has it without a version to compare; said, not refused
+        import importlib.util
+
+        try:
+            found = client.run(importlib.util.find_spec, "bayespilot", workers=lacking,
+                               on_error="return")
+        except Exception:  # noqa: BLE001 - then they count as lacking it
+            found = {}
+        unknown = [a for a in lacking if found.get(a) is not None
+                   and not isinstance(found.get(a), BaseException)]
+        lacking = [label(a) for a in lacking if a not in unknown]
+        if unknown:
+            warn_at_caller(f"{len(unknown)} dask worker(s) of the scheduler at {where} import "
+                           f"bayespilot without an installed version (a source folder on "
+                           f"PYTHONPATH?): it cannot be checked against this process's "
+                           f"{want} ({_listed([label(a) for a in unknown])})", RuntimeWarning)
+    if silent:  # (not refused: dask sends them no task if they are gone)
+        warn_at_caller(f"{len(silent)} dask worker(s) of the scheduler at {where} did not say "
+                       f"their bayespilot version ({_listed(silent)})", RuntimeWarning)
     if lacking or other:
         said = []
         if lacking:
