@@ -431,15 +431,7 @@ def test_run_keyed_reports_a_lost_cluster_not_failed_tasks(tmp_path, monkeypatch
 
     import bayespilot.campaign as C
 
-    class Fut:
-        def __init__(self, status, value=None):
-            self.status, self.value = status, value
-
-        def result(self):
-            return self.value
-
-        def release(self):
-            pass
+    Fut = _FakeFuture  # (below)
 
     class Client:
         def submit(self, fn, *args, pure=False):

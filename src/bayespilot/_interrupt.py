@@ -15,7 +15,7 @@ import signal
 import threading
 from typing import Callable, Iterator
 
-__all__ = ["interrupt_between_steps"]
+__all__ = ["interrupt_between_steps", "caused_by_interrupt"]
 
 
 @contextlib.contextmanager
@@ -61,3 +61,20 @@ def interrupt_between_steps() -> Iterator[Callable[[], None]]:
         yield check
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def caused_by_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` is, or was raised while handling or because of, a KeyboardInterrupt
+    (its ``__cause__``/``__context__`` chain): Ctrl-C inside a numba kernel surfaces as a
+    SystemError ("returned a result with an exception set") with the interrupt as context.
+    The command (its exit code 130) and the campaign's numba warm-up read it."""
+    todo, seen = [exc], set()
+    while todo:
+        e = todo.pop()
+        if e is None or id(e) in seen:
+            continue
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        todo += [e.__cause__, e.__context__]
+    return False

@@ -65,6 +65,7 @@ import numpy as np
 
 from . import presets
 from ._caller import warn_at_caller
+from ._interrupt import caused_by_interrupt
 
 if TYPE_CHECKING:  # (only named in annotations: distributed is imported when a campaign runs)
     from distributed import Client
@@ -663,22 +664,6 @@ def _first_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {text[0]}" if text else type(exc).__name__
 
 
-def _interrupted(exc: BaseException) -> bool:
-    """Whether ``exc`` is, or was raised while handling or because of, a KeyboardInterrupt
-    (its ``__cause__``/``__context__`` chain): Ctrl-C inside a numba kernel surfaces as a
-    SystemError ("returned a result with an exception set") with the interrupt as context."""
-    todo, seen = [exc], set()
-    while todo:
-        e = todo.pop()
-        if e is None or id(e) in seen:
-            continue
-        if isinstance(e, KeyboardInterrupt):
-            return True
-        seen.add(id(e))
-        todo += [e.__cause__, e.__context__]
-    return False
-
-
 def _check_scheduler(scheduler: Any) -> None:
     """A TypeError unless ``scheduler`` is None, an address, a Client or a Cluster."""
     if scheduler is None or isinstance(scheduler, str):
@@ -925,7 +910,7 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
             try:
                 warm()
             except Exception as exc:  # not fatal: the workers then compile for themselves
-                if _interrupted(exc):  # Ctrl-C in a numba kernel: stop, submit nothing
+                if caused_by_interrupt(exc):  # Ctrl-C in a numba kernel: stop, submit nothing
                     raise KeyboardInterrupt from exc
                 warn_at_caller(f"warming numba's cache failed ({_first_line(exc)}); each "
                                f"worker compiles the kernels itself", RuntimeWarning)

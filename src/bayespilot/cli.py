@@ -25,6 +25,8 @@ from . import __version__
 # the figures' resolution, the formats 'bayespilot plot --format' writes and how a vector
 # figure keeps its text: one definition for the commands and the reports (a light module)
 from ._figstyle import PLOT_DPI, PLOT_FORMATS, save_figure
+# (Ctrl-C inside a numba kernel reaches the command as a SystemError caused by it)
+from ._interrupt import caused_by_interrupt as _interrupted
 
 __all__ = ["main", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE"]
 
@@ -2487,22 +2489,6 @@ def _stdout_to_devnull(stream) -> None:
     finally:
         if null != fd:
             os.close(null)
-
-
-def _interrupted(exc: BaseException) -> bool:
-    """Whether ``exc`` is, or was raised while handling or because of, a KeyboardInterrupt
-    (its ``__cause__``/``__context__`` chain): Ctrl-C inside a numba kernel reaches the
-    command as a SystemError ("returned a result with an exception set")."""
-    todo, seen = [exc], set()
-    while todo:
-        e = todo.pop()
-        if e is None or id(e) in seen:
-            continue
-        if isinstance(e, KeyboardInterrupt):
-            return True
-        seen.add(id(e))
-        todo += [e.__cause__, e.__context__]
-    return False
 
 
 def main(argv: Sequence[str] | None = None) -> int:
