@@ -67,7 +67,18 @@ def caused_by_interrupt(exc: BaseException) -> bool:
     """Whether ``exc`` is, or was raised while handling or because of, a KeyboardInterrupt
     (its ``__cause__``/``__context__`` chain): Ctrl-C inside a numba kernel surfaces as a
     SystemError ("returned a result with an exception set") with the interrupt as context.
-    The command (its exit code 130) and the campaign's numba warm-up read it."""
+    The command (its exit code 130) and the campaign's numba warm-up read it.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The exception caught.
+
+    Returns
+    -------
+    bool
+        True if a KeyboardInterrupt is ``exc`` or in its chain.
+    """
     todo, seen = [exc], set()
     while todo:
         e = todo.pop()
