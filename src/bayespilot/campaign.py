@@ -726,7 +726,6 @@ def _connect(stack: ExitStack, scheduler: "str | Client | Cluster | None", worke
                     raise CampaignError(f"cannot start a local dask cluster with {n} workers "
                                         f"({_first_line(exc)})") from None
         return stack.enter_context(Client(cluster))
-    _check_scheduler(scheduler)
     where = _scheduler_name(scheduler)
     if isinstance(scheduler, Client):
         if scheduler.status != "running":

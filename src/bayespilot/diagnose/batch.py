@@ -624,21 +624,20 @@ def _differs(old: Any, new: Any, names: Mapping[str, str] | None = None) -> str:
         return "it is not a result of this batch"
     if old["recordings"] != new["recordings"]:
         return "other recordings"
-    said = []
+    said, changes = [], []  # (changes: per run, the sidecar values it reads that differ)
     if old.get("metadata") != new.get("metadata"):
-        runs = []
         for digest in sorted(new.get("metadata") or {}):
             was, now = (old.get("metadata") or {}).get(digest, {}), new["metadata"][digest]
             keys = sorted(k for k in set(was) | set(now) if was.get(k) != now.get(k))
             where = f"{(names or {}).get(digest, digest)}: " if len(new["metadata"]) > 1 else ""
-            runs += [where + ", ".join(_value_change(k, was, now) for k in keys)] if keys else []
+            changes += [where + ", ".join(_value_change(k, was, now) for k in keys)] if keys else []
+    if old.get("condition") != new.get("condition"):  # (a result that records no metadata)
+        changes.append(", ".join(_value_change(k, old["condition"], new["condition"])
+                                 for k in ("task", "motion_gain")
+                                 if old["condition"].get(k) != new["condition"].get(k)))
+    if changes:
         said.append("the same signals with other sidecar values, which the diagnosis reads ("
-                    + "; ".join(runs) + ")")
-    if old.get("condition") != new.get("condition"):
-        said.append("the same signals with other sidecar values, which the diagnosis reads ("
-                    + ", ".join(_value_change(k, old["condition"], new["condition"])
-                                for k in ("task", "motion_gain")
-                                if old["condition"].get(k) != new["condition"].get(k)) + ")")
+                    + "; ".join(changes) + ")")
     keys = sorted(k for k in set(old["settings"]) | set(new["settings"])
                   if old["settings"].get(k) != new["settings"].get(k))
     if "batch_seed" in keys:  # (the diagnosis's seed follows from it)
