@@ -845,3 +845,77 @@ def test_a_worker_running_bayespilot_from_a_source_folder_is_said_not_refused():
         _check_workers(Client("a ModuleSpec"), "S")
     with pytest.raises(CampaignError, match=r"1 without it \(gpu-3 \(tcp://a:1\)\)"):
         _check_workers(Client(None), "S")
+
+
+# --- progress="lines": a batch job's log -------------------------------------------------
+def test_progress_lines_say_what_finished_and_when():
+    """What a line says, and when one is due (a fake clock): another 5 % finished, or a
+    minute since the last line; tasks done before the run are counted, not as this run's."""
+    import io
+
+    import bayespilot.campaign as C
+
+    stream = io.StringIO()
+    lines = C._ProgressLines(40, 2, "fits", now=100.0, stream=stream)  # (5 %: every 2 tasks)
+    lines.update(3, 0, now=101.0)
+    assert stream.getvalue() == ""
+    lines.update(4, 0, now=102.0)
+    assert stream.getvalue() == ("bayespilot: 4/40 fits done, 0 failed, 2 before this run "
+                                 "(0:00:02 elapsed, about 0:00:36 left)\n")
+    lines.update(4, 1, now=103.0)
+    lines.update(4, 2, now=104.0)
+    assert stream.getvalue().splitlines()[-1] == (
+        "bayespilot: 4/40 fits done, 2 failed, 2 before this run "
+        "(0:00:04 elapsed, about 0:00:34 left)")
+    n = len(stream.getvalue().splitlines())
+    lines.beat(now=163.9)  # nothing new for a minute: a line all the same (the run is alive)
+    assert len(stream.getvalue().splitlines()) == n
+    lines.beat(now=164.0)
+    assert stream.getvalue().splitlines()[-1].startswith("bayespilot: 4/40 fits done, 2 failed")
+    fresh = C._ProgressLines(40, 0, "diagnoses", now=0.0, stream=stream)
+    fresh.beat(now=60.0)
+    assert stream.getvalue().splitlines()[-1] == ("bayespilot: 0/40 diagnoses done, 0 failed "
+                                                  "(0:01:00 elapsed)")
+    assert C._clock(3 * 3600 + 10 * 60 + 5.4) == "3:10:05"
+
+
+class _FailedFuture(_FakeFuture):
+    def __init__(self):
+        super().__init__("error")
+
+    def exception(self):
+        return ValueError("bad input")
+
+    def traceback(self):
+        return None
+
+
+def test_run_keyed_writes_progress_lines_as_tasks_finish(tmp_path, monkeypatch, capsys,
+                                                         fake_cluster):
+    """progress='lines': a plain line per 5 % of the tasks, counted where they finish (the
+    command line polled the output folder before), failures included; no bar.  A bad
+    ``progress`` is refused before anything runs."""
+    import bayespilot.campaign as C
+
+    submit = fake_cluster.submit
+
+    def submit_or_fail(fn, *args, pure=False):  # the task of x = 7 fails
+        return _FailedFuture() if args == (7,) else submit(fn, *args, pure=pure)
+
+    monkeypatch.setattr(fake_cluster, "submit", submit_or_fail)
+    tasks = [(f"k{x:02d}", _stub_task, (x,), {}) for x in range(2, 40)]
+    done, errors = C.run_keyed(tasks, tmp_path, total=40, skipped=2, scheduler=None,
+                               workers=1, progress="lines", connect_timeout=1.0)
+    assert done == 37 and list(errors) == ["k07"]
+    err = capsys.readouterr().err
+    said = [ln for ln in err.splitlines() if ln.startswith("bayespilot: ")]
+    assert "\r" not in err and len(said) == 19, err  # (4, 6, ..., 40 of 40)
+    assert said[0].startswith("bayespilot: 4/40 fits done, 0 failed, 2 before this run (")
+    assert said[2].startswith("bayespilot: 7/40 fits done, 1 failed, 2 before this run (")
+    assert said[-1].startswith("bayespilot: 39/40 fits done, 1 failed, 2 before this run (")
+    for bad in ("yes", 1, None):
+        with pytest.raises(ValueError, match="progress must be True or 'bar'"):
+            C.run_keyed(tasks, tmp_path, total=40, skipped=2, scheduler=None, workers=1,
+                        progress=bad, connect_timeout=1.0)
+        with pytest.raises(ValueError, match="progress must be"):
+            run_campaign(_jobs(), tmp_path / "x", progress=bad)

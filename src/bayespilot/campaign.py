@@ -56,7 +56,7 @@ import sys
 import time
 import traceback
 import warnings
-from contextlib import ExitStack
+from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
@@ -858,6 +858,102 @@ def _client_within(Client: Any, scheduler: "str | Cluster", connect_timeout: flo
     return box["client"]
 
 
+#: ``progress="lines"`` (a batch job's log, where a bar redrawn with carriage returns is noise):
+#: a line when another 5 % of the tasks has finished, and one at least every minute (the run
+#: is alive); the clock is looked at every second between tasks.
+LINES_STEP = 0.05
+LINES_EVERY = 60.0
+_LINES_TICK = 1.0
+
+
+def _check_progress(progress: Any) -> None:
+    """A ValueError unless ``progress`` is True, False, ``"bar"`` or ``"lines"``."""
+    if not (isinstance(progress, (bool, np.bool_)) or progress in ("bar", "lines")):
+        raise ValueError(f"progress must be True or 'bar' (a bar), 'lines' (plain lines) or "
+                         f"False, got {progress!r}")
+
+
+def _clock(seconds: float) -> str:
+    """Seconds as H:MM:SS (tqdm's way)."""
+    s = int(round(seconds))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
+
+
+class _ProgressLines:
+    """The plain progress lines of :func:`run_keyed` (``progress="lines"``), counted where the
+    tasks finish.  :meth:`line` is the line due at ``now`` with ``done`` tasks finished
+    (``before`` of them before this run) and ``failed`` failed, if one is; :meth:`update` and
+    :meth:`beat` write it.  Thread-safe: :func:`_beating` calls :meth:`beat` from a thread."""
+
+    def __init__(self, total: int, before: int, what: str, now: float,
+                 stream: Any = None) -> None:
+        import threading
+
+        self.total, self.before, self.what = total, before, what
+        self.stream = sys.stderr if stream is None else stream
+        self.start = self.last = now
+        self.done, self.failed = before, 0
+        self.said = before  # (finished at the last line)
+        self._lock = threading.Lock()
+
+    def line(self, now: float) -> str | None:
+        done, failed = self.done, self.failed
+        step = max(1, math.ceil(LINES_STEP * self.total))
+        if (done + failed) // step <= self.said // step and now - self.last < LINES_EVERY:
+            return None
+        self.said, self.last = done + failed, now
+        elapsed = now - self.start
+        new = done + failed - self.before
+        left = self.total - done - failed
+        eta = f", about {_clock(elapsed / new * left)} left" if new > 0 and left > 0 else ""
+        before = f", {self.before} before this run" if self.before else ""
+        return (f"bayespilot: {done}/{self.total} {self.what} done, {failed} failed{before} "
+                f"({_clock(elapsed)} elapsed{eta})")
+
+    def update(self, done: int, failed: int, now: float | None = None) -> None:
+        """Counts after a task finished; the line, if one is due."""
+        with self._lock:
+            self.done, self.failed = done, failed
+            self._write(self.line(time.monotonic() if now is None else now))
+
+    def beat(self, now: float | None = None) -> None:
+        """The minute's line, if due (no task finished for a minute)."""
+        with self._lock:
+            self._write(self.line(time.monotonic() if now is None else now))
+
+    def _write(self, text: str | None) -> None:
+        if text is None:
+            return
+        try:
+            self.stream.write(text + "\n")  # (one write: not split by a warning's line)
+            self.stream.flush()
+        except (OSError, ValueError):  # (stderr gone: the run goes on)
+            pass
+
+
+@contextmanager
+def _beating(lines: _ProgressLines | None):
+    """:meth:`_ProgressLines.beat` every second from a thread while the block runs."""
+    import threading
+
+    if lines is None:
+        yield
+        return
+    stop = threading.Event()
+
+    def beat() -> None:
+        while not stop.wait(_LINES_TICK):
+            lines.beat()
+
+    thread = threading.Thread(target=beat, name="bayespilot-progress", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+
+
 #: Seconds beyond ``connect_timeout`` that :func:`_client_within` waits for a connection.
 CONNECT_GRACE = 5.0
 
@@ -865,7 +961,8 @@ CONNECT_GRACE = 5.0
 def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: Path, *,
               total: int, skipped: int, scheduler: "str | Client | Cluster | None",
               workers: int | None,
-              progress: bool, connect_timeout: float, warm: Any = None, desc: str = "fits",
+              progress: bool | str, connect_timeout: float, warm: Any = None,
+              desc: str = "fits",
               unit: str = "fit", to_json: Any = None,
               scatter: bool = False) -> tuple[int, dict[str, str]]:
     """Run keyed tasks on dask.distributed, writing ``out/<key>.json`` as each one finishes.
@@ -881,8 +978,9 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
     once in this process after connecting (numba's cache, module docs); a failure
     there is a warning, but an interrupt (Ctrl-C, which numba re-raises as a
     SystemError caused by the KeyboardInterrupt) is a KeyboardInterrupt, raised
-    before anything is submitted.  ``total`` and ``skipped`` set the progress bar (tasks
-    already done before the call).  ``scatter``: send each task's arguments to
+    before anything is submitted.  ``progress``: as for :func:`run_campaign`;
+    ``total`` and ``skipped`` set its count (tasks already done before the call),
+    ``desc`` names the tasks (``unit`` one of them on the bar).  ``scatter``: send each task's arguments to
     the cluster first (one future per argument), so that large data (recordings)
     is not embedded in the task graph.  Returns ``(completed, {key: one-line
     error})``.  ``scheduler``, ``workers``, ``connect_timeout``: as for
@@ -893,6 +991,7 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
     restored at the end.
     """
     _check_scheduler(scheduler)
+    _check_progress(progress)
     completed, errors = 0, {}
     if not tasks:
         return completed, errors
@@ -919,8 +1018,11 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
                 args = tuple(client.scatter([a], hash=False)[0] for a in args)
             futures[client.submit(fn, *args, pure=False)] = (key, ctx)
         bar = stack.enter_context(tqdm(total=total, initial=skipped, desc=desc, unit=unit,
-                                       disable=not progress, file=sys.stderr,
-                                       smoothing=0.1, dynamic_ncols=True))
+                                       disable=progress not in (True, "bar"),
+                                       file=sys.stderr, smoothing=0.1, dynamic_ncols=True))
+        lines = (_ProgressLines(total, skipped, desc, time.monotonic())
+                 if progress == "lines" else None)
+        stack.enter_context(_beating(lines))
         lost = []
         if client_log.getEffectiveLevel() > logging.DEBUG:  # (unless asked for debugging)
             # a lost scheduler is reported below in one line; the client's reconnection
@@ -953,6 +1055,8 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
             fut.release()
             bar.update(1)
             bar.set_postfix(failed=len(errors), refresh=False)
+            if lines is not None:
+                lines.update(skipped + completed, len(errors))
     if lost:
         raise CampaignError(f"lost the dask cluster: {len(lost)} of {len(tasks)} tasks did not "
                             f"finish ({completed} finished and were saved"
@@ -963,8 +1067,8 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
 
 def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
                  scheduler: "str | Client | Cluster | None" = None,
-                 workers: int | None = None, progress: bool = True, connect_timeout: float = 10.0,
-                 warm_cache: bool = True) -> CampaignSummary:
+                 workers: int | None = None, progress: bool | str = True,
+                 connect_timeout: float = 10.0, warm_cache: bool = True) -> CampaignSummary:
     """Run the jobs on dask.distributed, writing ``out_dir/<key>.json`` as each fit finishes.
 
     Parameters
@@ -991,8 +1095,13 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
     workers : int, optional
         Workers of the local cluster (default ``os.cpu_count()``); not with
         ``scheduler``.
-    progress : bool
-        A tqdm bar on stderr: fits done / total, with the time left.
+    progress : bool, 'bar' or 'lines'
+        True or ``'bar'``: a tqdm bar on stderr, fits done / total, with the
+        time left.  ``'lines'``: plain lines on stderr instead, for a batch
+        job's log, where a bar redrawn in place is noise: one when another
+        5 % of the fits has finished and one at least every minute, each
+        ``bayespilot: <done>/<total> fits done, <n> failed (<elapsed> elapsed,
+        about <left> left)``.  False: neither.
     connect_timeout : float
         Seconds to wait for the scheduler and for its first worker.
     warm_cache : bool
@@ -1011,7 +1120,8 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
         local cluster cannot start, a result cannot be written, or ``out_dir``
         holds a result of the same key for other settings.
     ValueError
-        Duplicate keys, ``workers`` < 1 or given with ``scheduler``.
+        Duplicate keys, ``workers`` < 1 or given with ``scheduler``, another
+        ``progress``.
     TypeError
         A ``scheduler`` that is not an address, a Client or a Cluster.
 
@@ -1032,6 +1142,7 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
         raise ValueError(f"duplicate job keys: {', '.join(dupes[:5])}"
                          f"{' ...' if len(dupes) > 5 else ''}")
     _check_scheduler(scheduler)
+    _check_progress(progress)
     if workers is not None:
         if scheduler is not None:
             raise ValueError("workers sets the size of the local cluster; do not give it "

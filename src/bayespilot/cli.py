@@ -193,105 +193,13 @@ def _progress(args: argparse.Namespace) -> bool:
     return not args.quiet and sys.stderr.isatty()
 
 
-#: Progress lines of replicate and diagnose-batch when stderr is not a terminal (a batch job's
-#: log, where the bar is off): one when another 5 % of the jobs has finished, and one at
-#: least every minute; the output folder is looked at every 10 s (a listing of 100,000 results
-#: takes about 0.1 s, more on a parallel file system).
-_LINES_STEP = 0.05
-_LINES_EVERY = 60.0
-_LINES_POLL = 10.0
-
-
-def _clock(seconds: float) -> str:
-    """Seconds as H:MM:SS (tqdm's way)."""
-    s = int(round(seconds))
-    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}"
-
-
-class _ProgressLines:
-    """What a run of keyed jobs has done so far, from its output folder: ``<key>.json`` for
-    a job done (this run or before), ``<key>.error.json`` written during this run (new, or
-    another file than at the start) without its result for a job that failed
-    (campaign.run_keyed writes them in this process as each job finishes; a success
-    removes an old error file).  :meth:`line` is the progress line due at ``now``, if one is."""
-
-    def __init__(self, out: Path, keys: Sequence[str], what: str, now: float) -> None:
-        self.out, self.keys, self.what = out, list(keys), what
-        self.start = self.last = now
-        names = self._names()
-        self.before = sum(f"{k}.json" in names for k in self.keys)
-        self.old_errors = {k: self._stamp(k) for k in self.keys if f"{k}.error.json" in names}
-        self.said = self.before  # (finished at the last line)
-
-    def _names(self) -> set[str]:
-        try:
-            return {e.name for e in os.scandir(self.out)}
-        except OSError:  # (not made yet)
-            return set()
-
-    def _stamp(self, key: str) -> tuple[int, int] | None:
-        try:
-            st = os.stat(self.out / f"{key}.error.json")
-        except OSError:
-            return None
-        return st.st_mtime_ns, st.st_ino
-
-    def counts(self) -> tuple[int, int]:
-        """(done, failed): results there, errors written during this run without a result."""
-        names = self._names()
-        done = sum(f"{k}.json" in names for k in self.keys)
-        failed = sum(1 for k in self.keys if f"{k}.error.json" in names
-                     and f"{k}.json" not in names and self._stamp(k) != self.old_errors.get(k))
-        return done, failed
-
-    def line(self, now: float) -> str | None:
-        done, failed = self.counts()
-        total = len(self.keys)
-        step = max(1, math.ceil(_LINES_STEP * total))
-        if (done + failed) // step <= self.said // step and now - self.last < _LINES_EVERY:
-            return None
-        self.said, self.last = done + failed, now
-        elapsed = now - self.start
-        new = done + failed - self.before
-        left = total - done - failed
-        eta = (f", about {_clock(elapsed / new * left)} left" if new > 0 and left > 0 else "")
-        before = f", {self.before} before this run" if self.before else ""
-        return (f"{PROG}: {done}/{total} {self.what} done, {failed} failed{before} "
-                f"({_clock(elapsed)} elapsed{eta})")
-
-
-@contextlib.contextmanager
-def _progress_lines(args: argparse.Namespace, out: str | Path, keys: Sequence[str], what: str):
-    """Plain progress lines on stderr while replicate or diagnose-batch runs, when stderr is
-    not a terminal (:func:`_progress` turns the bar off there: a batch job's log showed the
-    header, then nothing for hours); nothing with --quiet or on a terminal (the bar)."""
-    import threading
-    import time
-
-    if args.quiet or _progress(args) or not keys:
-        yield
-        return
-    stream = sys.stderr
-    lines = _ProgressLines(Path(out), keys, what, time.monotonic())
-    stop = threading.Event()
-
-    def watch() -> None:
-        while not stop.wait(_LINES_POLL):
-            text = lines.line(time.monotonic())
-            if text is not None:
-                try:
-                    stream.write(text + "\n")  # (one write: not split by a warning's line)
-                    stream.flush()
-                except (OSError, ValueError):  # (stderr gone: the run goes on)
-                    return
-
-    thread = threading.Thread(target=watch, name="bayespilot-progress", daemon=True)
-    thread.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        thread.join()
+def _cluster_progress(args: argparse.Namespace) -> bool | str:
+    """The progress of replicate and diagnose-batch: the bar on a terminal, plain lines when
+    stderr is not one (a batch job's log showed the header, then nothing for hours; see
+    :func:`bayespilot.campaign.run_campaign`), nothing with --quiet."""
+    if args.quiet:
+        return False
+    return True if _progress(args) else "lines"
 
 
 def _say(args: argparse.Namespace, text: str) -> None:
@@ -910,10 +818,9 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
                f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on {where} "
                f"-> {out}")
     try:
-        with _progress_lines(args, out, [j.key for j in jobs], "fits"):
-            summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
-                                   progress=_progress(args),
-                                   connect_timeout=args.connect_timeout)
+        summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
+                               progress=_cluster_progress(args),
+                               connect_timeout=args.connect_timeout)
     except CampaignError as exc:
         raise CommandFailed(str(exc)) from None
     _say(args, str(summary))
@@ -1590,15 +1497,14 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
         # (the evidence's gaps: one line per kind of gap, after the diagnoses, from their
         # results; the workers keep them quiet)
         with _questionable_said(), _warnings_of(MissingReportWarning, said), \
-                _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line), \
-                _progress_lines(args, args.out, keys, "diagnoses"):
+                _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line):
             summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
                                      alpha=args.alpha, n_bootstrap=args.bootstrap,
                                      n_calibrate=args.calibrate,
                                      noise_passes=args.noise_passes, reports=args.reports,
                                      posterior=args.posterior,
                                      scheduler=args.scheduler, workers=args.workers,
-                                     progress=_progress(args),
+                                     progress=_cluster_progress(args),
                                      connect_timeout=args.connect_timeout)
     except ResultConflictError as exc:  # DIR holds a key's diagnosis from other settings
         raise UsageError(str(exc)) from None

@@ -656,7 +656,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                    posterior: bool = False,
                    reports: bool = False, scheduler: "str | Client | Cluster | None" = None,
                    workers: int | None = None,
-                   progress: bool = True, connect_timeout: float = 10.0,
+                   progress: bool | str = True, connect_timeout: float = 10.0,
                    warm_cache: bool = True) -> "CampaignSummary":
     """Diagnose many recordings as independent tasks on dask.distributed.
 
@@ -705,7 +705,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         which the result file does not keep; delete its ``<key>.json`` and
         call again to redo it with its report).
     scheduler, workers, progress, connect_timeout, warm_cache
-        As for :func:`~bayespilot.campaign.run_campaign`.
+        As for :func:`~bayespilot.campaign.run_campaign` (the lines say
+        diagnoses).
 
     Returns
     -------
@@ -777,6 +778,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     t0 = time.perf_counter()
     if not isinstance(posterior, bool):
         raise ValueError(f"posterior must be True or False, got {posterior!r}")
+    C._check_progress(progress)
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no recordings given")
