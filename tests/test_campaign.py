@@ -900,7 +900,7 @@ def test_run_keyed_writes_progress_lines_as_tasks_finish(tmp_path, monkeypatch, 
     submit = fake_cluster.submit
 
     def submit_or_fail(fn, *args, pure=False):  # the task of x = 7 fails
-        return _FailedFuture() if args == (7,) else submit(fn, *args, pure=pure)
+        return _FailedFuture() if args[-1] == 7 else submit(fn, *args, pure=pure)
 
     monkeypatch.setattr(fake_cluster, "submit", submit_or_fail)
     tasks = [(f"k{x:02d}", _stub_task, (x,), {}) for x in range(2, 40)]
@@ -919,3 +919,84 @@ def test_run_keyed_writes_progress_lines_as_tasks_finish(tmp_path, monkeypatch, 
                         progress=bad, connect_timeout=1.0)
         with pytest.raises(ValueError, match="progress must be"):
             run_campaign(_jobs(), tmp_path / "x", progress=bad)
+
+
+# --- a caller's cluster: what run_keyed leaves on it, and workers that join late ----------
+def test_an_asynchronous_client_is_refused(tmp_path):
+    """A Client made with asynchronous=True returns coroutines where run_keyed waits for
+    results: refused, saying what to give instead."""
+    import asyncio
+
+    import distributed
+
+    import bayespilot.campaign as C
+
+    async def main():
+        async with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                            dashboard_address=":0", asynchronous=True) as cl:
+            async with distributed.Client(cl, asynchronous=True) as client:
+                with pytest.raises(TypeError, match="asynchronous distributed.Client"):
+                    C.run_keyed([("a", _stub_task, (1,), {})], tmp_path, total=1, skipped=0,
+                                scheduler=client, workers=None, progress=False,
+                                connect_timeout=5.0)
+
+    asyncio.run(main())
+    assert list(tmp_path.iterdir()) == []
+
+
+def _sleepy_task(x):
+    import time
+
+    time.sleep(2.0)
+    return {"x": x}
+
+
+def test_ctrl_c_cancels_the_tasks_left_on_a_callers_client(tmp_path, monkeypatch):
+    """With a Client of the caller's (kept open), Ctrl-C in the loop left the submitted tasks
+    running on the cluster: what was not collected is cancelled."""
+    import time
+
+    import distributed
+
+    import bayespilot.campaign as C
+
+    def interrupted(futs):
+        raise KeyboardInterrupt
+        yield  # (a generator, as distributed's)
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=":0") as cluster:
+        with distributed.Client(cluster) as client:
+            monkeypatch.setattr(distributed, "as_completed", interrupted)
+            tasks = [(k, _sleepy_task, (i,), {}) for i, k in enumerate("abc")]
+            # (info keeps the traceback, so its frames' futures, as a notebook keeps the last
+            # exception's: released, they were forgotten anyway)
+            with pytest.raises(KeyboardInterrupt) as info:
+                C.run_keyed(tasks, tmp_path, total=3, skipped=0, scheduler=client,
+                            workers=None, progress=False, connect_timeout=10.0)
+            time.sleep(0.5)  # (the submissions reach the scheduler after a moment)
+            deadline = time.monotonic() + 5
+            while cluster.scheduler.tasks and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert not cluster.scheduler.tasks  # (before: three tasks of 2 s each, run on)
+            assert client.status == "running"  # (the caller's: left open)
+            del info
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_each_task_checks_its_workers_version(tmp_path, monkeypatch, fake_cluster):
+    """A worker that joins after the start-up check (an adaptive cluster) is checked by the
+    tasks it runs: another version is a WorkerVersionError (its error file says so), not a
+    result of other code; without an installed version (a source folder) the task runs."""
+    import bayespilot.campaign as C
+
+    have = C._installed_version()
+    assert have is not None  # (the tests run on an installed bayespilot)
+    C.run_keyed([("a", _stub_task, (5,), {})], tmp_path, total=1, skipped=0, scheduler=None,
+                workers=1, progress=False, connect_timeout=1.0)
+    assert fake_cluster.submitted == [(have, _stub_task, 5)]  # (run as _on_this_version)
+    assert C._on_this_version(have, _stub_task, 3) == {"x": 3}
+    with pytest.raises(C.WorkerVersionError, match=f"has bayespilot {have}, the client 9.9.9"):
+        C._on_this_version("9.9.9", _stub_task, 3)
+    monkeypatch.setattr(C, "_installed_version", lambda: None)
+    assert C._on_this_version("9.9.9", _stub_task, 3) == {"x": 3}

@@ -728,6 +728,10 @@ def _connect(stack: ExitStack, scheduler: "str | Client | Cluster | None", worke
         return stack.enter_context(Client(cluster))
     where = _scheduler_name(scheduler)
     if isinstance(scheduler, Client):
+        if getattr(scheduler, "asynchronous", False):
+            raise TypeError("an asynchronous distributed.Client (asynchronous=True) cannot "
+                            "run a campaign, which waits for its results; give its "
+                            "scheduler's address (client.scheduler.address) instead")
         if scheduler.status != "running":
             raise CampaignError(f"the dask Client given is not connected to its scheduler "
                                 f"(status {scheduler.status!r})")
@@ -757,9 +761,8 @@ def _check_workers(client: Any, where: str) -> None:
     for ever with no worker, or lost that worker's capacity without a word)."""
     from importlib.metadata import PackageNotFoundError, version
 
-    try:
-        want = version("bayespilot")
-    except PackageNotFoundError:  # (not installed here, run from a source folder: no version)
+    want = _installed_version()
+    if want is None:  # (not installed here, run from a source folder: no version)
         return
     try:
         answers = client.run(version, "bayespilot", on_error="return")
@@ -954,6 +957,48 @@ def _beating(lines: _ProgressLines | None):
         thread.join()
 
 
+def _installed_version() -> str | None:
+    """bayespilot's installed version, None when run from a source folder (no metadata)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("bayespilot")
+    except PackageNotFoundError:
+        return None
+
+
+class WorkerVersionError(RuntimeError):
+    """A task ran on a dask worker whose bayespilot is another version than the client's."""
+
+
+def _on_this_version(want: str, fn: Any, *args: Any) -> Any:
+    """``fn(*args)`` on a worker, if its bayespilot is ``want`` (the client's version).
+
+    :func:`_check_workers` asks the workers a cluster has when the run starts; a worker that
+    joins later (an adaptive dask-jobqueue cluster) is checked by each task it is given: a
+    task on another version fails with a WorkerVersionError (its error file says so) instead
+    of writing a result of other code.  A worker importing bayespilot from a source folder
+    (no installed version) runs it, as :func:`_check_workers` lets it."""
+    have = _installed_version()
+    if have is not None and have != want:
+        import socket
+
+        raise WorkerVersionError(f"the dask worker on {socket.gethostname()} has bayespilot "
+                                 f"{have}, the client {want}; install bayespilot=={want} in "
+                                 f"the workers' environment and run again to resume")
+    return fn(*args)
+
+
+def _cancel(client: Any, futures: Mapping[Any, Any]) -> None:
+    """Cancel the futures not yet collected (none when the loop ran to its end)."""
+    if not futures or getattr(client, "status", None) != "running":
+        return
+    try:
+        client.cancel(list(futures))
+    except Exception:  # noqa: BLE001 - (a scheduler gone: nothing left to cancel)
+        pass
+
+
 #: Seconds beyond ``connect_timeout`` that :func:`_client_within` waits for a connection.
 CONNECT_GRACE = 5.0
 
@@ -1013,9 +1058,15 @@ def run_keyed(tasks: Sequence[tuple[str, Any, tuple, Mapping[str, Any]]], out: P
                 warn_at_caller(f"warming numba's cache failed ({_first_line(exc)}); each "
                                f"worker compiles the kernels itself", RuntimeWarning)
         futures = {}
+        # what is left of them when the loop ends early (Ctrl-C, an error writing a result)
+        # is cancelled: a caller's Client, kept open, ran them on otherwise
+        stack.callback(_cancel, client, futures)
+        want = _installed_version()
         for key, fn, args, ctx in tasks:
             if scatter:  # each argument whole, as one future ([a]: not its items one by one)
                 args = tuple(client.scatter([a], hash=False)[0] for a in args)
+            if want is not None:  # (a worker that joined after _check_workers: checked here)
+                args, fn = (want, fn, *args), _on_this_version
             futures[client.submit(fn, *args, pure=False)] = (key, ctx)
         bar = stack.enter_context(tqdm(total=total, initial=skipped, desc=desc, unit=unit,
                                        disable=progress not in (True, "bar"),
@@ -1086,7 +1137,11 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
         the end; the cluster is left running).  Its workers must have
         bayespilot at the version of this process: they are asked after
         connecting, and a CampaignError names those that lack it or have
-        another before anything is submitted.  Default:
+        another before anything is submitted; a worker that joins later
+        is checked by each task it runs (a task on another version fails
+        with a WorkerVersionError in its error file).  Tasks left when
+        the call is interrupted or fails are cancelled, also on a Client
+        given.  Default:
         a ``LocalCluster`` of ``workers`` single-threaded processes, started
         and closed here.  On a cluster of your own, start one single-threaded
         worker process per core, or set ``NUMBA_NUM_THREADS`` in the workers'
@@ -1123,7 +1178,8 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
         Duplicate keys, ``workers`` < 1 or given with ``scheduler``, another
         ``progress``.
     TypeError
-        A ``scheduler`` that is not an address, a Client or a Cluster.
+        A ``scheduler`` that is not an address, a Client or a Cluster, or
+        an asynchronous Client.
 
     Examples
     --------
