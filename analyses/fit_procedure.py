@@ -18,10 +18,14 @@ them beside what our fits show: the spread of the Step I threshold estimates
 shrinks as K_theta grows; Step II collapses the spread of -ln L over
 repetitions; Step III lowers -ln L a little further than Step II.
 
-The same runs are the recordings of the campaign (realization ``--realization``
-of the cells of :func:`bayespilot.campaign.paper_study`), so the fits can be
-checked against ``analyses/results/replication``.  Fits are cached as JSON in
-``analyses/results/fit_procedure/`` and reused on the next run.
+The runs take the seeds of the campaign (the remnant and GA seeds of realization
+``--realization`` of the cells of :func:`bayespilot.campaign.paper_study`), but they
+are not the campaign's recordings: here the remnant is scaled to the remnant
+fraction F_n (``simulate(remnant_fraction=...)``), while the campaign's default
+(``--remnant table4``) uses Table 4's remnant gain K_n, whose realized F_n differs
+(0.231 for FD, K_theta = 1, realization 0 at F_n = 0.2).  So these fits are not the
+ones in ``analyses/results/replication`` and do not match them one for one.  Fits
+are cached as JSON in ``analyses/results/fit_procedure/`` and reused on the next run.
 """
 
 from __future__ import annotations
