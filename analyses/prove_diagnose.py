@@ -251,7 +251,7 @@ OPEN_LOOP_SEED = 777777
 
 def open_loop_table(entry: str) -> None:
     """``entry``'s cases decided by the closed-loop study and by its open-loop twins (same
-    runs, same inputs), per effect size, beside the optimal test's expectation."""
+    runs, same inputs), per effect size, beside the oracle test's expectation."""
     from bayespilot.diagnose import get_extension
 
     lam = oracle_lambdas()
@@ -270,8 +270,8 @@ def open_loop_table(entry: str) -> None:
         v[3] += (optimal_power(get_extension(entry), POOLED * lam[i]) if i in lam
                  else math.nan)
     print(f"{entry}, {POOLED} runs pooled: named in closed loop (the study) and in the "
-          "open-loop twins, against the optimal test's expectation")
-    print(f"{'effect':<16}{'cases':>6}{'closed loop':>13}{'open loop':>11}{'optimal':>9}")
+          "open-loop twins, against the oracle test's expectation")
+    print(f"{'effect':<16}{'cases':>6}{'closed loop':>13}{'open loop':>11}{'oracle':>9}")
     tot = [0, 0, 0, 0.0]
     for e, v in sorted(rows.items()):
         print(f"{e:<16}{v[0]:>6}{v[1]:>13}{v[2]:>11}{v[3]:>9.1f}")
@@ -384,7 +384,7 @@ def wrong_ids(runs: int, rs: list[dict] | None = None) -> set[int]:
 
 def misses_table(runs: int) -> None:
     """The cases the ``runs``-run study decided wrongly, decided again by this study (more
-    runs): truth, effect, condition, the optimal test's power with ``runs`` and with this
+    runs): truth, effect, condition, the oracle test's power with ``runs`` and with this
     study's runs (the oracle's single-run lambda times the runs, from ``--oracle``), and both
     decisions."""
     from bayespilot.diagnose import get_extension
@@ -397,7 +397,7 @@ def misses_table(runs: int) -> None:
     now_runs = POOLED or 1
     print(f"The {len(ids)} cases the {runs}-run study got wrong, with {now_runs} runs "
           f"({sum(i in now for i in ids)} done)")
-    print("(power R: the optimal test's with R runs; given: with the new runs, given the "
+    print("(power R: the oracle test's with R runs; given: with the new runs, given the "
           f"{runs} runs' own statistic, see conditional_power)")
     print(f"{'id':>4}  {'truth / effect / condition':<52}{'power ' + str(runs):>9}"
           f"{'power ' + str(now_runs):>10}{'given':>7}  {str(runs) + ' runs':<24}{now_runs} runs")
@@ -419,7 +419,7 @@ def misses_table(runs: int) -> None:
             named += dec == c["truth"]
             expected += float(pw[1]) if i in lam else 1.0
             given += float(pw[2]) if i in lam else 1.0
-    print(f"effect cases done: named {named:.0f}, the optimal test with {now_runs} runs expects "
+    print(f"effect cases done: named {named:.0f}, the oracle test with {now_runs} runs expects "
           f"{expected:.1f}, or {given:.1f} given the {runs} runs' own statistics (these cases "
           f"were chosen because those were low)")
 
@@ -767,15 +767,15 @@ def oracle_lambdas() -> dict[int, float]:
 
 
 def pooled_against_oracle(rs: list[dict]) -> dict:
-    """A pooled study's naming beside the optimal test's expectation with as many runs.
+    """A pooled study's naming beside the oracle test's expectation with as many runs.
 
     For every pooled case concealed in all its runs (saturation left out) the
     single-run oracle's noncentrality of the same case (``--oracle``, the
     single-run study's recording of it: same condition and effect, another
-    seed) times the number of runs gives the power of an optimal test of
+    seed) times the number of runs gives the power of the oracle test of
     the true extension pooled over that many runs (information adds over
     runs).  Per entry: cases, named by ``diagnose_pooled``, expected for the
-    optimal test.
+    oracle test.
     """
     from bayespilot.diagnose import get_extension
 
@@ -791,9 +791,9 @@ def pooled_against_oracle(rs: list[dict]) -> dict:
         v[0] += 1
         v[1] += r["decision"] == c["truth"]
         v[2] += optimal_power(ext, POOLED * lam[c["id"]])
-    print(f"\nAgainst the optimal test with {POOLED} runs (concealed cases, saturation left "
+    print(f"\nAgainst the oracle test with {POOLED} runs (concealed cases, saturation left "
           f"out; lambda from --oracle x {POOLED}):")
-    print(f"  {'entry':<24}{'n':>5}{'named':>7}{'optimal':>9}")
+    print(f"  {'entry':<24}{'n':>5}{'named':>7}{'oracle':>9}")
     tot = [0, 0, 0.0]
     for e, (n, k, x) in per.items():
         print(f"  {e:<24}{n:>5}{k:>7}{x:>9.1f}")
@@ -902,10 +902,10 @@ def compare_runs(runs: tuple[int, ...] = (1, 4, 8)) -> dict:
 
 def identifiable(studies: dict[int, dict[int, dict]], concealed: list[int],
                  powers=(0.5, 0.9, 0.99)) -> dict:
-    """Naming among the cases the data can reveal: the optimal test's power at least ``powers``.
+    """Naming among the cases the data can reveal: the oracle test's power at least ``powers``.
 
     For each study (R runs) and each non-saturation case of ``--oracle``, the
-    power an optimal test of the true extension has with R runs (lambda x R,
+    power the oracle test of the true extension has with R runs (lambda x R,
     the decision's level); among the cases with at least that power, how
     many the study named, of those one run conceals (``concealed``, case ids)
     and of all.  The selection uses the truth (the oracle's lambda), so it is
@@ -919,7 +919,7 @@ def identifiable(studies: dict[int, dict[int, dict]], concealed: list[int],
         return {}
     orc = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     conc = set(concealed)
-    print("\nAmong the cases an optimal test with as many runs names with at least this "
+    print("\nAmong the cases the oracle test with as many runs names with at least this "
           "probability (non-saturation; named / those one run conceals, named / all):")
     out = {}
     for R, st in studies.items():
@@ -2004,7 +2004,7 @@ def _mean_square(neg_log_lik: float, m: int) -> float:
 
 
 def conditional_power(ext, stat_before: float, runs_before: int, runs: int, lam: float) -> float:
-    """Power of the optimal test with ``runs`` runs when ``runs_before`` of them are already
+    """Power of the oracle test with ``runs`` runs when ``runs_before`` of them are already
     recorded and gave the statistic ``stat_before`` (2 d(-ln L) of the right extension).
 
     The cases that a study with fewer runs missed are a selection: their first runs'
@@ -2066,7 +2066,7 @@ def oracle_case(c: dict, rec, extra: dict,
                 bands: tuple[str, ...] = ("lowpass", "fullband")) -> dict:
     """:func:`oracle`'s numbers for one effect case: its extension's ``df`` and, per band
     (``lowpass``: the decision likelihood's 25 rad/s; ``fullband``), the noncentrality
-    ``lambda`` and the optimal test's ``power``."""
+    ``lambda`` and the oracle test's ``power``."""
     from bayespilot.diagnose import SKIP_SECONDS, _base_gls, get_extension
     from bayespilot.diagnose import decide as D
     from bayespilot.fit.fast import fit_fast
@@ -2109,7 +2109,7 @@ def oracle(shard: tuple[int, int] = (0, 1)) -> None:
     starts of delta_abs over 0-0.02, :func:`_best_base`).  Its whitened misfit
     over s2 is the noncentrality lambda of the likelihood-ratio statistic
     (2 d(-ln L) ~ noncentral chi2(df, lambda) for a small effect), so the
-    power of the optimal test of that extension at the decision's
+    power of the oracle test of that extension at the decision's
     per-candidate level (alpha over six candidates, the chi-bar-squared
     critical value for the boundary nulls) is 1 - ncx2.cdf(crit, df, lambda).
     Summed over the concealed cases it is the number that a test of the
@@ -2164,7 +2164,7 @@ def _oracle_table(rows: list[dict]) -> None:
     def power(r, tag, runs=1):
         return optimal_power(get_extension(r["truth"]), runs * r[tag]["lambda"])
 
-    print("Concealed cases: named by the default study, and the expected number an optimal test "
+    print("Concealed cases: named by the default study, and the expected number the oracle test "
           "of the true extension\nwould name (sum of its powers at the level alpha/6, one run)")
     print(f"{'entry / size':<38}{'n':>4}{'named':>7}{'oracle 25 rad/s':>17}"
           f"{'oracle full band':>18}{'median lambda 25/full':>24}")
@@ -2203,11 +2203,11 @@ def _oracle_table(rows: list[dict]) -> None:
     for ax, (e, row) in zip(axes.flat, panels.items()):
         x = np.arange(len(row))
         n = np.array([v[1] for v in row], float)
-        ax.plot(x, [v[3] for v in row] / n, "k--", lw=1, label="optimal test, 1 run")
+        ax.plot(x, [v[3] for v in row] / n, "k--", lw=1, label="oracle test, 1 run")
         ax.plot(x, [v[4][0] for v in row] / n, ":", color="0.45", lw=1,
-                label="optimal test, 4 runs")
+                label="oracle test, 4 runs")
         ax.plot(x, [v[4][1] for v in row] / n, "-.", color="0.65", lw=1,
-                label="optimal test, 8 runs")
+                label="oracle test, 8 runs")
         for xi, v in zip(x, row):
             k, m = v[2], v[1]
             lo, hi = _wilson_95(k, m)
@@ -2231,16 +2231,16 @@ def _oracle_table(rows: list[dict]) -> None:
     spare[0].set_visible(True)
     spare[0].axis("off")
     spare[0].legend(handles, labels, loc="center", fontsize=7, frameon=False)
-    fig.suptitle("diagnose against the best any test could do at its false-alarm level "
-                 "(lines: an optimal test's expected share)", fontsize=9)
+    fig.suptitle("diagnose against the oracle test at its false-alarm level\n(lines: the expected "
+                 "share the likelihood-ratio test of the true extension names)", fontsize=9)
     FIG.mkdir(parents=True, exist_ok=True)
     fig.savefig(FIG / "diagnose_oracle.png", dpi=110)
     plt.close(fig)
 
 
-#: ``--power-round``: sizes near where the optimal test's one-run power reaches 0.9 (the
+#: ``--power-round``: sizes near where the oracle test's one-run power reaches 0.9 (the
 #: oracle's median power 0.7-1.0 at the study's nearest sizes), to count the restated target
-#: (of the concealed effects that an optimal test names with power >= 0.9, how many
+#: (of the concealed effects that the oracle test names with power >= 0.9, how many
 #: ``diagnose`` names) on more cases than the study's 16.  No size of the soft threshold or
 #: of a 0.15-0.3 drift reaches it in one run.
 POWER_EFFECTS = {
@@ -2285,7 +2285,7 @@ def power_round(shard: tuple[int, int] = (0, 1)) -> None:
         tmp = path.with_name(path.name + ".tmp")
         tmp.write_text(json.dumps(r, indent=1, default=float))
         tmp.replace(path)
-        print(f"{case_key(c)}: {r['decision']}, optimal power {r['oracle']['power']:.2f} "
+        print(f"{case_key(c)}: {r['decision']}, oracle power {r['oracle']['power']:.2f} "
               f"({r['elapsed_seconds']:.0f} s)", flush=True)
     power_summary()
 
@@ -2317,15 +2317,15 @@ def power_summary() -> None:
     wrong = [r for r in new if r["decision"] not in ("none", r["case"]["truth"])]
     print(f"every case of the round: named {sum(r['decision'] == r['case']['truth'] for r in new)}"
           f" of {len(new)}, concealed {sum(bool(r['concealed']) for r in new)}; wrongly named "
-          f"{len(wrong)}" + "".join(f"; {case_key(r['case'])} as {r['decision']} (optimal power "
+          f"{len(wrong)}" + "".join(f"; {case_key(r['case'])} as {r['decision']} (oracle power "
                                     f"{r['oracle']['power']:.2f})" for r in wrong))
     for name, rs in (("the study", old), ("the power round", new), ("both", old + new)):
         sel = [r for r in rs if r["concealed"] and r["oracle"]["power"] >= 0.9]
         named = sum(r["decision"] == r["case"]["truth"] for r in sel)
         wrong = sum(r["decision"] not in ("none", r["case"]["truth"]) for r in sel)
-        print(f"{name}: concealed with optimal power >= 0.9: named {named} of {len(sel)}"
+        print(f"{name}: concealed with oracle power >= 0.9: named {named} of {len(sel)}"
               + (f" ({100 * named / len(sel):.0f} %)" if sel else "")
-              + f", wrongly named {wrong}; expected by the optimal test "
+              + f", wrongly named {wrong}; expected by the oracle test "
               f"{sum(r['oracle']['power'] for r in sel):.1f}")
 
 
@@ -2674,10 +2674,10 @@ def main(argv=None) -> int:
                          "again from the GLS base fit's residual); results and figures get "
                          "the suffix _np<P>")
     ap.add_argument("--power-round", action="store_true",
-                    help="diagnose and the oracle on new cases near the optimal test's 0.9 power "
+                    help="diagnose and the oracle on new cases near the oracle test's 0.9 power "
                          "(the restated target on more cases); analyses/results/diagnose_power/")
     ap.add_argument("--oracle", action="store_true",
-                    help="per effect case, the power of the optimal likelihood-ratio test of the "
+                    help="per effect case, the expected power of the likelihood-ratio test of the "
                          "true extension (noncentrality from the noise-free extended model), "
                          "beside the study's naming; analyses/results/diagnose/oracle.jsonl")
     ap.add_argument("--model-error", action="store_true",
