@@ -20,7 +20,7 @@ import pytest
 import bayespilot
 from bayespilot import presets
 from bayespilot.campaign import (CampaignError, Job, load_results, paper_study, run_campaign,
-                                 summarise, summary_markdown, write_summary_csv)
+                                 run_job, summarise, summary_markdown, write_summary_csv)
 from bayespilot.cli import main
 
 pytest.importorskip("distributed")
@@ -1000,3 +1000,27 @@ def test_each_task_checks_its_workers_version(tmp_path, monkeypatch, fake_cluste
         C._on_this_version("9.9.9", _stub_task, 3)
     monkeypatch.setattr(C, "_installed_version", lambda: None)
     assert C._on_this_version("9.9.9", _stub_task, 3) == {"x": 3}
+
+
+def test_the_fits_warnings_are_recorded_and_said_once(tmp_path):
+    """A worker's warnings went to its stderr, one per fit (a 8-s run's stick-offset warning
+    from every worker, buried the progress; on a remote cluster, lost): run_job records them
+    in the result, and run_campaign says each kind once, naming the fits."""
+    import warnings
+
+    jobs = paper_study(2, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.2,),
+                       method="fast", duration=8.0, **TINY)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # (none escapes run_job)
+        res = [run_job(j) for j in jobs]
+    said = [w for r in res for w in r["warnings"]]
+    assert said and all(w["category"] == "QuestionableRecordingWarning" for w in said), said
+    assert all("control output u has a mean of" in w["message"] for w in said)
+    with pytest.warns(RuntimeWarning) as record:
+        run_campaign(jobs, tmp_path, workers=1, progress=False)
+    ours = [str(w.message) for w in record if "QuestionableRecordingWarning in" in str(w.message)]
+    keys = sorted(j.key for j, r in zip(jobs, res) if r["warnings"])
+    assert len(ours) == 1 and ours[0].startswith(f"QuestionableRecordingWarning in {len(keys)} "
+                                                 f"fit(s) ({', '.join(keys)}), e.g. {keys[0]}: ")
+    for j, r in zip(jobs, res):
+        assert json.loads((tmp_path / f"{j.key}.json").read_text())["warnings"] == r["warnings"]

@@ -464,7 +464,10 @@ def run_job(job: Job) -> dict[str, Any]:
     check, ``gap``, ``neg_log_lik`` and ``delta_abs``, see
     :class:`~bayespilot.fit.result.NotAtMaximumWarning`, which is not issued here);
     ``elapsed_seconds``
-    (simulation and fit); ``host``; ``versions``.
+    (simulation and fit); ``host``; ``versions``; ``warnings``, those the
+    simulation and the fit issued (``category``, ``message``; each once;
+    :class:`~bayespilot.fit.result.NotAtMaximumWarning` left out), which
+    are recorded instead of issued.
 
     Parameters
     ----------
@@ -502,14 +505,23 @@ def run_job(job: Job) -> dict[str, Any]:
         noise = {"remnant_gain": job.remnant_gain}
     else:
         noise = {"remnant_fraction": job.remnant_fraction or None}
-    sim = simulate(task=job.task, motion_gain=job.motion_gain, seed=job.remnant_seed,
-                   duration=job.duration, **noise)
     from .fit.result import NotAtMaximumWarning
 
-    with warnings.catch_warnings():  # (a study of the procedure: its shortfall is recorded)
+    # the warnings go into the result (a worker's stderr is a log nobody reads on a cluster,
+    # and on a local one thousands of them buried the progress); run_campaign says them once
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        # (a study of the procedure: its shortfall is recorded, under "check")
         warnings.simplefilter("ignore", NotAtMaximumWarning)
+        sim = simulate(task=job.task, motion_gain=job.motion_gain, seed=job.remnant_seed,
+                       duration=job.duration, **noise)
         fit = _fit_function(job.method)(sim.recording, threshold=job.threshold,
                                         seed=job.fit_seed, **job.fit_kwargs)
+    said: list[dict[str, str]] = []
+    for w in caught:
+        entry = {"category": w.category.__name__, "message": str(w.message)}
+        if entry not in said:
+            said.append(entry)
     out: dict[str, Any] = {"key": job.key, **job.to_dict(), "job": job.to_dict(),
                            "remnant_seed": job.remnant_seed, "fit_seed": job.fit_seed,
                            # exact copies: readers of JSON numbers as doubles round seeds > 2**53
@@ -517,7 +529,7 @@ def run_job(job: Job) -> dict[str, Any]:
                            "fit_seed_text": str(job.fit_seed),
                            "true_params": dict(sim.params), "K_n": sim.remnant_gain,
                            "F_n": sim.remnant_fraction, "F_n_reached": sim.remnant_fraction,
-                           "fit": fit.to_dict(full=False)}
+                           "fit": fit.to_dict(full=False), "warnings": said}
     step1 = fit.steps.get("step1_delta_abs")
     if step1 is not None:
         out["step1_delta_abs"] = step1
@@ -1181,6 +1193,16 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
         A ``scheduler`` that is not an address, a Client or a Cluster, or
         an asynchronous Client.
 
+    Warns
+    -----
+    RuntimeWarning
+        Once per kind of warning the fits of this call issued on the workers
+        (a QuestionableRecordingWarning, an EstimateOnBoundWarning, ...),
+        naming how many fits and which; each result file lists its own under
+        ``warnings`` (:func:`run_job`).  Also when numba's cache cannot be
+        warmed, and for workers of a given cluster that did not say their
+        version.
+
     Examples
     --------
     >>> jobs = paper_study(1, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.2,),
@@ -1228,12 +1250,26 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
                                 f"or delete it")
         skipped += 1
 
-    completed, errors = run_keyed(
-        [(j.key, run_job, (j,), {"job": j.to_dict()}) for j in pending], out,
-        total=len(jobs), skipped=skipped, scheduler=scheduler, workers=workers,
-        progress=progress, connect_timeout=connect_timeout,
-        warm=(lambda: _warm_numba_cache({j.method for j in pending})) if warm_cache else None,
-        desc="fits", unit="fit")
+    warned: dict[str, list[tuple[str, str]]] = {}
+
+    def to_json(key: str, value: dict[str, Any]) -> dict[str, Any]:
+        for w in value.get("warnings") or ():
+            warned.setdefault(w["category"], []).append((key, w["message"]))
+        return value
+
+    try:
+        completed, errors = run_keyed(
+            [(j.key, run_job, (j,), {"job": j.to_dict()}) for j in pending], out,
+            total=len(jobs), skipped=skipped, scheduler=scheduler, workers=workers,
+            progress=progress, connect_timeout=connect_timeout,
+            warm=(lambda: _warm_numba_cache({j.method for j in pending})) if warm_cache else None,
+            desc="fits", unit="fit", to_json=to_json)
+    finally:  # (also when the run stops: what finished is saved, and said)
+        for category, seen in sorted(warned.items()):
+            keys = sorted({k for k, _ in seen})
+            warn_at_caller(f"{category} in {len(keys)} fit(s) ({_listed(keys, 3)}), e.g. "
+                           f"{keys[0]}: {min(m for k, m in seen if k == keys[0])}; each result "
+                           f"file lists its warnings under 'warnings'", RuntimeWarning)
     return CampaignSummary(len(jobs), completed, skipped, len(errors), errors, out,
                            time.perf_counter() - t0)
 
