@@ -79,7 +79,13 @@ Keys: a recording alone is keyed by its file stem (by ``<folder>_<stem>`` when
 two recordings share a stem); a pooled condition by
 ``<subject>_<task>_k<K_theta>``.  Pooling groups recordings by the
 recording's ``subject``, ``task`` and ``motion_gain`` (each must give
-``subject``); a group of one is diagnosed alone.
+``subject``); a group of one is diagnosed alone.  A group whose runs differ in
+the rest of the task the diagnosis reads (the sample rate, the controlled
+element, ``control_gain`` or the forcing functions, as
+:func:`~bayespilot.diagnose.pooled.pooling_disagreements` compares them: a lab's
+task ``"other"`` under one label) is refused before any work is done, naming
+its runs and what differs: the batch pools what it groups without being
+asked, and pooling shares the extension's parameters over runs of one task.
 """
 
 from __future__ import annotations
@@ -206,7 +212,10 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
     ------
     ValueError
         ``pool`` and a recording without ``subject``; two recordings whose keys
-        cannot be told apart.
+        cannot be told apart; ``pool`` and a group whose runs differ in the
+        sample rate, the controlled element, ``control_gain`` or the forcing
+        functions (:func:`~bayespilot.diagnose.pooled.pooling_disagreements`; every
+        such group named, with its runs and what differs).
     """
     if len(paths) != len(recordings):
         raise ValueError(f"{len(paths)} paths for {len(recordings)} recordings")
@@ -234,6 +243,14 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
                     for q in ps if ps.count(q) > 1})
     if dupes:
         raise ValueError(f"the same recording twice in one condition: {', '.join(dupes)}")
+    mixed = _mixed_groups(groups, dict(zip(map(str, paths), recordings)))
+    if mixed:
+        raise ValueError(
+            f"pooling groups runs by subject, task and K_theta, and in {len(mixed)} group(s) "
+            f"the runs differ in the task the diagnosis reads: {'; and '.join(mixed)}. "
+            f"Pooling shares the extension's parameters over runs of one task; diagnose "
+            f"each task's runs in a batch of their own (its own out folder), or without "
+            f"pooling")
     tasks = [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(sorted(ps, key=_the_recording)),
                           s, t, k)
              for (s, t, k), ps in sorted(groups.items())]
@@ -242,6 +259,23 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
         raise ValueError(f"subjects whose names give the same result name: {', '.join(clash)} "
                          "(only letters, digits, '.', '_' and '-' are kept)")
     return tasks
+
+
+def _mixed_groups(groups: Mapping[tuple, Sequence[str]], by_path: Mapping[str, Any]
+                  ) -> list[str]:
+    """For each group of :func:`plan_batch` (``(subject, task, K_theta) -> paths``) whose runs
+    differ in the rest of the task the diagnosis reads (sample rate, controlled element,
+    control_gain, forcing: :func:`~bayespilot.diagnose.pooled.pooling_disagreements`), one text:
+    the group and what differs, each value with its runs; sorted by group."""
+    from .pooled import pooling_disagreements
+
+    said = []
+    for (s, t, k), ps in sorted(groups.items()):
+        if len(ps) > 1:
+            what = pooling_disagreements([by_path[p] for p in ps], names=ps)
+            if what:
+                said.append(f"{s}/{t}/K_theta {k:g} ({len(ps)} runs): {what}")
+    return said
 
 
 def task_seed(seed: int, digests: Sequence[str]) -> int:

@@ -79,6 +79,12 @@ EVIDENCE = {
 N_SEGMENTS = 8
 #: Boundary between the low and high frequencies of the motion-channel evidence, rad/s.
 OMEGA_SPLIT = 2.0
+#: Relative RMS difference between a sidecar's forcing function (evaluated at the recording's
+#: ``t``) and its ``f_t`` or ``f_d`` column above which :func:`forcing_of` notes that they
+#: disagree: far above a column written at float precision (the package's own simulated
+#: recordings differ by about 1e-13) or rounded to a few digits (about 1e-3), below a
+#: forcing function of half or twice the amplitude (0.5) or with its phases wrong.
+FORCING_MISMATCH = 0.05
 #: What to give for the frequency evidence (the end of an EvidenceWarning).
 GIVE_FORCING = ("give the forcing (base_frequency, target, disturbance) in the sidecar, or f_t "
                 "and f_d columns")
@@ -94,7 +100,10 @@ class EvidenceWarning(UserWarning):
     cannot run), part of the frequency evidence is missing (forcing lines
     that are not whole cycles of the record, a forcing function that is zero
     throughout), a sidecar's base frequency was snapped to the record's DFT
-    bins (:data:`SNAP_TOLERANCE`), or the bootstrap simulates the recording
+    bins (:data:`SNAP_TOLERANCE`), a sidecar's forcing that disagrees with
+    the recording's ``f_t``/``f_d`` columns (:data:`FORCING_MISMATCH`), a
+    forcing with no line on one side of the motion evidence's split
+    (:data:`OMEGA_SPLIT`), or the bootstrap simulates the recording
     format's default plant for a task ``"other"`` that gives none; and, with
     ``n_calibrate``, once more when the calibration is skipped for the same
     reason as the bootstrap.  After the bootstrap, once when fewer of its
@@ -140,8 +149,11 @@ class Forcing:
     notes : tuple of str
         What the estimators should know about them, one sentence each: a
         base frequency snapped to the record's DFT bins, why the lines are
-        not bins (no frequency evidence), a forcing function that is zero
-        throughout (no two-input estimate).  :func:`bayespilot.diagnose.diagnose`
+        not bins or not separate (no frequency evidence), a sidecar's forcing
+        that disagrees with the ``f_t``/``f_d`` columns, a forcing function
+        that is zero throughout (no two-input estimate), a forcing with every
+        line on one side of :data:`OMEGA_SPLIT` (no ``frequency.motion_low``
+        or ``frequency.motion_high``).  :func:`bayespilot.diagnose.diagnose`
         issues each as an :class:`EvidenceWarning`.
     """
 
@@ -213,10 +225,13 @@ def forcing_of(recording: Recording) -> Forcing | None:
     Forcing or None
         The target and disturbance multisines, their DFT bins in the record
         (each None unless every frequency is a whole number of cycles of the
-        record) and the signals at the samples (the columns where the
-        recording has them, else the multisines evaluated); None when neither
-        source is available.  Its ``notes`` say why the frequencies are not
-        bins, or that a forcing function is zero throughout.
+        record and the target's lines and the disturbance's are separate) and
+        the signals at the samples (the columns where the recording has them,
+        else the multisines evaluated); None when neither source is
+        available.  Its ``notes`` say why the frequencies are not bins, that a
+        sidecar's forcing and the columns disagree, that a forcing function
+        is zero throughout, or that the motion evidence has no line on one
+        side of :data:`OMEGA_SPLIT`.
 
     Notes
     -----
@@ -234,6 +249,16 @@ def forcing_of(recording: Recording) -> Forcing | None:
     off its bin keeps 99.6 % of its amplitude there.  A line of zero
     amplitude is not in the signal: it does not decide, and is left out of
     the multisine when it is not on a bin.
+
+    A sidecar's forcing is read as the task's, as before, but when the
+    recording also has ``f_t`` or ``f_d`` columns each is compared with the
+    sidecar's multisine evaluated at ``t`` (at the snapped base frequency,
+    if snapped): a relative RMS difference (over the larger of the two RMS
+    values) above :data:`FORCING_MISMATCH` is noted, naming the column and
+    the difference.  A sidecar whose target and disturbance share a line of
+    the record (both with nonzero amplitude) gives no bins, as columns that
+    share one do: the two-input estimate at a shared line would divide by
+    one forcing function while both excite the loop there.
     """
     meta = recording.metadata.get("forcing")
     t = recording.t
@@ -252,6 +277,20 @@ def forcing_of(recording: Recording) -> Forcing | None:
         ft, fd, kk, note = _on_bins(ft, fd, T)
         if note:
             notes.append(note)
+        note = _sidecar_against_columns(recording, ft, fd)
+        if note:
+            notes.append(note)
+        if kk[0] is not None:
+            shared = np.intersect1d(kk[0][ft.amplitude != 0], kk[1][fd.amplitude != 0])
+            if shared.size:
+                kk = [None, None]
+                lines = ", ".join(f"{k * 2 * np.pi / T:.4g}" for k in shared)
+                notes.append(f"the frequency evidence (frequency.*) is missing: the sidecar's "
+                             f"forcing target and disturbance share {shared.size} DFT line(s) "
+                             f"of the {T:g}-s record (at {lines} rad/s), and the describing "
+                             f"functions need forcing functions at separate frequencies; give "
+                             f"each line to one forcing function (or check the forcing's n "
+                             f"against the experiment's)")
     else:
         # lines read from the columns are DFT bins by construction, so whether the record is
         # whole periods is read from the columns themselves (the rule of whole_periods); the
@@ -285,7 +324,56 @@ def forcing_of(recording: Recording) -> Forcing | None:
                      f"record{only}: the two-input describing-function estimate needs both "
                      f"forcing functions, so frequency.visual, frequency.motion_low and "
                      f"frequency.motion_high are missing, and {power} (no forced lines)")
+    if out.two_input:
+        note = _split_note(out)
+        if note:
+            notes.append(note)
     return dataclasses.replace(out, notes=tuple(notes)) if notes else out
+
+
+def _sidecar_against_columns(recording: Recording, ft: Multisine, fd: Multisine) -> str | None:
+    """The note when a sidecar's forcing (``ft``, ``fd``, as read) and the recording's
+    ``f_t``/``f_d`` columns disagree (relative RMS difference above :data:`FORCING_MISMATCH`,
+    over the larger of the two RMS values), or None (they agree, or there is no column)."""
+    said = []
+    for col, f, name in (("f_t", ft, "target"), ("f_d", fd, "disturbance")):
+        if col not in recording:
+            continue
+        x, c = f(recording.t), np.asarray(recording[col], float)
+        scale = max(float(np.sqrt(np.mean(x ** 2))), float(np.sqrt(np.mean(c ** 2))))
+        diff = float(np.sqrt(np.mean((x - c) ** 2))) / scale if scale > 0 else 0.0
+        if diff > FORCING_MISMATCH:
+            ratio = (float(np.sqrt(np.mean(x ** 2)) / np.sqrt(np.mean(c ** 2)))
+                     if np.any(c) else math.inf)
+            said.append(f"the {name} differs from the {col} column by {100 * diff:.3g} % "
+                        f"RMS (its RMS {ratio:.3g} times the column's)")
+    if not said:
+        return None
+    return (f"the sidecar's forcing does not match the recording's columns: "
+            f"{' and '.join(said)}, evaluated at t (more than {100 * FORCING_MISMATCH:g} %); "
+            f"the diagnosis reads the sidecar's (its lines for the frequency evidence, the "
+            f"bootstrap's forcing), so check the forcing's base_frequency, amplitudes and phases "
+            f"(and the columns' units) against the experiment's")
+
+
+def _split_note(forcing: Forcing) -> str | None:
+    """The note when every forcing line (of nonzero amplitude) lies on one side of
+    :data:`OMEGA_SPLIT`, so that ``frequency.motion_low`` or ``frequency.motion_high`` has no
+    line and is missing; None otherwise."""
+    w = np.concatenate([f.frequencies[f.amplitude != 0]
+                        for f in (forcing.target, forcing.disturbance)])
+    if w.size == 0:
+        return None
+    low = w < OMEGA_SPLIT
+    if np.all(low):
+        gone, where, kept = "frequency.motion_high", f"below {OMEGA_SPLIT:g} rad/s", "low"
+    elif not np.any(low):
+        gone, where, kept = "frequency.motion_low", f"at or above {OMEGA_SPLIT:g} rad/s", "high"
+    else:
+        return None
+    return (f"{gone} is missing: every forcing line is {where} ({w.min():.3g} to {w.max():.3g} "
+            f"rad/s), and the motion-channel evidence is split at a fixed {OMEGA_SPLIT:g} rad/s "
+            f"(OMEGA_SPLIT); frequency.motion_{kept} covers the motion channel at every line")
 
 
 def _on_bins(ft: Multisine, fd: Multisine, T: float
@@ -522,6 +610,8 @@ def statistics(recording: Recording, model: PilotModel, params: Mapping[str, flo
             low = w < OMEGA_SPLIT
 
             def rel(dh, hm, sel):
+                if not np.any(sel):  # (no line on this side of OMEGA_SPLIT: forcing_of's note)
+                    return math.nan
                 den = float(np.mean(np.abs(hm[sel]) ** 2))
                 return float(np.mean(np.abs(dh[sel]) ** 2) / den) if den > 0 else math.nan
 

@@ -63,27 +63,51 @@ class PoolingWarning(UserWarning):
     """Runs given to :func:`diagnose_pooled` that say they are not of one subject and condition."""
 
 
-def pooling_disagreements(recordings: Sequence[Recording]) -> str | None:
-    """What the runs' own metadata disagree on (subject, task, K_theta), or None.
+def pooling_disagreements(recordings: Sequence[Recording],
+                          names: Sequence[str] | None = None) -> str | None:
+    """What the runs' own metadata disagree on (subject, task, K_theta, the task's loop), or None.
 
     Pooling shares the extension's parameters over the runs, which assumes the
     physics left out is the same in every run.  Runs of several subjects or
     conditions may still be pooled on purpose (a platform's bandwidth is the
     same for every subject), so :func:`diagnose_pooled` warns
-    (:class:`PoolingWarning`) and does not refuse.
+    (:class:`PoolingWarning`) and does not refuse.  Besides the subject, the
+    task name and K_theta, the runs are compared on what the diagnosis reads
+    of their task, as it reads it: the sample rate, the controlled element
+    (``Recording.controlled_element``: the paper's 4/s^2 when none is given;
+    compared with its denominator's leading coefficient 1), ``control_gain``
+    (``Recording.control_gain``: 0.69 when not given) and the forcing
+    functions (:func:`~bayespilot.diagnose.locate.forcing_of`: the sidecar's,
+    else the ``f_t``/``f_d`` columns'; compared by the frequencies, in rad/s,
+    and amplitudes of their lines of nonzero amplitude, within 1e-4 and 1e-3 of
+    the largest amplitude: not by their phases, so another realisation of
+    one forcing's phases is the same forcing; a run without any, or whose
+    columns are not whole periods of separate lines, is not counted).
 
     Parameters
     ----------
     recordings : sequence of Recording
         The runs to pool.
+    names : sequence of str, optional
+        One name per run (e.g. its path): each value is then followed by the
+        runs that give it, in parentheses.
 
     Returns
     -------
     str or None
         For each of subject (the metadata's ``subject``; a run without one is
-        not counted), task and K_theta on which the runs give more than one
-        value, ``"<what> <values>"`` with the values sorted and joined by
-        ``", "``, these joined by ``"; "``; None when the runs agree.
+        not counted), task, K_theta, sample_rate_hz, controlled_element,
+        control_gain and forcing on which the runs give more than one value,
+        ``"<what> <values>"`` with the values sorted and joined by ``", "``,
+        these joined by ``"; "``; None when the runs agree.  A plant is
+        written as its transfer function (``8/(s^2 + 2 s)``), a forcing by
+        its lines per forcing function (``target 8 lines 0.209-7.85 rad/s rms
+        0.0406 + disturbance ...``).
+
+    Raises
+    ------
+    ValueError
+        ``names`` is not one per run.
 
     Examples
     --------
@@ -94,15 +118,131 @@ def pooling_disagreements(recordings: Sequence[Recording]) -> str | None:
     >>> runs = [Recording(sig, 100.0, 1.0, "FD", {"subject": s}) for s in ("s1", "s2")]
     >>> pooling_disagreements(runs)
     'subject s1, s2'
+    >>> runs = [Recording(sig, 100.0, 1.0, "other", {"subject": "s1", "control_gain": g})
+    ...         for g in (0.69, 1.0)]
+    >>> pooling_disagreements(runs, names=["a", "b"])
+    'control_gain 0.69 (a), 1 (b)'
     """
+    recs = list(recordings)
+    if names is not None and len(names) != len(recs):
+        raise ValueError(f"{len(names)} names for {len(recs)} recordings")
     said = []
-    for what, values in (("subject", [r.metadata.get("subject") for r in recordings]),
-                         ("task", [r.task for r in recordings]),
-                         ("K_theta", [f"{r.motion_gain:g}" for r in recordings])):
-        given = sorted({str(v) for v in values if v is not None})
+    for what, values in (("subject", [r.metadata.get("subject") for r in recs]),
+                         ("task", [r.task for r in recs]),
+                         ("K_theta", [f"{r.motion_gain:g}" for r in recs]),
+                         ("sample_rate_hz", [f"{r.sample_rate_hz:g}" for r in recs]),
+                         ("controlled_element", [_plant_text(r) for r in recs]),
+                         ("control_gain", [f"{r.control_gain:g}" for r in recs]),
+                         ("forcing", _forcing_texts(recs))):
+        given = sorted({str(v) for v in values if v is not None}, key=_in_order)
         if len(given) > 1:
+            if names is not None:  # each value with the runs that give it
+                given = [f"{v} ({', '.join(str(n) for n, w in zip(names, values) if str(w) == v)})"
+                         for v in given]
             said.append(f"{what} {', '.join(given)}")
     return "; ".join(said) or None
+
+
+def _in_order(value: str) -> tuple:
+    """Sort key of a value :func:`pooling_disagreements` says: numbers by size (50 before
+    250), before other text, alphabetically."""
+    try:
+        return (0, float(value), value)
+    except ValueError:
+        return (1, 0.0, value)
+
+
+def _polynomial_text(c: np.ndarray) -> str:
+    """A polynomial in s, coefficients highest power first: ``s^2 + 2 s``, ``8``."""
+    deg = c.size - 1
+    terms = []
+    for i, a in enumerate(c):
+        if a == 0:
+            continue
+        p = deg - i
+        s = "" if p == 0 else ("s" if p == 1 else f"s^{p}")
+        mag = abs(float(a))
+        coef = f"{mag:.6g}" if (mag != 1 or not s) else ""
+        term = f"{coef} {s}".strip()
+        terms.append(("-" if a < 0 else "+", term))
+    if not terms:
+        return "0"
+    text = ("-" if terms[0][0] == "-" else "") + terms[0][1]
+    return text + "".join(f" {sign} {term}" for sign, term in terms[1:])
+
+
+def _plant_text(recording: Recording) -> str:
+    """The controlled element the diagnosis reads (``Recording.controlled_element``, the
+    paper's 4/s^2 without one), as a transfer function with its denominator's leading
+    coefficient 1 (so 4/(2 s^2) and 2/s^2 read alike)."""
+    num, den = (np.trim_zeros(np.asarray(c, float), "f") for c in recording.controlled_element)
+    if den.size == 0:  # (the reader refuses a zero denominator; said as it is)
+        return f"{_polynomial_text(num)}/0"
+    num, den = num / den[0], den / den[0]
+    n, d = _polynomial_text(num), _polynomial_text(den)
+    if num.size > 1:
+        n = f"({n})"
+    return n if d == "1" else f"{n}/({d})" if " " in d else f"{n}/{d}"
+
+
+def _forcing_lines(recording: Recording) -> tuple | None:
+    """The forcing the diagnosis reads (:func:`~bayespilot.diagnose.locate.forcing_of`): per
+    forcing function the frequencies (rad/s) and amplitudes of its lines of nonzero
+    amplitude, sorted by frequency; None without a forcing, or when it is read from f_t/f_d
+    columns that are not whole periods of separate lines (their DFT smears each forcing over
+    hundreds of lines, which depend on where the record was cut, not on the forcing)."""
+    from .locate import forcing_of
+
+    f = forcing_of(recording)
+    if f is None or not (isinstance(recording.metadata.get("forcing"), Mapping) or f.periodic):
+        return None
+    out = []
+    for m in (f.target, f.disturbance):
+        live = np.asarray(m.amplitude) != 0
+        w, a = np.asarray(m.frequencies)[live], np.abs(np.asarray(m.amplitude)[live])
+        o = np.argsort(w)
+        out.append((w[o], a[o]))
+    return tuple(out)
+
+
+def _same_forcing(x: tuple, y: tuple) -> bool:
+    """Two :func:`_forcing_lines` alike: the same number of lines per forcing function, at
+    the same frequencies within 1e-4 (relative) and amplitudes within 1e-3 of the largest."""
+    top = max([float(np.max(a)) for w, a in (*x, *y) if a.size] or [0.0])
+    return all(wx.size == wy.size and np.allclose(wx, wy, rtol=1e-4, atol=0.0)
+               and np.allclose(ax, ay, rtol=0.0, atol=1e-3 * top)
+               for (wx, ax), (wy, ay) in zip(x, y))
+
+
+def _forcing_texts(recordings: Sequence[Recording]) -> list[str | None]:
+    """Each run's forcing as :func:`pooling_disagreements` says it, the same text for runs of
+    the same forcing (:func:`_same_forcing`) and different texts for different ones; None for
+    a run without a forcing."""
+    lines = [_forcing_lines(r) for r in recordings]
+    kinds: list[tuple] = []  # one representative per forcing seen
+    texts: list[str] = []
+    out: list[str | None] = []
+    for x in lines:
+        if x is None:
+            out.append(None)
+            continue
+        for k, y in enumerate(kinds):
+            if _same_forcing(x, y):
+                out.append(texts[k])
+                break
+        else:
+            parts = []
+            for name, (w, a) in zip(("target", "disturbance"), x):
+                parts.append(f"{name} {w.size} lines {w.min():.3g}-{w.max():.3g} rad/s rms "
+                             f"{math.sqrt(float(np.sum(a ** 2)) / 2):.3g}" if w.size
+                             else f"no {name}")
+            text = " + ".join(parts)
+            if text in texts:  # (alike in this summary, yet not the same forcing)
+                text += f" [{sum(t.startswith(text) for t in texts) + 1}]"
+            kinds.append(x)
+            texts.append(text)
+            out.append(text)
+    return out
 
 
 @dataclass(eq=False)  # by identity: == on its arrays would be ambiguous
@@ -322,7 +462,8 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         import html
 
         from .report import (_STYLE, _candidate_table, _checked_formats, _img, _listed,
-                             _write_figures, _yes_no, plot_candidates, plot_shared_posterior)
+                             _notes_html, _write_figures, _yes_no, plot_candidates,
+                             plot_shared_posterior)
 
         formats = _checked_formats(formats)
         out = Path(directory)
@@ -341,6 +482,9 @@ class PooledDiagnosisResult(_DiagnosisJSON):
                 f"run. Mismatch: <b>{_yes_no(self.mismatch)}</b>. Decision at family-wise "
                 f"level alpha = {self.settings['alpha']:g} "
                 f"({self.settings['level_per_candidate']:.2g} per candidate).</p>"
+                + _notes_html([(str(r.get("source") or f"run {j + 1}"), n)
+                               for j, r in enumerate(self.runs)
+                               for n in r.get("evidence_notes", ())]) +
                 f"<h2>Candidates (pooled)</h2>{_candidate_table(self.ranking, self.units)}"
                 + _img(paths["candidates"],
                        "Improvement of the pooled decision likelihood (summed over the runs) by "
@@ -854,7 +998,9 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
     Warns
     -----
     PoolingWarning
-        The recordings give different subjects, tasks or K_theta.
+        The recordings give different subjects, tasks or K_theta, or differ in
+        the task the diagnosis reads (sample rate, controlled element,
+        control_gain, forcing functions; :func:`pooling_disagreements`).
     EvidenceWarning
         Per run, as for :func:`~bayespilot.diagnose.diagnose` (kept in that
         run's ``runs[j]["evidence_notes"]``); with ``n_calibrate > 0`` and a

@@ -169,6 +169,17 @@ def _no_describing_function(result: DiagnosisResult) -> str:
             f"forcing functions over whole periods of the record (81.92 s for the paper's).")
 
 
+def _notes_html(notes: Sequence[tuple[str, str]]) -> str:
+    """The evidence notes (the EvidenceWarnings a diagnosis kept in ``evidence_notes``) as a
+    section of the page: ``(run, note)`` pairs, ``run`` "" for a single run; "" without any."""
+    if not notes:
+        return ""
+    items = "".join(f"<li>{f'<b>{html.escape(run)}</b>: ' if run else ''}{html.escape(note)}"
+                    f"</li>" for run, note in notes)
+    return ("<h2>Notes on the evidence</h2><p>What the diagnosis could not use, or read with "
+            f"an assumption (its EvidenceWarnings):</p><ul>{items}</ul>")
+
+
 def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure:
     """Visual and motion-channel describing functions: data, base model, extended model.
 
@@ -1133,7 +1144,8 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         ``result.posterior`` is set), each figure's other formats as
         ``<name>_pdf`` and ``<name>_svg``, ``json`` (``diagnosis.json``,
         :meth:`DiagnosisResult.to_json`), ``html`` (``report.html``, the
-        figures embedded) and ``manifest`` (:data:`MANIFEST`, the hidden
+        figures embedded, and under "Notes on the evidence" each of the
+        diagnosis's EvidenceWarnings, ``settings["evidence_notes"]``) and ``manifest`` (:data:`MANIFEST`, the hidden
         list of the figure files written, with their SHA-256: a later report
         removes a stale figure only if this list has it and it is unchanged;
         in a folder without one, of a release before it, only a stale PNG
@@ -1224,6 +1236,7 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
 Base model: -ln L (Eq. 4) = {result.base['neg_log_lik']:.2f}, VAF = {result.base['vaf']:.2f} %.
 Decision at family-wise level alpha = {result.settings['alpha']:g}
 ({result.settings['level_per_candidate']:.2g} per candidate). Time {result.elapsed:.1f} s.</p>
+{_notes_html([("", n) for n in (result.settings or {}).get("evidence_notes", ())])}
 <h2>Candidates</h2>
 {_candidate_table(result.ranking, result.units)}
 {cal}
