@@ -22,6 +22,7 @@ shrink as 1/sqrt(rate) at other rates).
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -102,13 +103,19 @@ class TrackingTask:
         Simulated time before the measurement window starts, s.
     task : {"FD", "FT", "other"}
         Label written to the recording.
+    forcing_scale : str, float or None, default None
+        The amplitude scale :meth:`paper` applied to Table 2 (a key of
+        :data:`bayespilot.presets.FORCING_SCALE` or a number), which
+        :func:`simulate` records in its settings; None for forcing functions
+        of your own, whose amplitudes are as given.
 
     Raises
     ------
     ValueError
         On a non-finite or out-of-range number, an unknown task label, a
-        controlled element of relative degree below 2, or a forcing line at
-        or above the Nyquist frequency.
+        controlled element of relative degree below 2, a forcing line at
+        or above the Nyquist frequency, or a ``forcing_scale`` that is
+        neither None, a key of ``FORCING_SCALE`` nor a number >= 0.
     """
 
     target: Multisine
@@ -120,6 +127,7 @@ class TrackingTask:
     duration: float = presets.T0
     run_in: float = presets.T0 / 2
     task: str = "other"
+    forcing_scale: str | float | None = None
 
     def __post_init__(self) -> None:
         for name in ("motion_gain", "control_gain", "sample_rate_hz", "duration", "run_in"):
@@ -132,6 +140,13 @@ class TrackingTask:
             raise ValueError("sample_rate_hz and duration must be > 0 and run_in >= 0")
         if self.task not in ("FD", "FT", "other"):
             raise ValueError(f"task must be 'FD', 'FT' or 'other', got {self.task!r}")
+        scale = self.forcing_scale
+        if isinstance(scale, numbers.Real) and not isinstance(scale, (bool, np.bool_)) \
+                and math.isfinite(scale) and scale >= 0:
+            object.__setattr__(self, "forcing_scale", float(scale))
+        elif not (scale is None or (isinstance(scale, str) and scale in presets.FORCING_SCALE)):
+            raise ValueError(f"forcing_scale must be None, one of {sorted(presets.FORCING_SCALE)} "
+                             f"or a number >= 0, got {scale!r}")
         num, den = self.controlled_element
         num = np.atleast_1d(np.asarray(num, float))
         den = np.atleast_1d(np.asarray(den, float))
@@ -181,12 +196,18 @@ class TrackingTask:
         motion_gain : float
             K_theta.
         scale : str or float
-            Forcing amplitude scale, see :func:`bayespilot.presets.paper_forcing`.
+            Forcing amplitude scale, see :func:`bayespilot.presets.paper_forcing`;
+            kept as the task's ``forcing_scale``.
         **kwargs
             Overrides of the other fields (e.g. ``duration``).
+
+        Returns
+        -------
+        TrackingTask
         """
         ft, fd = presets.paper_forcing(task, scale)
-        return cls(ft, fd, motion_gain=float(motion_gain), task=task, **kwargs)
+        return cls(ft, fd, motion_gain=float(motion_gain), task=task, forcing_scale=scale,
+                   **kwargs)
 
     @property
     def n_samples(self) -> int:
@@ -471,7 +492,10 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     forcing_scale : str or float, optional
         Amplitude scale of a preset task's forcing functions (default
         ``"paper_simulation"``; see :meth:`TrackingTask.paper`); refused
-        beside a TrackingTask, as ``motion_gain`` is.
+        beside a TrackingTask, as ``motion_gain`` is.  The scale applied is
+        recorded in ``settings["forcing_scale"]``: for a TrackingTask its
+        ``forcing_scale`` (that of :meth:`TrackingTask.paper`; None for
+        forcing functions of your own, whose amplitudes are as given).
 
     Returns
     -------
@@ -534,8 +558,8 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
                          f"carries its own (K_theta = {task.motion_gain:g}): build the task with "
                          f"what you want (e.g. TrackingTask.paper(..., motion_gain=...))")
     motion_gain = 1.0 if motion_gain is None else motion_gain
-    forcing_scale = "paper_simulation" if forcing_scale is None else forcing_scale
     if isinstance(task, str):
+        forcing_scale = "paper_simulation" if forcing_scale is None else forcing_scale
         if task not in ("FD", "FT"):
             raise ValueError(f"task must be 'FD', 'FT' or a TrackingTask, got {task!r}")
         tt = TrackingTask.paper(task, motion_gain, scale=forcing_scale)
@@ -622,7 +646,7 @@ def simulate(model: PilotModel | None = None, params: Mapping[str, float] | None
     chans = {c.name: {"pre": xpre[i].copy(), "post": qpost[i].copy()}
              for i, c in enumerate(model.channels)}
     settings = {"oversample": oversample, "T_n": T_n, "noise_psd": psd, "run_in": tt.run_in,
-                "duration": tt.duration, "forcing_scale": forcing_scale,
+                "duration": tt.duration, "forcing_scale": tt.forcing_scale,
                 "requested_remnant_fraction": remnant_fraction}
     return Simulation(rec, model.as_dict(theta, full=True), n, chans, kn, remnant_fraction_value,
                       seed, settings)
