@@ -508,42 +508,16 @@ def _simulate_and_write(out: str | Path, params: Mapping[str, float], *, task: s
     return sim, csv_path, json_path
 
 
-def _too_short_for_delays(model, recording, params: Mapping[str, float]) -> str | None:
-    """Why ``recording`` is too short for ``model`` at ``params``, or None.
-
-    The likelihood needs each channel's time delay to be shorter than the
-    record by more than ``kernels._response.DELAY_MARGIN`` (4) samples (at the
-    channel's rate: the recording's, times its ``oversample``); otherwise -ln L
-    is +inf, as for an unstable model.
-    """
-    from .kernels._response import DELAY_MARGIN  # (the kernel's own rule)
-
-    values = model.as_dict(model.full_vector(params), full=True)
-    dt = recording.dt
-    for ch in model.channels:
-        tau = abs(values[ch.delay])
-        m = ch.oversample
-        steps = tau / (dt / m)  # the delay in samples at the channel's rate, as the kernel has it
-        if not steps < recording.n_samples * m - DELAY_MARGIN:
-            need = recording.n_samples + 1
-            while not steps < need * m - DELAY_MARGIN:
-                need += 1
-            return (f"{recording.source or 'this recording'}: the record is too short for the "
-                    f"pilot model: {recording.n_samples} sample(s) ({recording.duration:g} s), "
-                    f"and the {ch.name} channel's delay {ch.delay} = {tau:g} s needs at least "
-                    f"{need} ({need * dt:g} s at {recording.sample_rate_hz:g} Hz)")
-    return None
-
-
 def _likelihood(model, recording, params: Mapping[str, float], initial: str = "periodic",
                 discard: float | None = None):
     """(-ln L, VAF %) of ``model`` on ``recording``, after the first ``discard`` s (None: as
     the fitters choose, the start-up of a record not known to be whole periods).
 
     A non-finite -ln L is a usage error (exit 2) when the record is shorter
-    than a channel's delay needs (:func:`_too_short_for_delays`), else a
-    failure (exit 1): the model is unstable at ``params``.
+    than a channel's delay needs (:func:`bayespilot.fit.three_step._too_short_for_delays`,
+    the fitters' rule), else a failure (exit 1): the model is unstable at ``params``.
     """
+    from .fit.three_step import _too_short_for_delays
     from .likelihood import Likelihood, PerfectFitWarning, _startup_default
 
     if discard is None:  # as the fitters: a record not known to be whole periods: start-up out

@@ -291,12 +291,16 @@ def _decision_reason(log_bf: float, err: float, decision: str, note: str = "", *
 
 
 def _verdict(log_bf: float, err: float, decision: str, note: str = "", *,
-             level: float = DECISION_LEVEL, z: float = DECISION_Z) -> str:
+             level: float = DECISION_LEVEL, z: float = DECISION_Z,
+             identified: bool = True) -> str:
     """"(<Jeffreys category>, favours <model>) -> decision: <decision> (<why>)" of the
-    summaries; the reason whenever the decision is not the model ln BF points to."""
+    summaries; the reason whenever the decision is not the model ln BF points to.  With a
+    threshold the record does not identify (``identified=False``: the two models are the same
+    on it, and ln BF is sampling noise) the label is "(not identified)", favouring neither."""
     why = _decision_reason(log_bf, err, decision, note, level=level, z=z)
-    return (f"({jeffreys_category(log_bf)}, favours {_favours(log_bf)})  -> decision: "
-            f"{decision}" + (f" ({why})" if why else ""))
+    label = (f"{jeffreys_category(log_bf)}, favours {_favours(log_bf)}" if identified
+             else "not identified")
+    return f"({label})  -> decision: {decision}" + (f" ({why})" if why else "")
 
 
 # --- nested sampling -------------------------------------------------------------------------
@@ -753,13 +757,25 @@ class SavageDickey:
         return cls(**{**d, "valid": valid})
 
 
+#: Largest KDE grid of :func:`savage_dickey` (points).
+_SD_GRID_MAX = 2**16
+#: :func:`savage_dickey` is valid only with a KDE bandwidth of at least this many grid steps:
+#: half-normal draws (2000 to 200000 of them) gave ln p(0) within 0.1 of the truth down to
+#: half a step, and 0.15 to 3 nats too high below a third.
+_SD_MIN_BW_STEPS = 0.5
+
+
 def savage_dickey(draws: Sequence[float] | np.ndarray, *, lower: float = 0.0, upper: float = 0.1,
                   prior_density: float | None = None, min_near: int = 50) -> SavageDickey:
     """Savage-Dickey ln BF (free : fixed at ``lower``) from draws of a parameter on [lower, upper].
 
     The nested value is the prior's lower bound, so the posterior density is
     estimated there with a boundary-corrected KDE (arviz, reflection at the
-    bounds) on [lower, upper].
+    bounds) on [lower, upper], with about 16 grid points per standard deviation of
+    the draws.  A posterior too narrow for that within 2**16 points has its KDE on
+    [lower, lower + 2 (max(draws) - lower)] instead; when the bandwidth is still
+    under half a grid step (draws piled up at ``lower`` with a few far away), the
+    estimate is not valid.
 
     Parameters
     ----------
@@ -810,15 +826,35 @@ def savage_dickey(draws: Sequence[float] | np.ndarray, *, lower: float = 0.0, up
                             "no posterior density to estimate", None, p0, math.nan, math.nan,
                             int(x.size), int(np.sum(x == lower)))
     az = _arviz()
-    grid_len = int(min(2**16, max(512, 2 ** math.ceil(math.log2(
-        16 * (upper - lower) / max(np.std(x), 1e-12 * (upper - lower)))))))
+
+    def wanted(hi: float) -> int:  # grid points for 16 per standard deviation on [lower, hi]
+        return 2 ** math.ceil(math.log2(16 * (hi - lower) / max(np.std(x), 1e-12 * (hi - lower))))
+
+    # A posterior narrower than the 2**16 points on [lower, upper] resolve (a grid step
+    # coarser than the KDE's bandwidth) had its density at lower overestimated by up to 2.6
+    # nats, as valid: its KDE is then made on [lower, hi], the draws' range and as much again
+    # (room for the reflection at hi, which does not reach lower), at the same 16 points per
+    # standard deviation.  Wider posteriors keep [lower, upper].
+    hi = upper
+    if wanted(upper) > _SD_GRID_MAX:
+        hi = min(upper, lower + 2.0 * (float(np.max(x)) - lower))
+    grid_len = int(min(_SD_GRID_MAX, max(512, wanted(hi))))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        grid, pdf, bw = az.kde(x, bound_correction=True, custom_lims=(lower, upper),
+        grid, pdf, bw = az.kde(x, bound_correction=True, custom_lims=(lower, hi),
                                grid_len=grid_len, bw_return=True)
     dens = float(pdf[0])
     n_near = int(np.sum(x <= lower + 2.0 * bw))
     ln_prior = math.log(p0)
+    step = (hi - lower) / grid_len
+    if n_near >= min_near and dens > 0 and not bw >= _SD_MIN_BW_STEPS * step:
+        # (draws piled up at lower with a few far away: the grid cannot be narrowed to them)
+        return SavageDickey(None, False, f"the KDE bandwidth {bw:.3g} is under "
+                            f"{_SD_MIN_BW_STEPS:g} of its grid's step {step:.3g} on [{lower:g}, "
+                            f"{hi:g}]: the posterior near {lower:g} is narrower than the grid "
+                            "resolves, so its density there cannot be estimated from these "
+                            "draws; use the nested-sampling ln BF", None, p0, dens, float(bw),
+                            int(x.size), n_near)
     if n_near >= min_near and dens > 0:
         return SavageDickey(ln_prior - math.log(dens), True,
                             f"{n_near} of {x.size} draws within 2 bandwidths of {lower:g}",
@@ -1131,6 +1167,14 @@ class Comparison:
         """Jeffreys' name for the strength of the evidence."""
         return jeffreys_category(self.log_bayes_factor)
 
+    @property
+    def threshold_identified(self) -> bool:
+        """False when the record does not identify ``delta_abs`` (its channel's input is zero
+        throughout: the two models are the same on it; ``settings["threshold_identified"]``,
+        True for a comparison saved before it was recorded)."""
+        s = self.settings if isinstance(self.settings, Mapping) else {}
+        return s.get("threshold_identified", True) is not False
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (the keys of the CLI's ``--json``); a copy: changing it leaves the
         comparison as it is."""
@@ -1143,7 +1187,8 @@ class Comparison:
             "decision_note": self.settings.get("decision_note", ""),
             "plateau_probability": self.plateau_probability,
             "jeffreys_category": self.category,
-            "favours": _favours(self.log_bayes_factor),
+            "favours": _favours(self.log_bayes_factor) if self.threshold_identified
+            else "neither",
             "log_evidence_threshold": self.evidence_threshold.log_z,
             "log_evidence_threshold_err": self.evidence_threshold.log_z_err,
             "log_evidence_none": self.evidence_none.log_z,
@@ -1285,7 +1330,8 @@ class Comparison:
             + _verdict(self.log_bayes_factor, self.log_bayes_factor_err, self.decision,
                        self.settings.get("decision_note") or "",
                        level=self.settings.get("decision_level", DECISION_LEVEL),
-                       z=self.settings.get("decision_z", DECISION_Z)),
+                       z=self.settings.get("decision_z", DECISION_Z),
+                       identified=self.threshold_identified),
             f"  ln Z threshold = {e1.log_z:.2f} +- {e1.log_z_err:.2f}, none = {e0.log_z:.2f} +- "
             f"{e0.log_z_err:.2f} (dynesty, nlive {e1.settings.get('nlive')})",
             f"  {sd_line}",
@@ -1447,10 +1493,28 @@ def plateau_onset(model: PilotModel, recording: Recording,
     return None if i is None else float(np.quantile(i, 1.0 - active_fraction))
 
 
+def _silent_threshold(lik: Likelihood) -> str | None:
+    """"<channel> channel's input (<source>)" of the channel whose input is zero throughout
+    ``lik``'s record and that owns the threshold (it is then not identified), or None."""
+    from .likelihood import _silent_channels
+
+    for ch, own in _silent_channels(lik.model, lik.X):
+        if THRESHOLD in own:
+            return f"{ch.name} channel's input ({ch.source})"
+    return None
+
+
 def _guarded_decision(log_bf: float, err: float, mode_ok: bool, plateau: float | None,
-                      onset: float | None = None) -> tuple[str, str]:
-    """:func:`decide`, then two guards; returns (decision, why it was changed or "")."""
+                      onset: float | None = None, silent: str | None = None) -> tuple[str, str]:
+    """:func:`decide`, then three guards; returns (decision, why it was changed or "").
+
+    ``silent``: the channel (its name and input) whose input is zero throughout the record,
+    so that the threshold is not identified and the two models are the same: "inconclusive",
+    whatever ln BF's sampling noise says."""
     d = decide(log_bf, err)
+    if silent is not None:
+        return "inconclusive", (f"{THRESHOLD} is not identified: the {silent} is zero "
+                                "throughout the record, so the two models are the same on it")
     if d == "none" and not mode_ok:
         return "inconclusive", ("every nested-sampling run with threshold lost the main mode, so "
                                 "ln BF is only a lower bound and cannot favour 'none'")
@@ -1742,9 +1806,11 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     i_max = threshold_input_max(model, recording)
     onset = plateau_onset(model, recording)
     plateau = None if onset is None else ev1.probability(THRESHOLD, onset)
-    decision, why = _guarded_decision(log_bf, err, mode_ok, plateau, onset)
+    silent = _silent_threshold(nll1.lik)
+    decision, why = _guarded_decision(log_bf, err, mode_ok, plateau, onset, silent)
     settings.update(max_threshold_input=i_max, plateau_onset=onset,
-                    plateau_active_fraction=PLATEAU_ACTIVE_FRACTION, decision_note=why)
+                    plateau_active_fraction=PLATEAU_ACTIVE_FRACTION, decision_note=why,
+                    threshold_identified=silent is None)
     return Comparison(float(log_bf), float(err), decision, ev1, ev0, sd, ic, settings,
                       seed, time.perf_counter() - t0, recording.source, plateau)
 

@@ -16,7 +16,9 @@ at 0 (Step III is then empty).
 
 from __future__ import annotations
 
+import math
 import time
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -71,12 +73,57 @@ def _check_steps(model: PilotModel, **steps: Any) -> None:
                              f"{v!r}: a grid over them in such steps has no point inside them")
 
 
+def _too_short_for_delays(model: PilotModel, recording: Recording,
+                          params: Mapping[str, float] | None = None) -> str | None:
+    """Why ``recording`` is too short for ``model``'s delays, or None: the one rule, used by
+    the fitters (:func:`_check_fittable`) and the command line's ``loglik``.
+
+    The likelihood needs each channel's time delay to be shorter than the record by more
+    than ``kernels._response.DELAY_MARGIN`` (4) samples (at the channel's rate: the
+    recording's, times its ``oversample``); otherwise -ln L is +inf, as for an unstable
+    model.  With ``params`` (values by name) the delays are those values; with None each
+    free delay is taken at the larger magnitude of its bounds, the furthest a fit may take
+    it (a fixed one at its value): a record too short there leaves part of the search box at
+    +inf, and starts there never leave it.
+    """
+    from ..kernels._response import DELAY_MARGIN  # (the kernel's own rule)
+
+    at_bound = params is None
+    values = model.as_dict(model.full_vector(params), full=True)
+    dt = recording.dt
+    n = recording.n_samples
+    for ch in model.channels:
+        if at_bound and ch.delay not in model.fixed:
+            par = model.parameter(ch.delay)
+            tau = max(abs(float(par.lower)), abs(float(par.upper)))
+        else:
+            tau = abs(values[ch.delay])
+        m = ch.oversample
+        steps = tau / (dt / m)  # the delay in samples at the channel's rate, as the kernel has it
+        if not steps < n * m - DELAY_MARGIN:
+            need = max(n + 1, int(math.floor((steps + DELAY_MARGIN) / m)))
+            while not steps < need * m - DELAY_MARGIN:
+                need += 1
+            where = recording.source or ("the recording" if at_bound else "this recording")
+            said = (f"a fit may take the {ch.name} channel's delay {ch.delay} up to its bound "
+                    f"{tau:g} s, which" if at_bound
+                    else f"the {ch.name} channel's delay {ch.delay} = {tau:g} s")
+            hint = (f"; use a longer record, or (in Python) fix {ch.delay} at a value the "
+                    f"record can hold (model.fix({ch.delay}=...))" if at_bound else "")
+            return (f"{where}: the record is too short for the pilot model: {n} sample(s) "
+                    f"({recording.duration:g} s), and {said} needs at least {need} "
+                    f"({need * dt:g} s at {recording.sample_rate_hz:g} Hz){hint}")
+    return None
+
+
 def _check_fittable(recording: Recording, model: PilotModel, discard: float) -> None:
     """Refuse a recording a fit cannot say anything about (a RecordingError, a ValueError
     the CLI reports as bad input), before fitting: fewer samples
-    after ``discard`` than four per free parameter, or a control output u that is constant
-    over them (nothing to fit; the VAF is undefined).  Fitted anyway, they gave an infinite
-    -ln L or a VAF of -inf without a word."""
+    after ``discard`` than four per free parameter, a record shorter than a channel's delay
+    may reach within the bounds (:func:`_too_short_for_delays`: -ln L is +inf there), or a
+    control output u that is constant over them (nothing to fit; the VAF is undefined).
+    Fitted anyway, they gave an infinite -ln L, garbage parameters or a VAF of -inf without
+    a word."""
     from ..recording import RecordingError
 
     skip = int(round(float(discard) / recording.dt)) if discard else 0
@@ -90,6 +137,9 @@ def _check_fittable(recording: Recording, model: PilotModel, discard: float) -> 
         raise RecordingError(f"{recording.source or 'the recording'}: the control output u is "
                          f"constant ({u[0]:g}){f' after the first {discard:g} s' if skip else ''}"
                          ": there is nothing to fit")
+    short = _too_short_for_delays(model, recording)
+    if short is not None:
+        raise RecordingError(short)
     _warn_offset(recording, u, skip, discard)
     _warn_unnamed_threshold(model)
 

@@ -25,7 +25,7 @@ from ._blocks import (MOD_NONE, NL_NONE, STAGE_FIXED, STAGE_HIGHPASS1, STAGE_HIG
                       nonlinearity,
                       nonlinearity_tangent, param_or, stable, stage_tf, tustin)
 from ._response import (_tap, _with_lead_in, any_oversampled, fine_lead_in, lead_in,
-                        oversampling, periodic_state, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
+                        oversampling, periodic_state_tangent, CH_DELAY, CH_GAIN0, CH_GAIN1, CH_LEAD, CH_MOD_KIND, CH_MOD_P0,
                         CH_NL_KIND, CH_NL_P0, CH_NL_P1, CH_NSTAGES, CHF_GAIN_CONST, CHF_SIGN,
                         OUT_NL_KIND, OUT_NL_P0, OUT_NL_P1, OUT_OMEGA, OUT_ZETA)
 
@@ -100,19 +100,23 @@ def _filter_tangent(x, dx, B0, B1, B2, A1, A2, dB0, dB1, dB2, dA1, dA2, periodic
     dy1 = 0.0
     dy2 = 0.0
     if periodic and n >= 2:
+        # the zero-state run in delta form, as in _response._filter_biquad (v = y_k - y_k-1
+        # and its tangent dv): v_k = in_k - c0 y_k-1 + A2 v_k-1, and along the tangent
+        # dv_k = din_k - dc0 y_k-1 + dA2 v_k-1 - c0 dy_k-1 + A2 dv_k-1
         x1, x2, dx1, dx2 = x[n - 1], x[n - 2], dx[n - 1], dx[n - 2]
+        c0 = (1.0 + A1) + A2
+        dc0 = dA1 + dA2
+        v1 = 0.0
+        dv1 = 0.0
         for k in range(n):
             xk = x[k]
             dxk = dx[k]
-            yk = B0 * xk + B1 * x1 + B2 * x2 - A1 * y1 - A2 * y2
-            dyk = (dB0 * xk + dB1 * x1 + dB2 * x2 - dA1 * y1 - dA2 * y2
-                   + B0 * dxk + B1 * dx1 + B2 * dx2 - A1 * dy1 - A2 * dy2)
-            x2, x1, y2, y1 = x1, xk, y1, yk
-            dx2, dx1, dy2, dy1 = dx1, dxk, dy1, dyk
-        T = np.array([[-A1, -A2, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0],
-                      [-dA1, -dA2, -A1, -A2], [0.0, 0.0, 1.0, 0.0]])
-        z = periodic_state(T, np.array([y1, y2, dy1, dy2]), n)
-        y1, y2, dy1, dy2 = z[0], z[1], z[2], z[3]
+            vk = B0 * xk + B1 * x1 + B2 * x2 - c0 * y1 + A2 * v1
+            dvk = (dB0 * xk + dB1 * x1 + dB2 * x2 - dc0 * y1 + dA2 * v1
+                   + B0 * dxk + B1 * dx1 + B2 * dx2 - c0 * dy1 + A2 * dv1)
+            x2, x1, y1, v1 = x1, xk, y1 + vk, vk
+            dx2, dx1, dy1, dv1 = dx1, dxk, dy1 + dvk, dvk
+        y1, y2, dy1, dy2 = periodic_state_tangent(A1, A2, dA1, dA2, y1, v1, dy1, dv1, n)
         x1, x2, dx1, dx2 = x[n - 1], x[n - 2], dx[n - 1], dx[n - 2]
     for k in range(n):
         xk = x[k]
