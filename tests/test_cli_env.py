@@ -651,3 +651,25 @@ def test_diagnose_batch_asks_for_progress_lines(capsys, monkeypatch, rc):
     code, _, err = _run(capsys, "diagnose-batch", rc / "run", "--out", rc / "o")
     assert code == 1 and "stopped by the test" in err, err
     assert seen["progress"] == "lines"
+
+
+def test_replicate_says_the_campaigns_warnings_as_its_lines(capsys, monkeypatch, tmp_path):
+    """run_campaign's RuntimeWarnings (the fits' warnings said once per kind, workers that did
+    not say their version) are the command's 'bayespilot: warning:' lines, not Python's
+    '<file>:<line>: RuntimeWarning:' display."""
+    import warnings
+
+    import bayespilot.campaign
+
+    def run_campaign(jobs, out, **kwargs):
+        warnings.warn("QuestionableRecordingWarning in 2 fit(s) (a, b), e.g. a: offset",
+                      RuntimeWarning)
+        _stopped()
+
+    monkeypatch.setattr(bayespilot.campaign, "run_campaign", run_campaign)
+    code, _, err = _run(capsys, "replicate", "--realizations", "1", "--tasks", "FD",
+                        "--motion-gains", "1", "--remnant-fractions", "0.2", "--method", "fast",
+                        "--out", tmp_path / "o")
+    assert code == 1 and "stopped by the test" in err, err
+    assert ("bayespilot: warning: QuestionableRecordingWarning in 2 fit(s) (a, b), e.g. a: "
+            "offset\n") in err and "RuntimeWarning" not in err, err

@@ -792,9 +792,11 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
                f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on {where} "
                f"-> {out}")
     try:
-        summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
-                               progress=_cluster_progress(args),
-                               connect_timeout=args.connect_timeout)
+        # (its warnings, the fits' said once per kind and the cluster's, as the command's lines)
+        with _warnings_of(RuntimeWarning, _warning_line):
+            summary = run_campaign(jobs, out, scheduler=args.scheduler, workers=args.workers,
+                                   progress=_cluster_progress(args),
+                                   connect_timeout=args.connect_timeout)
     except CampaignError as exc:
         raise CommandFailed(str(exc)) from None
     _say(args, str(summary))
