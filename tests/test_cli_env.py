@@ -673,3 +673,40 @@ def test_replicate_says_the_campaigns_warnings_as_its_lines(capsys, monkeypatch,
     assert code == 1 and "stopped by the test" in err, err
     assert ("bayespilot: warning: QuestionableRecordingWarning in 2 fit(s) (a, b), e.g. a: "
             "offset\n") in err and "RuntimeWarning" not in err, err
+
+
+def test_scheduler_file_is_read_for_the_address(capsys, monkeypatch, tmp_path):
+    """--scheduler-file FILE (dask scheduler --scheduler-file, dask-mpi, dask-jobqueue): the
+    address is read from the JSON, waited for while the scheduler starts; a missing file is
+    exit 1 after --connect-timeout, a file without an address exit 2, --workers beside it
+    exit 2."""
+    import threading
+
+    import bayespilot.campaign
+
+    seen = {}
+
+    def run_campaign(jobs, out, *, scheduler, **kwargs):
+        seen["scheduler"] = scheduler
+        _stopped()
+
+    monkeypatch.setattr(bayespilot.campaign, "run_campaign", run_campaign)
+    base = ["replicate", "--realizations", "1", "--tasks", "FD", "--motion-gains", "1",
+            "--remnant-fractions", "0.2", "--method", "fast", "--out", tmp_path / "o"]
+    f = tmp_path / "scheduler.json"
+    later = threading.Timer(0.3, lambda: f.write_text(
+        '{"type": "Scheduler", "address": "tcp://10.0.0.5:8786", "workers": {}}'))
+    later.start()
+    code, _, err = _run(capsys, *base, "--scheduler-file", f, "--connect-timeout", "10")
+    later.join()
+    assert code == 1 and "stopped by the test" in err and seen["scheduler"] == "tcp://10.0.0.5:8786"
+    seen.clear()
+    code, _, err = _run(capsys, *base, "--scheduler-file", tmp_path / "none.json",
+                        "--connect-timeout", "0.2")
+    assert code == 1 and "none.json: no scheduler file after 0.2 s" in err and not seen, err
+    (tmp_path / "bad.json").write_text('{"address": "tcp://host/"}')
+    code, _, err = _run(capsys, *base, "--scheduler-file", tmp_path / "bad.json",
+                        "--connect-timeout", "0.2")
+    assert code == 2 and "bad.json: not a dask scheduler address" in err and not seen, err
+    code, _, err = _run(capsys, *base, "--scheduler-file", f, "--workers", "2")
+    assert code == 2 and "give --scheduler-file (an existing cluster) or --workers" in err

@@ -150,6 +150,47 @@ def _scheduler_address(text: str) -> str:
     return text
 
 
+def _cluster_choice(args: argparse.Namespace) -> None:
+    """Check and settle replicate's and diagnose-batch's cluster options: --scheduler or
+    --workers, not both; --scheduler-file read into ``args.scheduler`` (the address the
+    scheduler wrote there, as ``dask scheduler --scheduler-file``, dask-mpi and
+    dask-jobqueue write it), waiting up to --connect-timeout for the file to appear (a
+    job script starts the scheduler and the command together)."""
+    import json
+    import time
+
+    path = getattr(args, "scheduler_file", None)
+    if (args.scheduler is not None or path is not None) and args.workers is not None:
+        raise UsageError(f"give {'--scheduler' if path is None else '--scheduler-file'} (an "
+                         f"existing cluster) or --workers (a local one), not both")
+    if path is None:
+        return
+    deadline = time.monotonic() + args.connect_timeout
+    while True:
+        try:
+            with open(path, encoding="utf-8") as fh:
+                text = fh.read()
+            info = json.loads(text)
+            address = info["address"] if isinstance(info, dict) else None
+            break
+        except FileNotFoundError:
+            if time.monotonic() >= deadline:
+                raise CommandFailed(f"{path}: no scheduler file after {args.connect_timeout:g} "
+                                    f"s (is the dask scheduler started with --scheduler-file "
+                                    f"{path}?)") from None
+        except (OSError, ValueError, KeyError) as exc:
+            if time.monotonic() >= deadline:  # (a file being written: read again)
+                raise UsageError(f"argument --scheduler-file: {path}: not a dask scheduler "
+                                 f"file ({exc.__class__.__name__}: {exc}); it holds the "
+                                 f"scheduler's address as JSON, {{\"address\": "
+                                 f"\"tcp://HOST:PORT\", ...}}") from None
+        time.sleep(0.5)
+    try:
+        args.scheduler = _scheduler_address(address if isinstance(address, str) else "")
+    except argparse.ArgumentTypeError as exc:
+        raise UsageError(f"argument --scheduler-file: {path}: {exc}") from None
+
+
 def _oversample(text: str) -> int:
     """An argparse type: an oversampling factor, 1 to model.MAX_OVERSAMPLE."""
     from .model import MAX_OVERSAMPLE
@@ -772,9 +813,7 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
     from .campaign import (CampaignError, load_results, paper_study, run_campaign, summarise,
                            summary_markdown, write_summary_csv)
 
-    if args.scheduler is not None and args.workers is not None:
-        raise UsageError("give --scheduler (an existing cluster) or --workers (a local one), "
-                         "not both")
+    _cluster_choice(args)
     try:
         jobs = paper_study(args.realizations, tasks=args.tasks, motion_gains=args.motion_gains,
                            remnant_fractions=args.remnant_fractions,
@@ -1447,9 +1486,7 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
                                  _the_recording, diagnose_batch)
     from .diagnose.locate import EvidenceWarning
 
-    if args.scheduler is not None and args.workers is not None:
-        raise UsageError("give --scheduler (an existing cluster) or --workers (a local one), "
-                         "not both")
+    _cluster_choice(args)
     _load_extensions(args.extension)
     paths = _recordings_in(args.recording)
     read = [f for p in paths for f in _recording_files(p)]
@@ -1688,9 +1725,14 @@ def _diagnose_arguments(p: argparse.ArgumentParser, seed_help: str | None = None
 
 def _cluster_arguments(p: argparse.ArgumentParser) -> None:
     """--scheduler, --workers and --connect-timeout, as replicate and diagnose-batch take them."""
-    p.add_argument("--scheduler", type=_scheduler_address, metavar="ADDRESS",
-                   help="address of a running dask scheduler, [tcp://]HOST:PORT, e.g. "
-                        "tcp://host:8786 (default: a local cluster)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--scheduler", type=_scheduler_address, metavar="ADDRESS",
+                       help="address of a running dask scheduler, [tcp://]HOST:PORT, e.g. "
+                            "tcp://host:8786 (default: a local cluster)")
+    where.add_argument("--scheduler-file", type=_output_path, metavar="FILE",
+                       help="the JSON file a dask scheduler wrote its address to (dask "
+                            "scheduler --scheduler-file FILE, dask-mpi, dask-jobqueue); "
+                            "waited for up to --connect-timeout")
     p.add_argument("--workers", type=_count, metavar="N",
                    help="worker processes of the local cluster (default: one per core)")
     p.add_argument("--connect-timeout", type=_positive, default=10.0, metavar="S",
