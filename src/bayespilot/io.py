@@ -128,7 +128,8 @@ def _check_metadata(where: Any, obj: Mapping[str, Any], *, what: str = "key") ->
         raise _fail(where, f"unknown format {fmt!r} (expected {FORMAT!r})")
     problems = []  # every bad key, in one message
     rate = obj["sample_rate_hz"]
-    if not _is_number(rate) or not math.isfinite(rate) or rate <= 0:
+    rate_ok = _is_number(rate) and math.isfinite(rate) and rate > 0
+    if not rate_ok:
         problems.append(f"sample_rate_hz must be a positive finite number, got {rate!r}")
     kth = obj["motion_gain"]
     if not _is_number(kth) or not math.isfinite(kth) or kth < 0:
@@ -136,8 +137,9 @@ def _check_metadata(where: Any, obj: Mapping[str, Any], *, what: str = "key") ->
     task = obj["task"]
     if not isinstance(task, str) or task not in TASKS:
         problems.append(f"task must be one of {', '.join(repr(t) for t in TASKS)}, got {task!r}")
-    # the optional keys: the same checks as for a Recording built in Python
-    problems += _metadata_problems(obj)
+    # the optional keys: the same checks as for a Recording built in Python (the forcing's
+    # lines against the Nyquist frequency when the rate is a valid one)
+    problems += _metadata_problems(obj, float(rate) if rate_ok else None)
     if problems:
         raise _fail(where, "; ".join(problems))
 

@@ -31,7 +31,7 @@ from .kernels import _response as R
 from .kernels import _segmented as SEG
 from .model import FixedFilter, PilotModel
 from .noise import ARNoise
-from .recording import Recording
+from .recording import Recording, _columns_motion_gain
 
 __all__ = ["Likelihood", "PerfectFitWarning", "SilentChannelWarning", "NotWholePeriodsWarning",
            "STARTUP_DISCARD", "COLOURED_DISCARD", "channel_inputs", "neg_log_lik",
@@ -355,15 +355,24 @@ def _pitch_rate_at_start(recording: Recording) -> float | None:
     Without theta the record used to be tiled as if periodic; on a 30-s FD run (not whole
     periods) that gave K_m 0.655 where the fit with theta gave 0.698 (this estimate: 0.6975).
 
-    A recorded theta is checked against theta_ddot_m over the first :data:`RATE_WINDOW`
-    seconds (:func:`_rate_by_least_squares`).  Where the two agree but the difference does
+    When theta_ddot_m = c theta'' holds over the record with c off the sidecar's K_theta
+    (:func:`~bayespilot.recording._columns_motion_gain`, which
+    :func:`~bayespilot.recording.questionable` warns of), K_theta theta' is not the rate
+    theta_ddot_m presents, and c is taken for K_theta here (a sidecar K_theta of 1 for 0.5
+    made the fast fit's K_m 0.244, tau_m 0.06 and delta_abs 0.027 for 0.346, 0.200 and
+    0.0025 on the port audit's 2/s^2 run).  A recorded theta is then checked against
+    theta_ddot_m over the first :data:`RATE_WINDOW` seconds
+    (:func:`_rate_by_least_squares`).  Where the two agree but the difference does
     not (a noisy or coarsely quantised theta sensor: 2e-4 rad of noise made it 0.060 rad/s
     where the rate was 0.019, and the fast fit's K_m 20 % low), the least-squares rate is
     taken.  Where they agree only with theta turned round (theta logged with the other
     sign: the fast fit's K_m 21 % low), the rate of -theta: theta_ddot_m is what drives the
     canal model.  Where they disagree either way (motion logged after a washout or a
-    platform filter), and on a recording whose columns agree, the difference is kept as it
-    is: the results of a recording with a clean theta do not change.
+    platform filter), the rate from theta_ddot_m alone, as without theta: theta_ddot_m is
+    what drives the canal model, and that estimate does not depend on K_theta (it used to
+    be K_theta theta's rate, which followed a wrong sidecar K_theta).  On a recording whose
+    columns agree, the difference is kept as it is: the results of a recording with a
+    clean theta do not change.
     """
     if recording.n_samples < 3:
         return None
@@ -372,6 +381,13 @@ def _pitch_rate_at_start(recording: Recording) -> float | None:
         return _rate_from_acceleration(a, recording.dt)
     K = recording.motion_gain
     th = np.asarray(recording["theta"], dtype=float)
+    if K > 0:
+        # theta_ddot_m = c theta'' over the record with c off K_theta: the sidecar's
+        # motion_gain is not the run's (questionable() says so), and K_theta theta' is not the
+        # rate theta_ddot_m presents, while the first second's check below can pass with it (a
+        # theta that is nearly a parabola there: the audit's 2/s^2 run, K_m 0.244 for 0.346);
+        # the columns' c is the K_theta that theta_ddot_m presents
+        K = _columns_motion_gain(recording) or K
     rate = K * (-3.0 * th[0] + 4.0 * th[1] - th[2]) / (2.0 * recording.dt)
     if not K > 0:  # no motion: nothing to check theta against
         return rate
@@ -388,7 +404,10 @@ def _pitch_rate_at_start(recording: Recording) -> float | None:
         # 0.2 % of the rate's scale, a noisy sensor 60 % and more)
         return rate_ls if abs(sign * rate - rate_ls) > max(3.0 * stderr, 0.02 * scale) \
             else sign * rate
-    return rate
+    # neither sign agrees (motion logged after a filter; a K_theta off theta_ddot_m's that
+    # the whole-record check above could not judge): K_theta times theta's rate is not the
+    # rate theta_ddot_m presents, so the rate from theta_ddot_m alone, as without theta
+    return _rate_from_acceleration(a, recording.dt)
 
 
 def _cumulative(x: np.ndarray, dt: float) -> np.ndarray:

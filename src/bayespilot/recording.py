@@ -87,7 +87,14 @@ def questionable(recording: "Recording") -> list[str]:
         whose sign contradicts the others (e = f_t - theta; theta_ddot_m of
         the sign of K_theta theta''; theta = G(s) (K_delta_u u + f_d) with
         the sidecar's plant: each only when its columns are there, see
-        :data:`SIGN_R2_MIN`); an offset in e against f_t - theta over
+        :data:`SIGN_R2_MIN`); an identity that holds exactly (R^2 >=
+        :data:`GAIN_R2_MIN`) with a coefficient of another size than the
+        sidecar says, by more than :data:`GAIN_TOLERANCE` (theta_ddot_m = c
+        theta'' with c off motion_gain; theta = G(s) (K_delta_u u + f_d) with
+        a coefficient off 1: the sidecar's plant or control_gain is not the
+        run's, and the sentence says by what factor); an unknown key inside
+        ``controlled_element`` (the plant is num and den alone); an offset in
+        e against f_t - theta over
         :data:`OFFSET_RATIO` of std(e) that e carries (not a theta or f_t
         logged about another zero); spikes in u (:data:`SPIKE_K`,
         :data:`SPIKE_SD`; from :data:`LOW_SAMPLE_RATE_HZ` up); a constant bias in
@@ -130,6 +137,17 @@ def questionable(recording: "Recording") -> list[str]:
         if near is not None:
             reasons.append(f"unknown key {key!r} (did you mean {near!r}?): it is kept but "
                            f"ignored, as the recording format does with unknown keys")
+    plant = recording.metadata.get("controlled_element")
+    extra = [k for k in plant if k not in ("num", "den")] if isinstance(plant, Mapping) else []
+    if extra:
+        said = ", ".join(repr(k) + (f" (did you mean {near!r}?)"
+                                    if (near := _near_miss(k, ["num", "den"])) else "")
+                         for k in extra)
+        reasons.append(f"unknown key{'s' if len(extra) > 1 else ''} {said} in "
+                       f"controlled_element: kept but ignored, as the recording format does "
+                       f"with unknown keys; the plant is num(s)/den(s) alone, so a delay or "
+                       f"anything else given there is not in the plant diagnose simulates "
+                       f"(the fits do not use the plant): fold what matters into num and den")
     with np.errstate(all="ignore"):  # a record of extreme values says nothing, quietly
         reasons += _sign_problems(recording)
         spikes = _spike_problem(recording)
@@ -159,12 +177,31 @@ OFFSET_RATIO = 0.2
 #: coefficient 0.96 to 1.34, while a column of the other sign gives -1; a theta_ddot_m logged
 #: after a washout at 4 rad/s (R^2 0.11 to 0.42 on 18 simulated 81.92-s runs) or a platform,
 #: omega^2 / (s^2 + 1.4 omega s + omega^2) at 5 rad/s with 30 ms of delay (0.001 to 0.03), or
-#: a plant the sidecar does not describe, explains less and is not judged: only signs are
-#: checked; docs/recording-format.md gives the runs).
+#: a plant the sidecar does not describe, explains less and is not judged: here only signs
+#: are checked, sizes from :data:`GAIN_R2_MIN` up; docs/recording-format.md gives the runs).
 SIGN_R2_MIN = 0.5
 #: ... and only the coefficients of terms that carry at least this fraction of the left
 #: side's standard deviation (an all but zero f_t or f_d says nothing of its sign).
 SIGN_TERM_MIN = 0.1
+#: The gain checks (:func:`_gain_problem`): an identity that the columns meet this well
+#: (R^2, the least squares of :data:`SIGN_R2_MIN`) is taken as exact, and its judged
+#: coefficients are compared in size with what the sidecar says: theta_ddot_m's with
+#: motion_gain (K_theta), the plant's with 1 (the sidecar's plant and control_gain).
+GAIN_R2_MIN = 0.99
+#: ... and warned of when one is off by more than this fraction (|c / expected - 1|).  On
+#: 116 records simulated by the package (the paper's FD and FT tasks at K_theta 0.5, 0.75
+#: and 1, F_n 0, 0.15 and 0.3, 50, 100 and 1000 Hz, 10 to 81.92 s, a washout in the pilot
+#: model or not, u quantised to 8 bits; 28 of another lab's task: plants 2/s^2,
+#: 8/(s (s + 2)), 8/(s (s + 2) (0.05 s + 1)) and 2 (s + 1)/(s^2 (s + 5)) at 50 and 250 Hz,
+#: K_theta 0.5, single-forcing tasks) every R^2 was at least 0.9998 and every judged
+#: coefficient 0.977 to 1.016 of its expected value (theta_ddot_m's 1.000 to 1.016, u's
+#: 0.984 to 1.002, f_d's 0.977 to 1.000: the low-pass and central differences at 50 Hz),
+#: a quarter of the tolerance; so did 8 runs with u saturated in the loop (the catalogue's
+#: control saturation).  A u column clipped after the fact at 1.6 standard deviations
+#: reaches it (R^2 0.991, u's coefficient 1.10; at 1 standard deviation R^2 is 0.94 to 0.98
+#: and nothing is judged).  A sidecar K_theta of 1 for 0.5, a plant gain of 4 for 8, or a
+#: control_gain left out (the paper's 0.69 taken for 1) is off by 44 % and more.
+GAIN_TOLERANCE = 0.1
 #: The sign checks low-pass both sides of an identity (zero phase, 4th order) at the lower of
 #: this (Hz) and a fifth of the sample rate before differentiating, and leave out this many
 #: seconds (at most a tenth of the record) at each end, where the filter starts up.
@@ -255,12 +292,14 @@ _IDENTITIES = {
 
 
 @_one_blas_thread
-def _sign_statistics(recording: "Recording") -> dict[str, dict[str, Any]]:
+def _sign_statistics(recording: "Recording", only: str | None = None
+                     ) -> dict[str, dict[str, Any]]:
     """For each identity between the columns the recording has (:data:`_IDENTITIES`): the
     least-squares fit of its left side on its terms (each with the format's sign), as
     ``{"r2", "coef" (per term), "share" (|coef| * std(term) / std(left)), "corr" (as
     recorded)}``.  theta_ddot_m and the plant are compared after a zero-phase low-pass
-    (:data:`SIGN_CUTOFF_HZ`) and without :data:`SIGN_EDGE_S` at each end."""
+    (:data:`SIGN_CUTOFF_HZ`) and without :data:`SIGN_EDGE_S` at each end.  ``only``: the
+    one identity to compute (the likelihood's start state needs "motion" alone)."""
     sig = recording.signals
     n = recording.n_samples
     rate = recording.sample_rate_hz
@@ -279,14 +318,15 @@ def _sign_statistics(recording: "Recording") -> dict[str, dict[str, Any]]:
         return name in sig and bool(np.ptp(sig[name]) > 0)
 
     sides: dict[str, tuple[np.ndarray, list[np.ndarray]]] = {}
-    if moves("e") and moves("theta") and "f_t" in sig:
+    if only in (None, "error") and moves("e") and moves("theta") and "f_t" in sig:
         sides["error"] = (np.asarray(sig["e"], float)[keep],
                           [np.asarray(sig["f_t"], float)[keep],
                            -np.asarray(sig["theta"], float)[keep]])
-    if moves("theta") and recording.motion_gain > 0 and moves("theta_ddot_m"):
+    if only in (None, "motion") and moves("theta") and recording.motion_gain > 0 \
+            and moves("theta_ddot_m"):
         sides["motion"] = (low("theta_ddot_m")[keep],
                            [_poly_d(np.array([1.0, 0.0, 0.0]), low("theta"), recording.dt)[keep]])
-    if moves("theta") and moves("u") and "f_d" in sig:
+    if only in (None, "plant") and moves("theta") and moves("u") and "f_d" in sig:
         num, den = recording.controlled_element
         num = np.trim_zeros(num, "f")
         den = np.trim_zeros(den, "f")
@@ -357,6 +397,9 @@ def _sign_problems(recording: "Recording") -> list[str]:
                     f"e as the error the pilot saw, zero when on target, so an offset biases "
                     f"the fit (K_v, T_vl, K_m) and can make diagnose name a channel the pilot "
                     f"does not have; remove it from e")
+            gain = _gain_problem(recording, name, st)
+            if gain:
+                reasons.append(gain)
             continue
         positive = [c for c, b, k in zip(cols, big, st["coef"]) if b and k > 0]
         # turning round the left side and the positive terms is the same as turning round
@@ -373,6 +416,95 @@ def _sign_problems(recording: "Recording") -> list[str]:
             f"columns (the model needs e, u and theta_ddot_m with the recording format's "
             f"signs) and turn the wrong one round")
     return reasons
+
+
+def _plant_said(recording: "Recording") -> str:
+    """The sidecar's controlled element as said in messages."""
+    meta = recording.metadata
+    if meta.get("controlled_element") is not None:
+        return "the controlled element (controlled_element)"
+    if "controlled_element_gain" in meta:
+        return "the controlled element's gain (controlled_element_gain)"
+    return "the controlled element (the paper's 4/s^2: the sidecar gives none)"
+
+
+def _columns_motion_gain(recording: "Recording",
+                         st: Mapping[str, Any] | None = None) -> float | None:
+    """The K_theta of the columns, c in theta_ddot_m = c theta'' (the "motion" statistics of
+    :func:`_sign_statistics`, or ``st``), when the identity holds (R^2 >=
+    :data:`GAIN_R2_MIN`) with c of the right sign but off motion_gain by more than
+    :data:`GAIN_TOLERANCE`; else None (the columns agree with motion_gain, or cannot tell).
+    What :func:`questionable` warns of, and what makes the likelihood start the canal from
+    theta_ddot_m alone (:func:`bayespilot.likelihood._pitch_rate_at_start`)."""
+    if st is None:
+        try:
+            with np.errstate(all="ignore"):
+                st = _sign_statistics(recording, "motion").get("motion")
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):  # pragma: no cover
+            return None
+    if st is None or st["r2"] < GAIN_R2_MIN or st["share"][0] < SIGN_TERM_MIN:
+        return None
+    c = float(st["coef"][0])
+    return c if c > 0 and abs(c / recording.motion_gain - 1.0) > GAIN_TOLERANCE else None
+
+
+def _gain_problem(recording: "Recording", name: str, st: Mapping[str, Any]) -> str | None:
+    """A sentence on an identity (:data:`_IDENTITIES`) that the columns meet exactly (R^2 >=
+    :data:`GAIN_R2_MIN`) with a judged coefficient of the right sign but not the size the
+    sidecar says (off by more than :data:`GAIN_TOLERANCE`), or None: theta_ddot_m's against
+    motion_gain, and the plant's (u's against the sidecar's plant times control_gain, f_d's
+    against its plant)."""
+    if st["r2"] < GAIN_R2_MIN or name not in ("motion", "plant"):
+        return None
+    judged = st["share"] >= SIGN_TERM_MIN
+    if name == "motion":
+        K = recording.motion_gain
+        c = _columns_motion_gain(recording, st)
+        if c is None:
+            return None
+        return (f"theta_ddot_m = K_theta theta'' holds (R^2 {st['r2']:.4f}) with K_theta = "
+                f"{c:.3g}, but the sidecar's motion_gain (K_theta) is {K:g}, {K / c:.3g} times "
+                f"that (more than {GAIN_TOLERANCE:.0%} off): either motion_gain is not the "
+                f"run's K_theta, or theta_ddot_m is not the motion the pilot felt, K_theta "
+                f"theta'' (the plant's theta'' logged, say); diagnose simulates the loop with "
+                f"motion_gain and pools runs by it, and a channel on theta_m takes K_theta "
+                f"theta (the fits take the columns' K_theta for the canal's start state); "
+                f"give the run's K_theta as motion_gain, or log K_theta theta'' in "
+                f"theta_ddot_m")
+    cu, cd = (float(x) for x in st["coef"])
+    off_u = bool(judged[0]) and abs(cu - 1.0) > GAIN_TOLERANCE
+    off_d = bool(judged[1]) and abs(cd - 1.0) > GAIN_TOLERANCE
+    if not (off_u or off_d):
+        return None
+    kdu = recording.control_gain
+    given = "control_gain" in recording.metadata
+    kdu_said = (f"control_gain (K_delta_u) {kdu:g}" if given else
+                f"control_gain (K_delta_u), which the sidecar does not give (the paper's "
+                f"{kdu:g} is taken)")
+    plant = _plant_said(recording)
+    coefs = " and ".join(f"{c}'s coefficient {k:.3g}" for c, k, j in
+                         (("u", cu, judged[0]), ("f_d", cd, judged[1])) if j)
+    if off_u and off_d and abs(cu / cd - 1.0) <= GAIN_TOLERANCE:
+        why = (f"both by about {(cu + cd) / 2:.3g}: the plant of the columns is "
+               f"{(cu + cd) / 2:.3g} times {plant} in size; check its gain")
+    elif off_u and not judged[1]:
+        why = (f"the plant's gain times K_delta_u of the columns is {cu:.3g} times that of "
+               f"{plant} and {kdu_said}; check both")
+    elif off_u and not off_d:
+        why = (f"{kdu_said} is not the run's: the columns say K_delta_u = {cu * kdu:.3g}, "
+               f"{cu:.3g} times it; give the run's control_gain (if it is the run's, u is "
+               f"logged in other units than the stick's, or clipped)")
+    elif off_d and not off_u:
+        why = (f"f_d enters the plant {cd:.3g} times as large as the column says (the format "
+               f"adds f_d to K_delta_u u at the plant's input, in the same units); check the "
+               f"units of f_d")
+    else:
+        why = (f"neither {plant} nor {kdu_said} matches the columns (f_d's coefficient is "
+               f"the plant's factor, u's the plant's times K_delta_u's); check both")
+    return (f"the sidecar's plant does not match the columns in size: theta = G(s) (K_delta_u u "
+            f"+ f_d) holds (R^2 {st['r2']:.4f}) with {coefs}, not 1 (more than "
+            f"{GAIN_TOLERANCE:.0%} off): {why}; the fits do not use the plant, but diagnose's "
+            f"bootstrap simulates the loop with it and control_gain")
 
 
 def _spike_statistics(recording: "Recording") -> tuple[np.ndarray, float, float]:
@@ -607,7 +739,15 @@ def _check_number_list(key: str, value: Any, *, integral: bool = False) -> None:
             raise RecordingError(f"{key}[{i}] must be an integer, got {v!r}")
 
 
-def _check_forcing(forcing: Any) -> None:
+#: What a forcing's message says of a task without one of its two forcing functions.
+_ONE_FORCING_HINT = ('; for a task without a {name}, give "{name}": {{"n": [], "amplitude": [], '
+                     '"phase": []}}')
+
+
+def _check_forcing(forcing: Any, rate: float | None = None) -> None:
+    """Check a ``forcing`` value (plain Python); with the record's ``rate`` (Hz), also that
+    no line of nonzero amplitude is at or above the Nyquist frequency (the rule of
+    :class:`~bayespilot.simulate.TrackingTask`)."""
     if not isinstance(forcing, Mapping):
         raise RecordingError(f"forcing must be an object with base_frequency, target and "
                              f"disturbance, got {_describe(forcing)}")
@@ -619,11 +759,13 @@ def _check_forcing(forcing: Any) -> None:
                              f"got {w0!r}")
     for name in ("target", "disturbance"):
         if name not in forcing:
-            raise RecordingError(f"forcing has no {name!r} object")
+            raise RecordingError(f"forcing has no {name!r} object"
+                                 + _ONE_FORCING_HINT.format(name=name))
         part = forcing[name]
         if not isinstance(part, Mapping):
             raise RecordingError(f"forcing.{name} must be an object with arrays n, amplitude and "
-                                 f"phase, got {_describe(part)}")
+                                 f"phase, got {_describe(part)}"
+                                 + _ONE_FORCING_HINT.format(name=name))
         for arr in ("n", "amplitude", "phase"):
             if arr not in part:
                 raise RecordingError(f"forcing.{name} has no {arr!r} array")
@@ -637,6 +779,21 @@ def _check_forcing(forcing: Any) -> None:
             raise RecordingError(f"forcing.{name} arrays have unequal lengths "
                                  f"(n: {lengths['n']}, amplitude: {lengths['amplitude']}, "
                                  f"phase: {lengths['phase']})")
+        if rate is not None:
+            nyquist = math.pi * rate  # rad/s
+            high = [(n * w0, n) for n, a in zip(part["n"], part["amplitude"])
+                    if a != 0 and n * w0 >= nyquist * (1 - 1e-12)]
+            if high:
+                w, n = max(high)
+                raise RecordingError(
+                    f"forcing.{name}'s line n = {int(n)} at {w / (2 * math.pi):.6g} Hz "
+                    f"({w:.6g} rad/s, n times base_frequency {w0:.6g} rad/s) is at or above the "
+                    f"Nyquist frequency {rate / 2:g} Hz ({nyquist:.6g} rad/s) of the "
+                    f"{rate:g}-Hz recording: it cannot be in the columns (it would be recorded "
+                    f"aliased); leave the line out, or check base_frequency (rad/s), n and "
+                    f"sample_rate_hz"
+                    + (f" ({len(high)} of its lines are at or above the Nyquist frequency)"
+                       if len(high) > 1 else ""))
 
 
 def _check_plant(ce: Any) -> None:
@@ -665,9 +822,10 @@ def _check_plant(ce: Any) -> None:
             f"than its den (coefficients in powers of s, highest first)")
 
 
-def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
+def _metadata_problems(meta: Mapping[str, Any], rate: float | None = None) -> list[str]:
     """One message per optional metadata key whose value the recording format refuses (see
-    :func:`_check_metadata_values`), in the order of :data:`OPTIONAL_KEYS`."""
+    :func:`_check_metadata_values`), in the order of :data:`OPTIONAL_KEYS`; ``rate``: the
+    sample rate (Hz), when known, for the forcing's lines against the Nyquist frequency."""
     obj = {k: _plain(meta[k]) for k in OPTIONAL_KEYS if k in meta}
     problems: list[str] = []
     for key in ("controlled_element_gain", "control_gain"):
@@ -694,13 +852,13 @@ def _metadata_problems(meta: Mapping[str, Any]) -> list[str]:
             problems.append(f"run must be an integer, got {v!r}")
     if "forcing" in obj:
         try:
-            _check_forcing(obj["forcing"])
+            _check_forcing(obj["forcing"], rate)
         except RecordingError as exc:
             problems.append(str(exc))
     return problems
 
 
-def _check_metadata_values(meta: Mapping[str, Any]) -> None:
+def _check_metadata_values(meta: Mapping[str, Any], rate: float | None = None) -> None:
     """Check the optional metadata keys whose values the recording format fixes.
 
     ``controlled_element_gain`` (a finite number, not 0) and ``control_gain``
@@ -708,7 +866,9 @@ def _check_metadata_values(meta: Mapping[str, Any]) -> None:
     non-empty arrays of finite numbers, neither all zeros, ``num`` not of
     higher degree than ``den``; not together with
     ``controlled_element_gain``), ``subject`` and ``notes`` (strings),
-    ``run`` (an integer) and ``forcing``.  Other keys are not looked at.
+    ``run`` (an integer) and ``forcing`` (with ``rate``, the sample rate in Hz:
+    no line of nonzero amplitude at or above the Nyquist frequency).  Other keys
+    are not looked at.
     numpy scalars and arrays and tuples count as the numbers and arrays they
     hold.  Used for a Recording built in Python and, by
     :mod:`bayespilot.io`, for files, so both are held to the same rules.
@@ -719,7 +879,7 @@ def _check_metadata_values(meta: Mapping[str, Any]) -> None:
         Naming every bad key and its problem, ``"; "``-separated, in one
         message (no file or source prefix).
     """
-    problems = _metadata_problems(meta)
+    problems = _metadata_problems(meta, rate)
     if problems:
         raise RecordingError("; ".join(problems))
 
@@ -775,7 +935,8 @@ class Recording:
         and ``den``, neither all zeros, ``num`` not of higher degree than
         ``den`` (an improper plant), and not together with
         ``controlled_element_gain``; ``subject``/``notes`` strings, ``run`` an
-        integer, a well-formed ``forcing``; numpy values count as the numbers
+        integer, a well-formed ``forcing`` with no line of nonzero amplitude at or
+        above the Nyquist frequency; numpy values count as the numbers
         and arrays they hold; other keys are not checked; every bad key is
         named in the one message).
 
@@ -882,7 +1043,7 @@ class Recording:
             fail(f"metadata must be a mapping of key to value, got {type(self.metadata).__name__}")
         meta = dict(self.metadata)
         try:
-            _check_metadata_values(meta)
+            _check_metadata_values(meta, rate)
         except RecordingError as exc:
             fail(str(exc))
         # read-only like the arrays: a column put in afterwards would skip every check above
