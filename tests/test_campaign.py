@@ -913,7 +913,7 @@ def test_run_keyed_writes_progress_lines_as_tasks_finish(tmp_path, monkeypatch, 
     assert said[0].startswith("bayespilot: 4/40 fits done, 0 failed, 2 before this run (")
     assert said[2].startswith("bayespilot: 7/40 fits done, 1 failed, 2 before this run (")
     assert said[-1].startswith("bayespilot: 39/40 fits done, 1 failed, 2 before this run (")
-    for bad in ("yes", 1, None):
+    for bad in ("yes", 2, None):
         with pytest.raises(ValueError, match="progress must be True or 'bar'"):
             C.run_keyed(tasks, tmp_path, total=40, skipped=2, scheduler=None, workers=1,
                         progress=bad, connect_timeout=1.0)
@@ -1025,3 +1025,25 @@ def test_the_fits_warnings_are_recorded_and_said_once(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # (none escapes run_job: the same, recorded)
         assert run_job(job)["warnings"] == said
+
+
+def test_a_stopped_campaign_says_its_warnings_without_hiding_why(tmp_path, monkeypatch):
+    """The fits' warnings are said when the run stops too, but with warnings made errors
+    (-W error) the warning must not replace the error that stopped the run."""
+    import warnings
+
+    import bayespilot.campaign as C
+
+    def run_keyed(tasks, out, *, to_json, **kwargs):
+        to_json("k1", {"warnings": [{"category": "QuestionableRecordingWarning",
+                                     "message": "offset"}]})
+        raise CampaignError("lost the dask cluster: 1 of 2 tasks did not finish")
+
+    monkeypatch.setattr(C, "run_keyed", run_keyed)
+    with pytest.warns(RuntimeWarning, match="QuestionableRecordingWarning in 1 fit.s. .k1."):
+        with pytest.raises(CampaignError, match="lost the dask cluster"):
+            run_campaign(_jobs(), tmp_path / "a", workers=1, progress=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(CampaignError, match="lost the dask cluster"):
+            run_campaign(_jobs(), tmp_path / "b", workers=1, progress=False)

@@ -56,7 +56,7 @@ import sys
 import time
 import traceback
 import warnings
-from contextlib import ExitStack, contextmanager
+from contextlib import ExitStack, contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterable, Mapping, Sequence
@@ -73,7 +73,7 @@ if TYPE_CHECKING:  # (only named in annotations: distributed is imported when a 
 
 __all__ = ["Job", "CampaignError", "CampaignSummary", "paper_study", "run_job", "run_campaign",
            "load_results", "summarise", "summary_markdown", "write_summary_csv", "job_seed",
-           "SEED_ROOT", "TRUE_DELTA_ABS"]
+           "SEED_ROOT", "TRUE_DELTA_ABS", "WorkerVersionError"]
 
 #: Root entropy of every seed of a campaign (arbitrary, fixed: the paper's year and issue).
 SEED_ROOT = 2012_035_003
@@ -511,8 +511,11 @@ def run_job(job: Job) -> dict[str, Any]:
     # and on a local one thousands of them buried the progress); run_campaign says them once
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        # (a study of the procedure: its shortfall is recorded, under "check")
-        warnings.simplefilter("ignore", NotAtMaximumWarning)
+        # (libraries' notices to developers are not the fit's; a study of the procedure: its
+        # shortfall is recorded, under "check")
+        for quiet in (DeprecationWarning, PendingDeprecationWarning, FutureWarning,
+                      NotAtMaximumWarning):
+            warnings.simplefilter("ignore", quiet)
         sim = simulate(task=job.task, motion_gain=job.motion_gain, seed=job.remnant_seed,
                        duration=job.duration, **noise)
         fit = _fit_function(job.method)(sim.recording, threshold=job.threshold,
@@ -883,7 +886,8 @@ _LINES_TICK = 1.0
 
 def _check_progress(progress: Any) -> None:
     """A ValueError unless ``progress`` is True, False, ``"bar"`` or ``"lines"``."""
-    if not (isinstance(progress, (bool, np.bool_)) or progress in ("bar", "lines")):
+    if not (isinstance(progress, (bool, np.bool_)) or progress in ("bar", "lines")
+            or (isinstance(progress, (int, np.integer)) and progress in (0, 1))):
         raise ValueError(f"progress must be True or 'bar' (a bar), 'lines' (plain lines) or "
                          f"False, got {progress!r}")
 
@@ -1257,6 +1261,13 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
             warned.setdefault(w["category"], []).append((key, w["message"]))
         return value
 
+    def say_warned() -> None:
+        for category, seen in sorted(warned.items()):
+            keys = sorted({k for k, _ in seen})
+            warn_at_caller(f"{category} in {len(keys)} fit(s) ({_listed(keys, 3)}), e.g. "
+                           f"{keys[0]}: {min(m for k, m in seen if k == keys[0])}; each result "
+                           f"file lists its warnings under 'warnings'", RuntimeWarning)
+
     try:
         completed, errors = run_keyed(
             [(j.key, run_job, (j,), {"job": j.to_dict()}) for j in pending], out,
@@ -1264,12 +1275,11 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
             progress=progress, connect_timeout=connect_timeout,
             warm=(lambda: _warm_numba_cache({j.method for j in pending})) if warm_cache else None,
             desc="fits", unit="fit", to_json=to_json)
-    finally:  # (also when the run stops: what finished is saved, and said)
-        for category, seen in sorted(warned.items()):
-            keys = sorted({k for k, _ in seen})
-            warn_at_caller(f"{category} in {len(keys)} fit(s) ({_listed(keys, 3)}), e.g. "
-                           f"{keys[0]}: {min(m for k, m in seen if k == keys[0])}; each result "
-                           f"file lists its warnings under 'warnings'", RuntimeWarning)
+    except BaseException:  # (the run stopped: what finished is saved, and its warnings said,
+        with suppress(Warning):  # but a warning made an error (-W error) must not hide why)
+            say_warned()
+        raise
+    say_warned()
     return CampaignSummary(len(jobs), completed, skipped, len(errors), errors, out,
                            time.perf_counter() - t0)
 
