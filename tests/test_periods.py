@@ -104,8 +104,10 @@ def test_a_zero_amplitude_line_off_its_bin_does_not_decide():
     fo = forcing_of(rec)
     assert fo.target.base_frequency == pytest.approx(2 * np.pi / T, rel=1e-13)
     assert fo.k_target.tolist() == [5] and fo.k_disturbance.tolist() == [7, 100]
-    assert len(fo.notes) == 1 and "taken as" in fo.notes[0]
+    # (and, every line being above 2 rad/s, that frequency.motion_low has none)
+    assert len(fo.notes) == 2 and "taken as" in fo.notes[0]
     assert "0.007 cycle" in fo.notes[0]  # the lines in the signal, not the zero one's 0.1
+    assert "frequency.motion_low" in fo.notes[1] and "OMEGA_SPLIT" in fo.notes[1]
 
 
 def test_a_zero_placeholder_does_not_change_the_forcing_period():
