@@ -285,3 +285,15 @@ def test_sizes_are_not_judged_below_the_low_rate(rate):
     said = questionable(rec)
     assert any("sample rate" in r for r in said)
     assert not any("holds (R^2" in r for r in said), said
+
+
+def test_one_nyquist_rule_for_the_task_and_the_reader():
+    """TrackingTask and the reader share forcing.above_nyquist: a line of nonzero amplitude
+    at pi * rate (also 1e-13 below it, n times a rounded base frequency) or above counts, a
+    zero-amplitude line or one just below does not."""
+    from bayespilot.forcing import above_nyquist
+
+    w_ny = np.pi * 100.0
+    w = [1.0, w_ny * (1 - 1e-13), w_ny * (1 - 1e-9), w_ny, 400.0, 500.0]
+    a = [1.0, 1.0, 1.0, 1.0, 0.0, 2.0]
+    assert above_nyquist(w, a, 100.0).tolist() == [1, 3, 5]

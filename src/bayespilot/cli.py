@@ -179,7 +179,9 @@ def _cluster_choice(args: argparse.Namespace) -> None:
                                     f"s (is the dask scheduler started with --scheduler-file "
                                     f"{path}?)") from None
         except (OSError, ValueError, KeyError) as exc:
-            if time.monotonic() >= deadline:  # (a file being written: read again)
+            # (a file being written does not parse yet: read again; one that parses but has
+            # no address is not a scheduler file, said at once)
+            if isinstance(exc, KeyError) or time.monotonic() >= deadline:
                 raise UsageError(f"argument --scheduler-file: {path}: not a dask scheduler "
                                  f"file ({exc.__class__.__name__}: {exc}); it holds the "
                                  f"scheduler's address as JSON, {{\"address\": "

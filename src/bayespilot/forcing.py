@@ -12,7 +12,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 __all__ = ["Multisine", "SNAP_TOLERANCE", "EXACT_TOLERANCE", "whole_periods_frequency",
-           "columns_whole_periods"]
+           "columns_whole_periods", "above_nyquist"]
 
 
 def _is_complex(x: Any) -> bool:
@@ -186,6 +186,33 @@ SNAP_TOLERANCE = 0.05
 #: A base frequency that puts every forcing line within this many cycles (over the record) of a
 #: whole number of cycles is taken as it is (:func:`whole_periods_frequency` does not snap it).
 EXACT_TOLERANCE = 1e-3
+
+
+def above_nyquist(frequencies: Any, amplitude: Any, sample_rate_hz: float) -> np.ndarray:
+    """The indices of the lines of nonzero amplitude at or above the Nyquist frequency.
+
+    The one rule of :class:`~bayespilot.simulate.TrackingTask` and the recording reader:
+    such a line cannot be sampled at ``sample_rate_hz`` (it would be recorded aliased).  A
+    relative 1e-12 below pi * rate counts as at it (a line exactly at Nyquist computed from
+    n times a rounded base frequency).
+
+    Parameters
+    ----------
+    frequencies : array_like
+        The lines' frequencies, rad/s.
+    amplitude : array_like
+        Their amplitudes (a line of zero amplitude is not in the signal: not counted).
+    sample_rate_hz : float
+        The sample rate, Hz.
+
+    Returns
+    -------
+    numpy.ndarray
+        Indices into ``frequencies``, ascending.
+    """
+    w = np.asarray(frequencies, dtype=float)
+    a = np.asarray(amplitude, dtype=float)
+    return np.flatnonzero((w >= math.pi * float(sample_rate_hz) * (1 - 1e-12)) & (a != 0))
 
 
 def whole_periods_frequency(base_frequency: float, n: Any, amplitude: Any,

@@ -500,6 +500,10 @@ def _gain_problem(recording: "Recording", name: str, st: Mapping[str, Any]) -> s
         why = (f"{kdu_said} is not the run's: the columns say K_delta_u = {cu * kdu:.3g}, "
                f"{cu:.3g} times it; give the run's control_gain (if it is the run's, u is "
                f"logged in other units than the stick's, or clipped)")
+    elif off_d and not judged[0]:  # (u too small a share to judge: f_d's is the plant's)
+        why = (f"the plant of the columns is {cd:.3g} times {plant} in size, or f_d is in "
+               f"other units than K_delta_u u (the format adds them at the plant's input); "
+               f"check the plant's gain and f_d's units")
     elif off_d and not off_u:
         why = (f"f_d enters the plant {cd:.3g} times as large as the column says (the format "
                f"adds f_d to K_delta_u u at the plant's input, in the same units); check the "
@@ -786,9 +790,12 @@ def _check_forcing(forcing: Any, rate: float | None = None) -> None:
                                  f"(n: {lengths['n']}, amplitude: {lengths['amplitude']}, "
                                  f"phase: {lengths['phase']})")
         if rate is not None:
+            from .forcing import above_nyquist  # (the one rule, TrackingTask's too)
+
             nyquist = math.pi * rate  # rad/s
-            high = [(n * w0, n) for n, a in zip(part["n"], part["amplitude"])
-                    if a != 0 and n * w0 >= nyquist * (1 - 1e-12)]
+            ns = [float(n) for n in part["n"]]
+            high = [(ns[i] * w0, ns[i]) for i in above_nyquist(
+                [n * w0 for n in ns], [float(a) for a in part["amplitude"]], rate)]
             if high:
                 w, n = max(high)
                 raise RecordingError(

@@ -34,7 +34,7 @@ from scipy import optimize, signal
 from . import presets
 from ._files import json_ready
 from ._seeds import resolve_seed
-from .forcing import Multisine
+from .forcing import Multisine, above_nyquist
 from .kernels import _closed_loop as CL
 from .model import PilotModel, _parameter_value, paper_model
 from .recording import Recording
@@ -170,8 +170,7 @@ class TrackingTask:
                 f"controlled_element=({num.tolist()}, {[float(f'{x:.6g}') for x in fast]})")
         for name in ("target", "disturbance"):
             f = getattr(self, name)
-            nyquist = math.pi * self.sample_rate_hz  # rad/s
-            high = np.flatnonzero((f.frequencies >= nyquist * (1 - 1e-12)) & (f.amplitude != 0))
+            high = above_nyquist(f.frequencies, f.amplitude, self.sample_rate_hz)
             if high.size:
                 i = high[np.argmax(f.frequencies[high])]
                 w = float(f.frequencies[i])

@@ -83,8 +83,9 @@ def _delta_scale(A1, A2):
     p1, p2 inside the unit circle.  With h = sqrt(c0) (at most 1) D's entries are of the size
     of 1 - p (omega dt for a stage of omega rad/s near z = 1) and its eigenvectors are
     well apart; in the companion coordinates (y_k-1, y_k-2) the two eigenvectors of a pole
-    pair near z = 1 are almost parallel.  (1 + A1) + A2 is exact in floating point when
-    A1 is in [-2, -0.5] and A2 in [0.5, 1], the poles near z = 1 where it matters.
+    pair near z = 1 are almost parallel.  (1 + A1) + A2 is exact in floating point where it
+    matters, poles near z = 1: 1 + A1 is exact for A1 in [-2, -0.5] (Sterbenz), and so is
+    the sum when 1 + A1 is within a factor 2 of -A2 (not for every A2 in [0.5, 1]).
     """
     c0 = (1.0 + A1) + A2
     h = math.sqrt(c0) if c0 > 0.0 else 1.0
