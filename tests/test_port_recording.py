@@ -16,6 +16,7 @@ import warnings
 import numpy as np
 import pytest
 
+from bayespilot import presets
 from bayespilot.forcing import Multisine
 from bayespilot.io import read_recording, write_recording
 from bayespilot.likelihood import Likelihood, _pitch_rate_at_start, _rate_from_acceleration
@@ -297,3 +298,20 @@ def test_one_nyquist_rule_for_the_task_and_the_reader():
     w = [1.0, w_ny * (1 - 1e-13), w_ny * (1 - 1e-9), w_ny, 400.0, 500.0]
     a = [1.0, 1.0, 1.0, 1.0, 0.0, 2.0]
     assert above_nyquist(w, a, 100.0).tolist() == [1, 3, 5]
+
+
+def test_a_plant_too_large_when_u_cannot_be_judged_names_both_causes():
+    """With the pilot's u too small a share of theta to be judged (gains near 0), f_d's
+    coefficient is the plant's own factor: the message says the plant may be off as well as
+    f_d's units (it blamed f_d's units alone; review of the port fixes)."""
+    from bayespilot.recording import _sign_statistics
+
+    p = dict(presets.TABLE3["FD"], K_v=0.02, K_m=0.01)
+    rec = simulate(params=p, task=TrackingTask.paper("FD", 1.0, duration=40.0),
+                   remnant_gain=0.0, seed=1).recording
+    st = _sign_statistics(rec, "plant")["plant"]
+    assert st["share"][0] < 0.1 < st["share"][1] and abs(st["coef"][1] - 1) < 0.02  # u unjudged
+    big = _again(rec, controlled_element_gain=1.3 * presets.K_C)
+    (s,) = _said(big, "plant does not match")
+    assert "the plant of the columns is 0.765 times" in s and "or f_d is in other units" in s, s
+    assert not _said(rec, "plant does not match")
