@@ -218,3 +218,28 @@ def test_washout_jacobian_agrees_with_finite_differences(fs):
                 num = (lik.response(dict(p, **{name: p[name] + h}))
                        - lik.response(dict(p, **{name: p[name] - h}))) / (2.0 * h)
                 assert np.max(np.abs(J[:, j] - num)) / np.max(np.abs(num)) < 1e-5, (zeta, name)
+
+
+def test_a_pool_leaves_out_recordings_that_do_not_identify_the_threshold():
+    """compare() of a recording without motion input decides inconclusive ('not identified'),
+    but pool() summed its ln BF (sampling noise: the two models are the same there) into the
+    condition's decision.  Such recordings are left out of it; with none left, inconclusive
+    and labelled 'not identified'."""
+    from bayespilot.compare import PooledComparison, pool
+
+    def one(lbf, identified=True):
+        return {"log_bayes_factor": lbf, "log_bayes_factor_err": 1.0,
+                "settings": {"threshold_identified": identified}}
+
+    p = pool([one(10.0), one(10.0), one(-30.0, identified=False)])
+    assert p.log_bayes_factor == -10.0 and p.n_unidentified == 1  # (the sum as before)
+    assert p.decision == "threshold"  # (20 +- 1.4 over the two that identify it)
+    assert "1 of 3 recordings do not identify delta_abs" in p.decision_note
+    q = pool([one(3.0, identified=False), one(2.0, identified=False)])
+    assert q.decision == "inconclusive" and q.n_unidentified == 2
+    assert "(not identified)" in q.summary() and "favours" not in q.summary()
+    assert "not identified in any of the 2 recordings" in q.decision_note
+    r = pool([one(10.0), one(12.0)])
+    assert r.decision == "threshold" and r.n_unidentified == 0 and r.decision_note == ""
+    old = {k: v for k, v in r.to_dict().items() if k != "n_unidentified"}  # a file of before
+    assert PooledComparison.from_dict(old).n_unidentified == 0

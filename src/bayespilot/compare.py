@@ -1885,6 +1885,11 @@ class PooledComparison:
         The condition's name, e.g. ``"FD, K_theta = 1"``.
     decision_note : str
         Why a guard changed the decision ("" if none did).
+    n_unidentified : int
+        Recordings that do not identify the threshold (its channel has no
+        input: ``settings["threshold_identified"]`` False): left out of the
+        decision, which is "inconclusive" when none is left (0 in files
+        written before).
     """
 
     n: int
@@ -1899,6 +1904,7 @@ class PooledComparison:
     wilcoxon_pvalue: float
     label: str = ""
     decision_note: str = ""
+    n_unidentified: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """Every attribute by name (:func:`dataclasses.asdict`)."""
@@ -1988,7 +1994,7 @@ class PooledComparison:
                 f"recording{'' if self.n == 1 else 's'}, sum ln BF = "
                 f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} "
                 + _verdict(self.log_bayes_factor, self.log_bayes_factor_err, self.decision,
-                           self.decision_note)
+                           self.decision_note, identified=self.n_unidentified < self.n)
                 + f"; per recording: {counts}; " + self._tests())
 
     def _tests(self) -> str:
@@ -2043,7 +2049,7 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
 
     if isinstance(results, (Comparison, Mapping)) or not len(results):
         raise ValueError("results must be a non-empty sequence of comparisons")
-    lbf, err, dec, on_plateau, lost_mode = [], [], [], [], []
+    lbf, err, dec, on_plateau, lost_mode, unidentified = [], [], [], [], [], []
     first_of: dict[Any, int] = {}  # a Comparison (by identity) or a recording's digest: index
     for i, r in enumerate(results):
         d = r.to_dict() if isinstance(r, Comparison) else r
@@ -2058,6 +2064,7 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
         on_plateau.append(pp is not None and pp > PLATEAU_LEVEL)
         settings = d.get("settings") or {}
         lost_mode.append(settings.get("mode_check") is False)
+        unidentified.append(settings.get("threshold_identified") is False)
     x = np.array(lbf)
     total, total_err = float(x.sum()), float(math.sqrt(np.sum(np.square(err))))
     t = p = w = wp = math.nan
@@ -2068,24 +2075,39 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
             wres = stats.wilcoxon(x)
             w, wp = float(wres.statistic), float(wres.pvalue)
     counts = {k: int(sum(1 for d in dec if d == k)) for k in DECISIONS}
-    decision, note = decide(total, total_err), ""
+    # a recording without input to the threshold's channel says nothing about it (its ln BF
+    # is sampling noise, the two models being the same there): left out of the decision
+    ident = ~np.array(unidentified)
+
+    def on(keep: Any) -> tuple[float, float]:
+        k = np.asarray(keep) & ident
+        return float(x[k].sum()), float(math.sqrt(np.sum(np.square(np.array(err)[k]))))
 
     def holds(keep: list[bool]) -> bool:
-        k = np.array(keep)
-        return k.any() and decide(float(x[k].sum()),
-                                  float(math.sqrt(np.sum(np.square(np.array(err)[k]))))) == decision
+        return bool((np.array(keep) & ident).any()) and decide(*on(keep)) == decision
 
+    n_out = int((~ident).sum())
+    if not ident.any():
+        decision, note = "inconclusive", (f"{THRESHOLD} is not identified in any of the "
+                                          f"{x.size} recordings (its channel has no input): "
+                                          "the two models are the same on them")
+    else:
+        decision = decide(*on(ident))
+        note = (f"{n_out} of {x.size} recordings do not identify {THRESHOLD} (its channel has "
+                "no input) and are left out of the decision") if n_out else ""
+    guard = ""
     if decision == "threshold" and any(on_plateau) and not holds([not v for v in on_plateau]):
-        decision, note = "inconclusive", (f"{sum(on_plateau)} of {x.size} recordings favour the "
-                                          "threshold through the plateau (motion channel off or "
-                                          "passing under 1 % of the samples); the others do not "
-                                          "decide for it")
+        decision, guard = "inconclusive", (f"{sum(on_plateau)} of {x.size} recordings favour the "
+                                           "threshold through the plateau (motion channel off or "
+                                           "passing under 1 % of the samples); the others do not "
+                                           "decide for it")
     elif decision == "none" and any(lost_mode) and not holds([not v for v in lost_mode]):
-        decision, note = "inconclusive", (f"in {sum(lost_mode)} of {x.size} recordings nested "
-                                          "sampling lost the main mode; the others do not decide "
-                                          "for 'none'")
+        decision, guard = "inconclusive", (f"in {sum(lost_mode)} of {x.size} recordings nested "
+                                           "sampling lost the main mode; the others do not decide "
+                                           "for 'none'")
+    note = "; ".join(part for part in (note, guard) if part)
     return PooledComparison(int(x.size), total, total_err, decision, counts,
-                            float(x.mean()), t, p, w, wp, label, note)
+                            float(x.mean()), t, p, w, wp, label, note, n_out)
 
 
 def _check_once(i: int, r: Any, d: Mapping[str, Any], first_of: dict[Any, int],
