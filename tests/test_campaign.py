@@ -913,6 +913,8 @@ def test_run_keyed_writes_progress_lines_as_tasks_finish(tmp_path, monkeypatch, 
     assert said[0].startswith("bayespilot: 4/40 fits done, 0 failed, 2 before this run (")
     assert said[2].startswith("bayespilot: 7/40 fits done, 1 failed, 2 before this run (")
     assert said[-1].startswith("bayespilot: 39/40 fits done, 1 failed, 2 before this run (")
+    for ok in (0, 1, np.int64(1), np.False_):  # (as before: True and False by another name)
+        C._check_progress(ok)
     for bad in ("yes", 2, None):
         with pytest.raises(ValueError, match="progress must be True or 'bar'"):
             C.run_keyed(tasks, tmp_path, total=40, skipped=2, scheduler=None, workers=1,

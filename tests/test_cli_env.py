@@ -710,3 +710,20 @@ def test_scheduler_file_is_read_for_the_address(capsys, monkeypatch, tmp_path):
     assert code == 2 and "bad.json: not a dask scheduler address" in err and not seen, err
     code, _, err = _run(capsys, *base, "--scheduler-file", f, "--workers", "2")
     assert code == 2 and "give --scheduler-file (an existing cluster) or --workers" in err
+
+
+def test_a_scheduler_file_without_an_address_is_refused_at_once(capsys, monkeypatch, tmp_path):
+    """A file that parses but holds no address (or is not a JSON object) is not a scheduler
+    file: refused at once (it was read again until --connect-timeout ran out)."""
+    import time
+
+    def no_wait(seconds):
+        raise AssertionError("waited for a file that is there")
+
+    monkeypatch.setattr(time, "sleep", no_wait)
+    base = ["replicate", "--realizations", "1", "--tasks", "FD", "--out", tmp_path / "o",
+            "--connect-timeout", "300"]
+    for text in ('{"type": "Scheduler"}', '["tcp://10.0.0.5:8786"]'):
+        (tmp_path / "s.json").write_text(text)
+        code, _, err = _run(capsys, *base, "--scheduler-file", tmp_path / "s.json")
+        assert code == 2 and "s.json: not a dask scheduler file (KeyError: 'address')" in err, err

@@ -4,6 +4,8 @@ unidentified threshold, and the periodic start of a slow second-order stage (F9)
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -233,8 +235,16 @@ def test_a_pool_leaves_out_recordings_that_do_not_identify_the_threshold():
 
     p = pool([one(10.0), one(10.0), one(-30.0, identified=False)])
     assert p.log_bayes_factor == -10.0 and p.n_unidentified == 1  # (the sum as before)
-    assert p.decision == "threshold"  # (20 +- 1.4 over the two that identify it)
-    assert "1 of 3 recordings do not identify delta_abs" in p.decision_note
+    assert p.decision == "threshold" and p.decision_note == ""
+    assert (p.decided_log_bayes_factor, p.decided_log_bayes_factor_err) == (20.0, math.sqrt(2))
+    assert p.decisions == {"threshold": 2, "none": 0, "inconclusive": 1}  # (not its noise's)
+    assert ("sum ln BF = -10.00 +- 1.73 (1 without input to delta_abs's channel left out: "
+            "+20.00 +- 1.41 over the other 2) (decisive, favours threshold)  -> decision: "
+            "threshold;") in p.summary()
+    # a guard counts the recordings that decide: the unidentified one on the plateau is not
+    on = dict(one(10.0), plateau_probability=0.9)
+    g = pool([on, one(-1.0), dict(one(0.0, identified=False), plateau_probability=0.9)])
+    assert g.decision == "inconclusive" and g.decision_note.startswith("1 of 2 recordings")
     q = pool([one(3.0, identified=False), one(2.0, identified=False)])
     assert q.decision == "inconclusive" and q.n_unidentified == 2
     assert "(not identified)" in q.summary() and "favours" not in q.summary()

@@ -298,6 +298,13 @@ def test_one_nyquist_rule_for_the_task_and_the_reader():
     w = [1.0, w_ny * (1 - 1e-13), w_ny * (1 - 1e-9), w_ny, 400.0, 500.0]
     a = [1.0, 1.0, 1.0, 1.0, 0.0, 2.0]
     assert above_nyquist(w, a, 100.0).tolist() == [1, 3, 5]
+    # the task refuses what the rule counts, and takes what it does not
+    ft = Multisine(1.0, np.array([2]), np.array([1.0]), np.array([0.0]))
+    at = Multisine(w_ny * (1 - 1e-13) / 3, np.array([3]), np.array([1.0]), np.array([0.0]))
+    below = Multisine(w_ny * (1 - 1e-9) / 3, np.array([3]), np.array([1.0]), np.array([0.0]))
+    with pytest.raises(ValueError, match="at or above the Nyquist frequency"):
+        TrackingTask(ft, at, sample_rate_hz=100.0)
+    TrackingTask(ft, below, sample_rate_hz=100.0)
 
 
 def test_a_plant_too_large_when_u_cannot_be_judged_names_both_causes():

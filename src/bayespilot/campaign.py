@@ -885,11 +885,11 @@ _LINES_TICK = 1.0
 
 
 def _check_progress(progress: Any) -> None:
-    """A ValueError unless ``progress`` is True, False, ``"bar"`` or ``"lines"``."""
+    """A ValueError unless ``progress`` is True, False (or 1, 0), ``"bar"`` or ``"lines"``."""
     if not (isinstance(progress, (bool, np.bool_)) or progress in ("bar", "lines")
             or (isinstance(progress, (int, np.integer)) and progress in (0, 1))):
         raise ValueError(f"progress must be True or 'bar' (a bar), 'lines' (plain lines) or "
-                         f"False, got {progress!r}")
+                         f"False (1 and 0 for True and False), got {progress!r}")
 
 
 def _clock(seconds: float) -> str:

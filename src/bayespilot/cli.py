@@ -171,7 +171,9 @@ def _cluster_choice(args: argparse.Namespace) -> None:
             with open(path, encoding="utf-8") as fh:
                 text = fh.read()
             info = json.loads(text)
-            address = info["address"] if isinstance(info, dict) else None
+            if not isinstance(info, dict):  # (JSON, but not an object: not a scheduler file)
+                raise KeyError("address")
+            address = info["address"]
             break
         except FileNotFoundError:
             if time.monotonic() >= deadline:

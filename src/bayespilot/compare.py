@@ -1865,7 +1865,9 @@ class PooledComparison:
     log_bayes_factor, log_bayes_factor_err : float
         Sum of the per-recording ln BF, errors in quadrature.
     decision : str
-        :func:`decide` on the sum, with the guards of :func:`compare`: a
+        :func:`decide` on the sum over the recordings that identify the
+        threshold (``decided_log_bayes_factor``: all of them, unless some
+        have no input to its channel), with the guards of :func:`compare`: a
         "threshold" must also hold on the sum over the recordings whose
         ``plateau_probability`` is at most :data:`PLATEAU_LEVEL`, and a
         "none" on the sum over those whose nested sampling kept the main
@@ -1890,6 +1892,10 @@ class PooledComparison:
         input: ``settings["threshold_identified"]`` False): left out of the
         decision, which is "inconclusive" when none is left (0 in files
         written before).
+    decided_log_bayes_factor, decided_log_bayes_factor_err : float
+        The sum the decision is made on: over the recordings that identify
+        the threshold (the same as ``log_bayes_factor`` when all do; NaN when
+        none does, and in files written before).
     """
 
     n: int
@@ -1905,6 +1911,8 @@ class PooledComparison:
     label: str = ""
     decision_note: str = ""
     n_unidentified: int = 0
+    decided_log_bayes_factor: float = math.nan
+    decided_log_bayes_factor_err: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         """Every attribute by name (:func:`dataclasses.asdict`)."""
@@ -1990,11 +1998,17 @@ class PooledComparison:
     def summary(self) -> str:
         """One line for people: the sum ln BF and decision, the per-recording counts, the tests."""
         counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)
+        lbf, err = self.log_bayes_factor, self.log_bayes_factor_err
+        head = f"sum ln BF = {lbf:+.2f} +- {err:.2f} "
+        if 0 < self.n_unidentified < self.n:  # (the decision's sum: the others')
+            lbf, err = self.decided_log_bayes_factor, self.decided_log_bayes_factor_err
+            head += (f"({self.n_unidentified} without input to {THRESHOLD}'s channel left "
+                     f"out: {lbf:+.2f} +- {err:.2f} over the other "
+                     f"{self.n - self.n_unidentified}) ")
         return (f"{self.label + ': ' if self.label else ''}{self.n} "
-                f"recording{'' if self.n == 1 else 's'}, sum ln BF = "
-                f"{self.log_bayes_factor:+.2f} +- {self.log_bayes_factor_err:.2f} "
-                + _verdict(self.log_bayes_factor, self.log_bayes_factor_err, self.decision,
-                           self.decision_note, identified=self.n_unidentified < self.n)
+                f"recording{'' if self.n == 1 else 's'}, " + head
+                + _verdict(lbf, err, self.decision, self.decision_note,
+                           identified=self.n_unidentified < self.n)
                 + f"; per recording: {counts}; " + self._tests())
 
     def _tests(self) -> str:
@@ -2036,7 +2050,12 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
     -----
     One recording has no spread across recordings: its t and Wilcoxon tests
     are NaN, and :meth:`PooledComparison.summary` says "no paired test"
-    instead of printing them.
+    instead of printing them.  A recording that does not identify the
+    threshold (``settings["threshold_identified"]`` False: no input to its
+    channel, so that its ln BF is sampling noise) is in the sum and the
+    tests but not in the decision (``n_unidentified``,
+    ``decided_log_bayes_factor``); with none left the decision is
+    "inconclusive".
 
     Examples
     --------
@@ -2059,12 +2078,13 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
         _check_once(i, r, d, first_of, results)
         lbf.append(float(d["log_bayes_factor"]))
         err.append(float(d.get("log_bayes_factor_err", 0.0)))
-        dec.append(d.get("decision") or decide(lbf[-1], err[-1]))
+        settings = d.get("settings") or {}
+        unidentified.append(settings.get("threshold_identified") is False)
+        dec.append(d.get("decision") or ("inconclusive" if unidentified[-1]
+                                         else decide(lbf[-1], err[-1])))
         pp = d.get("plateau_probability")
         on_plateau.append(pp is not None and pp > PLATEAU_LEVEL)
-        settings = d.get("settings") or {}
         lost_mode.append(settings.get("mode_check") is False)
-        unidentified.append(settings.get("threshold_identified") is False)
     x = np.array(lbf)
     total, total_err = float(x.sum()), float(math.sqrt(np.sum(np.square(err))))
     t = p = w = wp = math.nan
@@ -2086,28 +2106,28 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
     def holds(keep: list[bool]) -> bool:
         return bool((np.array(keep) & ident).any()) and decide(*on(keep)) == decision
 
-    n_out = int((~ident).sum())
-    if not ident.any():
+    n_out, n_in = int((~ident).sum()), int(ident.sum())
+    decided = on(ident) if n_in else (math.nan, math.nan)
+    note = ""
+    if not n_in:
         decision, note = "inconclusive", (f"{THRESHOLD} is not identified in any of the "
                                           f"{x.size} recordings (its channel has no input): "
                                           "the two models are the same on them")
     else:
-        decision = decide(*on(ident))
-        note = (f"{n_out} of {x.size} recordings do not identify {THRESHOLD} (its channel has "
-                "no input) and are left out of the decision") if n_out else ""
-    guard = ""
-    if decision == "threshold" and any(on_plateau) and not holds([not v for v in on_plateau]):
-        decision, guard = "inconclusive", (f"{sum(on_plateau)} of {x.size} recordings favour the "
-                                           "threshold through the plateau (motion channel off or "
-                                           "passing under 1 % of the samples); the others do not "
-                                           "decide for it")
-    elif decision == "none" and any(lost_mode) and not holds([not v for v in lost_mode]):
-        decision, guard = "inconclusive", (f"in {sum(lost_mode)} of {x.size} recordings nested "
-                                           "sampling lost the main mode; the others do not decide "
-                                           "for 'none'")
-    note = "; ".join(part for part in (note, guard) if part)
+        decision = decide(*decided)
+    plateau_in = int(sum(np.array(on_plateau) & ident))
+    lost_in = int(sum(np.array(lost_mode) & ident))
+    if decision == "threshold" and plateau_in and not holds([not v for v in on_plateau]):
+        decision, note = "inconclusive", (f"{plateau_in} of {n_in} recordings favour the "
+                                          "threshold through the plateau (motion channel off or "
+                                          "passing under 1 % of the samples); the others do not "
+                                          "decide for it")
+    elif decision == "none" and lost_in and not holds([not v for v in lost_mode]):
+        decision, note = "inconclusive", (f"in {lost_in} of {n_in} recordings nested "
+                                          "sampling lost the main mode; the others do not decide "
+                                          "for 'none'")
     return PooledComparison(int(x.size), total, total_err, decision, counts,
-                            float(x.mean()), t, p, w, wp, label, note, n_out)
+                            float(x.mean()), t, p, w, wp, label, note, n_out, *decided)
 
 
 def _check_once(i: int, r: Any, d: Mapping[str, Any], first_of: dict[Any, int],
