@@ -933,10 +933,11 @@ class _ProgressLines:
         """Counts after a task finished; the line, if one is due."""
         with self._lock:
             self.done, self.failed = done, failed
-            self._write(self.line(time.monotonic() if now is None else now))
+        self.beat(now)
 
     def beat(self, now: float | None = None) -> None:
-        """The minute's line, if due (no task finished for a minute)."""
+        """The line due now, if any: after :meth:`update`, or the minute's (no task finished
+        for a minute)."""
         with self._lock:
             self._write(self.line(time.monotonic() if now is None else now))
 

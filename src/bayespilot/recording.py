@@ -459,11 +459,7 @@ def _gain_problem(recording: "Recording", name: str, st: Mapping[str, Any]) -> s
     sidecar says (off by more than :data:`GAIN_TOLERANCE`), or None: theta_ddot_m's against
     motion_gain, and the plant's (u's against the sidecar's plant times control_gain, f_d's
     against its plant)."""
-    if (st["r2"] < GAIN_R2_MIN or name not in ("motion", "plant")
-            or recording.sample_rate_hz < LOW_SAMPLE_RATE_HZ):  # (GAIN_R2_MIN)
-        return None
-    judged = st["share"] >= SIGN_TERM_MIN
-    if name == "motion":
+    if name == "motion":  # (its rule, _columns_motion_gain's, is the likelihood's too)
         K = recording.motion_gain
         c = _columns_motion_gain(recording, st)
         if c is None:
@@ -477,6 +473,10 @@ def _gain_problem(recording: "Recording", name: str, st: Mapping[str, Any]) -> s
                 f"theta (the fits take the columns' K_theta for the canal's start state); "
                 f"give the run's K_theta as motion_gain, or log K_theta theta'' in "
                 f"theta_ddot_m")
+    if (name != "plant" or st["r2"] < GAIN_R2_MIN
+            or recording.sample_rate_hz < LOW_SAMPLE_RATE_HZ):  # (GAIN_R2_MIN)
+        return None
+    judged = st["share"] >= SIGN_TERM_MIN
     cu, cd = (float(x) for x in st["coef"])
     off_u = bool(judged[0]) and abs(cu - 1.0) > GAIN_TOLERANCE
     off_d = bool(judged[1]) and abs(cd - 1.0) > GAIN_TOLERANCE
