@@ -298,6 +298,11 @@ def test_one_nyquist_rule_for_the_task_and_the_reader():
     w = [1.0, w_ny * (1 - 1e-13), w_ny * (1 - 1e-9), w_ny, 400.0, 500.0]
     a = [1.0, 1.0, 1.0, 1.0, 0.0, 2.0]
     assert above_nyquist(w, a, 100.0).tolist() == [1, 3, 5]
+    for bad in (0.0, -100.0, math.nan, math.inf, "100", True):
+        with pytest.raises(ValueError, match="sample_rate_hz must be a positive finite"):
+            above_nyquist(w, a, bad)
+    with pytest.raises(ValueError, match="1-D arrays of one length"):
+        above_nyquist(w, a[:-1], 100.0)
     # the task refuses what the rule counts, and takes what it does not
     ft = Multisine(1.0, np.array([2]), np.array([1.0]), np.array([0.0]))
     at = Multisine(w_ny * (1 - 1e-13) / 3, np.array([3]), np.array([1.0]), np.array([0.0]))

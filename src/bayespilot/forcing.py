@@ -209,9 +209,23 @@ def above_nyquist(frequencies: Any, amplitude: Any, sample_rate_hz: float) -> np
     -------
     numpy.ndarray
         Indices into ``frequencies``, ascending.
+
+    Raises
+    ------
+    ValueError
+        ``sample_rate_hz`` not a positive finite number, or ``frequencies``
+        and ``amplitude`` not 1-D arrays of one length.
     """
+    if not (isinstance(sample_rate_hz, (int, float, np.integer, np.floating))
+            and not isinstance(sample_rate_hz, bool) and math.isfinite(sample_rate_hz)
+            and sample_rate_hz > 0):
+        raise ValueError(f"sample_rate_hz must be a positive finite number, got "
+                         f"{sample_rate_hz!r}")
     w = np.asarray(frequencies, dtype=float)
     a = np.asarray(amplitude, dtype=float)
+    if w.ndim != 1 or w.shape != a.shape:
+        raise ValueError(f"frequencies and amplitude must be 1-D arrays of one length, got "
+                         f"shapes {w.shape} and {a.shape}")
     return np.flatnonzero((w >= math.pi * float(sample_rate_hz) * (1 - 1e-12)) & (a != 0))
 
 
