@@ -95,3 +95,28 @@ def test_tracking_task_refuses_a_bad_forcing_scale(bad):
     ft, fd = presets.paper_forcing("FD")
     with pytest.raises(ValueError, match="forcing_scale must be None"):
         TrackingTask(ft, fd, forcing_scale=bad)
+
+
+def test_a_preset_with_forcing_of_ones_own_must_drop_its_scale():
+    """dataclasses.replace of a preset kept its forcing_scale for a forcing that is no longer
+    Table 2's (simulate then recorded the paper's scale for it): refused, saying how; the
+    replace that keeps the forcing (another rate or duration), or drops the scale, is fine."""
+    import dataclasses
+
+    paper = TrackingTask.paper("FD", 1.0)
+    w0 = 2 * np.pi / 10.0
+    mine = Multisine(w0, [2, 5, 11], [0.02, 0.01, 0.005], [0.1, 1.2, 2.3])
+    with pytest.raises(ValueError, match=r"the target is not; give forcing_scale=None"):
+        dataclasses.replace(paper, target=mine)
+    louder = Multisine(paper.disturbance.base_frequency, paper.disturbance.n,
+                       paper.disturbance.amplitude * 1.01, paper.disturbance.phase)
+    with pytest.raises(ValueError, match=r"the disturbance is not"):
+        dataclasses.replace(paper, disturbance=louder)
+    with pytest.raises(ValueError, match=r"forcing_scale=1.0 says"):
+        TrackingTask.paper("FT", 1.0, scale=1.0).__class__(
+            paper.target, paper.disturbance, task="FT", forcing_scale=1.0)
+    assert dataclasses.replace(paper, sample_rate_hz=50.0, duration=40.96).forcing_scale == \
+        "paper_simulation"
+    own = dataclasses.replace(paper, target=mine, forcing_scale=None)
+    assert own.forcing_scale is None and own.target is mine
+    assert TrackingTask.paper("FT", 0.5, scale="printed").forcing_scale == "printed"

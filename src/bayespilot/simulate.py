@@ -115,7 +115,10 @@ class TrackingTask:
         On a non-finite or out-of-range number, an unknown task label, a
         controlled element of relative degree below 2, a forcing line at
         or above the Nyquist frequency, or a ``forcing_scale`` that is
-        neither None, a key of ``FORCING_SCALE`` nor a number >= 0.
+        neither None, a key of ``FORCING_SCALE`` nor a number >= 0, or
+        that (task FD or FT) does not give this target and disturbance
+        (``dataclasses.replace(TrackingTask.paper(...), target=mine)`` needs
+        ``forcing_scale=None`` too).
     """
 
     target: Multisine
@@ -183,6 +186,30 @@ class TrackingTask:
                     + (f" ({high.size} of its lines are at or above the Nyquist frequency)"
                        if high.size > 1 else ""))
         object.__setattr__(self, "controlled_element", (tuple(num), tuple(den)))
+        self._check_forcing_scale()
+
+    def _check_forcing_scale(self) -> None:
+        """Refuse a ``forcing_scale`` that does not describe this task's forcing functions.
+
+        ``dataclasses.replace(TrackingTask.paper("FD"), target=mine)`` kept the paper's
+        scale, which :func:`simulate` then recorded for a forcing that is not Table 2's.
+        Checked for the paper's tasks (FD, FT), the only ones a scale is defined for.
+        """
+        scale = self.forcing_scale
+        if scale is None or self.task not in ("FD", "FT"):
+            return
+        ft, fd = presets.paper_forcing(self.task, scale)
+        for name, mine, table in (("target", self.target, ft), ("disturbance", self.disturbance, fd)):
+            same = (mine.base_frequency == table.base_frequency
+                    and np.array_equal(mine.n, table.n)
+                    and np.allclose(mine.amplitude, table.amplitude, rtol=1e-12, atol=0.0)
+                    and np.allclose(mine.phase, table.phase, rtol=1e-12, atol=0.0))
+            if not same:
+                raise ValueError(
+                    f"forcing_scale={scale!r} says the forcing functions are Table 2's for task "
+                    f"{self.task} at that scale, but the {name} is not; give forcing_scale=None "
+                    f"for forcing functions of your own (dataclasses.replace(task, {name}=..., "
+                    f"forcing_scale=None))")
 
     @classmethod
     def paper(cls, task: str = "FD", motion_gain: float = 1.0,
