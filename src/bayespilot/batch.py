@@ -1,0 +1,646 @@
+"""Fit and compare many recorded runs on dask.distributed: one result file per recording.
+
+A lab has hundreds of recordings (subjects x conditions x runs) and wants, for each run,
+the pilot model's parameters with and without the threshold and the evidence for the
+threshold, and that evidence pooled per condition.  :func:`fit_batch` fits each recording
+with and without the threshold (:func:`~bayespilot.fit.three_step.fit_paper` or
+:func:`~bayespilot.fit.fast.fit_fast`, the paper's model:
+:func:`~bayespilot.model.paper_model`, as ``bayespilot fit REC`` without ``--with``),
+takes the information criteria of the two (:func:`~bayespilot.compare.information_criteria`)
+and, with ``compare=True``, the Bayes factor by nested sampling
+(:func:`~bayespilot.compare.compare`), as independent tasks on a dask cluster: a local
+one by default, an existing one by address.  It is the sibling of
+:func:`bayespilot.diagnose.batch.diagnose_batch` and shares its pieces: the cluster loop
+(:func:`bayespilot.campaign.run_keyed`: atomic result files, an ``<key>.error.json`` for
+a task that raised while the others go on, which the next call retries, a progress bar,
+a lost cluster stopping the batch with what finished saved), the keys
+(:func:`~bayespilot.diagnose.batch.plan_batch`: the file stem, ``<folder>_<stem>`` when
+two stems clash), the seeds (:func:`~bayespilot.diagnose.batch.task_seed` of the batch's
+``seed`` and the recording's signals: both fits and the comparison of a recording run
+with it, whatever the order of the paths or the other recordings of the batch) and the
+resume rule: a result that exists and was made from the same recording (its signals'
+digest and what the fit reads of its sidecar, K_theta among it) with the same settings
+is not redone; one made from another recording or with other settings is a
+:class:`~bayespilot.diagnose.batch.ResultConflictError` that names the key and says what
+differs, before anything runs.
+
+Every recording is read and checked (long enough to fit) in this process before the
+cluster starts: the unreadable ones are all named in one error and nothing runs.  The
+workers receive the recordings, not their paths (a remote cluster needs no shared
+folder); the warnings of a task's fits are kept in its result (``warnings``), and this
+process says each kind once at the end, naming the recordings.
+
+Outputs in ``out_dir``:
+
+- ``<key>.json``: ``key``, ``recording`` (the path as given), ``recording_digests`` and
+  ``recording_metadata`` (as :func:`~bayespilot.diagnose.batch.diagnose_batch` records
+  them: one each), ``subject``, ``task``, ``motion_gain``, ``settings`` (``method``,
+  ``noise``, ``iterate``, ``oversample``, ``compare``, ``nlive``, ``fit_options``,
+  ``compare_options``, ``seed``: the task's own, and ``batch_seed``), ``fit_threshold``
+  and ``fit_none`` (``FitResult.to_dict(full=False)``), ``information_criteria`` (of
+  the two fits' -ln L, k counted as :func:`~bayespilot.compare.compare` counts it: the
+  free parameters, those of an AR noise model among them, and 1 for the output-error
+  variance), ``comparison`` (``Comparison.to_dict()``, or null), ``warnings``
+  (``category`` and ``message``, each once), ``elapsed_seconds``, ``host``, ``versions``
+  and ``bayespilot_version`` (the worker's).
+- ``summary.csv`` (:data:`SUMMARY_FIELDS`), one row per recording whose result (or error)
+  file in ``out_dir`` was made with the batch's settings, sorted by key: this call's and
+  those an earlier call on other recordings left there.
+- ``conditions.csv`` (:data:`CONDITION_FIELDS`), one row per condition (subject, task,
+  K_theta) of those rows: the threshold's spread over the runs, the summed improvement
+  of -ln L and BIC by the threshold, and with ``compare`` the runs' Bayes factors pooled
+  (:func:`~bayespilot.compare.pool`).
+- ``summary.png``: each run's delta_abs per condition, marked by the run's decision.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import platform
+import tempfile
+import time
+import warnings
+from collections import defaultdict
+from contextlib import suppress
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
+
+import numpy as np
+
+from . import presets
+
+if TYPE_CHECKING:
+    from distributed import Client
+    from distributed.deploy import Cluster
+
+    from .campaign import CampaignSummary
+    from .model import PilotModel
+    from .recording import Recording
+
+__all__ = ["fit_batch", "SUMMARY_FIELDS", "CONDITION_FIELDS"]
+
+#: Columns of ``summary.csv``: the recording, the parameters of its fit with threshold by
+#: name, -ln L with and without, the VAF with threshold, delta_bic (none - threshold:
+#: positive favours the threshold), with ``compare`` the ln Bayes factor, its error and the
+#: decision, the seed the task ran with and, for a task that failed, its error.
+SUMMARY_FIELDS = ("key", "subject", "task", "motion_gain", *presets.PARAMETER_NAMES,
+                  "neg_log_lik", "neg_log_lik_none", "vaf", "delta_bic", "log_bayes_factor",
+                  "log_bayes_factor_err", "decision", "seed", "error")
+
+#: Columns of ``conditions.csv``: the condition (subject, '' when the recordings give none;
+#: task; K_theta) and its ``label``, the runs with a result, delta_abs's median, min and max
+#: over them, the sums over them of -ln L none - threshold and of delta_bic, and with
+#: ``compare`` the pooled ln Bayes factor, its error and decision
+#: (:func:`~bayespilot.compare.pool`).
+CONDITION_FIELDS = ("subject", "task", "motion_gain", "label", "n_runs", "delta_abs_median",
+                    "delta_abs_min", "delta_abs_max", "sum_delta_neg_log_lik", "sum_delta_bic",
+                    "log_bayes_factor", "log_bayes_factor_err", "decision")
+
+#: Warnings not recorded (libraries' notices to developers), as run_job leaves them out.
+_QUIET = (DeprecationWarning, PendingDeprecationWarning, FutureWarning)
+
+
+def _information_criteria(fit_threshold: Any, fit_none: Any, model: PilotModel,
+                          recording: Recording) -> dict[str, Any]:
+    """:func:`~bayespilot.compare.information_criteria` of the two fits, k counted as
+    :func:`~bayespilot.compare.compare` counts it (the model's free parameters, an AR
+    noise model's coefficients, + 1 for the output-error variance), n the samples the fit
+    with threshold's likelihood uses (after its discard, less the AR order)."""
+    from .compare import THRESHOLD, information_criteria
+    from .likelihood import Likelihood
+    from .noise import ARNoise
+
+    def noise(fit: Any) -> ARNoise | None:
+        given = fit.settings.get("noise")
+        return None if not given else ARNoise.from_dict(given)
+
+    def k(m: PilotModel, fit: Any) -> int:
+        return m.n_free + (0 if noise(fit) is None else noise(fit).order) + 1
+
+    lik = Likelihood(model, recording, initial=fit_threshold.settings["initial"],
+                     discard=fit_threshold.settings["discard"], noise=noise(fit_threshold))
+    return information_criteria(fit_threshold.neg_log_lik, fit_none.neg_log_lik,
+                                k(model, fit_threshold),
+                                k(model._fixed(**{THRESHOLD: 0.0}), fit_none), lik.n_terms)
+
+
+def _run_fit_task(recording: Recording, settings: Mapping[str, Any]) -> dict[str, Any]:
+    """One recording's task, on a worker: both fits, their information criteria and (with
+    ``settings["compare"]``) the comparison, all seeded by ``settings["seed"]``; the
+    warnings kept (each once), not issued.  Returns the result file's computed part."""
+    from . import __version__
+    from ._files import VERSION_KEY
+    from .campaign import _fit_function, _versions
+    from .model import paper_model
+    from .noise import ARNoise
+
+    t0 = time.perf_counter()
+    model = paper_model(threshold=True, oversample=settings["oversample"])
+    kw = dict(settings["fit_options"])
+    if settings["method"] == "paper":
+        kw["iterate"] = settings["iterate"]
+    elif settings["noise"] == "ar":
+        kw["noise"] = "ar"
+    fit = _fit_function(settings["method"])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for quiet in _QUIET:
+            warnings.simplefilter("ignore", quiet)
+        with_threshold = fit(recording, model, threshold=True, seed=settings["seed"], **kw)
+        if kw.get("noise") == "ar" and kw.get("noise_order") is None:
+            # the AR order the fit with threshold chose, for both: with an order each, the
+            # two -ln L were sums over different samples with different noise models, and
+            # their information criteria compared nothing
+            kw["noise_order"] = ARNoise.from_dict(with_threshold.settings["noise"]).order
+        without = fit(recording, model, threshold=False, seed=settings["seed"], **kw)
+        ic = _information_criteria(with_threshold, without, model, recording)
+        comparison = None
+        if settings["compare"]:
+            from .compare import compare
+
+            comparison = compare(recording, model, seed=settings["seed"],
+                                 nlive=settings["nlive"], progress=False,
+                                 **settings["compare_options"]).to_dict()
+    said: list[dict[str, str]] = []
+    for w in caught:
+        entry = {"category": w.category.__name__, "message": str(w.message)}
+        if entry not in said:
+            said.append(entry)
+    return {"fit_threshold": with_threshold.to_dict(full=False),
+            "fit_none": without.to_dict(full=False), "information_criteria": ic,
+            "comparison": comparison, "warnings": said,
+            "elapsed_seconds": time.perf_counter() - t0, "host": platform.node(),
+            "versions": _versions(), VERSION_KEY: __version__}
+
+
+def _options(method: str, noise: str, iterate: bool, oversample: int, compare: bool,
+             nlive: int | None, fit_options: Mapping[str, Any] | None,
+             compare_options: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The batch's settings, checked (ValueError), as its result files record them (without
+    the seeds)."""
+    from .campaign import Job, _json_roundtrip
+    from .compare import _check_int
+    from .model import paper_model
+
+    if method not in ("paper", "fast"):
+        raise ValueError(f"method must be 'paper' or 'fast', got {method!r}")
+    if noise not in ("white", "ar"):
+        raise ValueError(f"noise must be 'white' or 'ar', got {noise!r}")
+    if noise == "ar" and method != "fast":
+        raise ValueError("noise='ar' (a prediction-error fit) goes with method='fast'")
+    for name, value in (("iterate", iterate), ("compare", compare)):
+        if not isinstance(value, bool):
+            raise ValueError(f"{name} must be True or False, got {value!r}")
+    if iterate and method != "paper":
+        raise ValueError("iterate=True repeats Steps II and III of method='paper'")
+    model = paper_model(threshold=True, oversample=oversample)  # (a bad oversample: raised)
+    if nlive is not None and not compare:
+        raise ValueError(f"nlive sets the live points of the comparison; give it with "
+                         f"compare=True (got nlive={nlive!r})")
+    if compare:
+        import inspect
+
+        from .compare import compare as compare_function
+
+        params = inspect.signature(compare_function).parameters
+        # (compare's own rule: the model with threshold needs the most live points)
+        nlive = _check_int("nlive", params["nlive"].default if nlive is None else nlive,
+                           2 * model.n_free + 2)
+        refused = {"recording", "model", "seed", "nlive", "progress"}
+        bad = sorted(k for k in compare_options or {} if k not in params or k in refused)
+        if bad:
+            raise ValueError(f"compare_options: {', '.join(map(repr, bad))} is not an option of "
+                             f"compare() the batch passes on (give nlive and seed as "
+                             f"fit_batch's own)")
+    elif compare_options:
+        raise ValueError("compare_options are options of the comparison; give them with "
+                         "compare=True")
+    fit_options = dict(fit_options or {})
+    own = sorted(set(fit_options) & {"iterate", "noise"})
+    if own:
+        raise ValueError(f"fit_options: give {', '.join(own)} as fit_batch's own keyword")
+    # (the campaign's check of a fit's options: names, True/False, JSON)
+    fit_options = Job(task="FD", motion_gain=1.0, remnant_fraction=0.0, realization=0,
+                      threshold=True, method=method, fit_kwargs=fit_options).fit_kwargs
+    try:
+        compare_options = _json_roundtrip(dict(compare_options or {}))
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"compare_options must be JSON-serialisable ({exc})") from None
+    return {"method": method, "noise": noise, "iterate": iterate, "oversample": int(oversample),
+            "compare": compare, "nlive": nlive if compare else None,
+            "fit_options": fit_options, "compare_options": compare_options}
+
+
+def _fittable_problem(recording: Recording, options: Mapping[str, Any]) -> str | None:
+    """Why the batch's fits cannot use ``recording`` (too short, u constant, a discard it
+    cannot take), as the fits would say it on a worker, or None."""
+    from .fit.fast import _check_ar_fittable
+    from .fit.three_step import _check_fittable
+    from .likelihood import _checked_discard, _coloured_default, _startup_default
+    from .model import paper_model
+
+    fit = options["fit_options"]
+    ar = options["noise"] == "ar"
+    discard = fit.get("discard")
+    if discard is None:
+        discard = (_coloured_default(recording.duration) if ar
+                   else _startup_default(recording, fit.get("initial", "periodic")))
+    try:
+        with warnings.catch_warnings():  # (the fits say them, recorded in the results)
+            warnings.simplefilter("ignore")
+            discard = _checked_discard(recording, discard)
+            _check_fittable(recording, paper_model(oversample=options["oversample"]), discard)
+            if ar:
+                _check_ar_fittable(recording, discard, fit.get("noise_order"),
+                                   fit.get("discard") is None)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+def _done(out: Path, key: str) -> dict[str, Any] | None:
+    """The result file ``out/<key>.json`` if it is one of a batch's (parses, records ``key``
+    and a fit), else None (missing, cut short, another kind of file: to run)."""
+    from .campaign import _read_json
+
+    stored = _read_json(out / f"{key}.json")
+    ok = isinstance(stored, dict) and stored.get("key") == key and "fit_threshold" in stored
+    return stored if ok else None
+
+
+def _say_warned(out: Path, keys: Sequence[str]) -> None:
+    """Each kind of warning that the tasks of ``keys`` whose results are in ``out`` (those
+    this call ran and saved) recorded, once: a RuntimeWarning naming how many recordings
+    and which, with one message, as :func:`~bayespilot.campaign.run_campaign` says those of
+    its fits."""
+    from ._caller import warn_at_caller
+    from .campaign import _listed
+
+    warned: dict[str, list[tuple[str, str]]] = defaultdict(list)
+    for key in keys:
+        for w in (_done(out, key) or {}).get("warnings") or ():
+            warned[w["category"]].append((key, w["message"]))
+    for category, seen in sorted(warned.items()):
+        named = sorted({k for k, _ in seen})
+        first = min(m for k, m in seen if k == named[0])
+        warn_at_caller(f"{category} in {len(named)} recording(s) ({_listed(named, 3)}), e.g. "
+                       f"{named[0]}: {first}; each result file lists its warnings under "
+                       f"'warnings'", RuntimeWarning)
+
+
+def _view(stored: Any) -> Any:
+    """What must agree for a result file to count as done (the form of
+    :func:`bayespilot.diagnose.batch._differs`' views): the recording's signals' digest,
+    what the fit reads of its sidecar, the settings; None for a file that records none."""
+    if not isinstance(stored, Mapping):
+        return None
+    digests, meta = stored.get("recording_digests"), stored.get("recording_metadata")
+    settings = stored.get("settings")
+    if not (isinstance(digests, list) and isinstance(meta, list) and len(meta) == len(digests)
+            and isinstance(settings, dict)):
+        return None
+    return {"recordings": sorted(map(str, digests)), "settings": settings,
+            "metadata": dict(zip(map(str, digests), meta))}
+
+
+def _batch_settings(stored: Any) -> Any:
+    """A result (or error) file's settings without the task's own ``seed``: what the tasks
+    of one batch share (``batch_seed`` among it); None if it records none."""
+    settings = stored.get("settings") if isinstance(stored, Mapping) else None
+    if not isinstance(settings, dict):
+        return None
+    return {k: v for k, v in settings.items() if k != "seed"}
+
+
+def _results(out: Path, settings: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """Every result file in ``out`` (or, for a task that failed, its error file) made with
+    the batch's ``settings`` (:func:`_batch_settings`), by key."""
+    from .campaign import _read_json
+
+    found: dict[str, dict[str, Any]] = {}
+    for f in sorted(out.glob("*.json")):
+        failed = f.name.endswith(".error.json")
+        key = f.name[:-len(".error.json")] if failed else f.stem
+        stored = _read_json(f)
+        if not (isinstance(stored, dict) and stored.get("key") == key
+                and (failed or "fit_threshold" in stored)
+                and _batch_settings(stored) == settings):
+            continue
+        if failed:  # (a result wins over an old error file, whichever is read first)
+            found.setdefault(key, stored)
+        else:
+            found[key] = stored
+    return found
+
+
+def _summary_row(stored: Mapping[str, Any]) -> dict[str, Any]:
+    """A row of ``summary.csv`` (:data:`SUMMARY_FIELDS`) from a result or error file."""
+    row = {"key": stored["key"], "subject": stored.get("subject") or "",
+           "task": stored.get("task"), "motion_gain": stored.get("motion_gain"),
+           "seed": stored["settings"].get("seed")}
+    if "fit_threshold" not in stored:
+        return {**row, "error": f"{stored.get('error')}: {stored.get('message')}"}
+    fit, none = stored["fit_threshold"], stored["fit_none"]
+    comparison = stored.get("comparison") or {}
+    return {**row, **{n: fit["params"].get(n) for n in presets.PARAMETER_NAMES},
+            "neg_log_lik": fit["neg_log_lik"], "neg_log_lik_none": none["neg_log_lik"],
+            "vaf": fit["vaf"], "delta_bic": stored["information_criteria"]["delta_bic"],
+            "log_bayes_factor": comparison.get("log_bayes_factor"),
+            "log_bayes_factor_err": comparison.get("log_bayes_factor_err"),
+            "decision": comparison.get("decision")}
+
+
+def _label(subject: str, task: str, motion_gain: float) -> str:
+    """A condition's name, as :func:`~bayespilot.compare.pool` labels it: "s1, FD, K_theta = 1"
+    ("FD, K_theta = 1" without a subject)."""
+    return ", ".join([*([subject] if subject else []), str(task),
+                      f"K_theta = {float(motion_gain):g}"])
+
+
+def _condition_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The rows of ``conditions.csv`` (:data:`CONDITION_FIELDS`) of the results (no error
+    files), one per (subject, task, K_theta), sorted."""
+    from .compare import pool
+
+    groups: dict[tuple, list[Mapping[str, Any]]] = defaultdict(list)
+    for r in results:
+        groups[(r.get("subject") or "", str(r.get("task")), float(r["motion_gain"]))].append(r)
+    rows = []
+    for (subject, task, gain), runs in sorted(groups.items()):
+        delta = [r["fit_threshold"]["params"]["delta_abs"] for r in runs]
+        row = {"subject": subject, "task": task, "motion_gain": gain,
+               "label": _label(subject, task, gain), "n_runs": len(runs),
+               "delta_abs_median": float(np.median(delta)), "delta_abs_min": min(delta),
+               "delta_abs_max": max(delta),
+               "sum_delta_neg_log_lik": math.fsum(r["fit_none"]["neg_log_lik"]
+                                                  - r["fit_threshold"]["neg_log_lik"]
+                                                  for r in runs),
+               "sum_delta_bic": math.fsum(r["information_criteria"]["delta_bic"] for r in runs)}
+        compared = [r["comparison"] for r in runs if r.get("comparison")]
+        if compared:
+            try:
+                p = pool(compared, label=row["label"])
+                row.update(log_bayes_factor=p.log_bayes_factor,
+                           log_bayes_factor_err=p.log_bayes_factor_err, decision=p.decision)
+            except ValueError as exc:  # (the same run under two keys, left by earlier calls)
+                row["decision"] = f"not pooled: {exc}"
+        rows.append(row)
+    return rows
+
+
+def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mapping[str, Any]]
+                  ) -> Any:
+    """Each run's delta_abs (rows of ``summary.csv`` with a result), one column per condition,
+    marked by the run's decision (with a comparison) or by the sign of its delta_bic."""
+    from .diagnose.report import _subplots
+    from .plots import _param_label
+
+    where = {(c["subject"], c["task"], c["motion_gain"]): i for i, c in enumerate(conditions)}
+    done = [r for r in rows if not r.get("error")]
+    compared = any(r.get("decision") for r in done)
+    kinds = ({"threshold": ("o", "C0", "threshold"), "none": ("x", "C3", "none"),
+              "inconclusive": ("s", "0.5", "inconclusive")} if compared else
+             {True: ("o", "C0", r"$\Delta$BIC > 0 (threshold)"),
+              False: ("x", "C3", r"$\Delta$BIC $\leq$ 0 (none)")})
+    fig, ax = _subplots(figsize=(max(4.8, 1.6 + 1.0 * len(conditions)), 4.0))
+    for kind, (marker, colour, text) in kinds.items():
+        xs, ys = [], []
+        for r in done:
+            mine = r.get("decision") if compared else float(r["delta_bic"]) > 0
+            if mine == kind:
+                i = where[(r["subject"], str(r["task"]), float(r["motion_gain"]))]
+                xs.append(i)
+                ys.append(r["delta_abs"])
+        if xs:
+            ax.scatter(xs, ys, marker=marker, c=colour, label=text, zorder=3)
+    ax.set_xticks(range(len(conditions)))
+    ax.set_xticklabels([c["label"].replace("K_theta", r"$K_\theta$") for c in conditions],
+                       rotation=30 if len(conditions) > 3 else 0, ha="right"
+                       if len(conditions) > 3 else "center", fontsize="small")
+    ax.set_xlim(-0.6, len(conditions) - 0.4)
+    ax.set_ylim(bottom=0.0)  # (0: no threshold)
+    ax.set_ylabel(_param_label("delta_abs"))
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize="small", title="per run", title_fontsize="small")
+    ax.set_title(f"The threshold of {len(done)} run{'s' if len(done) != 1 else ''} in "
+                 f"{len(conditions)} condition{'s' if len(conditions) != 1 else ''}",
+                 fontsize="medium")
+    return fig
+
+
+def _write_summaries(out: Path, settings: Mapping[str, Any]) -> None:
+    """``summary.csv``, ``conditions.csv`` and (when a task finished) ``summary.png`` of the
+    results in ``out`` made with ``settings`` (:func:`_batch_settings`)."""
+    from ._files import write_csv_atomic
+    from .diagnose.report import _png
+
+    found = _results(out, settings)
+    rows = [_summary_row(found[k]) for k in sorted(found)]
+    conditions = _condition_rows([found[k] for k in sorted(found) if "fit_threshold" in found[k]])
+    write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS, rows)
+    write_csv_atomic(out / "conditions.csv", CONDITION_FIELDS, conditions)
+    if conditions:
+        _png(_plot_summary(rows, conditions), out / "summary.png")
+
+
+def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str = "paper",
+              noise: str = "white", iterate: bool = False, oversample: int = 1,
+              compare: bool = False, nlive: int | None = None, seed: int = 0,
+              fit_options: Mapping[str, Any] | None = None,
+              compare_options: Mapping[str, Any] | None = None,
+              scheduler: "str | Client | Cluster | None" = None, workers: int | None = None,
+              progress: bool | str = True, connect_timeout: float = 10.0,
+              warm_cache: bool = True) -> "CampaignSummary":
+    """Fit (and compare) many recordings, with and without threshold, on dask.distributed.
+
+    Parameters
+    ----------
+    paths : sequence of str or Path
+        Recordings (stems, .csv, .json or .mat paths), as ``bayespilot fit`` takes them;
+        one named twice (its ``.csv`` and its ``.json``) is fitted once.
+    out_dir : str or Path
+        Created if missing; ``<key>.json`` per recording, ``summary.csv``,
+        ``conditions.csv`` and ``summary.png`` (module docs).
+    method : {"paper", "fast"}
+        :func:`~bayespilot.fit.three_step.fit_paper` (minutes a fit) or
+        :func:`~bayespilot.fit.fast.fit_fast` (seconds).
+    noise : {"white", "ar"}
+        The output-error model: white (Eq. 4, the paper's) or, with ``method="fast"``
+        only, an AR model estimated with the fit (a prediction-error fit); its
+        coefficients count in k of the information criteria.  The fit with threshold
+        picks the AR order by BIC and the fit without uses the same order (unless
+        ``fit_options`` gives ``noise_order``), so both -ln L are sums over the same
+        samples.
+    iterate : bool
+        With ``method="paper"`` only: repeat Steps II and III until they agree.
+    oversample : int
+        Run the vestibular channel at this many times the recording's rate
+        (:func:`~bayespilot.model.paper_model`), in the fits and the comparison.
+    compare : bool
+        Also compare the models with and without threshold on each recording by nested
+        sampling (:func:`~bayespilot.compare.compare`: minutes a recording) and pool the
+        Bayes factors per condition in ``conditions.csv``.
+    nlive : int, optional
+        The comparison's live points (default: :func:`~bayespilot.compare.compare`'s);
+        only with ``compare``.
+    seed : int
+        The batch's seed (>= 0).  Each recording's fits and comparison run with its own,
+        :func:`~bayespilot.diagnose.batch.task_seed` of ``seed`` and its signals' digest
+        (recorded in ``settings["seed"]`` and in ``summary.csv``: ``fit_fast(recording,
+        seed=...)`` repeats the fit), beside ``settings["batch_seed"]``.
+    fit_options : mapping, optional
+        Other keywords of the fit function, the same for every fit (e.g.
+        ``{"n_starts": 4}`` for the fast method, ``{"population": 80}`` for the
+        paper's); ``iterate`` and ``noise`` are this function's own.  Recorded in the
+        settings.
+    compare_options : mapping, optional
+        Other keywords of :func:`~bayespilot.compare.compare` (e.g.
+        ``{"savage_dickey_samples": False}``, which leaves out the emcee run of its
+        Savage-Dickey check, about half its time); only with ``compare``.  Recorded in
+        the settings.
+    scheduler, workers, progress, connect_timeout, warm_cache
+        As for :func:`~bayespilot.campaign.run_campaign` (the lines count recordings).
+
+    Returns
+    -------
+    CampaignSummary
+        ``total`` recordings, ``completed`` by this call, ``skipped`` (done before),
+        ``failed`` with one line per key in ``errors`` (each in ``<key>.error.json``).
+
+    Raises
+    ------
+    bayespilot.recording.RecordingError
+        A recording cannot be read (every such file is named); nothing is run.  A
+        ValueError.
+    ValueError
+        A bad setting (``noise="ar"`` without ``method="fast"``, ``iterate`` without
+        ``method="paper"``, ``nlive`` or ``compare_options`` without ``compare``, an
+        unknown fit option, ``workers`` not a positive integer or given with
+        ``scheduler``, ``connect_timeout`` not a positive number, another ``progress``),
+        recordings the fits cannot use (too short, u constant:
+        every one named), keys that clash, the same recording (its signals) under two
+        names; nothing is run.
+    ResultConflictError
+        ``out_dir`` holds a result of one of the batch's keys made from another recording
+        (by its signals, or by what the fit reads of its sidecar: K_theta, the sample
+        rate, the task, the plant, the forcing) or with other settings: the message names
+        the file and says what differs; nothing is run.  A CampaignError and a
+        ValueError (:class:`bayespilot.diagnose.batch.ResultConflictError`).
+    CampaignError
+        The cluster cannot be reached or started or is lost during the run (what
+        finished is saved), ``out_dir`` cannot be written in, or a worker lacks
+        bayespilot or has another version of it.
+    TypeError
+        A ``scheduler`` that is not an address (str), a ``distributed.Client`` or a
+        ``distributed.deploy.Cluster``.
+
+    Warns
+    -----
+    RuntimeWarning
+        Once per kind of warning the tasks issued on the workers (a
+        QuestionableRecordingWarning, an EstimateOnBoundWarning, ...), naming how many
+        recordings and which; each result file lists its own under ``warnings``.
+
+    Examples
+    --------
+    >>> summary = fit_batch(["out/s1-run1", "out/s1-run2"], "fits", method="fast",
+    ...                     workers=2)  # doctest: +SKIP
+    """
+    from . import campaign as C
+    from .diagnose.batch import (ResultConflictError, _differs, _recording_metadata,
+                                 _the_recording, plan_batch, task_seed)
+    from .io import read_recording
+    from .recording import RecordingError, _signals_digest
+
+    t0 = time.perf_counter()
+    C._check_progress(progress)
+    C._check_scheduler(scheduler)
+    if workers is not None and (scheduler is not None or isinstance(workers, bool)
+                                or not isinstance(workers, numbers.Integral) or workers < 1):
+        raise ValueError(f"workers is the size of the local cluster, a positive integer "
+                         f"without scheduler; got {workers!r}"
+                         f"{' with a scheduler' if scheduler is not None else ''}")
+    if isinstance(connect_timeout, bool) or not (isinstance(connect_timeout, numbers.Real)
+                                                 and connect_timeout > 0):
+        raise ValueError(f"connect_timeout must be a positive number of seconds, "
+                         f"got {connect_timeout!r}")
+    options = _options(method, noise, iterate, oversample, compare, nlive, fit_options,
+                       compare_options)
+    task_seed(seed, [])  # (a bad seed: the ValueError, before any file is read)
+    first: dict[str, str] = {}  # a recording named twice (its .csv and its .json) is one
+    for p in map(str, paths):
+        first.setdefault(_the_recording(p), p)
+    paths = list(first.values())
+    if not paths:
+        raise ValueError("no recordings given")
+    recs, bad = {}, []
+    for p in paths:
+        try:
+            recs[p] = read_recording(p)
+        except RecordingError as exc:
+            bad.append(str(exc))
+    if bad:
+        raise RecordingError(f"{len(bad)} of {len(paths)} recordings cannot be read; nothing "
+                             "was run:\n  " + "\n  ".join(bad))
+    unfit = [said for said in (_fittable_problem(r, options) for r in recs.values()) if said]
+    if unfit:
+        raise ValueError(f"{len(unfit)} of {len(paths)} recordings cannot be fitted; nothing "
+                         "was run:\n  " + "\n  ".join(unfit))
+    tasks = plan_batch(paths, [recs[p] for p in paths])
+    digests = {p: _signals_digest(r) for p, r in recs.items()}
+    by_digest: dict[str, str] = {}
+    twice = []
+    for p, d in digests.items():
+        if d in by_digest:
+            twice.append(f"{by_digest[d]} and {p}")
+        by_digest.setdefault(d, p)
+    if twice:
+        raise ValueError(f"the same recording under two names: {'; '.join(twice)} hold the same "
+                         f"signals (conditions.csv would count the run twice); give each run "
+                         f"once")
+    out = Path(out_dir)
+    try:  # (a folder that cannot be written in: said now, not after the first result)
+        out.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=out).close()
+    except OSError as exc:
+        raise C.CampaignError(f"{out}: cannot write in the output folder "
+                              f"({exc.strerror or exc})") from None
+
+    def header(t: Any) -> dict[str, Any]:  # what a result (and an error file) records first
+        p = t.paths[0]
+        return C._json_roundtrip({
+            "recording": p, "recording_digests": [digests[p]],
+            "recording_metadata": [_recording_metadata(recs[p])], "subject": t.subject,
+            "task": t.task, "motion_gain": t.motion_gain,
+            "settings": {**options, "seed": task_seed(seed, [digests[p]]), "batch_seed": seed}})
+
+    headers = {t.key: header(t) for t in tasks}
+    done = {t.key: (t, _done(out, t.key)) for t in tasks}
+    done = {key: (t, old) for key, (t, old) in done.items() if old is not None}
+    for key, (t, old) in done.items():  # (all checked before anything runs)
+        was, now = _view(old), _view(headers[key])
+        if was != now:  # (_differs' words are the diagnosis's: what the fit reads here)
+            said = _differs(was, now, {digests[t.paths[0]]: t.paths[0]}).replace(
+                "which the diagnosis reads", "which the fit reads")
+            raise ResultConflictError(f"{out / (key + '.json')} holds a fit of {key} from "
+                                      f"{said}; use another output folder or delete it")
+    pending = [t for t in tasks if t.key not in done]
+    try:
+        completed, errors = C.run_keyed(
+            [(t.key, _run_fit_task, (recs[t.paths[0]], headers[t.key]["settings"]),
+              headers[t.key]) for t in pending], out,
+            total=len(tasks), skipped=len(done), scheduler=scheduler, workers=workers,
+            progress=progress, connect_timeout=connect_timeout,
+            warm=(lambda: C._warm_numba_cache({method})) if warm_cache else None,
+            desc="recordings", unit="recording",
+            to_json=lambda key, value: C._jsonable({"key": key, **headers[key], **value}),
+            scatter=True)
+    except BaseException:  # (the run stopped: what finished is saved, and its warnings
+        with suppress(Warning):  # said, but a warning made an error must not hide why)
+            _say_warned(out, [t.key for t in pending])
+        raise
+    _say_warned(out, [t.key for t in pending])
+    _write_summaries(out, _batch_settings(next(iter(headers.values()))))
+    return C.CampaignSummary(len(tasks), completed, len(done), len(errors), errors, out,
+                             time.perf_counter() - t0, "recordings")
