@@ -72,9 +72,10 @@ OPTIONS = {"eq4": {"likelihood": "eq4"},
            "ar2": {"likelihood": "coloured", "ar": "sampled", "ar_order": 2, "discard": 0.0}}
 #: The vestibular channel's oversampling factor of each likelihood studied (default 1).
 OVERSAMPLE = {"profiled8": 8}
-#: Panel titles of the figure.
-LABELS = {"eq4": "Eq. 4", "coloured": "coloured, AR fixed", "profiled": "coloured, AR profiled",
-          "profiled8": "AR profiled, motion channel 8x", "ar2": "coloured, AR(2) sampled"}
+#: Panel titles of the figure ("Eq. (4) likelihood" as the package's figures name it).
+LABELS = {"eq4": "Eq. (4) likelihood", "coloured": "coloured, AR fixed",
+          "profiled": "coloured, AR profiled",
+          "profiled8": "AR profiled, motion 8x", "ar2": "coloured, AR(2) sampled"}
 F_N, K_THETA = 0.2, 1.0
 LEVELS = (0.5, 0.9)
 NAMES = ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm", "delta_abs")
@@ -252,17 +253,19 @@ def figure(rows, path: Path) -> None:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
+    from bayespilot._figstyle import save_figure
     from bayespilot._labels import symbol
 
     liks = [lk for lk in LIKELIHOODS if any(r["likelihood"] == lk for r in rows)]
-    # two panels a row (a page's width, 7.5 in); the legend in the free cell, else below
+    # two panels a row (a page's width, 7 in); the legend in the free cell, else below
     ncols = min(len(liks), 2)
     nrows = math.ceil(len(liks) / ncols)
     free = nrows * ncols > len(liks)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(7.5, 2.5 * nrows + 0.6 + (0 if free else 0.4)),
+    fig, axes = plt.subplots(nrows, ncols, figsize=(7.0, 2.5 * nrows + 0.6 + (0 if free else 0.4)),
                              sharey=True, squeeze=False, layout="constrained")
     x = np.arange(len(NAMES))
     colours = dict(zip(LEVELS, ("C0", "C1")))
+    markers = dict(zip(LEVELS, ("o", "s")))  # told apart without colour too (greyscale)
     for a, lik in zip(axes.flat, liks):
         cov = coverage(rows, lik)
         n = cov[NAMES[0]][LEVELS[0]][1]
@@ -273,10 +276,10 @@ def figure(rows, path: Path) -> None:
             a.axhline(lv, color=col, lw=0.8, ls="--")
             f = np.array([cov[nm][lv][0] / n for nm in NAMES])
             ci = np.array([wilson(cov[nm][lv][0], n) for nm in NAMES])
-            a.errorbar(x + (j - 0.5) * 0.2, f, yerr=[f - ci[:, 0], ci[:, 1] - f], fmt="o",
-                       color=col, ms=3.5, capsize=2)
+            a.errorbar(x + (j - 0.5) * 0.2, f, yerr=[f - ci[:, 0], ci[:, 1] - f],
+                       fmt=markers[lv], color=col, ms=3.5, capsize=2)
         a.set_xticks(x, [symbol(nm) for nm in NAMES])
-        a.set_ylim(0, 1.02)
+        a.set_ylim(-0.04, 1.04)  # a share of 0 shows its whole marker
         a.set_title(f"{LABELS[lik]}: {n} recordings", fontsize="medium")
         a.grid(True, axis="y", lw=0.3, alpha=0.6)
     for a in axes[:, 0]:
@@ -284,7 +287,7 @@ def figure(rows, path: Path) -> None:
     handles = []
     for lv in LEVELS:
         c = colours[lv]
-        handles += [Line2D([], [], ls="none", marker="o", ms=3.5, color=c,
+        handles += [Line2D([], [], ls="none", marker=markers[lv], ms=3.5, color=c,
                            label=f"{int(lv * 100)} % intervals: share, 95 % Wilson interval"),
                     Line2D([], [], color=c, lw=0.8, ls="--",
                            label=f"nominal {int(lv * 100)} %"),
@@ -298,9 +301,9 @@ def figure(rows, path: Path) -> None:
         fig.legend(handles=handles, loc="outside lower center", ncol=2, fontsize="small",
                    frameon=False)
     fig.suptitle(f"Coverage of central credible intervals\n({symbol('F_n')} = {F_N}, "
-                 f"$K_\\theta$ = {K_THETA:g}, FD and FT)", fontsize="medium")
+                 f"{symbol('K_theta')} = {K_THETA:g}, FD and FT)", fontsize="medium")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 
 

@@ -1,6 +1,7 @@
 """Faithfulness to Pool et al. (2012): our numbers beside the paper's.
 
 Run:  python analyses/faithfulness.py [--quick] [--out analyses/results] [--figures docs/figures]
+      python analyses/faithfulness.py --figure-only   # Fig. 13 redrawn from the stored part D
 
 Parts (each prints a table beside the paper's and writes its numbers to
 ``analyses/results/faithfulness.json``):
@@ -208,28 +209,58 @@ def part_d(pool, n_real, figdir):
     return res
 
 
+#: The figure's name (docs/faithfulness.md embeds it).
+FIG13 = "fig13_likelihood_vs_delta_abs.png"
+#: -ln L as the package's fit figures write it (bayespilot.fit.figures).
+NLL = r"$-\ln L$"
+
+
 def _plot_fig13(res, grid, figdir):
+    """Fig. 13 from part D's curves (``res`` = the stored ``D_fig13``): -ln L over delta_abs
+    per realization, its minimum, the truth; 7 x 4.5 in (a page's width, text printed at its
+    size), the paper's notation (:mod:`bayespilot._labels`), saved by
+    :func:`bayespilot._figstyle.save_figure`."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, axes = plt.subplots(2, 3, figsize=(12, 6.5), sharex=True)
+    from matplotlib.lines import Line2D
+
+    from bayespilot._figstyle import save_figure
+    from bayespilot._labels import label, symbol
+
+    grid = np.asarray(grid)
+    fig, axes = plt.subplots(2, 3, figsize=(7.0, 4.5), sharex=True, layout="constrained")
+    n = 0
     for r, k in enumerate((0.25, 1.0)):
         for c, fn in enumerate((0.0, 0.1, 0.25)):
             ax = axes[r, c]
-            for curve in res[f"{k:g} {fn:g}"]["periodic"]["curves"]:
+            curves = res[f"{k:g} {fn:g}"]["periodic"]["curves"]
+            n = max(n, len(curves))
+            for curve in curves:
                 curve = np.array(curve)
                 ax.plot(grid, curve, lw=0.8, color="0.3")
                 j = int(np.argmin(curve))
                 ax.plot(grid[j], curve[j], "o", mfc="white", mec="k", ms=4)
-            ax.axvline(0.0075, ls="--", color="k", lw=0.8)
-            ax.set_title(f"K_theta = {k:g}, F_n = {fn:g}")
+            ax.axvline(THRESH, ls="--", color="k", lw=0.8)
+            ax.set_title(f"{symbol('K_theta')} = {k:g}, {symbol('F_n')} = {fn:g}",
+                         fontsize="medium")
+            ax.tick_params(labelsize="small")
+            ax.yaxis.get_offset_text().set_fontsize("small")
             if r == 1:
-                ax.set_xlabel("delta_abs, IPUT")
+                ax.set_xlabel(label("delta_abs", "IPUT"))
             if c == 0:
-                ax.set_ylabel("-ln L")
-    fig.suptitle("Fig. 13 (FD): -ln L versus delta_abs, other parameters at their true values")
-    fig.tight_layout()
-    fig.savefig(figdir / "fig13_likelihood_vs_delta_abs.png", dpi=110)
+                ax.set_ylabel(NLL)
+    handles = [Line2D([], [], color="0.3", lw=0.8,
+                      label=f"{NLL}, one realization ({n} per panel)"),
+               Line2D([], [], ls="none", marker="o", mfc="white", mec="k", ms=4,
+                      label="its minimum"),
+               Line2D([], [], color="k", ls="--", lw=0.8,
+                      label=f"true {symbol('delta_abs')} = {THRESH:g} IPUT")]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize="small",
+               frameon=False)
+    fig.suptitle(f"Fig. 13 (FD): {NLL} versus {symbol('delta_abs')}, the other parameters "
+                 "at their true values", fontsize="medium")
+    save_figure(fig, Path(figdir) / FIG13)
     plt.close(fig)
 
 
@@ -288,9 +319,22 @@ def main(argv=None):
     ap.add_argument("--out", default="analyses/results", help="directory for faithfulness.json")
     ap.add_argument("--figures", default="docs/figures", help="directory for figures")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--figure-only", action="store_true",
+                    help="only redraw Fig. 13 from the stored part D (faithfulness.json is "
+                         "read, not written; nothing is simulated)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     figdir = Path(args.figures)
+    if args.figure_only:
+        path = out / "faithfulness.json"
+        if not path.exists() or "D_fig13" not in json.loads(path.read_text()):
+            print(f"{path}: no part D (Fig. 13) stored; run the script without --figure-only")
+            return 1
+        stored = _nan_for_null(json.loads(path.read_text()))["D_fig13"]
+        figdir.mkdir(parents=True, exist_ok=True)
+        _plot_fig13(stored, np.linspace(0.0, 0.1, 201), figdir)  # part D's grid
+        print(f"wrote {figdir / FIG13} from {path}")
+        return 0
     out.mkdir(parents=True, exist_ok=True)
     figdir.mkdir(parents=True, exist_ok=True)
     seeds_a = range(2) if args.quick else range(3)
@@ -323,9 +367,9 @@ def main(argv=None):
     part("F_sign", part_f)
     results["seconds"] = time.time() - t0
     path.write_text(dumps(results))
-    print(f"\nwrote {out / 'faithfulness.json'} and {figdir}/fig13_likelihood_vs_delta_abs.png "
+    print(f"\nwrote {out / 'faithfulness.json'} and {figdir / FIG13} "
           f"in {results['seconds']:.0f} s")
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -22,7 +22,8 @@ recording there is fitted with and without threshold, so for each cell
 
 The unpaired test cannot see a difference of a few units of -ln L against a
 spread of hundreds between realizations; the paired one can.  The figure
-``docs/figures/fig11_neg_log_lik.png`` shows the per-recording differences.
+``docs/figures/fig11_neg_log_lik_<method>.png`` (``..._paper.png`` by default)
+shows the per-recording differences.
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ from bayespilot.campaign import load_results
 HERE = Path(__file__).resolve().parent
 FIGURES = HERE.parent / "docs" / "figures"
 TOL = 0.01
+#: -ln L as the package's fit figures write it (bayespilot.fit.figures).
+NLL = r"$-\ln L$"
 
 
 def pairs(results: list[dict], remnant_fraction: float) -> dict[tuple[str, float], np.ndarray]:
@@ -56,6 +59,49 @@ def pairs(results: list[dict], remnant_fraction: float) -> dict[tuple[str, float
         if len(d) == 2:
             out[task, kt].append((d[True], d[False]))
     return {k: np.array(v) for k, v in out.items()}
+
+
+def plot_differences(cells: dict[tuple[str, float], np.ndarray], remnant_fraction: float,
+                     method: str) -> Path:
+    """Draw the per-recording differences -ln L with threshold minus without (``cells`` as
+    :func:`pairs` returns them) per task and K_theta, in the paper's notation
+    (:mod:`bayespilot._labels`), 7 in wide; write ``fig11_neg_log_lik_<method>.png`` with
+    :func:`bayespilot._figstyle.save_figure` and return its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FixedLocator, FuncFormatter
+
+    from bayespilot._figstyle import save_figure
+    from bayespilot._labels import symbol
+
+    fig, axes = plt.subplots(1, 2, figsize=(7.0, 3.0), sharey=True, layout="constrained")
+    ticks = [-1000, -100, -10, -1, 0, 1, 10, 100, 1000]
+    for ax, task in zip(axes, ("FD", "FT")):
+        for j, kt in enumerate(presets.MOTION_GAINS):
+            if (task, kt) in cells:
+                d = cells[task, kt][:, 0] - cells[task, kt][:, 1]
+                x = j + np.random.default_rng(j).uniform(-0.15, 0.15, d.size)
+                ax.plot(x, d, "o", ms=3, alpha=0.7)
+        ax.axhline(0, color="k", lw=0.8)
+        ax.set_xticks(range(len(presets.MOTION_GAINS)), [f"{k:g}" for k in presets.MOTION_GAINS])
+        ax.set_xlabel(symbol("K_theta"))
+        ax.set_title(task, fontsize="medium")
+        # logarithmic beyond +-1, linear within (the suptitle says so); ticks as plain numbers
+        ax.set_yscale("symlog", linthresh=1.0)
+        ax.yaxis.set_major_locator(FixedLocator(ticks))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}".replace("-", "\u2212")))
+    axes[0].set_ylabel(r"$-\ln L_\mathrm{thr} - (-\ln L_\mathrm{none})$")
+    fig.suptitle(f"Per recording: {NLL} with threshold (thr) minus without (none), "
+                 f"{symbol('F_n')} = {remnant_fraction:g}, {method} method\n"
+                 "(above 0: the threshold fit ended worse; axis logarithmic beyond "
+                 "\u00b11, linear within)", fontsize="medium")
+    FIGURES.mkdir(parents=True, exist_ok=True)
+    out = FIGURES / f"fig11_neg_log_lik_{method}.png"
+    save_figure(fig, out)
+    plt.close(fig)
+    return out
 
 
 def main(argv=None) -> int:
@@ -97,29 +143,7 @@ def main(argv=None) -> int:
     print("\n'worse': recordings on which the threshold fit ended with a higher -ln L than the "
           f"fit without threshold (by > {TOL}); at the optimum this cannot happen.")
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), sharey=True)
-    for ax, task in zip(axes, ("FD", "FT")):
-        for j, kt in enumerate(presets.MOTION_GAINS):
-            if (task, kt) in cells:
-                d = cells[task, kt][:, 0] - cells[task, kt][:, 1]
-                x = j + np.random.default_rng(j).uniform(-0.15, 0.15, d.size)
-                ax.plot(x, d, "o", ms=3, alpha=0.7)
-        ax.axhline(0, color="k", lw=0.8)
-        ax.set_xticks(range(len(presets.MOTION_GAINS)), [str(k) for k in presets.MOTION_GAINS])
-        ax.set_xlabel(r"K$_\theta$")
-        ax.set_title(f"{task}, F$_n$ = {args.remnant_fraction}, {args.method} method", fontsize=9)
-        ax.set_yscale("symlog", linthresh=1.0)
-    axes[0].set_ylabel("-ln L with minus without threshold")
-    fig.tight_layout()
-    FIGURES.mkdir(parents=True, exist_ok=True)
-    out = FIGURES / f"fig11_neg_log_lik_{args.method}.png"
-    fig.savefig(out, dpi=110)
-    plt.close(fig)
+    out = plot_differences(cells, args.remnant_fraction, args.method)
     print(f"wrote {out}")
     return 0
 

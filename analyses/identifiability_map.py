@@ -132,6 +132,13 @@ def report(rows) -> dict:
     return summary
 
 
+#: The likelihoods as the figure's title names them ("Eq. (4) likelihood" as the package's
+#: figures do).
+LIKELIHOOD_NAMES = {"eq4": "Eq. (4) likelihood", "coloured": "coloured likelihood",
+                    "profiled": "coloured likelihood, AR profiled",
+                    "profiled8": "coloured likelihood, AR profiled, motion 8x"}
+
+
 def figure(rows, path: Path, lik: str) -> None:
     import matplotlib
 
@@ -140,11 +147,12 @@ def figure(rows, path: Path, lik: str) -> None:
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
+    from bayespilot._figstyle import save_figure
     from bayespilot._labels import label, symbol
     from bayespilot.presets import FIG14_15
 
-    d_abs, k_theta, f_n = symbol("delta_abs"), r"$K_\theta$", symbol("F_n")
-    fig, axes = plt.subplots(3, 2, figsize=(7.5, 9.0), sharex=True, sharey="row",
+    d_abs, k_theta, f_n = symbol("delta_abs"), symbol("K_theta"), symbol("F_n")
+    fig, axes = plt.subplots(3, 2, figsize=(7.0, 9.0), sharex=True, sharey="row",
                              layout="constrained", gridspec_kw={"height_ratios": [1.3, 1.3, 1]})
     width = 0.8 / len(FRACTIONS)
     missing = False
@@ -203,10 +211,10 @@ def figure(rows, path: Path, lik: str) -> None:
     fig.legend(handles=handles, loc="outside lower center",
                ncol=4 if len(handles) % 4 == 0 else 3, fontsize="small", frameon=False)
     n = len(rows)
-    fig.suptitle(f"Identifiability of the threshold from posteriors\n({lik} likelihood, "
+    fig.suptitle(f"Identifiability of the threshold from posteriors\n({LIKELIHOOD_NAMES[lik]}, "
                  f"{n} recordings; colour: remnant fraction {f_n})", fontsize="medium")
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 
 

@@ -495,11 +495,6 @@ def mark_concealed(rs: list[dict]) -> None:
 
 
 def summarize() -> dict:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     rs = load()
     if not rs:
         print("no results yet")
@@ -562,24 +557,7 @@ def summarize() -> dict:
     # figures
     FIG.mkdir(parents=True, exist_ok=True)
     plot_detection(curves, FIG / f"diagnose_detection{FIG_SUFFIX}.png")
-    fig, ax = plt.subplots(figsize=(7, 5))
-    M = np.array([[conf[t][d] for d in cols] for t in labels], float)
-    rows = M.sum(axis=1, keepdims=True)
-    ax.imshow(M / np.maximum(rows, 1), cmap="Blues", vmin=0, vmax=1)
-    for i in range(len(labels)):
-        for j in range(len(cols)):
-            if M[i, j]:
-                ax.text(j, i, int(M[i, j]), ha="center", va="center", fontsize=9)
-    ax.set_xticks(range(len(cols)))
-    ax.set_xticklabels([short[c] for c in cols])
-    ax.set_yticks(range(len(labels)))
-    ax.set_yticklabels(labels, fontsize=8)
-    ax.set_xlabel("decision")
-    ax.set_ylabel("truth")
-    ax.set_title("diagnose: confusion matrix (counts)")
-    fig.tight_layout()
-    fig.savefig(FIG / f"diagnose_confusion{FIG_SUFFIX}.png", dpi=110)
-    plt.close(fig)
+    plot_confusion(conf, labels, FIG / f"diagnose_confusion{FIG_SUFFIX}.png")
     summary = {"n_cases": len(rs), "confusion": conf, "confusion_concealed": conf_c,
                "concealed_named_correctly": [n_ok, len(ent)], "false_alarms": [fa, n_ctl],
                "detection_curves": {e: [{"effect": lab, "correct": k, "n": n, "concealed": c}
@@ -595,20 +573,55 @@ def summarize() -> dict:
     return summary
 
 
+def plot_confusion(conf: dict, labels: list[str], path: Path) -> None:
+    """The confusion matrix ``conf[truth][decision]`` (counts) over ``labels`` (truths and
+    decisions alike): each cell shaded by its share of the truth's cases, its count in white
+    on the dark half of the colour map; the decisions written out in full, rotated (as
+    ``bayespilot.diagnose.report.plot_batch`` writes the candidates)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from bayespilot._figstyle import save_figure
+
+    fig, ax = plt.subplots(figsize=(7.0, 5.6), layout="constrained")
+    M = np.array([[conf[t][d] for d in labels] for t in labels], float)
+    share = M / np.maximum(M.sum(axis=1, keepdims=True), 1)
+    ax.imshow(share, cmap="Blues", vmin=0, vmax=1)
+    for i in range(len(labels)):
+        for j in range(len(labels)):
+            if M[i, j]:  # white on the dark half of Blues, black on the light half
+                ax.text(j, i, int(M[i, j]), ha="center", va="center", fontsize="medium",
+                        color="white" if share[i, j] > 0.5 else "black")
+    ax.set_xticks(range(len(labels)))
+    ax.set_xticklabels(labels, rotation=30, ha="right", rotation_mode="anchor",
+                       fontsize="small")
+    ax.set_yticks(range(len(labels)))
+    ax.set_yticklabels(labels, fontsize="small")
+    ax.set_xlabel("decision")
+    ax.set_ylabel("truth")
+    ax.set_title("diagnose: confusion matrix (counts; shade: share of the truth's cases)",
+                 fontsize="medium")
+    save_figure(fig, path)
+    plt.close(fig)
+
+
 def _effect_axis(entry: str) -> str:
     """The x axis of an entry's detection curve: what its effect size is, with its unit
-    (the catalogue's parameter, or how the saturation limit was set)."""
+    (the catalogue's parameter, or how the saturation limit was set), in two lines that
+    fit a third of a 7-in page at the "small" size."""
     from bayespilot._labels import label, symbol
 
     return {
-        "motion-system-dynamics": "platform bandwidth " + label("omega_ms", "rad/s"),
-        "motion-washout": "washout break frequency " + label("omega_w", "rad/s"),
+        "motion-system-dynamics": "platform bandwidth\n" + label("omega_ms", "rad/s"),
+        "motion-washout": "washout break frequency\n" + label("omega_w", "rad/s"),
         "otolith-channel": "otolith gain " + label("K_ot", "rad/(m/s^2)")
-                           + f", {symbol('h_head')} = 1 m",
-        "threshold-shape": "soft-threshold corner width " + label("w_soft", "IPUT"),
-        "time-varying-gains": f"relative drift of {symbol('K_v')} and {symbol('K_m')} "
+                           + f",\n{symbol('h_head')} = 1 m",
+        "threshold-shape": "soft-threshold corner width\n" + label("w_soft", "IPUT"),
+        "time-varying-gains": f"relative drift of {symbol('K_v')} and {symbol('K_m')}\n"
                               "over the run",
-        "control-saturation": "control samples clipped by the limit (%)",
+        "control-saturation": "control samples clipped\nby the limit (%)",
     }.get(entry, entry)
 
 
@@ -629,10 +642,12 @@ def plot_detection(curves: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from bayespilot._figstyle import save_figure
+
     FIG.mkdir(parents=True, exist_ok=True)
     ncols = 3
     nrows = math.ceil(len(curves) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(7.5, 2.5 * nrows + 0.5), sharey=True,
+    fig, axes = plt.subplots(nrows, ncols, figsize=(7.0, 2.7 * nrows + 0.5), sharey=True,
                              squeeze=False, layout="constrained")
     for ax, (e, row) in zip(axes.flat, curves.items()):
         x = np.arange(len(row))
@@ -650,7 +665,7 @@ def plot_detection(curves: dict, path: Path) -> None:
                         ha="center", fontsize=7)
         ax.set_xticks(x, [lab.split("=")[-1].rstrip("%") for lab, *_ in row], fontsize=8)
         ax.set_xlim(-0.5, len(row) - 0.5)
-        ax.set_xlabel(_effect_axis(e), fontsize=7)
+        ax.set_xlabel(_effect_axis(e), fontsize="small")
         ax.set_ylim(-0.03, 1.15)
         ax.set_yticks(np.linspace(0, 1, 6))
         ax.set_title(e, fontsize=9)
@@ -662,7 +677,7 @@ def plot_detection(curves: dict, path: Path) -> None:
     fig.suptitle("diagnose: detection against effect size, all cases (smallest effect left;\n"
                  "point: share named correctly out of the cases shown; bar: its 95 % Wilson "
                  "interval)", fontsize=9)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path)
     plt.close(fig)
 
 
@@ -2151,6 +2166,7 @@ def _oracle_table(rows: list[dict]) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from bayespilot._figstyle import save_figure
     from bayespilot.diagnose import get_extension
 
     global OUT
@@ -2198,7 +2214,7 @@ def _oracle_table(rows: list[dict]) -> None:
               f"{sum(power(r, 'lowpass', R) for r in conc):.1f} of {len(conc)}")
     ncols = 3
     nrows = math.ceil((len(panels) + 1) / ncols)  # (a cell left for the legend)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(7.5, 2.5 * nrows + 0.5), sharey=True,
+    fig, axes = plt.subplots(nrows, ncols, figsize=(7.0, 2.9 * nrows + 0.5), sharey=True,
                              squeeze=False, layout="constrained")
     for ax, (e, row) in zip(axes.flat, panels.items()):
         x = np.arange(len(row))
@@ -2214,11 +2230,11 @@ def _oracle_table(rows: list[dict]) -> None:
             ax.errorbar(xi, k / m, yerr=[[k / m - lo], [hi - k / m]], fmt="o", ms=4,
                         capsize=2, color="C0", lw=1,
                         label="diagnose, 1 run (95 % Wilson interval)" if xi == 0 else None)
-            ax.annotate(f"{k}/{m}", (xi, hi), textcoords="offset points", xytext=(0, 3),
-                        ha="center", fontsize=7)
-        ax.set_xticks(x, [v[0].split("=")[-1] for v in row], fontsize=8)
+        # the counts under the sizes, off the oracle's lines: named / concealed cases
+        ax.set_xticks(x, [f"{v[0].split('=')[-1]}\n{v[2]}/{v[1]}" for v in row],
+                      fontsize="small")
         ax.set_xlim(-0.5, len(row) - 0.5)
-        ax.set_xlabel(_effect_axis(e), fontsize=7)
+        ax.set_xlabel(_effect_axis(e), fontsize="small")
         ax.set_title(e, fontsize=9)
         ax.set_ylim(-0.03, 1.15)
         ax.grid(alpha=0.3, axis="y")
@@ -2230,11 +2246,12 @@ def _oracle_table(rows: list[dict]) -> None:
         ax.set_visible(False)
     spare[0].set_visible(True)
     spare[0].axis("off")
-    spare[0].legend(handles, labels, loc="center", fontsize=7, frameon=False)
+    spare[0].legend(handles, labels, loc="center", fontsize="small", frameon=False)
     fig.suptitle("diagnose against the oracle test at its false-alarm level\n(lines: the expected "
-                 "share the likelihood-ratio test of the true extension names)", fontsize=9)
+                 "share the likelihood-ratio test of the true extension names;\nunder each "
+                 "size: concealed cases named / concealed cases)", fontsize=9)
     FIG.mkdir(parents=True, exist_ok=True)
-    fig.savefig(FIG / "diagnose_oracle.png", dpi=110)
+    save_figure(fig, FIG / "diagnose_oracle.png")
     plt.close(fig)
 
 

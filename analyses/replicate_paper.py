@@ -136,10 +136,11 @@ def main(argv=None) -> int:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
+        from bayespilot._figstyle import save_figure
         from bayespilot.plots import plot_threshold_histograms
 
         fig = plot_threshold_histograms(results, fractions=(0.0, 0.2, 0.3), method=args.method)
-        fig.savefig(args.out / "delta_abs_histograms.png", dpi=110)
+        save_figure(fig, args.out / "delta_abs_histograms.png")
         plt.close(fig)
         print(f"wrote {args.out / 'summary.csv'}, summary.md and delta_abs_histograms.png")
     return 0
