@@ -232,6 +232,11 @@ def _save_figure(fig, path: Path, dpi: int = PLOT_DPI) -> None:
         plt.close(fig)
 
 
+def _cluster_where(args: argparse.Namespace) -> str:
+    """Where replicate's, diagnose-batch's and fit-batch's tasks run, in words."""
+    return args.scheduler or f"{args.workers or 'all'} local worker(s)"
+
+
 def _progress(args: argparse.Namespace) -> bool:
     """Whether to draw progress bars: not with --quiet, and only on a terminal (a bar
     redrawn with carriage returns is noise in a log file or a pipe)."""
@@ -647,14 +652,20 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _cmd_fit(args: argparse.Namespace) -> int:
-    from .fit.fast import fit_fast
-    from .fit.three_step import fit_paper
-
+def _fit_method_rules(args: argparse.Namespace) -> None:
+    """Refuse (exit 2) --noise ar and --iterate with the method they do not go with, as fit
+    and fit-batch take them (:func:`_fit_method_arguments`)."""
     if args.noise == "ar" and args.method != "fast":
         raise UsageError("argument --noise: 'ar' (a prediction-error fit) goes with --method fast")
     if args.iterate and args.method != "paper":
         raise UsageError("argument --iterate: it repeats Steps II and III of --method paper")
+
+
+def _cmd_fit(args: argparse.Namespace) -> int:
+    from .fit.fast import fit_fast
+    from .fit.three_step import fit_paper
+
+    _fit_method_rules(args)
     from .recording import RecordingError
 
     _refuse_overwriting([("--json", args.json)],
@@ -829,11 +840,10 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
         arg = "--remnant" if "Table 4" in str(exc) else "--fit-option"
         raise UsageError(f"argument {arg}: {exc}") from None
     out = Path(args.out)
-    where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
     _say(args, f"{len(jobs)} fits ({args.method} method, {args.realizations} realization(s) x "
                f"{len(args.tasks)} task(s) x {len(args.motion_gains)} K_theta x "
-               f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on {where} "
-               f"-> {out}")
+               f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on "
+               f"{_cluster_where(args)} -> {out}")
     try:
         # (its warnings, the fits' said once per kind and the cluster's, as the command's lines)
         with _warnings_of(RuntimeWarning, _warning_line):
@@ -1421,8 +1431,9 @@ def _recordings_in(args_paths: Sequence[str]) -> list[str]:
 
 
 def _batch_keys(paths: Sequence[str], *, pool: bool) -> list[str] | None:
-    """The keys of ``diagnose_batch(paths, ..., pool=pool)``: ``plan_batch`` on the
-    recordings, a recording named twice counted once, as the batch does.  The recordings are
+    """The keys of ``diagnose_batch(paths, ..., pool=pool)`` (and, with ``pool`` False, of
+    ``fit_batch(paths, ...)``): ``plan_batch`` on the recordings, a recording named twice
+    counted once, as the batches do.  The recordings are
     read for it (milliseconds each; a pooled key is their subject and condition).  None
     when one cannot be read or the keys clash: the batch refuses that before it writes
     anything."""
@@ -1445,7 +1456,9 @@ def _batch_keys(paths: Sequence[str], *, pool: bool) -> list[str] | None:
 
 def _batch_files(paths: Sequence[str], out: str | Path, *, pool: bool,
                  reports: bool, keys: Sequence[str] | None = None) -> list[Path]:
-    """The files ``diagnose_batch(paths, out, pool=pool, reports=reports)`` may write.
+    """The files ``diagnose_batch(paths, out, pool=pool, reports=reports)`` may write (those of
+    ``fit_batch(paths, out)`` with ``pool`` and ``reports`` False, but for its
+    ``conditions.csv``).
 
     ``summary.csv`` and ``summary.png``, and for each diagnosis ``<key>.json`` (or
     ``<key>.error.json``) and, with ``reports``, its report in ``<key>/``.  The keys are
@@ -1482,12 +1495,36 @@ def _batch_files(paths: Sequence[str], out: str | Path, *, pool: bool,
     return files
 
 
-def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
+@contextlib.contextmanager
+def _batch_errors():
+    """Within: diagnose-batch's and fit-batch's refusals and failures as the command's. A
+    result in DIR of another recording or other settings (ResultConflictError) and bad input
+    (a ValueError: an unreadable recording, one the settings do not suit) are exit 2; the
+    cluster's failures (CampaignError) exit 1."""
+    from .campaign import CampaignError
+    from .diagnose.batch import ResultConflictError
+
+    try:
+        yield
+    except ResultConflictError as exc:  # (a CampaignError and a ValueError: bad input)
+        raise UsageError(str(exc)) from None
+    except CampaignError as exc:
+        raise CommandFailed(str(exc)) from None
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def _earlier_rows(table: str, summary) -> int:
+    """How many rows of a batch's summary.csv (its text) an earlier run made: the table
+    covers every result in DIR made with the batch's settings."""
     import csv
 
-    from .campaign import CampaignError
-    from .diagnose.batch import (MissingReportWarning, ResultConflictError, SummaryScopeWarning,
-                                 _the_recording, diagnose_batch)
+    return len(list(csv.DictReader(table.splitlines(keepends=True)))) - summary.total
+
+
+def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
+    from .diagnose.batch import (MissingReportWarning, SummaryScopeWarning, _the_recording,
+                                 diagnose_batch)
     from .diagnose.locate import EvidenceWarning
 
     _cluster_choice(args)
@@ -1498,44 +1535,37 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     _refuse_overwriting([("--out", f) for f in _batch_files(paths, args.out, pool=args.pool,
                                                             reports=args.reports, keys=keys)],
                         [*read, *_code_files(args.extension, "--extension")])
-    where = args.scheduler or f"{args.workers or 'all'} local worker(s)"
     # (said before the recordings are read: a refusal of one of them may follow, and nothing
     # has run then)
     _say(args, f"{len({_the_recording(p) for p in paths})} recording(s) to diagnose"
                f"{', the runs of each subject and condition pooled' if args.pool else ''} "
-               f"on {where} -> {args.out}; each is read and checked before anything runs")
+               f"on {_cluster_where(args)} -> {args.out}; each is read and checked before "
+               f"anything runs")
     unreported = []  # MissingReportWarning: finished before, without a report
 
     def said(message) -> None:  # --reports, and finished diagnoses it cannot give one
         unreported.append(message)
         print(f"{PROG}: warning: {message}", file=sys.stderr)
 
-    try:
-        # (the evidence's gaps: one line per kind of gap, after the diagnoses, from their
-        # results; the workers keep them quiet)
-        with _questionable_said(), _warnings_of(MissingReportWarning, said), \
-                _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line):
-            summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
-                                     alpha=args.alpha, n_bootstrap=args.bootstrap,
-                                     n_calibrate=args.calibrate,
-                                     noise_passes=args.noise_passes, reports=args.reports,
-                                     posterior=args.posterior,
-                                     scheduler=args.scheduler, workers=args.workers,
-                                     progress=_cluster_progress(args),
-                                     connect_timeout=args.connect_timeout)
-    except ResultConflictError as exc:  # DIR holds a key's diagnosis from other settings
-        raise UsageError(str(exc)) from None
-    except CampaignError as exc:
-        raise CommandFailed(str(exc)) from None
-    except ValueError as exc:  # an unreadable recording, a setting it does not suit
-        raise UsageError(str(exc)) from None
+    # (the evidence's gaps: one line per kind of gap, after the diagnoses, from their
+    # results; the workers keep them quiet)
+    with _batch_errors(), _questionable_said(), _warnings_of(MissingReportWarning, said), \
+            _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line):
+        summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
+                                 alpha=args.alpha, n_bootstrap=args.bootstrap,
+                                 n_calibrate=args.calibrate,
+                                 noise_passes=args.noise_passes, reports=args.reports,
+                                 posterior=args.posterior,
+                                 scheduler=args.scheduler, workers=args.workers,
+                                 progress=_cluster_progress(args),
+                                 connect_timeout=args.connect_timeout)
     _say(args, str(summary))
     with open(Path(args.out) / "summary.csv", encoding="utf-8") as fh:
         table = fh.read()
     print(table, end="")
     # (the summary covers every diagnosis in DIR made with these settings: say so when an
     # earlier run's are in it)
-    earlier = len(list(csv.DictReader(table.splitlines(keepends=True)))) - summary.total
+    earlier = _earlier_rows(table, summary)
     if not args.reports:
         reports = ""
     elif unreported:
@@ -1554,6 +1584,62 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
                             f"{args.out}/<key>.error.json); run the same command again to "
                             "retry them")
     return EXIT_OK
+
+def _cmd_fit_batch(args: argparse.Namespace) -> int:
+    from .batch import fit_batch
+    from .diagnose.batch import _the_recording
+
+    _fit_method_rules(args)
+    if args.nlive is not None and not args.compare:
+        raise UsageError("argument --nlive: it sets the nested sampling of --compare; give "
+                         "--compare too, or leave --nlive out")
+    _cluster_choice(args)
+    paths = _recordings_in(args.recording)
+    out = Path(args.out)
+    keys = _batch_keys(paths, pool=False) or []  # (none: the batch refuses the input)
+    _refuse_overwriting([("--out", f) for f in [*_batch_files(paths, out, pool=False,
+                                                              reports=False, keys=keys),
+                                                out / "conditions.csv"]],
+                        [f for p in paths for f in _recording_files(p)])
+    how = (f"the paper's three-step procedure{', iterated' if args.iterate else ''}"
+           if args.method == "paper" else
+           f"the fast estimator{', prediction error' if args.noise == 'ar' else ''}")
+    _say(args, f"{len({_the_recording(p) for p in paths})} recording(s) to fit with and without "
+               f"threshold ({how}){', compared by nested sampling,' if args.compare else ''} "
+               f"on {_cluster_where(args)} -> {out}; each is read and checked before anything "
+               f"runs")
+    # (the fits' warnings, said once per kind at the end from their results, and the
+    # cluster's: the command's lines; the recordings' as diagnose-batch says them)
+    with _batch_errors(), _questionable_said(), _warnings_of(RuntimeWarning, _warning_line):
+        summary = fit_batch(paths, out, method=args.method, noise=args.noise,
+                            iterate=args.iterate, oversample=args.oversample,
+                            compare=args.compare, nlive=args.nlive, seed=args.seed,
+                            scheduler=args.scheduler, workers=args.workers,
+                            progress=_cluster_progress(args),
+                            connect_timeout=args.connect_timeout)
+    _say(args, str(summary))
+    try:
+        table = (out / "conditions.csv").read_text(encoding="utf-8")
+        runs = (out / "summary.csv").read_text(encoding="utf-8")
+    except OSError as exc:
+        raise CommandFailed(f"{out}: cannot read the summary the batch wrote "
+                            f"({_os_reason(exc)})") from None
+    print(table, end="")
+    # (the tables cover every recording's fits in DIR made with these settings: say so when
+    # an earlier run's are in them)
+    earlier = _earlier_rows(runs, summary)
+    scope = (f" (with {earlier} recording{'' if earlier == 1 else 's'} an earlier run fitted "
+             f"in {out} with these settings)" if earlier > 0 else "")
+    png = out / "summary.png"  # (written when any fit finished)
+    _say(args, f"wrote {out / 'conditions.csv'} (one row per subject, task and K_theta), "
+               f"{out / 'summary.csv'} (one row per recording){scope}"
+               f"{f', {png}' if png.is_file() else ''} and one <key>.json per recording")
+    if summary.failed:
+        raise CommandFailed(f"{summary.failed} of {summary.total} recordings' fits failed "
+                            f"(messages in {out}/<key>.error.json); run the same command "
+                            f"again to retry them")
+    return EXIT_OK
+
 
 # --- the parser ------------------------------------------------------------------------
 def _recording_argument(p: argparse.ArgumentParser) -> None:
@@ -1725,6 +1811,32 @@ def _diagnose_arguments(p: argparse.ArgumentParser, seed_help: str | None = None
                         "bayespilot.diagnose.Extension or a list of them, in the Python file "
                         "FILE.py or in a module on PYTHONPATH (package.module:NAME); "
                         "registered and tested after the built-in entries")
+
+
+def _fit_method_arguments(p: argparse.ArgumentParser) -> None:
+    """--method, --noise and --iterate, as fit and fit-batch take them (the rules between them:
+    :func:`_fit_method_rules`)."""
+    p.add_argument("--method", choices=("paper", "fast"), default="paper",
+                   help="'paper': the three-step procedure of Pool et al. (GA, Gauss-Newton, "
+                        "scan; default); 'fast': multi-start least squares with a profile over "
+                        "delta_abs")
+    p.add_argument("--noise", choices=("white", "ar"), default="white",
+                   help="'white': Eq. 4 as the paper has it (default); 'ar': a prediction-error "
+                        "fit, the residual whitened by an AR model and the first 2 s left out "
+                        "(a quarter of a record under 8 s; with --method fast; see "
+                        "docs/fitting.md)")
+    p.add_argument("--iterate", action="store_true",
+                   help="repeat Steps II and III until delta_abs and -ln L stop changing "
+                        "(with --method paper; the paper runs them once, which stops short on "
+                        "remnant-free or low-remnant records, see docs/fitting.md)")
+
+
+def _batch_seed_help(each: str, command: str) -> str:
+    """--seed's help in diagnose-batch and fit-batch: ``each`` says how the tasks' seeds are
+    drawn (``diagnose.batch.task_seed``), ``command`` repeats one task."""
+    return (f"the batch's seed (default 0): {each}, recorded as settings.seed in <key>.json "
+            f"and the seed column of summary.csv ('bayespilot {command} REC --seed' with it "
+            f"and the same options repeats one); S is recorded as settings.batch_seed")
 
 
 def _cluster_arguments(p: argparse.ArgumentParser) -> None:
@@ -2020,6 +2132,42 @@ Examples:
   bayespilot diagnose-batch recordings/ --out diagnoses --scheduler tcp://10.0.0.5:8786
 """
 
+FIT_BATCH_EPILOG = """\
+Fits the pilot model with threshold and without (delta_abs fixed at 0) to
+many recordings, as independent tasks on a dask cluster: a local one
+(--workers, default one per core) or an existing one (--scheduler
+tcp://host:8786; the workers receive the recordings, no shared folder
+needed). Every recording is read and checked first: a bad file is reported
+with all others and nothing runs. Both fits of a recording use one seed,
+drawn from --seed and the recording's content. Each recording's result is
+written to DIR/<key>.json as it finishes (key: the recording's stem, or
+<parent>_<stem> where two stems clash): both fits, their information
+criteria and, with --compare, the comparison; one that fails leaves
+DIR/<key>.error.json and the others go on (exit 1 at the end); running the
+same command again skips the finished ones and retries the failed; a
+<key>.json made from another recording or with other settings is refused
+(exit 2). --noise ar goes with --method fast and --iterate with --method
+paper, as in 'bayespilot fit'.
+
+DIR/summary.csv has one row per recording fitted in DIR with these
+settings, sorted by key: its subject, task and K_theta, the parameters
+with threshold, -ln L of both fits, the VAF, delta_bic (BIC without
+threshold minus BIC with: > 0 favours the threshold), with --compare ln BF,
+its error and decision, the seed and any error. DIR/conditions.csv, printed
+at the end, has one row per subject, task and K_theta: the number of runs,
+delta_abs's median, min and max over them, the summed differences of -ln L
+and BIC, and with --compare the pooled ln BF, its error and decision.
+DIR/summary.png draws every run's delta_abs per condition. One fit of an
+81.92-s run takes about 2 s (--method fast) or 7 s (--method paper), two
+per recording; --compare adds minutes per recording.
+
+Examples:
+  bayespilot fit-batch recordings/ --out fits
+  bayespilot fit-batch recordings/ --out fits-pem --method fast --noise ar
+  bayespilot fit-batch recordings/ --out compared --method fast --compare --nlive 200
+  bayespilot fit-batch recordings/ --out fits --scheduler tcp://10.0.0.5:8786
+"""
+
 DIAGNOSE_EPILOG = """\
 Locates where a recording and the fitted pilot model differ, names the physics
 the model leaves out, fits it, and shows the fit improve. Steps: the fast
@@ -2154,19 +2302,7 @@ def build_parser() -> argparse.ArgumentParser:
     _recording_argument(p)
     p.add_argument("--no-threshold", action="store_true",
                    help="fit the model without threshold (delta_abs fixed at 0)")
-    p.add_argument("--method", choices=("paper", "fast"), default="paper",
-                   help="'paper': the three-step procedure of Pool et al. (GA, Gauss-Newton, "
-                        "scan; default); 'fast': multi-start least squares with a profile over "
-                        "delta_abs")
-    p.add_argument("--noise", choices=("white", "ar"), default="white",
-                   help="'white': Eq. 4 as the paper has it (default); 'ar': a prediction-error "
-                        "fit, the residual whitened by an AR model and the first 2 s left out "
-                        "(a quarter of a record under 8 s; with --method fast; see "
-                        "docs/fitting.md)")
-    p.add_argument("--iterate", action="store_true",
-                   help="repeat Steps II and III until delta_abs and -ln L stop changing "
-                        "(with --method paper; the paper runs them once, which stops short on "
-                        "remnant-free or low-remnant records, see docs/fitting.md)")
+    _fit_method_arguments(p)
     _seed_argument(p, "seed of the genetic algorithm / starting points (default 0)")
     p.add_argument("--json", type=_output_path, metavar="OUT",
                    help="write the result (params, neg_log_lik, vaf, method, seed and every "
@@ -2354,17 +2490,40 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where an extension is chosen, also its posterior (one run: emcee, "
                         "minutes; pooled: the shared parameters on a grid, seconds), in each "
                         "<key>.json and summary.csv")
-    _diagnose_arguments(p, seed_help="the batch's seed (default 0): each diagnosis runs with "
-                                     "its own seed drawn from S and its recordings' content "
-                                     "(not from their paths, order or the other recordings; "
-                                     "run j of a pooled one uses its seed + j), recorded as "
-                                     "settings.seed in <key>.json and the seed column of "
-                                     "summary.csv ('bayespilot diagnose REC --seed' with it "
-                                     "and the same options repeats one); S is recorded as "
-                                     "settings.batch_seed")
+    _diagnose_arguments(p, seed_help=_batch_seed_help(
+        "each diagnosis runs with its own seed drawn from S and its recordings' content (not "
+        "from their paths, order or the other recordings; run j of a pooled one uses its "
+        "seed + j)", "diagnose"))
     _cluster_arguments(p)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_diagnose_batch)
+
+    p = subs.add_parser("fit-batch", formatter_class=fmt, epilog=FIT_BATCH_EPILOG,
+                        help="fit many recordings with and without threshold on a dask cluster",
+                        description="Fit every recording with and without threshold, weigh "
+                                    "the threshold per recording and per subject and "
+                                    "condition, as a resumable batch.")
+    p.add_argument("recording", metavar="REC", nargs="+",
+                   help="recordings (stems, .csv, .json or .mat paths) or folders of them")
+    p.add_argument("--out", type=_output_path, required=True, metavar="DIR",
+                   help="folder for one <key>.json per recording, summary.csv, conditions.csv "
+                        "and summary.png (created if missing; recordings fitted in it "
+                        "already are not redone)")
+    _fit_method_arguments(p)
+    _oversample_argument(p)
+    p.add_argument("--compare", action="store_true",
+                   help="also the log Bayes factor of the threshold for each recording "
+                        "(nested sampling, as 'bayespilot compare' weighs one: minutes each) "
+                        "and pooled per subject and condition")
+    p.add_argument("--nlive", type=_whole_number(20), default=None, metavar="N",
+                   help="with --compare: live points of each nested-sampling run (default "
+                        "200, compare's)")
+    _seed_argument(p, _batch_seed_help(
+        "each recording's fits run with its own seed drawn from S and its content (not from "
+        "its path, order or the other recordings)", "fit"))
+    _cluster_arguments(p)
+    _common(p, sub=True)
+    p.set_defaults(handler=_cmd_fit_batch)
     return parser
 
 
