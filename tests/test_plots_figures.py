@@ -812,3 +812,352 @@ def test_cli_plot_of_an_extension_posterior_draws_its_parameter(tmp_path, capsys
     # (matplotlib writes each text into the SVG as a comment too)
     for svg in (marginal, trace):
         assert r"<!-- $\omega_\mathrm{w}$ (rad/s) -->" in svg
+
+
+# --- 8. the figure audit for a journal paper (audit_figures.md, 2026-11-29) ---------------------
+def _recording(seconds=3.0):
+    from bayespilot.recording import Recording
+
+    t = np.arange(int(100 * seconds)) / 100.0
+    return Recording({"t": t, "e": np.sin(t), "u": np.cos(t), "theta_ddot_m": -np.sin(t)},
+                     100.0, 1.0, "FD")
+
+
+def _titles(fig, axes):
+    """The figure's title and the titles (left, centre, right) of ``axes``, non-empty."""
+    out = [fig._suptitle.get_text()] if fig._suptitle is not None else []
+    out += [a.get_title(loc) for a in axes for loc in ("left", "center", "right")]
+    return [t for t in out if t.strip()]
+
+
+def _paper_figures(title, **kw):
+    """(figure, axes whose titles are the figure's title, today's title text) per function."""
+    post = _posterior()
+    t = np.arange(300) / 100.0
+    rec = _recording()
+    out = {}
+    fig = plot_marginal(post, title=title, **kw)
+    out["marginal"] = (fig, fig.axes, "draws (Eq. (4) likelihood")
+    fig = plot_pair(post, title=title, **kw)
+    out["pair"] = (fig, fig.axes, "Posterior:")
+    fig = plot_chains(post, title=title, **kw)
+    out["chains"] = (fig, fig.axes[:1], "10 walkers, 600 steps, not converged")
+    fig = plot_traces(rec, canal=0.02 * np.sin(3 * t), delta_abs=0.0075, title=title, **kw)
+    out["traces"] = (fig, fig.axes[:1], "task FD")
+    fig = plot_threshold_histograms(_results([0.006, 0.008, 0.02]), title=title, **kw)
+    out["histograms"] = (fig, [], "Estimated threshold over realizations")
+    return out
+
+
+@pytest.mark.filterwarnings("ignore::bayespilot.sample.ConvergenceWarning")
+def test_every_plot_takes_title_true_false_or_a_text():
+    """Audit R1: every figure had a run-note title a paper must delete, and no option to."""
+    size = {"figsize": (5.0, 4.0)}
+    default = _paper_figures(True, **size)
+    for name, (fig, axes, own) in default.items():
+        titles = _titles(fig, axes)
+        assert len(titles) == 1 and own in titles[0].replace("\n", " "), (name, titles)
+    for name, (fig, axes, own) in _paper_figures(False, **size).items():
+        assert _titles(fig, axes) == [], name
+        # the layout takes the room: the panels reach higher than under a title
+        fig.canvas.draw()
+        before = default[name][0]
+        before.canvas.draw()
+        top = max(a.get_window_extent().y1 for a in fig.axes if a.get_visible())
+        top_before = max(a.get_window_extent().y1 for a in before.axes if a.get_visible())
+        assert top > top_before + 5.0, f"{name}: the panels do not use the title's room"
+        # and the title's text stays available for a caption
+        assert own in getattr(fig, "_bayespilot_note").replace("\n", " "), name
+    for name, (fig, axes, own) in _paper_figures("Figure 3", **size).items():
+        assert [t.replace("\n", " ") for t in _titles(fig, axes)] == ["Figure 3"], name
+    # "" is no title too (as in the diagnosis report); anything else is refused
+    assert _titles(*_paper_figures("")["chains"][:2]) == []
+    post = _posterior()
+    for f in (plot_marginal, plot_pair, plot_chains):
+        with pytest.raises(TypeError, match="title must be True .* False .* or a str, got 1"):
+            f(post, title=1)
+    with pytest.raises(TypeError, match="title must be"):
+        plot_traces(_recording(), title=None)
+    with pytest.raises(TypeError, match="title must be"):
+        plot_threshold_histograms(_results([0.006]), title=None)
+    # the histograms' panels keep their K_theta headings: they name the panels
+    fig = _paper_figures(False)["histograms"][0]
+    assert fig.axes[0].get_title() == r"$K_\theta$ = 1"
+    # a pair plot on given axes: a title only when the caller names one
+    fig, axs = plt.subplots(3, 3)
+    assert not plot_pair(post, ax=axs).get_suptitle()
+    fig, axs = plt.subplots(3, 3)
+    assert plot_pair(post, ax=axs, title="Fig. 5").get_suptitle() == "Fig. 5"
+
+
+def test_an_untitled_unconverged_posterior_warns_and_keeps_its_note():
+    """R1: "not converged" was in the title only; without the title the user is told."""
+    import warnings
+
+    from bayespilot.sample import ConvergenceWarning
+
+    post = _posterior()
+    assert not post.converged
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for f in (plot_marginal, plot_pair, plot_chains):
+            f(post)  # the title says it: no warning
+    for f in (plot_marginal, plot_pair, plot_chains):
+        for title in (False, "Fig. 4"):
+            with pytest.warns(ConvergenceWarning, match=r"not converged \(600 steps\).*caption"):
+                fig = f(post, title=title)
+            assert "not converged" in fig._bayespilot_note
+    import dataclasses
+
+    converged = dataclasses.replace(_posterior(), converged=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert "converged" in plot_chains(converged, title=False)._bayespilot_note
+
+
+def test_untitled_histograms_give_the_papers_key_in_the_legend():
+    """R1: "≠ and red: differs from the paper" was only in the title."""
+    def legend_texts(fig):
+        return [t.get_text() for lg in fig.legends for t in lg.get_texts()]
+
+    res = _results([0.006, 0.008, 0.02], fn=0.2, k=1.0)  # a cell of Figs. 14/15
+    assert not any("differs from the paper" in s for s in legend_texts(
+        plot_threshold_histograms(res)))
+    for title in (False, "Fig. 14"):
+        fig = plot_threshold_histograms(res, title=title)
+        assert any("differs from the paper" in s for s in legend_texts(fig)), title
+    # a cell the paper does not have (K_theta = 3): nothing to key
+    fig = plot_threshold_histograms(_results([0.006, 0.008], k=3.0), title=False)
+    assert not any("paper" in s for s in legend_texts(fig))
+
+
+def test_fit_figures_take_title_true_false_or_a_text():
+    from bayespilot.fit.figures import (plot_ga_convergence, plot_step_one_thresholds,
+                                        plot_step_three, plot_step_two)
+
+    fits = [_paper_fit(seed=s) for s in range(2)]
+    for f in (plot_step_one_thresholds, plot_ga_convergence, plot_step_two, plot_step_three):
+        name = f.__name__
+        fig = f(fits)
+        assert not fig.get_suptitle() and [a.get_title() for a in fig.axes if a.get_title()] \
+            == ["fit 1", "fit 2"], name
+        fig = f(fits, title=False)
+        fig.canvas.draw()
+        assert _titles(fig, fig.axes) == [], name
+        fig = f(fits, title="Figure 6")
+        fig.canvas.draw()
+        # the title at the top, heading the legend above the panels (a suptitle lay over it)
+        head = fig.legends[0].get_title()
+        assert head.get_text().split("\n")[0] == "Figure 6", name
+        entries = [t.get_window_extent() for t in fig.legends[0].get_texts()]
+        assert head.get_window_extent().y0 >= max(e.y1 for e in entries) - 1.0, name
+        assert head.get_window_extent().y1 <= fig.bbox.y1 + 0.5
+        assert fig.legends[0].get_window_extent().y0 >= max(
+            a.get_window_extent().y1 for a in fig.axes if a.get_visible()) - 1.0, name
+        # the labels a caller gives name the panels, with or without a title
+        fig = f(fits, ["FD, 0.25", "FD, 0.5"], title=False)
+        assert [a.get_title() for a in fig.axes if a.get_title()] == ["FD, 0.25", "FD, 0.5"]
+        with pytest.raises(TypeError, match="title must be"):
+            f(fits, title=0)
+
+
+def test_chains_at_column_width_keep_their_texts_apart():
+    """R3: at 3.5 x 6 in the title ran into the autocorrelation time and off the figure, and
+    neighbouring y labels ("K_m (rad/IPUT)" over "tau_m (s)") overlapped."""
+    post = _posterior()
+    fig = plot_chains(post, figsize=(3.5, 6))
+    fig.canvas.draw()
+    page = fig.bbox
+    title = [t for t in (fig._suptitle, *(fig.axes[0].title, fig.axes[0]._left_title))
+             if t is not None and "not converged" in t.get_text()]
+    assert len(title) == 1
+    box = title[0].get_window_extent()
+    assert page.x0 - 0.5 <= box.x0 and box.x1 <= page.x1 + 0.5, "the title is cut"
+    notes = [t for a in fig.axes for t in a.texts if "autocorrelation time" in t.get_text()]
+    assert len(notes) == len(PAPER)
+    for t in notes:
+        nb = t.get_window_extent()
+        assert not box.overlaps(nb), "the title runs into an autocorrelation time"
+        assert page.x0 - 0.5 <= nb.x0 and nb.x1 <= page.x1 + 0.5
+    labels = [a.yaxis.label.get_window_extent() for a in fig.axes]
+    for i, b0 in enumerate(labels):
+        assert page.y0 - 0.5 <= b0.y0 and b0.y1 <= page.y1 + 0.5
+        for b1 in labels[i + 1:]:
+            assert not b0.overlaps(b1), "two y labels overlap"
+    # in one column (aligned on the side of the axes)
+    assert max(b.x1 for b in labels) - min(b.x1 for b in labels) < 1.0
+    # at the default size (a page) every label keeps its unit, the log posterior its constant
+    fig = plot_chains(post)
+    assert [a.get_ylabel() for a in fig.axes][:-1] == [
+        label(n, presets.PARAMETER_UNITS[n]) for n in PAPER]
+    assert fig.axes[-1].get_ylabel().replace("\n", " ") == "log posterior (+ const.)"
+    assert fig.axes[0].get_title(loc="left") == "10 walkers, 600 steps, not converged"
+
+
+def test_traces_at_column_width_keep_the_share_off_the_legend():
+    """R3: at 3.5 x 4.5 in "|i| > delta_abs 71 % of the time" overprinted the legend."""
+    from bayespilot.simulate import simulate
+
+    sim = simulate(task="FT", motion_gain=0.5, remnant_fraction=0.0, seed=2, duration=5.0)
+    for size in ((3.5, 4.5), (7.0, 6.9)):
+        fig = plot_traces(sim, figsize=size)
+        fig.canvas.draw()
+        canal = fig.axes[3]
+        legend = canal.get_legend()
+        entries = [t.get_window_extent() for t in legend.get_texts()]
+        entries += [h.get_window_extent(fig.canvas.get_renderer())
+                    for h in legend.legend_handles]
+        share = [t for t in (canal._left_title, legend.get_title())
+                 if "of the time" in t.get_text()]
+        assert len(share) == 1, size
+        sb = share[0].get_window_extent()
+        assert not any(sb.overlaps(e) for e in entries), f"{size}: the share over the legend"
+        for b in (sb, legend.get_window_extent()):
+            assert fig.bbox.x0 - 0.5 <= b.x0 and b.x1 <= fig.bbox.x1 + 0.5
+            # above the canal panel, below the panel above
+            assert b.y0 >= canal.get_window_extent().y1 - 1.0
+            assert b.y1 <= fig.axes[2].get_window_extent().y0 + 1.0
+    # a page-wide figure keeps them side by side, as before
+    assert canal.get_title(loc="left") and not legend.get_title().get_text()
+
+
+def _column_results():
+    rng = np.random.default_rng(3)
+    d = np.concatenate([rng.uniform(0.0, 0.1, 60), rng.normal(0.07, 0.01, 40)]).clip(0, 0.1)
+    return _results(d, k=0.25) + _results(np.abs(rng.normal(0.0075, 0.004, 100)), k=1.0)
+
+
+def _statistics(ax):
+    return [t for t in ax.texts if "N_{50" in t.get_text() and t.get_visible()]
+
+
+def test_histograms_at_column_width_keep_statistics_off_bars_and_ticks():
+    """R3: at 3.5 x 2.2 in the statistics covered the bars and a y tick label ("25≠mu")."""
+    fig = plot_threshold_histograms(_column_results(), figsize=(3.5, 2.2), title=False)
+    fig.canvas.draw()
+    page = fig.bbox
+    for ax in fig.axes:
+        stats = _statistics(ax)
+        assert len(stats) == 1
+        box = stats[0].get_window_extent()
+        for bar in _bars(ax):
+            assert not box.overlaps(bar.get_window_extent()), "statistics cover a bar"
+        for other in fig.axes:
+            for t in (*other.get_yticklabels(), *other.get_xticklabels(), other.title,
+                      other.yaxis.label):
+                if t.get_visible() and t.get_text():
+                    assert not box.overlaps(t.get_window_extent()), \
+                        f"statistics over {t.get_text()!r}"
+        assert page.x0 - 0.5 <= box.x0 and box.x1 <= page.x1 + 0.5
+        assert page.y0 - 0.5 <= box.y0 and box.y1 <= page.y1 + 0.5
+        # the panel is not squeezed to nothing
+        assert ax.get_window_extent().height > 20
+    # a page-wide figure keeps them in the corner, as before
+    fig = plot_threshold_histograms(_column_results())
+    fig.canvas.draw()
+    for ax in fig.axes:
+        box, ab = _statistics(ax)[0].get_window_extent(), ax.get_window_extent()
+        assert ab.x0 <= box.x0 and box.x1 <= ab.x1 and ab.y0 <= box.y0 and box.y1 <= ab.y1
+
+
+def test_histogram_statistics_go_where_asked():
+    res = _column_results()
+    for where, inside in (("inside", True), ("above", False)):
+        fig = plot_threshold_histograms(res, stats=where)
+        fig.canvas.draw()
+        for ax in fig.axes:
+            box, ab = _statistics(ax)[0].get_window_extent(), ax.get_window_extent()
+            assert (box.y0 >= ab.y1 - 1.0) == (not inside), where
+            # above: under the panel's heading
+            if not inside:
+                assert box.y1 <= ax.title.get_window_extent().y0 + 1.0
+    fig = plot_threshold_histograms(res, stats=None)
+    assert not any(_statistics(ax) for ax in fig.axes)
+    with pytest.raises(ValueError, match="stats must be 'auto', 'inside', 'above' or None"):
+        plot_threshold_histograms(res, stats="below")
+
+
+def test_step_one_marks_a_true_value_only_when_known_and_names_a_reference():
+    """R4: every Fig. 6 drew a line "true delta_abs (0.0075 IPUT)", measured data too."""
+    from bayespilot.fit.figures import TRUE_THRESHOLD, plot_step_one_thresholds
+    from bayespilot.fit.result import FitResult
+
+    def dashed(fig):
+        return [ln for ax in fig.axes for ln in ax.get_lines() if ln.get_linestyle() == "--"
+                and ln.get_label().startswith(("true", "Groen"))]
+
+    def legend(fig):
+        return [t.get_text() for t in fig.legends[0].get_texts()]
+
+    fits = [_paper_fit(seed=s) for s in range(2)]
+    fig = plot_step_one_thresholds(fits)
+    assert not dashed(fig) and not any("true" in s for s in legend(fig))
+    d = symbol("delta_abs")
+    # the paper's simulations (analyses/fit_procedure.py's Fig. 6): as before
+    fig = plot_step_one_thresholds(fits, true_value=TRUE_THRESHOLD)
+    assert f"true {d} (0.0075 IPUT)" in legend(fig)
+    assert {float(ln.get_ydata()[0]) for ln in dashed(fig)} == {0.0075}
+    # measured data: the passive threshold, named as such
+    fig = plot_step_one_thresholds(fits, true_value=presets.DELTA_ABS_PASSIVE,
+                                   reference_label="Groen et al.'s passive threshold")
+    assert "Groen et al.'s passive threshold (0.00734 IPUT)" in legend(fig)
+    assert not any("true" in s for s in legend(fig))
+    # a fit that records its recording's truth is marked with it
+    recorded = []
+    for s, true in ((0, 0.006), (1, 0.009)):
+        dct = _paper_fit(seed=s).to_dict()
+        dct["settings"] = dict(dct["settings"], true_parameters={"delta_abs": true})
+        recorded.append(FitResult.from_dict(dct))
+    fig = plot_step_one_thresholds(recorded[:1] + fits[:1])
+    assert [float(ln.get_ydata()[0]) for ln in dashed(fig)] == [0.006]
+    assert f"true {d} (0.006 IPUT)" in legend(fig)
+    fig = plot_step_one_thresholds(recorded)
+    assert sorted(float(ln.get_ydata()[0]) for ln in dashed(fig)) == [0.006, 0.009]
+    assert f"true {d} (each panel's)" in legend(fig)
+    with pytest.raises(ValueError, match="reference_label names the line at true_value"):
+        plot_step_one_thresholds(fits, reference_label="passive threshold")
+    with pytest.raises(ValueError, match="true_value must be finite"):
+        plot_step_one_thresholds(fits, true_value=math.nan)
+
+
+def test_true_values_and_marginal_numbers_carry_quantity_and_unit():
+    """T1: "truth 0.0075", "true", "median 0.01108" (no unit) beside Fig. 6's
+    "true delta_abs (0.0075 IPUT)"."""
+    d = symbol("delta_abs")
+    post = _posterior()
+    fig = plot_marginal(post, truth=0.0075)
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert f"true {d} (0.0075 IPUT)" in texts
+    assert any(re.fullmatch(r"median 0\.00\d+ IPUT", s) for s in texts), texts
+    assert any(re.fullmatch(r"90 % HDI \[0\.00\d+, 0\.00\d+\] IPUT", s) for s in texts), texts
+    fig = plot_marginal(post, "zeta_nm", truth=0.22)  # dimensionless: no unit
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert rf"true {symbol('zeta_nm')} (0.22)" in texts
+    assert any(re.fullmatch(r"median 0\.2\d*", s) for s in texts), texts
+    fig = plot_threshold_histograms(_results([0.006, 0.008, 0.02]))
+    texts = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert f"true {d} (0.0075 IPUT)" in texts
+    assert rf"true {d} $\pm$50 %" in texts
+
+
+@pytest.mark.filterwarnings("ignore::bayespilot.sample.ConvergenceWarning")
+def test_marginal_without_title_at_column_width_keeps_its_labels_on_the_figure():
+    """R1/R3: without the title's room above the axes, "posterior density (1/IPUT)" ran off
+    the top of a 3.5 x 2.6 in figure."""
+    post = _posterior()
+    for title in (True, False):
+        fig = plot_marginal(post, truth=0.0075, figsize=(3.5, 2.6), title=title)
+        fig.canvas.draw()
+        page = fig.bbox
+        ax = fig.axes[0]
+        lo, hi = ax.get_xlim()
+        ticks = [t for t in ax.get_xticklabels() if lo <= t.get_position()[0] <= hi]
+        ticks += [t for t in ax.get_yticklabels()
+                  if ax.get_ylim()[0] <= t.get_position()[1] <= ax.get_ylim()[1]]
+        shown = [t for t in _texts(fig) if t not in (*ax.get_xticklabels(),
+                                                      *ax.get_yticklabels())]
+        for t in shown + [t for t in ticks if t.get_text()]:
+            b = t.get_window_extent()
+            assert page.x0 - 0.5 <= b.x0 and b.x1 <= page.x1 + 0.5 and page.y0 - 0.5 <= b.y0 \
+                and b.y1 <= page.y1 + 0.5, f"{title}: {t.get_text()!r} runs off the figure"
+        assert fig.axes[0].get_ylabel().replace("\n", " ") == "posterior density (1/IPUT)"

@@ -5,8 +5,10 @@ Light on purpose (no matplotlib, no numba): the command line reads it at start-u
 
 from __future__ import annotations
 
-#: Resolution of the figures the package writes, dots per inch (a print-quality PNG): the
-#: commands' (``bayespilot plot``, ``demo``) and the diagnosis reports'.
+#: Resolution of the figures the package writes, dots per inch: the commands' (``bayespilot
+#: plot``, ``demo``) and the diagnosis reports'.  200 dpi is for the screen and for drafts, not
+#: for print: for a paper write a vector format (PDF, SVG: :data:`PLOT_FORMATS`), or a PNG at
+#: 300 dpi or more (journals ask 300 for halftones, 600 for line art).
 PLOT_DPI = 200
 #: Formats a figure can be written in (matplotlib picks the writer by the suffix).
 PLOT_FORMATS = ("png", "pdf", "svg")

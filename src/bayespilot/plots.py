@@ -10,6 +10,13 @@ Parameters are labelled in the paper's notation with their units
 (:mod:`bayespilot._labels`).  A new figure is at most :data:`PAGE_WIDTH` x
 :data:`PAGE_HEIGHT` inches (panels shrink as they multiply; ``figsize=``
 overrides), in constrained layout, with its legends outside the plotted data.
+
+Every figure takes ``title=``: True (default) its own title (the run: draws, likelihood,
+convergence; task and duration), False (or "") none, the panels taking its room (for a
+paper, whose caption says it), a str that text instead.  The own title's text is kept on the
+returned figure, whatever ``title``, as ``fig._bayespilot_note`` (:data:`NOTE_ATTR`); a
+posterior figure without it warns (:class:`~bayespilot.sample.ConvergenceWarning`) when the
+chain has not converged.  The diagnosis report's figures take ``title=`` alike.
 """
 
 from __future__ import annotations
@@ -80,6 +87,47 @@ def _figsize(figsize: Any, ax: Any, default: tuple[float, float]) -> tuple[float
     if not (math.isfinite(w) and math.isfinite(h) and w > 0 and h > 0):
         raise ValueError(f"figsize must be two positive numbers (inches), got {figsize!r}")
     return w, h
+
+
+def _title_text(title: Any, default: str | None) -> str | None:
+    """The title a figure is drawn with (the ``title=`` convention of every plot function, the
+    diagnosis report's too): ``default`` for True (today's title), none for False (or ""), the
+    text itself for a str; TypeError for anything else."""
+    if isinstance(title, (bool, np.bool_)):
+        return default if title else None
+    if isinstance(title, str):
+        return title or None
+    raise TypeError(f"title must be True (the figure's own title), False (none) or a str, got "
+                    f"{title!r}")
+
+
+#: The attribute of a returned figure that keeps its run note (what its own title says: draws,
+#: likelihood, convergence; task and duration), whatever ``title=`` was: for a caption.
+NOTE_ATTR = "_bayespilot_note"
+
+
+def _keep_note(fig, note: str) -> None:
+    """Keep ``note`` (the figure's own title, as it reads without mathtext) on ``fig`` as
+    :data:`NOTE_ATTR`, for a caption when the title is off or replaced."""
+    setattr(fig, NOTE_ATTR, note)
+
+
+def _warn_untitled(posterior, title: Any, what: str) -> None:
+    """A ConvergenceWarning when the title that says "not converged" is off or replaced
+    (``title`` not True) and the posterior has not converged: the reader of the figure no
+    longer sees it, the user is told to say it in the caption."""
+    if title is True or posterior.converged:
+        return
+    from ._caller import warn_at_caller
+    from .sample import ConvergenceWarning
+
+    tau = np.array([v for v in posterior.tau.values() if v is not None], dtype=float)
+    n_steps = posterior.settings.get("n_steps", 0)
+    shown = "off" if _title_text(title, None) is None else "replaced"
+    warn_at_caller(ConvergenceWarning(
+        f"{what}: the posterior has not converged ({n_steps} steps); the figure's title, "
+        f"which says so, is {shown} (title={title!r}): say it in the caption (the figure's "
+        f"{NOTE_ATTR} attribute keeps the title's text)", tau, int(n_steps or 0)))
 
 
 def _new_figure(nrows: int, ncols: int, size: tuple[float, float], **kw):
@@ -204,7 +252,8 @@ def _legend_columns(labels: Sequence[str], width: float, ncols: int) -> int:
 
 def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | np.ndarray | None = None,
                 delta_abs: float | None = None, ax: Sequence[Any] | None = None,
-                figsize: tuple[float, float] | None = None, show_source: bool = False) -> Figure:
+                figsize: tuple[float, float] | None = None, show_source: bool = False,
+                title: bool | str = True) -> Figure:
     """Plot a run's signals over time: e, u, theta_ddot_m and, if given, the canal output i.
 
     Parameters
@@ -219,8 +268,9 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
     delta_abs : float, optional
         Threshold (IPUT, >= 0) drawn as a band +-delta_abs on the canal panel;
         needs ``canal``.  Its legend, with the share of the time |i| exceeds
-        it, is above the canal panel of a new figure (where it hides no data)
-        and where it covers least on given axes.
+        it, is above the canal panel of a new figure (where it hides no data;
+        the share beside the legend, or as its title where they would overlap,
+        as in a figure 3.5 in wide) and where it covers least on given axes.
     ax : sequence of matplotlib Axes, optional
         One axes per panel (3 without ``canal``, 4 with it).  Default: a new
         figure.
@@ -231,6 +281,13 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
         Start the title with the recording's file (``recording.source``);
         by default the title names only the task, K_theta and the duration,
         as a paper's figure would.
+    title : bool or str, default True
+        True: the title above the first panel (task, K_theta, duration);
+        False (or ""): no title, the panels taking its room (a paper's
+        figure, its caption saying what the title did); a str: that text
+        as the title.  The title's own text is kept, whatever ``title``,
+        in the figure's attribute ``_bayespilot_note``
+        (:data:`NOTE_ATTR`), for a caption.
 
     Returns
     -------
@@ -239,7 +296,8 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
     Raises
     ------
     TypeError
-        If ``recording`` is neither a Recording nor a Simulation.
+        If ``recording`` is neither a Recording nor a Simulation, or
+        ``title`` is neither a bool nor a str.
     ValueError
         If ``canal`` is not a finite 1-D array with one value per sample,
         ``delta_abs`` is negative, not finite or given without ``canal``,
@@ -265,6 +323,7 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
                 delta_abs = sim.params.get("delta_abs")
     if not isinstance(recording, Recording):
         raise TypeError(f"recording must be a Recording or Simulation, got {type(recording).__name__}")
+    _title_text(title, None)  # (checked before a figure is made)
     if canal is not None:
         canal = np.asarray(canal, dtype=float)
         if canal.shape != (recording.n_samples,):
@@ -317,24 +376,38 @@ def plot_traces(recording: Recording | Simulation, *, canal: Sequence[float] | n
         share = rf"$|i| > {d.strip('$')}$ {100 * above:.0f} % of the time"
         if ax is None:
             # above the panel, right of the share: nothing of the signal is under them
-            a.set_title(share, loc="left", fontsize="small")
-            a.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2,
-                     fontsize="small", frameon=False)
+            shared = a.set_title(share, loc="left", fontsize="small")
+            legend = a.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2,
+                              fontsize="small", frameon=False)
         else:
             a.legend(loc="best", fontsize="small", title=share, title_fontsize="small")
     axes[-1].set_xlabel("$t$ (s)")
     axes[-1].set_xlim(t[0], t[-1])
     src = f"{recording.source}: " if show_source and recording.source else ""
-    title = (f"{src}task {recording.task}, $K_\\theta$ = {recording.motion_gain:g}, "
-             f"{recording.duration:g} s")
-    axes[0].set_title(_wrap(title, fig.get_figwidth() - 0.8, 10.0) if ax is None else title)
+    own = (f"{src}task {recording.task}, $K_\\theta$ = {recording.motion_gain:g}, "
+           f"{recording.duration:g} s")
+    _keep_note(fig, own)
+    text = _title_text(title, own)
+    if text:
+        axes[0].set_title(_wrap(text, fig.get_figwidth() - 0.8, 10.0) if ax is None else text)
+    if ax is None and canal is not None and delta_abs is not None:
+        # a narrow figure (a column, 3.5 in): the share and the legend side by side overlap;
+        # the share then heads the legend instead
+        fig.draw_without_rendering()
+        if shared.get_window_extent().x1 > legend.get_window_extent().x0:
+            a.set_title("", loc="left")
+            legend.remove()
+            a.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), borderaxespad=0.2,
+                     fontsize="small", frameon=False, title=share, title_fontsize="small",
+                     alignment="right")
     return fig
 
 
 def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[float] = (0.0, 0.2, 0.3),
                               method: str | None = None, bins: int = 40,
                               upper: float | str = 0.1, ax: Any = None,
-                              figsize: tuple[float, float] | None = None) -> Figure:
+                              figsize: tuple[float, float] | None = None,
+                              stats: str | None = "auto", title: bool | str = True) -> Figure:
     """Histograms of the estimated threshold over realizations, after Figs. 14 and 15.
 
     One panel per (task, F_n, K_theta) cell present in ``results`` (rows:
@@ -353,7 +426,8 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     Without failed fits every number is :func:`~bayespilot.campaign.summarise`'s.
     Fits at or above ``upper`` are drawn, hatched, in the last bin and
     counted in the panel ("≥ upper: n").  The statistics sit in the top
-    right corner above the bars (the y axis is extended to make room).
+    right corner above the bars (the y axis is extended to make room), or
+    above the panel where that corner is too small (``stats``).
 
     Parameters
     ----------
@@ -380,6 +454,21 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     figsize : (float, float), optional
         Size of the new figure, inches (default: 2.3 in per column and 1.75 in
         per row, at most 7.5 x 9.5 in); not with ``ax``.
+    stats : {"auto", "inside", "above"} or None, default "auto"
+        Where each panel's statistics go: "inside", in its top right corner,
+        the y axis raised until they clear the bars; "above", over the panel,
+        left-aligned, under its K_theta heading; "auto", inside unless that
+        would cover bars or tick labels (a small panel, as in a figure 3.5 in
+        wide), then above (every panel alike); None: none (a table gives
+        them: :func:`bayespilot.campaign.summarise`).
+    title : bool or str, default True
+        True: the figure's title (method, Figs. 14/15, the key "≠ and red:
+        differs from the paper"); False (or ""): no title, the panels taking
+        its room, and the key, where a panel has the paper's values, an
+        entry of the legend; a str: that text as the title (the key in the
+        legend too).  The panels' K_theta headings stay: they name the
+        panels.  The title's own text is kept, whatever ``title``, in the
+        figure's attribute ``_bayespilot_note`` (:data:`NOTE_ATTR`).
 
     Returns
     -------
@@ -389,13 +478,15 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     ------
     TypeError
         If ``results`` is not a sequence of dicts (a FitResult, a folder's
-        name: read it with :func:`bayespilot.campaign.load_results`).
+        name: read it with :func:`bayespilot.campaign.load_results`), or
+        ``title`` is neither a bool nor a str.
     ValueError
         If a dict in ``results`` is not a campaign result (a fit's
         ``to_dict()``), no fit with threshold at the requested ``fractions`` is in
         ``results``, several methods are present and ``method`` is not given,
-        ``ax`` has the wrong number of axes, or ``figsize`` is given with
-        ``ax`` or is not two positive numbers.
+        ``ax`` has the wrong number of axes, ``figsize`` is given with
+        ``ax`` or is not two positive numbers, or ``stats`` is not one of
+        the places above.
 
     Examples
     --------
@@ -419,6 +510,9 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
             isinstance(upper, (int, float)) and not isinstance(upper, bool)
             and math.isfinite(upper) and upper > 0):
         raise ValueError(f"upper must be a positive number or 'auto', got {upper!r}")
+    if stats not in ("auto", "inside", "above", None):
+        raise ValueError(f"stats must be 'auto', 'inside', 'above' or None, got {stats!r}")
+    _title_text(title, None)  # (checked before a figure is made)
     results = _campaign_results(results)
     wanted = [float(f) for f in fractions]
     sel = [r for r in results if bool(r["threshold"])
@@ -437,32 +531,44 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
     def _delta(r) -> float:
         return float(r["fit"]["params"]["delta_abs"])
 
-    stats = {(r["task"], r["F_n"], r["K_theta"]): r for r in summarise(sel)}
+    cells = {(r["task"], r["F_n"], r["K_theta"]): r for r in summarise(sel)}
     # mu, sigma (and their flag) of the finite fits; N50 and n of every realization
     finite_stats = {(r["task"], r["F_n"], r["K_theta"]): r
                     for r in summarise([r for r in sel if math.isfinite(_delta(r))])}
-    rows = sorted({(t, f) for (t, f, _) in stats})
-    cols = sorted({k for (_, _, k) in stats})
+    rows = sorted({(t, f) for (t, f, _) in cells})
+    cols = sorted({k for (_, _, k) in cells})
 
     finite = np.array([_delta(r) for r in sel], dtype=float)
     if upper == "auto":
         upper = _auto_upper(finite[np.isfinite(finite)],
                             max(float(r["true_params"]["delta_abs"]) for r in sel))
     any_over = bool(np.any(finite[np.isfinite(finite)] >= upper))
-    handles = [Patch(color="C2", alpha=0.25, lw=0, label=r"true $\pm$50 %"),
-               Line2D([], [], color="k", ls="--", lw=0.9, label="true")]
+    d_sym = symbol("delta_abs")
+    truths = {float(st["true_delta_abs"]) for st in cells.values()}
+    # the quantity and its value with its unit, as the other figures name a true value
+    true_name = (f"true {d_sym} ({truths.pop():g} IPUT)" if len(truths) == 1
+                 else f"true {d_sym} (each panel's)")
+    handles = [Patch(color="C2", alpha=0.25, lw=0, label=rf"true {d_sym} $\pm$50 %"),
+               Line2D([], [], color="k", ls="--", lw=0.9, label=true_name)]
     if any_over:
         handles.append(Patch(facecolor="C1", alpha=0.85, hatch="////", lw=0,
                              label=f"≥ {upper:g} IPUT (in the last bin)"))
+    own = (f"Estimated threshold over realizations ({sel[0]['method']} method; Figs. 14/15 "
+           f"of Pool et al. 2012); ≠ and red: differs from the paper")
+    title_text = _title_text(title, own)
+    if title_text != own and stats is not None \
+            and any(st["paper_mu"] is not None for st in cells.values()):
+        # the title's key, where the title no longer gives it: in the legend
+        handles.append(Line2D([], [], ls="none", marker=r"$\neq$", color="C3", ms=7,
+                              label="differs from the paper (also red)"))
     labels = [h.get_label() for h in handles]
-    title = (f"Estimated threshold over realizations ({sel[0]['method']} method; Figs. 14/15 "
-             f"of Pool et al. 2012); ≠ and red: differs from the paper")
 
     if ax is None:
         size = _figsize(figsize, ax, (2.3 * len(cols) + 0.9, 1.75 * len(rows) + 1.1))
         if figsize is None:
             # a narrow figure: room for the wrapped title's and the legend's extra lines
-            extra = 0.2 * (len(_wrap(title, size[0] - 0.3, 10.0).splitlines()) - 1
+            extra = 0.2 * ((len(_wrap(title_text, size[0] - 0.3, 10.0).splitlines()) - 1
+                            if title_text else -1)
                            + math.ceil(len(labels) / _legend_columns(labels, size[0], 3)) - 1)
             size = _figsize(None, ax, (size[0], size[1] + extra))
         fig, axes = _new_figure(len(rows), len(cols), size, sharex=True, squeeze=False)
@@ -477,7 +583,8 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
         fig = axes[0, 0].figure
 
     edges = np.linspace(0.0, upper, bins + 1)
-    boxes = []  # (axes, statistics text, bar heights) to keep the text above the bars
+    texts = []  # (axes, statistics, colour, bar heights): placed once the figure is laid out
+    filled = []  # the panels with fits
     for i, (task, fn) in enumerate(rows):
         for j, k in enumerate(cols):
             a = axes[i, j]
@@ -487,7 +594,7 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
                 a.set_ylabel(f"{task}, {symbol('F_n')} = {fn:g}\ncount")
             if i == len(rows) - 1:
                 a.set_xlabel(_param_label("delta_abs"))
-            st = stats.get((task, fn, k))
+            st = cells.get((task, fn, k))
             if st is None:
                 a.text(0.5, 0.5, "no fits", ha="center", va="center", transform=a.transAxes)
                 a.set_yticks([])
@@ -528,11 +635,9 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
             if n_over:
                 lines.append(f"≥{upper:g}: {n_over}")
             flag = st["flag_N50"] or bool(fs is not None and fs["flag_mu"])
-            txt = a.text(0.97, 0.96, "\n".join(lines), ha="right", va="top",
-                         fontsize=SMALLEST_FONT, transform=a.transAxes,
-                         color="C3" if flag else "k",
-                         bbox={"facecolor": "white", "alpha": 0.75, "lw": 0, "pad": 1.0})
-            boxes.append((a, txt, heights))
+            filled.append(a)
+            if stats is not None:
+                texts.append((a, "\n".join(lines), "C3" if flag else "k", heights))
             a.yaxis.get_major_locator().set_params(integer=True)
             a.set_xlim(0.0, upper)
             a.set_ylim(0.0, max(1.0, float(heights.max())) * 1.05)
@@ -540,14 +645,91 @@ def plot_threshold_histograms(results: Sequence[Any], *, fractions: Sequence[flo
 
     if ax is None:
         _legend_below(fig, handles, labels, ncols=3)
-        fig.suptitle(_wrap(title, fig.get_figwidth() - 0.3, 10.0), fontsize=10)
+        if title_text:
+            fig.suptitle(_wrap(title_text, fig.get_figwidth() - 0.3, 10.0), fontsize=10)
     else:
         # on a user's axes: the first panel with fits, where it covers least
-        first = next((a for a, _, _ in boxes), axes.flat[0])
+        first = filled[0] if filled else axes.flat[0]
         first.legend(handles=handles, loc="best", fontsize=SMALLEST_FONT)
-        fig.suptitle(title, fontsize=10)
-    _clear_bars(fig, edges, boxes)
+        if title_text:
+            fig.suptitle(title_text, fontsize=10)
+    _keep_note(fig, own)
+    if stats is not None:
+        _place_statistics(fig, edges, texts, stats)
     return fig
+
+
+def _place_statistics(fig, edges: np.ndarray, texts, where: str) -> None:
+    """The histograms' statistics (:func:`plot_threshold_histograms`' ``stats``): in each
+    panel's top right corner, the y axis raised until they clear the bars ("inside"), or over
+    the panel ("above"); "auto": inside unless that covers a bar or runs over the y tick
+    labels or out of the panel in any panel, then above in every panel (unless the figure has
+    no room for them there either: inside, as before)."""
+    import contextlib
+    import warnings
+
+    if not texts:
+        return
+    if where in ("inside", "auto"):
+        boxes = [(a, a.text(0.97, 0.96, text, ha="right", va="top", fontsize=SMALLEST_FONT,
+                            transform=a.transAxes, color=color,
+                            bbox={"facecolor": "white", "alpha": 0.75, "lw": 0, "pad": 1.0}),
+                  heights) for a, text, color, heights in texts]
+        ylims = [a.get_ylim() for a, _, _ in boxes]
+        _clear_bars(fig, edges, boxes)
+        if where == "inside" or not any(_covers(a, txt) for a, txt, _ in boxes):
+            return
+        for (a, txt, _), lim in zip(boxes, ylims):  # too small a corner: above the panels
+            txt.set_visible(False)
+            a.set_ylim(*lim)
+    above = [(a, a.annotate(text, xy=(0.0, 1.0), xycoords="axes fraction", xytext=(0.0, 3.0),
+                            textcoords="offset points", ha="left", va="bottom",
+                            fontsize=SMALLEST_FONT, color=color, annotation_clip=False))
+             for a, text, color, _ in texts]
+    headed = [a for a in {id(a): a for a, _ in above}.values() if a.get_title()]
+    # (auto: a layout that collapses is caught here, and the statistics go back inside)
+    watch = warnings.catch_warnings(record=True) if where == "auto" else contextlib.nullcontext([])
+    with watch as caught:
+        if where == "auto":
+            warnings.simplefilter("always")
+        # the headings (K_theta, on the top row) go up above the statistics
+        fig.draw_without_rendering()
+        tall = max(t.get_window_extent().height for _, t in above) * 72.0 / fig.dpi
+        for a in headed:
+            a.set_title(a.get_title(), fontsize="medium",
+                        pad=tall + 3.0 + _pyplot().rcParams["axes.titlepad"])
+        fig.draw_without_rendering()
+    if where == "above":
+        return
+    if any("collapsed" in str(w.message) for w in caught):
+        # no room above either (a title of several lines over short panels): inside after all
+        for a, txt in above:
+            txt.remove()
+        for a in headed:
+            a.set_title(a.get_title(), fontsize="medium")
+        for a, txt, _ in boxes:
+            txt.set_visible(True)
+        _clear_bars(fig, edges, boxes)
+    else:
+        for a, txt, _ in boxes:
+            txt.remove()
+
+
+def _covers(ax, txt) -> bool:
+    """Whether a statistics text inside ``ax`` covers one of its bars, runs over its y tick
+    labels (left of the axes) or out of it at the bottom (a panel shorter than the text)."""
+    from matplotlib.patches import Rectangle
+
+    tb, ab = txt.get_window_extent(), ax.get_window_extent()
+    if tb.x0 < ab.x0 - 0.5 or tb.y0 < ab.y0 - 0.5:
+        return True
+    for p in ax.patches:
+        if isinstance(p, Rectangle) and p.get_height() > 0 and p.get_width() > 0 \
+                and p.get_facecolor()[3] > 0.5:
+            pb = p.get_window_extent()
+            if pb.x0 < tb.x1 - 1 and tb.x0 < pb.x1 - 1 and pb.y0 < tb.y1 - 1 and tb.y0 < pb.y1 - 1:
+                return True
+    return False
 
 
 def _auto_upper(estimates: np.ndarray, true: float) -> float:
@@ -663,7 +845,8 @@ def _run_note(posterior, n_draws: int) -> str:
 
 def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | None = None,
                   ax: Any = None, *, model: Any = None,
-                  figsize: tuple[float, float] | None = None) -> Figure:
+                  figsize: tuple[float, float] | None = None,
+                  title: bool | str = True) -> Figure:
     """Histogram of one parameter's posterior draws with its 90 % HDI, median and (if given) truth.
 
     The 90 % HDI is a black bar above the histogram (not a shaded span, so that a span
@@ -688,6 +871,15 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
         other Table 1's.
     figsize : (float, float), optional
         Size of the new figure, inches (default 5.5 x 3.8); not with ``ax``.
+    title : bool or str, default True
+        True: the axes' title (the parameter, draws, likelihood, whether the
+        chain converged); False (or ""): no title, the axes taking its room;
+        a str: that text as the title.  The title's own text is kept,
+        whatever ``title``, in the figure's attribute ``_bayespilot_note``
+        (:data:`NOTE_ATTR`), for a caption; without the title, a posterior
+        that has not converged gives a
+        :class:`~bayespilot.sample.ConvergenceWarning` (the figure no
+        longer says so).
 
     Returns
     -------
@@ -696,18 +888,20 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
     Raises
     ------
     TypeError
-        If ``posterior`` is not a Posterior.
+        If ``posterior`` is not a Posterior, or ``title`` is neither a bool
+        nor a str.
     ValueError
         If ``name`` was not sampled, ``truth`` is not a finite number, or
         ``figsize`` is given with ``ax`` or is not two positive numbers.
     """
     from matplotlib.ticker import MaxNLocator
 
-    from ._labels import symbol
+    from ._labels import symbol, unit_text
 
     posterior = _posterior_or_raise(posterior)
     x = posterior.draws(name)
     model = _posterior_model(posterior, model)
+    _title_text(title, None)  # (checked before a figure is made)
     if truth is not None:
         try:
             truth = float(truth)
@@ -727,24 +921,34 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
     # the HDI as a bar above the bars (the axes' top raised to make room)
     ax.set_ylim(0.0, 1.16 * top)
     ax.yaxis.set_major_locator(MaxNLocator(5))
+    # the numbers with their unit, the truth named as every figure names it (T1)
+    unit = unit_text(_param_unit(name, model))
+    unit = f" {unit}" if unit else ""
     ax.plot([lo, hi], [1.08 * top] * 2, color="k", lw=3, solid_capstyle="butt",
-            label=f"90 % HDI [{lo:.4g}, {hi:.4g}]")
+            label=f"90 % HDI [{lo:.4g}, {hi:.4g}]{unit}")
     ax.plot([lo, hi], [1.08 * top] * 2, "|", color="k", ms=8, mew=1.2)
     med = float(np.median(x))
-    ax.axvline(med, color="C1", lw=1.5, ls="-.", label=f"median {med:.4g}")
+    ax.axvline(med, color="C1", lw=1.5, ls="-.", label=f"median {med:.4g}{unit}")
     if truth is not None:
-        ax.axvline(truth, color="k", lw=1.2, ls="--", label=f"truth {truth:.4g}")
+        ax.axvline(truth, color="k", lw=1.2, ls="--",
+                   label=f"true {symbol(name)} ({truth:.4g}{unit})")
     ax.set_xlabel(_param_label(name, model))
-    ax.set_ylabel("posterior density" + _per_unit(_param_unit(name, model)))
+    density = "posterior density" + _per_unit(_param_unit(name, model))
+    ax.set_ylabel(density)
     handles, labels = ax.get_legend_handles_labels()
-    title = f"{symbol(name)}: {_run_note(posterior, x.size)}"
+    own = f"{symbol(name)}: {_run_note(posterior, x.size)}"
+    _keep_note(fig, own)
+    _warn_untitled(posterior, title, "plot_marginal")
+    text = _title_text(title, own)
     if new:
         _legend_below(fig, handles, labels, ncols=3)
-        ax.set_title(_wrap(title, fig.get_figwidth() - 0.3, _points("medium")),
-                     fontsize="medium")
+        if text:
+            ax.set_title(_wrap(text, fig.get_figwidth() - 0.3, _points("medium")),
+                         fontsize="medium")
     else:
         width = ax.get_position().width * fig.get_figwidth()
-        ax.set_title(_wrap(title, width, _points("medium")), fontsize="medium")
+        if text:
+            ax.set_title(_wrap(text, width, _points("medium")), fontsize="medium")
         legend = _legend_under_xlabel(ax, handles, labels, width)
         if fig.get_layout_engine() is None:
             # no layout to make room under the axes: if the legend is off the figure, it goes
@@ -756,6 +960,13 @@ def plot_marginal(posterior: Posterior, name: str = "delta_abs", truth: float | 
                 tall = np.asarray(heights, float).copy()
                 tall[(edges[1:] > lo) & (edges[:-1] < hi)] = 1.12 * top  # (the HDI bar)
                 _clear_bars(fig, edges, [(ax, legend, tall)])
+    if " (" in density:
+        # a short figure (a column's 3.5 x 2.6 in without a title): the unit on a second line
+        # rather than the label running off the figure
+        fig.draw_without_rendering()
+        box = ax.yaxis.label.get_window_extent()
+        if box.y1 > fig.bbox.y1 + 0.5 or box.y0 < fig.bbox.y0 - 0.5:
+            ax.set_ylabel(density.replace(" (", "\n(", 1))
     return fig
 
 
@@ -783,7 +994,7 @@ def _legend_under_xlabel(ax, handles, labels, width: float):
 
 def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "delta_abs"),
               truth: Mapping[str, float] | None = None, ax: Any = None, *, model: Any = None,
-              figsize: tuple[float, float] | None = None) -> Figure:
+              figsize: tuple[float, float] | None = None, title: bool | str = True) -> Figure:
     """Pairwise scatter of posterior draws (lower triangle) with marginal histograms (diagonal).
 
     A new figure has a title (draws, likelihood, convergence).  Where ``truth``
@@ -805,6 +1016,14 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     figsize : (float, float), optional
         Size of the new figure, inches (default: 2.3 in per panel, at most
         7.5 in wide); not with ``ax``.
+    title : bool or str, default True
+        True: a new figure's title, "Posterior: " with the draws, likelihood
+        and convergence (none on given axes); False (or ""): no title, the
+        panels taking its room; a str: that text as the figure's title (on
+        given axes too).  The title's own text is kept, whatever ``title``,
+        in the figure's attribute ``_bayespilot_note`` (:data:`NOTE_ATTR`);
+        without the title, a posterior that has not converged gives a
+        :class:`~bayespilot.sample.ConvergenceWarning`.
 
     Returns
     -------
@@ -813,8 +1032,8 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     Raises
     ------
     TypeError
-        If ``posterior`` is not a Posterior, or ``names`` is neither a str nor
-        a sequence of str.
+        If ``posterior`` is not a Posterior, ``names`` is neither a str nor
+        a sequence of str, or ``title`` is neither a bool nor a str.
     ValueError
         If a name was not sampled, ``names`` is empty, ``ax`` has the wrong
         shape, or ``figsize`` is given with ``ax`` or is not two positive
@@ -828,6 +1047,7 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     names = _names(names)
     if not names:
         raise ValueError("names must hold at least one parameter")
+    _title_text(title, None)  # (checked before a figure is made)
     draws = [posterior.draws(n) for n in names]
     truth = dict(truth or {})
     k = len(names)
@@ -911,9 +1131,12 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
             _legend_below(fig, handles, [h.get_label() for h in handles], ncols=2)
         else:
             axes[0, 0].legend(handles=handles, loc="best", fontsize="small")
-    if new:
-        title = f"Posterior: {_run_note(posterior, draws[0].size)}"
-        fig.suptitle(_wrap(title, fig.get_figwidth() - 0.3, 10.0), fontsize=10)
+    own = f"Posterior: {_run_note(posterior, draws[0].size)}"
+    _keep_note(fig, own)
+    _warn_untitled(posterior, title, "plot_pair")
+    text = _title_text(title, own)
+    if text and (new or title is not True):  # (given axes: a title only when the caller names one)
+        fig.suptitle(_wrap(text, fig.get_figwidth() - 0.3, 10.0), fontsize=10)
     return fig
 
 
@@ -933,12 +1156,22 @@ def _unclash_ticks(fig, row) -> None:
 
 def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
                 ax: Sequence[Any] | None = None, *, model: Any = None,
-                figsize: tuple[float, float] | None = None) -> Figure:
+                figsize: tuple[float, float] | None = None, title: bool | str = True) -> Figure:
     """Retained draws of every walker against the step number, one panel per parameter, and lp.
 
     The x axis is the step of the full chain (burn-in ``discard`` and the
     thinning ``thin`` of the Posterior undone), so panels line up with tau,
     each parameter's integrated autocorrelation time, written above its panel.
+    The last panel is the log posterior up to a constant (the prior's and the
+    likelihood's normalisation left out).
+
+    The y labels are aligned; where they would run into each other (short
+    panels), the log posterior's is ``$\\ln p$``, and if they still would
+    (a figure 3.5 in wide and 6 in tall with the paper's eight parameters)
+    every parameter's is its symbol only (the units then belong in the
+    caption).  The title is on the left above the
+    first panel, or, where it would run into that panel's autocorrelation
+    time (a narrow figure), above the figure.
 
     Parameters
     ----------
@@ -953,6 +1186,13 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     figsize : (float, float), optional
         Size of the new figure, inches (default 7 in wide, about 1 in per
         panel, at most 9.5 in tall); not with ``ax``.
+    title : bool or str, default True
+        True: the title (walkers, steps, whether the chain converged); False
+        (or ""): no title, the panels taking its room; a str: that text as
+        the title.  The title's own text is kept, whatever ``title``, in the
+        figure's attribute ``_bayespilot_note`` (:data:`NOTE_ATTR`); without
+        the title, a posterior that has not converged gives a
+        :class:`~bayespilot.sample.ConvergenceWarning`.
 
     Returns
     -------
@@ -961,8 +1201,8 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     Raises
     ------
     TypeError
-        If ``posterior`` is not a Posterior, or ``names`` is neither a str nor
-        a sequence of str.
+        If ``posterior`` is not a Posterior, ``names`` is neither a str nor
+        a sequence of str, or ``title`` is neither a bool nor a str.
     ValueError
         If a name was not sampled, ``ax`` has the wrong number of axes, or
         ``figsize`` is given with ``ax`` or is not two positive numbers.
@@ -972,6 +1212,7 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
     names = posterior.parameter_names if names is None else _names(names)
     for n in names:
         posterior.draws(n)  # validates the name
+    _title_text(title, None)  # (checked before a figure is made)
     post = posterior.idata.posterior
     discard = int(posterior.settings.get("discard", 0))
     thin = int(posterior.settings.get("thin", 1))
@@ -987,25 +1228,69 @@ def plot_chains(posterior: Posterior, names: Sequence[str] | None = None,
             raise ValueError(f"ax must hold {n_panels} axes (one per parameter and one for lp), "
                              f"got {len(axes)}")
         fig = axes[0].figure
-    series = [(n, _param_label(n, model), np.asarray(post[n].values, float)) for n in names]
-    series.append(("lp", "log posterior",
+    from ._labels import symbol
+
+    # (each panel's label in full, and short: the symbol alone, for a panel too short for it)
+    series = [(n, (_param_label(n, model), symbol(n)), np.asarray(post[n].values, float))
+              for n in names]
+    series.append(("lp", ("log posterior\n(+ const.)", r"$\ln p$"),
                    np.asarray(posterior.idata.sample_stats["lp"].values, float)))
-    for a, (name, ylabel, v) in zip(axes, series):
+    notes = {}
+    for a, (name, ylabels, v) in zip(axes, series):
         steps = discard + thin * np.arange(v.shape[1])
         a.plot(steps, v.T, lw=0.4, alpha=0.5, color="C0")
-        a.set_ylabel(ylabel)
+        a.set_ylabel(ylabels[0])
         tau = posterior.tau.get(name) if name != "lp" else None
         if tau is not None and math.isfinite(tau):
             # above the top spine, right-aligned (the panel's title, if any, is on the left)
-            a.annotate(f"autocorrelation time {tau:.0f} steps", xy=(1.0, 1.0),
-                       xycoords="axes fraction", xytext=(0.0, 2.0), textcoords="offset points",
-                       ha="right", va="bottom", fontsize=SMALLEST_FONT)
+            notes[a] = a.annotate(f"autocorrelation time {tau:.0f} steps", xy=(1.0, 1.0),
+                                  xycoords="axes fraction", xytext=(0.0, 2.0),
+                                  textcoords="offset points", ha="right", va="bottom",
+                                  fontsize=SMALLEST_FONT)
         a.grid(True, lw=0.3, alpha=0.6)
     axes[-1].set_xlabel("step")
-    axes[0].set_title(f"{len(series[0][2])} walkers, {posterior.settings.get('n_steps', '?')} steps, "
-                      f"{'converged' if posterior.converged else 'not converged'}",
-                      fontsize="medium", loc="left")
+    own = (f"{len(series[0][2])} walkers, {posterior.settings.get('n_steps', '?')} steps, "
+           f"{'converged' if posterior.converged else 'not converged'}")
+    _keep_note(fig, own)
+    _warn_untitled(posterior, title, "plot_chains")
+    text = _title_text(title, own)
+    if text:
+        head = axes[0].set_title(text, fontsize="medium", loc="left")
+        note = notes.get(axes[0])
+        if note is not None:
+            fig.draw_without_rendering()
+            if head.get_window_extent().x1 > note.get_window_extent().x0 - 4.0:
+                # beside the autocorrelation time there is no room: above the figure (a new
+                # one, laid out to make room), or wrapped to the room left (a user's axes)
+                ab = axes[0].get_window_extent()
+                room = (note.get_window_extent().x0 - ab.x0) / fig.dpi - 0.1
+                if ax is None or room < 1.0:
+                    head.set_text("")
+                    fig.suptitle(_wrap(text, fig.get_figwidth() - 0.3, _points("medium")),
+                                 fontsize="medium")
+                else:
+                    head.set_text(_wrap(text, room, _points("medium")))
+    # labels in one column; where two run into each other (short panels: rotated, a label's
+    # length is upright), every label is the short one (units in the caption, not some here)
+    # (first the log posterior's, the longest, then every parameter's)
+    fig.align_ylabels(axes)
+    if _labels_clash(fig, axes):
+        axes[-1].set_ylabel(series[-1][1][1])
+        if _labels_clash(fig, axes):
+            for a, (_, ylabels, _) in zip(axes, series):
+                a.set_ylabel(ylabels[1])
     return fig
+
+
+def _labels_clash(fig, axes) -> bool:
+    """Whether, the figure laid out, two of the y labels of ``axes`` (a column of panels)
+    overlap or one runs off the figure."""
+    fig.draw_without_rendering()
+    boxes = [a.yaxis.label.get_window_extent() for a in axes if a.yaxis.label.get_text()]
+    page = fig.bbox
+    if any(b.y0 < page.y0 - 0.5 or b.y1 > page.y1 + 0.5 for b in boxes):
+        return True
+    return any(b0.overlaps(b1) for i, b0 in enumerate(boxes) for b1 in boxes[i + 1:])
 
 
 __all__ += ["plot_marginal", "plot_pair", "plot_chains"]

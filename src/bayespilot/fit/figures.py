@@ -7,10 +7,15 @@ returns a matplotlib Figure, at most :data:`~bayespilot.plots.PAGE_WIDTH`
 (7.5 in) wide unless ``figsize=`` says otherwise, in constrained layout with
 one legend above the panels, its text in matplotlib's default sizes (for a
 vector copy with TrueType fonts, which journals' PDF checks want, save it
-within ``matplotlib.rc_context(bayespilot.plots.VECTOR_TEXT)``).
+within ``matplotlib.rc_context(bayespilot.plots.VECTOR_TEXT)``).  Each takes ``title=``
+as every figure of the package does: True (default) as always (no figure title, panels
+titled), False no title and no default panel titles ("fit 1"), a str a title heading the
+legend.
 
 - :func:`plot_step_one_thresholds` (Fig. 6): the Step I delta_abs of every GA
-  repetition, in ascending order of -ln L, one panel per condition.
+  repetition, in ascending order of -ln L, one panel per condition; the true
+  delta_abs only where it is known (``true_value=``, or recorded in the fits),
+  or another reference named as such (``reference_label=``).
 - :func:`plot_ga_convergence` (Fig. 7): -ln L and chosen parameters of the
   best-so-far individual over the GA generations, for a few repetitions.
 - :func:`plot_step_two` (Fig. 8): -ln L of each repetition after Step I
@@ -30,7 +35,8 @@ import numpy as np
 
 from .._labels import symbol
 from ..presets import TABLE3
-from ..plots import _figsize, _legend_columns, _new_figure, _param_label, _pyplot
+from ..plots import (_figsize, _legend_columns, _new_figure, _param_label, _pyplot, _title_text,
+                     _wrap)
 from .result import FitResult
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -38,9 +44,11 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["plot_step_one_thresholds", "plot_ga_convergence", "plot_step_two", "plot_step_three"]
 
-#: The true delta_abs of the paper's simulations (Table 3), IPUT: the dashed line these
-#: figures draw by default.  (The paper's Fig. 6, of measured data, draws Groen et al.'s
-#: passive threshold instead, ``presets.DELTA_ABS_PASSIVE`` = 0.00734 IPUT.)
+#: The true delta_abs of the paper's simulations (Table 3), IPUT: ``true_value=`` of
+#: :func:`plot_step_one_thresholds` for fits of them (it draws no line by default: a fit
+#: does not record the truth of its recording).  The paper's Fig. 6, of measured data, draws
+#: Groen et al.'s passive threshold instead, ``presets.DELTA_ABS_PASSIVE`` = 0.00734 IPUT,
+#: with ``reference_label=``.
 TRUE_THRESHOLD = TABLE3["FD"]["delta_abs"]
 #: -ln L as the axes show it.
 _NLL = r"$-\ln L$"
@@ -90,17 +98,42 @@ def _finish(fig, axes) -> None:
                          and any(t.get_visible() for t in ax.get_xticklabels())])
 
 
-def _legend_above(fig, handles, labels, ncols: int, **kw):
-    """One legend above the panels (constrained layout makes room)."""
-    return fig.legend(handles, labels, loc="outside upper center",
-                      ncols=_legend_columns(labels, fig.get_figwidth(), ncols),
-                      fontsize="small", frameon=False, **kw)
+def _panel_title(labels: Sequence[str] | None, k: int, default: str, title) -> str | None:
+    """Panel ``k``'s title: its label when ``labels`` are given, else ``default`` ("fit 1"),
+    which ``title=False`` leaves out."""
+    if labels is not None:
+        return labels[k]
+    dropped = (isinstance(title, (bool, np.bool_)) and not title) or title == ""
+    return None if dropped else default
+
+
+def _legend_above(fig, handles, labels, ncols: int, *, title=True,
+                  legend_title: str | None = None):
+    """One legend above the panels (constrained layout makes room), headed by a str ``title``
+    (the figure's title: a suptitle would lie over the legend, as constrained layout gives
+    the top margin to the taller of the two, not to both), wrapped to the figure's width,
+    above the legend's own ``legend_title`` if it has one."""
+    heading = _title_text(title, None)
+    kw = {}
+    if heading:
+        heading = _wrap(heading, fig.get_figwidth() - 0.3, 10.0)
+        kw = {"title": f"{heading}\n{legend_title}" if legend_title else heading,
+              "title_fontsize": "medium"}
+    elif legend_title:
+        kw = {"title": legend_title, "title_fontsize": "small"}
+    legend = fig.legend(handles, labels, loc="outside upper center",
+                        ncols=_legend_columns(labels, fig.get_figwidth(), ncols),
+                        fontsize="small", frameon=False, **kw)
+    legend.get_title().set_multialignment("center")
+    return legend
 
 
 def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
                              ncols: int | None = None,
-                             true_value: float | None = TRUE_THRESHOLD,
-                             figsize: tuple[float, float] | None = None) -> Figure:
+                             true_value: float | None = None,
+                             reference_label: str | None = None,
+                             figsize: tuple[float, float] | None = None,
+                             title: bool | str = True) -> Figure:
     """Fig. 6: the Step I delta_abs of every repetition, ordered by -ln L.
 
     Parameters
@@ -114,25 +147,77 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
         "condition 1", ... for panels of several fits).
     ncols : int, optional
         Panels per row (default up to 4).
-    true_value : float or None
-        The true delta_abs, a dashed black horizontal line named in the
-        legend (default 0.0075 IPUT, the true value of the paper's
-        simulations, Table 3; for measured data as in the paper's Fig. 6,
-        Groen et al.'s passive threshold ``presets.DELTA_ABS_PASSIVE``);
-        None for no line.
+    true_value : float, optional
+        A delta_abs (IPUT) drawn in every panel as a dashed black horizontal
+        line named in the legend: "true delta_abs (value IPUT)", the
+        truth of simulated recordings (the paper's simulations, Table 3:
+        :data:`TRUE_THRESHOLD`, 0.0075), or, with ``reference_label``,
+        another reference.  Default: the true delta_abs a fit records in
+        ``settings["true_parameters"]`` where every fit of a panel records
+        the same one, else no line (a fit as
+        :func:`~bayespilot.fit.three_step.fit_paper` makes it
+        records none: the truth of a measured recording is not known).
+    reference_label : str, optional
+        What the line at ``true_value`` is, when it is not a true value:
+        the legend reads "reference_label (value IPUT)".  For measured
+        data as in the paper's Fig. 6, Groen et al.'s passive threshold:
+        ``true_value=presets.DELTA_ABS_PASSIVE,
+        reference_label="Groen et al.'s passive threshold"``.
     figsize : (float, float), optional
         Size of the figure, inches (default 3 in per panel and 2.6 in per
         row, at most 7.5 in wide).
+    title : bool or str, default True
+        True: as the figure has always been, no figure title and each
+        panel titled (its label, else "fit 1", ...); False (or ""): no
+        figure title and no default panel titles, the panels taking their
+        room (titles given by ``labels`` stay: they name the panels); a
+        str: that text as the figure's title, heading the legend above the
+        panels.
 
     Returns
     -------
     matplotlib.figure.Figure
+
+    Raises
+    ------
+    TypeError
+        If an entry of ``results`` is not a FitResult, or ``title`` is
+        neither a bool nor a str.
+    ValueError
+        If ``results`` is empty, ``labels`` is not one per panel, a fit is
+        not by the paper's three-step procedure, ``true_value`` is not a
+        finite number, or ``reference_label`` is empty or given without
+        ``true_value``.
     """
     panels = [r if isinstance(r, (list, tuple)) else [r] for r in results]
     if not panels:
         raise ValueError("no fits to plot")
     if labels is not None and len(labels) != len(panels):
         raise ValueError(f"{len(labels)} labels for {len(panels)} panels")
+    _title_text(title, None)  # (checked before a figure is made)
+    if true_value is not None:
+        try:
+            true_value = float(true_value)
+        except (TypeError, ValueError):
+            raise ValueError(f"true_value must be a number (IPUT), got {true_value!r}") from None
+        if not math.isfinite(true_value):
+            raise ValueError(f"true_value must be finite, got {true_value!r}")
+    if reference_label is not None:
+        if not isinstance(reference_label, str) or not reference_label.strip():
+            raise ValueError(f"reference_label must be a non-empty str, got {reference_label!r}")
+        if true_value is None:
+            raise ValueError("reference_label names the line at true_value; give its value too "
+                             "(for Groen et al.'s passive threshold: true_value="
+                             "presets.DELTA_ABS_PASSIVE)")
+    d = symbol("delta_abs")
+    if true_value is not None:
+        lines = [true_value] * len(panels)
+        line_label = f"{reference_label or f'true {d}'} ({true_value:g} IPUT)"
+    else:  # the truth the fits record, where they do (simulations)
+        lines = [_recorded_truth(fits) for fits in panels]
+        known = {v for v in lines if v is not None}
+        line_label = (f"true {d} ({known.pop():g} IPUT)" if len(known) == 1
+                      else f"true {d} (each panel's)")
     nrows, ncols = _grid(len(panels), ncols)
     fig, axes = _panels(nrows, ncols, 3.0, 2.6, figsize, integer_x=True, sharey=True)
     several = any(len(f) > 1 for f in panels)
@@ -146,12 +231,12 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
             ax.plot(np.arange(1, len(order) + 1), deltas[order], marker="os^Dv"[j % 5],
                     ls=_STYLES[j % len(_STYLES)], ms=3, lw=0.8,
                     label=f"run {j + 1}" if len(fits) > 1 else "Step I estimate")
-        if true_value is not None:
-            # the package's mark of a true value: a dashed black line
-            ax.axhline(true_value, color="k", ls="--", lw=0.9, zorder=0,
-                       label=f"true {symbol('delta_abs')} ({true_value:g} IPUT)")
-        ax.set_title(labels[k] if labels is not None
-                     else f"{'condition' if several else 'fit'} {k + 1}", fontsize="medium")
+        if lines[k] is not None:
+            # the package's mark of a true value (or the reference named): a dashed black line
+            ax.axhline(lines[k], color="k", ls="--", lw=0.9, zorder=0, label=line_label)
+        head = _panel_title(labels, k, f"{'condition' if several else 'fit'} {k + 1}", title)
+        if head:
+            ax.set_title(head, fontsize="medium")
         if ncols == 1:
             ax.set_xlabel(f"GA repetition (ascending {_NLL})")
         if k % ncols == 0:
@@ -160,18 +245,38 @@ def plot_step_one_thresholds(results: Sequence[FitResult], labels: Sequence[str]
         ax.set_visible(False)
     if ncols > 1:  # (one label for the panels side by side: each would overrun its panel)
         fig.supxlabel(f"GA repetition (ascending {_NLL})", fontsize="medium")
-    # one legend for every panel, above them (the panels with most runs name them all)
-    widest = max(range(len(panels)), key=lambda k: len(panels[k]))
+    # one legend for every panel, above them (the panels with most runs name them all, and
+    # the line where one is drawn)
+    widest = max(range(len(panels)), key=lambda k: (len(panels[k]), lines[k] is not None))
     handles, names = axes.flat[widest].get_legend_handles_labels()
-    _legend_above(fig, handles, names, 4)
+    if line_label not in names and any(v is not None for v in lines):
+        k = next(k for k, v in enumerate(lines) if v is not None)
+        h, n = axes.flat[k].get_legend_handles_labels()
+        handles.append(h[n.index(line_label)])
+        names.append(line_label)
+    _legend_above(fig, handles, names, 4, title=title)
     _finish(fig, axes[-1])
     return fig
+
+
+def _recorded_truth(fits: Sequence[FitResult]) -> float | None:
+    """The true delta_abs the fits record (``settings["true_parameters"]``, as a simulated
+    recording's truth is kept), when every one records the same finite value; else None."""
+    values = set()
+    for fit in fits:
+        true = (getattr(fit, "settings", None) or {}).get("true_parameters") or {}
+        v = true.get("delta_abs") if hasattr(true, "get") else None
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            return None
+        values.add(float(v))
+    return values.pop() if len(values) == 1 else None
 
 
 def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
                         parameters: Sequence[str] = ("K_v", "K_m", "tau_m", "delta_abs"),
                         repetitions: int = 3,
-                        figsize: tuple[float, float] | None = None) -> Figure:
+                        figsize: tuple[float, float] | None = None,
+                        title: bool | str = True) -> Figure:
     """Fig. 7: the best-so-far individual over the GA generations.
 
     Rows are -ln L and ``parameters``; columns are the fits (conditions); each
@@ -196,6 +301,13 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     figsize : (float, float), optional
         Size of the figure, inches (default 3 in per column and 1.7 in per
         row, at most 7.5 x 9.5 in).
+    title : bool or str, default True
+        True: as the figure has always been, no figure title and each
+        panel titled (its label, else "fit 1", ...); False (or ""): no
+        figure title and no default panel titles, the panels taking their
+        room (titles given by ``labels`` stay: they name the panels); a
+        str: that text as the figure's title, heading the legend above the
+        panels.
 
     Returns
     -------
@@ -204,7 +316,8 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     Raises
     ------
     TypeError
-        If an entry of ``results`` is not a FitResult.
+        If an entry of ``results`` is not a FitResult, or ``title`` is
+        neither a bool nor a str.
     ValueError
         If ``results`` is empty, ``repetitions`` < 1, ``labels`` is not one per
         fit, a fit is not by the paper's three-step procedure, or a name in
@@ -218,6 +331,7 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
     if repetitions < 1:
         raise ValueError(f"repetitions must be >= 1, got {repetitions}")
     _check_labels(labels, len(results))
+    _title_text(title, None)  # (checked before a figure is made)
     rows = [_NLL, *(_param_label(p, results[0]) for p in parameters)]  # its model's units
     fig, axes = _panels(len(rows), len(results), 3.0, 1.7, figsize, integer_x=True,
                         sharex=True)
@@ -241,15 +355,16 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
             for r, p in enumerate(parameters, start=1):
                 axes[r, c].plot(gen, hx[:, names.index(p)], **style)
         drawn = max(drawn, min(repetitions, len(s1["runs"])))
-        axes[0, c].set_title(labels[c] if labels is not None else f"fit {c + 1}",
-                             fontsize="medium")
+        head = _panel_title(labels, c, f"fit {c + 1}", title)
+        if head:
+            axes[0, c].set_title(head, fontsize="medium")
         axes[-1, c].set_xlabel("GA generation")
     for r, name in enumerate(rows):
         axes[r, 0].set_ylabel(name)
     handles, names = next(ax for ax in axes[0]
                           if len(ax.get_lines()) == drawn).get_legend_handles_labels()
-    _legend_above(fig, handles, names, len(names), title="best-so-far individual of",
-                  title_fontsize="small")
+    _legend_above(fig, handles, names, len(names), title=title,
+                  legend_title="best-so-far individual of")
     _finish(fig, axes[-1])
     return fig
 
@@ -262,18 +377,20 @@ def _check_labels(labels: Sequence[str] | None, n: int) -> None:
 
 def _one_row(results: Sequence[FitResult], labels: Sequence[str] | None = None,
              figsize: tuple[float, float] | None = None, height: float = 2.8,
-             integer_x: bool = False):
+             integer_x: bool = False, title: bool | str = True):
     """The fits as a list and a figure with one panel per fit in a row (Figs. 8 and 9)."""
     results = list(results)
     if not results:
         raise ValueError("no fits to plot")
     _check_labels(labels, len(results))
+    _title_text(title, None)  # (checked before a figure is made)
     fig, axes = _panels(1, len(results), 3.0, height, figsize, integer_x=integer_x)
     return results, fig, axes
 
 
 def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = None, *,
-                  figsize: tuple[float, float] | None = None) -> Figure:
+                  figsize: tuple[float, float] | None = None,
+                  title: bool | str = True) -> Figure:
     """Fig. 8: -ln L per repetition after Step I (grey) and Step II (black).
 
     Parameters
@@ -288,6 +405,13 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
     figsize : (float, float), optional
         Size of the figure, inches (default 3 in per panel, at most 7.5 in
         wide).
+    title : bool or str, default True
+        True: as the figure has always been, no figure title and each
+        panel titled (its label, else "fit 1", ...); False (or ""): no
+        figure title and no default panel titles, the panels taking their
+        room (titles given by ``labels`` stay: they name the panels); a
+        str: that text as the figure's title, heading the legend above the
+        panels.
 
     Returns
     -------
@@ -297,14 +421,15 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
     Raises
     ------
     TypeError
-        If an entry of ``results`` is not a FitResult.
+        If an entry of ``results`` is not a FitResult, or ``title`` is
+        neither a bool nor a str.
     ValueError
         If ``results`` is empty, ``labels`` is not one per fit, or a fit is
         not by the paper's three-step procedure.
     """
     from matplotlib.lines import Line2D
 
-    results, fig, axes = _one_row(results, labels, figsize, integer_x=True)
+    results, fig, axes = _one_row(results, labels, figsize, integer_x=True, title=title)
     for c, (ax, fit) in enumerate(zip(axes[0], results)):
         steps = _paper_fit(fit, "plot_step_two")
         before = np.array([r["fun"] for r in steps["step1"]["runs"]])
@@ -316,7 +441,9 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
         # a ring around the kept square (a filled circle would hide it)
         ax.plot(k[best], after[best], "o", mfc="none", mec="k", mew=1.2, ms=10, label="kept",
                 zorder=3)
-        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize="medium")
+        head = _panel_title(labels, c, f"fit {c + 1}", title)
+        if head:
+            ax.set_title(head, fontsize="medium")
         ax.set_xlabel("GA repetition")
         if c == 0:
             ax.set_ylabel(_NLL)
@@ -324,7 +451,8 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
                Line2D([], [], ls="none", marker="s", color="k", ms=4),
                Line2D([], [], ls="none", marker="o", mfc="none", mec="k", mew=1.2, ms=10)]
     _legend_above(fig, handles, ["after Step I (GA)", "after Step II (Gauss-Newton)",
-                                 "Step II refinement kept (lowest " + _NLL + ")"], 3)
+                                 "Step II refinement kept (lowest " + _NLL + ")"], 3,
+                  title=title)
     _finish(fig, axes[0])
     return fig
 
@@ -332,7 +460,8 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
 def plot_step_three(results: Sequence[FitResult],
                     labels: Sequence[str] | None = None, *, scan: int = 0,
                     span: float | None = None,
-                    figsize: tuple[float, float] | None = None) -> Figure:
+                    figsize: tuple[float, float] | None = None,
+                    title: bool | str = True) -> Figure:
     """Fig. 9: -ln L along delta_abs (Step II parameters fixed) with the estimates marked.
 
     The Step I estimates of each repetition are crosses on the curve, the
@@ -365,6 +494,13 @@ def plot_step_three(results: Sequence[FitResult],
     figsize : (float, float), optional
         Size of the figure, inches (default 3 in per panel, at most 7.5 in
         wide).
+    title : bool or str, default True
+        True: as the figure has always been, no figure title and each
+        panel titled (its label, else "fit 1", ...); False (or ""): no
+        figure title and no default panel titles, the panels taking their
+        room (titles given by ``labels`` stay: they name the panels); a
+        str: that text as the figure's title, heading the legend above the
+        panels.
 
     Returns
     -------
@@ -373,7 +509,8 @@ def plot_step_three(results: Sequence[FitResult],
     Raises
     ------
     TypeError
-        If an entry of ``results`` is not a FitResult.
+        If an entry of ``results`` is not a FitResult, or ``title`` is
+        neither a bool nor a str.
     ValueError
         If ``results`` is empty, ``labels`` is not one per fit, a fit is not
         by the paper's three-step procedure, a fit has no Step III scan
@@ -407,7 +544,7 @@ def plot_step_three(results: Sequence[FitResult],
     from matplotlib.lines import Line2D
 
     # (room above the panels for the legend's four lines)
-    results, fig, axes = _one_row(results, labels, figsize, height=3.3)
+    results, fig, axes = _one_row(results, labels, figsize, height=3.3, title=title)
     off_scale = False
     for c, (ax, (steps, one)) in enumerate(zip(axes[0], chosen)):
         scan_c = one
@@ -438,7 +575,9 @@ def plot_step_three(results: Sequence[FitResult],
         # whole values of -ln L on the ticks: a range of a few units about -26 157 otherwise
         # gets an offset text ("-2.615e4") that runs into the panel's title
         ax.ticklabel_format(axis="y", useOffset=False, style="plain")
-        ax.set_title(labels[c] if labels is not None else f"fit {c + 1}", fontsize="medium")
+        head = _panel_title(labels, c, f"fit {c + 1}", title)
+        if head:
+            ax.set_title(head, fontsize="medium")
         ax.set_xlabel(_param_label("delta_abs"))
         if c == 0:
             ax.set_ylabel(_NLL)
@@ -454,7 +593,7 @@ def plot_step_three(results: Sequence[FitResult],
     if off_scale:
         handles.insert(2, Line2D([], [], ls="none", marker="^", color="0.4", ms=6,
                                  label="Step I estimates above the range shown"))
-    _legend_above(fig, handles, [h.get_label() for h in handles], 2)
+    _legend_above(fig, handles, [h.get_label() for h in handles], 2, title=title)
     _finish(fig, axes[0])
     return fig
 
