@@ -707,3 +707,272 @@ def test_report_neg_log_lik_of_a_perfect_fit_is_the_likelihoods_floored_value(mo
     assert floored and math.isfinite(after) and after == want
     assert math.isfinite(before) and before > after
     assert res.to_dict()["chosen"]["neg_log_lik_after"] == want
+
+
+# -- 9. for a paper: titles optional, column-width axes, figsize (audit_figures R1/R3/R6/R7) ----
+
+
+def _titles(fig):
+    """Every title text of ``fig``: its suptitle and each axes' three titles (non-empty)."""
+    found = [fig._suptitle.get_text()] if fig._suptitle is not None else []
+    found += [ax.get_title(loc) for ax in fig.axes for loc in ("center", "left", "right")]
+    return [t for t in found if t]
+
+
+def _shared():
+    from bayespilot.diagnose.posterior import SharedPosterior
+
+    grid = np.linspace(0.5, 1.1, 31)
+    log_density = -0.5 * ((grid - 0.8) / 0.08) ** 2
+    dens = np.exp(log_density) / (np.exp(log_density).sum() * (grid[1] - grid[0]))
+    marg = {"median": 0.8, "mean": 0.8, "sd": 0.08, "interval": [0.67, 0.93], "mode": 0.8,
+            "density": dens.tolist()}
+    return SharedPosterior("motion-washout", ("omega_w",), [grid], log_density,
+                           {"omega_w": marg}, {"omega_w": 0.8}, {"omega_w": 0.08}, 0.0,
+                           {"method": "Laplace", "points": 31, "n_runs": 2}, 1.0, 2.0)
+
+
+def _title_calls(washout):
+    res = dataclasses.replace(_with_bootstrap(washout, 39), posterior=_fake_posterior(washout))
+    batch = [("a", _batch_dict(1e-4)), ("b", _batch_dict(0.3))]
+    # name -> (draw with title=..., today's title, whether the panels keep their headings)
+    return {
+        "frequency_response": (lambda t: R.plot_frequency_response(res, title=t),
+                               "Describing functions at the forcing frequencies", True),
+        "residuals": (lambda t: R.plot_residuals(res, title=t), None, True),
+        "evidence": (lambda t: R.plot_evidence(res, title=t),
+                     "Where the data and the base model differ", False),
+        "candidates": (lambda t: R.plot_candidates(res, title=t),
+                       "Candidates (decision: motion-washout)", False),
+        "batch": (lambda t: R.plot_batch(batch, title=t), "2 diagnoses: every candidate's", False),
+        "profile": (lambda t: R.plot_profile(res, title=t),
+                    "motion-washout: profile likelihood of its new parameters", False),
+        "posterior": (lambda t: R.plot_posterior(res, title=t),
+                      "motion-washout: posterior of its new parameters", False),
+        "shared_posterior": (lambda t: R.plot_shared_posterior(_shared(), title=t),
+                             "motion-washout: posterior of the parameters shared by 2 runs",
+                             False),
+    }
+
+
+def test_every_report_plot_takes_title_true_false_or_a_text(washout):
+    """R1: title=True draws today's title, False none (the panels' headings of the 2 x 2
+    figures stay: they name the panels), a str that text; anything else is refused."""
+    for name, (draw, today, headings) in _title_calls(washout).items():
+        default = _titles(draw(True))
+        if today is not None:
+            assert any(t.replace("\n", " ").startswith(today) for t in default), (name, default)
+        fig = draw(False)
+        none = _titles(fig)
+        if headings:  # only the panels' headings, as with True less the figure's title
+            assert fig._suptitle is None or not fig._suptitle.get_text(), name
+            assert none == [t for t in default if t != today], name
+        else:
+            assert none == [], (name, none)
+        mine = _titles(draw("Fig. 3"))
+        assert "Fig. 3" in mine, (name, mine)
+        assert today is None or not any(today in t for t in mine), name
+        plt.close("all")
+    with pytest.raises(TypeError, match="title must be"):
+        R.plot_evidence(washout, title=1)
+
+
+def test_without_titles_the_axes_take_their_room(washout):
+    """R1: title=False gives the title's room to the axes (constrained layout), and a panel's
+    note (the profile's scale c) moves into its legend's title, not lost."""
+    res = _with_bootstrap(washout, 39)
+    for draw in (lambda t: R.plot_evidence(res, title=t),
+                 lambda t: R.plot_candidates(res, title=t),
+                 lambda t: R.plot_profile(res, title=t)):
+        tops = []
+        for t in (True, False):
+            fig = draw(t)
+            fig.canvas.draw()
+            tops.append(fig.axes[0].get_window_extent().y1 / fig.dpi)
+        assert tops[1] > tops[0] + 0.1, tops  # (in: at least a line of 10-pt text)
+    fig = R.plot_profile(res, title=False)
+    c = washout.chosen.interval["omega_w"].scale
+    assert fig.axes[0].get_legend().get_title().get_text().startswith(f"$c$ = {c:.2g}")
+
+
+def _inside(box, fig, tol=1.0):
+    f = fig.bbox
+    return (box.x0 >= f.x0 - tol and box.x1 <= f.x1 + tol and box.y0 >= f.y0 - tol
+            and box.y1 <= f.y1 + tol)
+
+
+def _column_axes(w, h):
+    fig = plt.figure(figsize=(w, h), layout="constrained")
+    return fig, fig.add_subplot()
+
+
+def test_evidence_on_column_wide_axes_keeps_axes_and_legend_inside(washout):
+    """R3: on the caller's 3.5 x 3.0-in axes the legend went beside them and constrained
+    layout collapsed the axes ("axes sizes collapsed to zero"): now it is under the x label,
+    inside the figure, the axes at least 1 in each way; legend=False draws none."""
+    res = _with_bootstrap(washout, 39)
+    fig, ax = _column_axes(3.5, 3.0)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        R.plot_evidence(res, ax=ax)
+        fig.canvas.draw()
+    leg = ax.get_legend().get_window_extent()
+    assert _inside(leg, fig)
+    assert _inside(ax.get_tightbbox(), fig)  # names, x label, title whole
+    a = ax.get_window_extent()
+    assert a.width / fig.dpi >= 1.0 and a.height / fig.dpi >= 1.0, a
+    assert leg.y1 <= a.y0  # under the axes
+    assert leg.y1 <= ax.xaxis.label.get_window_extent().y0 + 1  # and under the x label
+    assert not [w for w in caught if "collapsed" in str(w.message)]
+    fig, ax = _column_axes(3.5, 3.0)
+    R.plot_evidence(res, ax=ax, legend=False)
+    assert ax.get_legend() is None and not fig.legends
+
+
+def test_candidates_caption_is_wrapped_to_column_wide_axes(washout):
+    """R3: on the caller's 3.5 x 2.6-in axes the two-line caption was cut on both sides: now
+    wrapped to the width under the axes and their labels, inside the figure; caption=False
+    leaves the formula only."""
+    fig, ax = _column_axes(3.5, 2.6)
+    R.plot_candidates(washout, ax=ax)
+    fig.canvas.draw()
+    lab = ax.xaxis.label
+    assert _inside(lab.get_window_extent(), fig)
+    assert _inside(ax.get_tightbbox(), fig)  # and the title, the names, the p-values
+    assert "black mark" in lab.get_text() and lab.get_text().count("\n") >= 2
+    assert ax.get_window_extent().width / fig.dpi >= 0.5
+    fig, ax = _column_axes(3.5, 2.6)
+    R.plot_candidates(washout, ax=ax, caption=False)
+    text = ax.get_xlabel()
+    assert "black mark" not in text and "justified" not in text and r"\Delta(-\ln L)" in text
+    # at a page's width the caption is its two lines, as before
+    ax = R.plot_candidates(washout).axes[0]
+    assert ax.get_xlabel().count("\n") == 1
+
+
+def test_report_figures_take_a_figsize(washout):
+    """R2/R3: figsize= sizes a new figure as given (a column's 3.5 in; the 2 x 2 figures a
+    7-in page's), everything inside it; with the caller's axes it is refused."""
+    res = dataclasses.replace(_with_bootstrap(washout, 39), posterior=_fake_posterior(washout))
+    calls = {"frequency_response": (R.plot_frequency_response, (7.0, 5.0)),
+             "residuals": (R.plot_residuals, (7.0, 6.0)), "evidence": (R.plot_evidence, (3.5, 4.0)),
+             "candidates": (R.plot_candidates, (3.5, 2.6)), "profile": (R.plot_profile, (3.5, 3.2)),
+             "posterior": (R.plot_posterior, (3.5, 3.2))}
+    for name, (fn, size) in calls.items():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # (no collapsed layout)
+            fig = fn(res, figsize=size)
+            fig.canvas.draw()
+        assert tuple(fig.get_size_inches()) == pytest.approx(size), name
+        for lg in fig.legends + [a.get_legend() for a in fig.axes if a.get_legend()]:
+            assert _inside(lg.get_window_extent(), fig), name
+        assert _inside(fig.axes[0].get_tightbbox(), fig), name
+        plt.close(fig)
+    fig = R.plot_batch([("a", _batch_dict())], figsize=(3.5, 3.0))
+    assert tuple(fig.get_size_inches()) == pytest.approx((3.5, 3.0))
+    assert tuple(R.plot_shared_posterior(_shared(), figsize=(3.5, 3.0)).get_size_inches()
+                 ) == pytest.approx((3.5, 3.0))
+    fig, ax = plt.subplots()
+    with pytest.raises(ValueError, match="figsize"):
+        R.plot_candidates(res, ax=ax, figsize=(3.5, 2.6))
+
+
+def test_figures_of_a_result_read_from_json_say_it_keeps_no_signals(washout, tmp_path):
+    """R6: a diagnosis read back from its JSON has no signals; the frequency-response panel
+    said "the recording's forcing functions are unknown" (they were known), the residual
+    figure raised KeyError and the posterior AttributeError.  Each now says the file keeps
+    no signals and what to do; the figures of numbers the file keeps still draw."""
+    from bayespilot.diagnose import DiagnosisResult
+
+    path = tmp_path / "diagnosis.json"
+    washout.to_json(path)
+    back = DiagnosisResult.from_json(path)
+    fig = R.plot_frequency_response(back)
+    (msg,) = [t.get_text() for t in fig.axes[0].texts]
+    assert "unknown" not in msg
+    assert "read from JSON" in msg and str(path) in msg and "keeps no signals" in msg
+    assert "re-run diagnose" in msg
+    with pytest.raises(ValueError, match="read from JSON .*keeps no signals: re-run diagnose"):
+        R.plot_residuals(back)
+    with pytest.raises(ValueError, match="read from JSON .*re-run diagnose"):
+        R.plot_posterior(back)
+    R.plot_candidates(back), R.plot_profile(back), R.plot_evidence(back)  # (numbers: drawn)
+    # a result that has its signals but no whole periods keeps its own reason
+    assert "read from JSON" not in R._no_describing_function(_without_df(washout))
+
+
+def test_residual_band_label_has_an_upright_subscript(washout):
+    """R7: the decision band's omega_c as _labels writes a subscript (upright), not $\\omega_c$."""
+    from bayespilot._labels import symbol
+
+    fig = R.plot_residuals(washout)
+    band = [t.get_text() for t in fig.legends[0].get_texts() if t.get_text().startswith("above")]
+    assert band and band[0].startswith(f"above {symbol('omega_c')} = ")
+    assert r"\omega_c" not in band[0]
+
+
+def test_batch_chosen_box_is_seen_on_a_dark_cell():
+    """T8: the chosen extension's black box had no contrast on viridis' dark cells (a large
+    p); a white edge inside it now: the pixels just inside the black line are white."""
+    fig = R.plot_batch([("a", _batch_dict(0.3))])  # chosen washout, p = 0.3: a dark cell
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    (box,) = [p for p in ax.patches if not p.get_fill()]
+    e = box.get_window_extent()
+    rgba = np.asarray(fig.canvas.buffer_rgba())
+    height = rgba.shape[0]
+    # 2 px inside the left and top black lines (2 pt wide at 100 dpi: 1.4 px each side)
+    inside = [(int(round(e.x0 + 2.2)), int(round((e.y0 + e.y1) / 2))),
+              (int(round((e.x0 + e.x1) / 2)), int(round(e.y1 - 2.2)))]
+    centre = (int(round((e.x0 + e.x1) / 2)), int(round((e.y0 + e.y1) / 2)))
+    assert rgba[height - centre[1], centre[0], :3].max() < 120  # the cell is dark
+    for x, y in inside:
+        assert rgba[height - y, x, :3].min() > 200, rgba[height - y, x]  # white
+
+
+def test_batch_figure_stops_growing_at_a_page_and_its_names_do_not_overlap():
+    """T8: 0.28 in per diagnosis without a cap made 60 diagnoses 18.7 in tall; now at most a
+    page (9.5 in), every k-th row named where rows are narrower than a name."""
+    from bayespilot.plots import PAGE_HEIGHT
+
+    fig = R.plot_batch([(f"s{i:02d}/run1", _batch_dict(10.0 ** -(i % 7))) for i in range(60)])
+    assert fig.get_figheight() <= PAGE_HEIGHT
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    boxes = sorted((t.get_window_extent() for t in ax.get_yticklabels() if t.get_text()),
+                   key=lambda b: b.y0)
+    assert len(boxes) >= 20  # (still most names)
+    assert all(a.y1 <= b.y0 + 0.5 for a, b in zip(boxes, boxes[1:]))  # no overlap
+    assert _inside(ax.get_tightbbox(), fig)
+    # a short batch keeps a row per name
+    fig = R.plot_batch([("a", _batch_dict()), ("b", _batch_dict(0.3))])
+    assert [t.get_text() for t in fig.axes[0].get_yticklabels()] == [
+        "a: motion-washout", "b: motion-washout"]
+
+
+def test_report_figures_can_be_written_without_titles(washout, tmp_path, monkeypatch):
+    """R1: write_report(title=False) (for ``diagnose --report --no-title``) saves every
+    figure without its title; the default keeps them (the HTML report's figures)."""
+    seen = {}
+    save = R._png
+
+    def spy(fig, path, formats=("png",)):
+        seen[path.stem] = _titles(fig)
+        return save(fig, path, formats)
+
+    monkeypatch.setattr(R, "_png", spy)
+    res = dataclasses.replace(_with_bootstrap(washout, 19), posterior=_fake_posterior(washout))
+    R.write_report(res, tmp_path / "titled")
+    assert "Where the data and the base model differ" in seen["evidence"]
+    assert any(t.startswith("Candidates (decision") for t in seen["candidates"])
+    seen.clear()
+    R.write_report(res, tmp_path / "plain", title=False)
+    assert set(seen) == {"frequency_response", "residuals", "evidence", "candidates", "profile",
+                         "posterior"}
+    for name in ("evidence", "candidates", "profile", "posterior"):
+        assert seen[name] == [], (name, seen[name])
+    headings = {"frequency_response": 2, "residuals": 4}  # the panels' own headings stay
+    for name, k in headings.items():
+        assert len(seen[name]) == k, (name, seen[name])
+    with pytest.raises(TypeError, match="title must be True or False"):
+        R.write_report(res, tmp_path / "x", title="Fig. 1")

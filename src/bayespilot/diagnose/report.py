@@ -7,6 +7,12 @@ diagnoses' dicts) and optional axes, and returns the figure (it never calls
 ``plt.show()``); :func:`write_report` writes them all.  A figure made here uses
 matplotlib's constrained layout; on axes the caller gives, the caller's figure and its
 layout are left as they are.
+
+For a paper each takes ``title=`` (True: the figure's own title, as the report draws it;
+False: none, the axes taking its room; a str: that text) and ``figsize=`` (a new figure's
+size, as given: a 3.5-in column's); on a column's width, or the caller's narrow axes,
+titles, captions and legends are wrapped or placed to stay inside the figure.  A result
+read back from JSON keeps no signals: the figures drawn from them say so.
 """
 
 from __future__ import annotations
@@ -24,7 +30,7 @@ import numpy as np
 from .._files import dumps, write_text_atomic
 from .._labels import parameter_label, symbol
 from .._figstyle import PLOT_DPI, PLOT_FORMATS, save_figure
-from ..plots import PAGE_WIDTH, _figsize
+from ..plots import PAGE_WIDTH, _figsize, _title_text, _wrap
 from ..plots import _pyplot  # (one backend rule for every figure; batch.py imports it here)
 
 if TYPE_CHECKING:
@@ -77,13 +83,97 @@ def _delta_format(x: float) -> str:
 
 
 def _subplots(*args, figsize: tuple[float, float] = (PAGE_WIDTH, 4.0), tall: bool = False,
-              **kwargs):
+              given: Any = None, **kwargs):
     """A new figure and its axes, laid out by matplotlib's constrained layout, at most a
     paper's page (:func:`bayespilot.plots._figsize`); ``tall``: only its width capped (a
-    batch's summary, a row per diagnosis)."""
-    w, h = _figsize(None, None, figsize)
-    return _pyplot().subplots(*args, layout="constrained", figsize=(w, figsize[1] if tall else h),
-                              **kwargs)
+    batch's summary, a row per diagnosis); ``given``: the caller's ``figsize=`` (width,
+    height in inches), used as it is (ValueError for one that is not two positive
+    numbers)."""
+    if given is not None:
+        w, h = _figsize(given, None, figsize)
+    else:
+        w, h = _figsize(None, None, figsize)
+        h = figsize[1] if tall else h
+    return _pyplot().subplots(*args, layout="constrained", figsize=(w, h), **kwargs)
+
+
+def _no_figsize_with(figsize: Any, axes: Any) -> None:
+    """ValueError when ``figsize`` (the size of a new figure) comes with the caller's axes."""
+    if figsize is not None and axes is not None:
+        raise ValueError("figsize sizes a new figure; it cannot be given with ax/axes")
+
+
+def _columns(handles: Sequence[Any], fig: Any, ncols: int, figsize: Any = None) -> int:
+    """How many of at most ``ncols`` columns a legend of ``handles`` under a new figure
+    takes: ``ncols`` at the figure's own size, fewer where they would not fit the width the
+    caller gave (``figsize``: a column's width)."""
+    from ..plots import _legend_columns
+
+    if figsize is None:
+        return ncols
+    return _legend_columns([h.get_label() for h in handles], fig.get_figwidth(), ncols)
+
+
+def _fig_title(fig: Any, text: str | None) -> None:
+    """``text`` as the figure's title (:func:`_suptitle`: wrapped to its width); none for
+    None."""
+    if text:
+        _suptitle(fig, text)
+
+
+def _text_span(ax: Any) -> tuple[float, str]:
+    """Where a text over or under ``ax`` (its title, its x label, a legend) goes, and how
+    wide (in) it can be, to stay over the axes and their tick labels (the axes' own part of
+    the figure: a neighbour's is left alone) and inside the figure, as the figure is laid
+    out now: ``(width, "center")``, centred on the axes; or, where tick labels on one side
+    leave a centred text much less room than there is (the evidence's statistic names at a
+    column's width), ``(width, "right")``, aligned with the axes' right end and running
+    over the labels on the left (``"left"``, the other way round).  Measured with the title
+    and x label empty (set them after)."""
+    fig = ax.figure
+    fig.draw_without_rendering()  # (lays a constrained figure out)
+    a = ax.get_window_extent()
+    box = ax.get_tightbbox()
+    fb = fig.bbox
+    lo = max(min(box.x0, a.x0), fb.x0)
+    hi = min(max(box.x1, a.x1), fb.x1)
+    c = 0.5 * (a.x0 + a.x1)
+    centred = max(2.0 * min(c - lo, hi - c), 0.0)
+    if centred >= 0.7 * (hi - lo):
+        return centred / fig.dpi, "center"
+    if c - lo > hi - c:
+        return max(min(a.x1, fb.x1) - lo, 0.0) / fig.dpi, "right"
+    return max(hi - max(a.x0, fb.x0), 0.0) / fig.dpi, "left"
+
+
+def _fit_text(fig: Any, text: str, width: float, size: Any) -> str:
+    """``text`` broken into lines that fit ``width`` inches at font ``size`` as ``fig`` draws
+    them (measured): each of its own lines is left whole where it fits, else wrapped
+    (:func:`bayespilot.plots._wrap`, mathtext spans kept whole) at the most characters that
+    fit."""
+    from matplotlib.text import Text
+
+    from ..plots import _points
+
+    pts = _points(size)
+
+    def wide(s: str) -> float:
+        t = Text(0, 0, s, fontsize=pts, figure=fig)
+        return t.get_window_extent().width / fig.dpi
+
+    lines = []
+    for line in text.split("\n"):
+        if wide(line) <= width:
+            lines.append(line)
+            continue
+        # _wrap guesses 0.58 em a character, more than most: from wider down until it fits
+        w = 1.4 * width
+        wrapped = _wrap(line, w, pts)
+        while w > 0.3 * width and wide(wrapped) > width:
+            w *= 0.9
+            wrapped = _wrap(line, w, pts)
+        lines.append(wrapped)
+    return "\n".join(lines)
 
 
 def _readable_log_axis(ax: Any, which: str) -> None:
@@ -155,9 +245,28 @@ def _align(phase: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return phase + 360.0 * k
 
 
+def _read_from_json(result: Any) -> str | None:
+    """Where a result read back from JSON came from, in words ("diagnosis.json", "a dict");
+    None for one ``diagnose`` returned (it has its signals)."""
+    where = getattr(result, "arrays", {}).get("from_json")
+    if not where:
+        return None
+    return "a dict" if where is True else str(where)
+
+
+def _no_signals(result: Any, what: str) -> str:
+    """The message of a figure that needs the signals a result file does not keep: ``what``
+    (the figure) cannot be drawn from this result, read from JSON."""
+    return (f"No {what}: this diagnosis was read from JSON ({_read_from_json(result)}), which "
+            f"keeps no signals: re-run diagnose (or draw it from the DiagnosisResult diagnose "
+            f"returns).")
+
+
 def _no_describing_function(result: DiagnosisResult) -> str:
     """Why a result has no describing function, in a sentence (for the figure and the report)."""
     arr = result.arrays
+    if _read_from_json(result) is not None:  # (the forcing was known: the file keeps no signals)
+        return _no_signals(result, "describing function")
     if arr.get("forcing_frequencies") is None:
         why = "the recording's forcing functions are unknown"
     else:
@@ -180,7 +289,9 @@ def _notes_html(notes: Sequence[tuple[str, str]]) -> str:
             f"an assumption (its EvidenceWarnings):</p><ul>{items}</ul>")
 
 
-def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure:
+def plot_frequency_response(result: DiagnosisResult, axes: Any = None, *,
+                            title: bool | str = True,
+                            figsize: tuple[float, float] | None = None) -> Figure:
     """Visual and motion-channel describing functions: data, base model, extended model.
 
     Parameters
@@ -197,22 +308,39 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
         Four axes, taken as 2 x 2 (rows: magnitude, phase in deg; columns:
         visual H_v = u/e in rad/rad, motion H_m = u/theta_ddot_m in
         rad/(rad/s^2)); default: a new figure.
+    title : bool or str, optional
+        True (default): a new figure's title, "Describing functions at the
+        forcing frequencies" (none on given axes); False: no title, the
+        panels taking its room; a str: that text as the figure's title.
+        The two columns' headings (visual, motion channel) stay: they name
+        the panels.
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 7.5 x 6,
+        one short panel without a describing function); not with ``axes``.
 
     Returns
     -------
     matplotlib.figure.Figure
         The figure of the axes.  Without a describing function (forcing
         functions unknown, not whole periods of the record, or one zero
-        throughout) a new figure is one short panel saying so; on given axes
-        the first says so and the others are blank.
+        throughout; a result read from JSON, which keeps no signals) a new
+        figure is one short panel saying so; on given axes the first says so
+        and the others are blank.
+
+    Raises
+    ------
+    ValueError
+        ``figsize`` given with ``axes``, or not two positive numbers.
     """
     from matplotlib.lines import Line2D
 
+    _no_figsize_with(figsize, axes)
+    text = _title_text(title, "Describing functions at the forcing frequencies")
     arr = result.arrays
     if "df_data" not in arr:
         msg = _no_describing_function(result)
         if axes is None:
-            fig, ax = _subplots(figsize=(PAGE_WIDTH, 1.6))
+            fig, ax = _subplots(figsize=(PAGE_WIDTH, 1.6), given=figsize)
             rest = []
         else:
             flat = list(np.ravel(axes))
@@ -220,10 +348,12 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
         for a in (ax, *rest):
             a.set_axis_off()
         ax.text(0.5, 0.5, msg, ha="center", va="center", transform=ax.transAxes, wrap=True)
+        if title is not True:  # (a str: the caller's title; True: none, as before)
+            _fig_title(fig, text)
         return fig
     created = axes is None
     if created:
-        fig, axes = _subplots(2, 2, figsize=(PAGE_WIDTH, 6.0), sharex=True)
+        fig, axes = _subplots(2, 2, figsize=(PAGE_WIDTH, 6.0), sharex=True, given=figsize)
     else:
         fig = np.ravel(axes)[0].figure
     axes = np.asarray(axes).reshape(2, 2)
@@ -259,15 +389,17 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None) -> Figure
     if ma is not None:
         handles.append(Line2D([], [], **after_kw, label=f"with {result.physics}"))
     if created:
-        fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize="small",
-                   frameon=False)
-        fig.suptitle("Describing functions at the forcing frequencies")
+        fig.legend(handles=handles, loc="outside lower center",
+                   ncols=_columns(handles, fig, 2, figsize), fontsize="small", frameon=False)
     else:
         axes[0, 0].legend(handles=handles, fontsize="small")
+    if created or title is not True:  # (given axes: a title only when the caller names one)
+        _fig_title(fig, text)
     return fig
 
 
-def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any = None
+def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any = None,
+                   title: bool | str = True, figsize: tuple[float, float] | None = None
                    ) -> Figure:
     """Residual before and after: spectrum, variance over the run, against |i| and |u|.
 
@@ -291,6 +423,13 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
     recording : Recording, optional
         The recording diagnosed: its sample interval is used when the
         result's ``settings`` have none (``diagnose`` always records it).
+    title : bool or str, optional
+        A str: that text as the figure's title; True (default) or False:
+        none (the figure has no title of its own, as before).  The four
+        panels' headings stay: they name the panels.
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 7.5 x 6.5);
+        not with ``axes``.
 
     Returns
     -------
@@ -302,14 +441,23 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
     ------
     ValueError
         Neither ``result.settings["dt"]`` nor ``recording`` gives the
-        sample interval.
+        sample interval; the result was read from JSON, which keeps no
+        signals (re-run diagnose); ``figsize`` given with ``axes``, or not
+        two positive numbers.
     """
     from matplotlib.lines import Line2D
 
+    _no_figsize_with(figsize, axes)
+    text = _title_text(title, None)
     arr = result.arrays
+    if "residual" not in arr:
+        if _read_from_json(result) is not None:
+            raise ValueError(_no_signals(result, "residual figure"))
+        raise ValueError("the diagnosis has no residual (result.arrays['residual']): draw the "
+                         "figure from the DiagnosisResult diagnose returns")
     created = axes is None
     if created:
-        fig, axes = _subplots(2, 2, figsize=(PAGE_WIDTH, 6.5))
+        fig, axes = _subplots(2, 2, figsize=(PAGE_WIDTH, 6.5), given=figsize)
     else:
         fig = np.ravel(axes)[0].figure
     axes = np.asarray(axes).reshape(2, 2)
@@ -342,8 +490,8 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
         ax.axvspan(omega_c, w_max, color="0.5", alpha=0.15, lw=0)
         ax.set_xlim(right=w_max)
         handles.append(Line2D([], [], color="0.5", alpha=0.3, lw=6,
-                              label=rf"above $\omega_c$ = {omega_c:g} rad/s: not in the "
-                                    "decision"))
+                              label=rf"above $\omega_\mathrm{{c}}$ = {omega_c:g} rad/s: not "
+                                    "in the decision"))
     ax.set_xlabel(r"$\omega$ (rad/s)")
     ax.set_ylabel("one-sided PSD (rad$^2$/(rad/s))")
     ax.set_title("residual spectrum", fontsize="medium")
@@ -391,15 +539,17 @@ def plot_residuals(result: DiagnosisResult, axes: Any = None, *, recording: Any 
                                 label=f"with {result.physics}"))
         handles = lines + [h for h in handles if h.get_label() not in
                            ("base model", f"with {result.physics}")]
-        fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize="small",
-                   frameon=False)
+        fig.legend(handles=handles, loc="outside lower center",
+                   ncols=_columns(handles, fig, 3, figsize), fontsize="small", frameon=False)
     else:
         axes[0, 0].legend(handles=handles, fontsize="small", loc="lower left")
         axes[0, 1].legend(fontsize="small")
+    _fig_title(fig, text)
     return fig
 
 
-def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
+def plot_evidence(result: DiagnosisResult, ax: Any = None, *, title: bool | str = True,
+                  legend: bool = True, figsize: tuple[float, float] | None = None) -> Figure:
     """-log10 of each located statistic's bootstrap p-value.
 
     Parameters
@@ -409,6 +559,16 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
         the bootstrap's size.
     ax : matplotlib Axes, optional
         Default: a new figure.
+    title : bool or str, optional
+        True (default): "Where the data and the base model differ"; False:
+        no title, the axes taking its room; a str: that text.  A title is
+        wrapped to the width over the axes and their labels.
+    legend : bool, optional
+        False: no legend (the lines and the red bars explained in the
+        caption instead).
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 7.5 x 4.6);
+        not with ``ax``.
 
     Returns
     -------
@@ -420,15 +580,26 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
         1 / (B + 1), as a wide grey line (both in the legend; at B = 19 they
         are the same).  Without a bootstrap (``n_bootstrap=0``, or skipped)
         the axes say "no bootstrap p-values" and draw no bars
-        (:func:`write_report` then leaves the figure out).  On a new figure
-        the legend is under the axes, on given axes beside them.
+        (:func:`write_report` then leaves the figure out).  The legend is
+        under the axes: on a new figure the figure's, on given axes the
+        axes' own, under their x label (the figure's layout, when it has
+        one, makes room; beside the axes it took the room of a column-wide
+        figure's axes).  The x label is wrapped to the width under the axes
+        and their labels.
+
+    Raises
+    ------
+    ValueError
+        ``figsize`` given with ``ax``, or not two positive numbers.
     """
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
+    _no_figsize_with(figsize, ax)
+    text = _title_text(title, "Where the data and the base model differ")
     created = ax is None
     if created:
-        fig, ax = _subplots(figsize=(PAGE_WIDTH, 4.6))
+        fig, ax = _subplots(figsize=(PAGE_WIDTH, 4.6), given=figsize)
     else:
         fig = ax.figure
     keys = [k for k, e in result.where.items() if math.isfinite(e.value)]
@@ -438,7 +609,6 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
     ax.set_yticks(range(len(keys)))
     ax.set_yticklabels([_evidence_label(k) for k in keys], fontsize="small")
     ax.set_ylim(len(keys) - 0.5, -0.5)
-    ax.set_title("Where the data and the base model differ", fontsize="medium")
     if not any(ok):
         why = (result.settings.get("bootstrap") or {}).get("skipped")
         ax.text(0.5, 0.5, "no bootstrap p-values: the located statistics were not tested\n"
@@ -446,7 +616,7 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
                 ha="center", va="center", transform=ax.transAxes, wrap=True,
                 bbox=dict(fc="white", ec="0.6"))
         ax.set_xticks([])
-        ax.set_xlabel(r"$-\log_{10} p$ (no parametric bootstrap)")
+        _label_axes(ax, text, r"$-\log_{10} p$ (no parametric bootstrap)")
         return fig
     val = [-math.log10(x) if good else 0.0 for x, good in zip(p, ok)]
     crit = -math.log10(0.05)
@@ -469,20 +639,65 @@ def plot_evidence(result: DiagnosisResult, ax: Any = None) -> Figure:
     ax.axvline(crit, color="k", ls="--", lw=1)
     handles.insert(0, Line2D([], [], color="k", ls="--", lw=1, label="p = 0.05"))
     ax.set_xlim(0, 1.1 * max(max(val), crit, math.log10(B + 1) if B else 0.0))
+    _label_axes(ax, text, rf"$-\log_{{10}}\,p$ (parametric bootstrap, B = {B})")
+    if not legend:
+        return fig
     if created:
-        fig.legend(handles=handles, loc="outside lower center", ncols=len(handles),
-                   fontsize="small", frameon=False)
-    else:
-        ax.legend(handles=handles, fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    ax.set_xlabel(rf"$-\log_{{10}}\,p$ (parametric bootstrap, B = {B})")
+        fig.legend(handles=handles, loc="outside lower center",
+                   ncols=_columns(handles, fig, len(handles), figsize), fontsize="small",
+                   frameon=False)
+    else:  # under the x label, as on a new figure (beside the axes it took a column's room)
+        _legend_under(ax, handles)
     return fig
 
 
-def _figure_and_axes(ax: Any = None, figsize=(PAGE_WIDTH, 3.6)):
+def _label_axes(ax: Any, title: str | None, xlabel: str, size: Any = "medium") -> None:
+    """Set ``ax``'s ``title`` (font ``size``; none for None) and ``xlabel``, each wrapped to
+    the width over and under the axes and their tick labels, centred or aligned with one end
+    of the axes (:func:`_text_span`): a figure of a column's width, or the caller's narrow
+    axes, does not cut them."""
+    ax.set_title("")
+    ax.set_xlabel("")
+    span, loc = _text_span(ax)
+    fig = ax.figure
+    if title:
+        ax.set_title(_fit_text(fig, title, span, size), fontsize=size, loc=loc)
+    ax.set_xlabel(_fit_text(fig, xlabel, span, _pyplot().rcParams["axes.labelsize"]), loc=loc)
+
+
+def _legend_under(ax: Any, handles: Sequence[Any] | None = None, ncols: int | None = None,
+                  title: str | None = None) -> Any:
+    """The legend of ``handles`` (default: the axes' labelled artists) under ``ax``, below
+    its x label (clear of the data; a figure's constrained layout makes room), a fixed
+    distance below the axes so that a new layout keeps it there (one placed at a fraction
+    of the axes' height moved with it, and a column-wide figure's layout did not settle:
+    the legend ended outside the figure); centred, or aligned with one end of the axes
+    (:func:`_text_span`), in ``ncols`` columns or, by default, as many as fit."""
+    from matplotlib.transforms import ScaledTranslation
+
+    from ..plots import _legend_columns
+
+    fig = ax.figure
+    if handles is None:
+        handles, _ = ax.get_legend_handles_labels()
+    width, loc = _text_span(ax)  # (also lays the figure out: the x label's place)
+    below = ax.xaxis.get_tightbbox()
+    drop = 0.05 if below is None else max(0.0, ax.get_window_extent().y0 - below.y0) / fig.dpi
+    trans = ax.transAxes + ScaledTranslation(0.0, -(drop + 0.03), fig.dpi_scale_trans)
+    labels = [h.get_label() for h in handles]
+    return ax.legend(handles=handles, loc=f"upper {loc}",
+                     bbox_to_anchor=({"center": 0.5, "right": 1.0, "left": 0.0}[loc], 0.0),
+                     bbox_transform=trans, borderaxespad=0.0,
+                     ncols=ncols or _legend_columns(labels, width, len(labels)),
+                     fontsize="small", frameon=False, title=title, title_fontsize="small")
+
+
+def _figure_and_axes(ax: Any = None, figsize=(PAGE_WIDTH, 3.6), given: Any = None):
     """``(figure, axes)``: the given axes and their figure, or a new (constrained-layout)
-    figure of ``figsize`` (at most a page wide)."""
+    figure of ``figsize`` (at most a page wide), or of ``given`` (the caller's, as it is)."""
+    _no_figsize_with(given, ax)
     if ax is None:
-        return _subplots(figsize=figsize)
+        return _subplots(figsize=figsize, given=given)
     return ax.figure, ax
 
 
@@ -522,8 +737,9 @@ def _p_html(p: Any) -> str:
     return f"&lt;10<sup>{e}</sup>" if m == "<" else f"{m}&times;10<sup>{e}</sup>"
 
 
-def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = None
-                    ) -> Figure:
+def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = None, *,
+                    title: bool | str = True, caption: bool = True,
+                    figsize: tuple[float, float] | None = None) -> Figure:
     """Fit improvement of each candidate on the decision likelihood, with the test's threshold.
 
     Parameters
@@ -533,6 +749,18 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
         (``result.ranking``) and the level per candidate.
     ax : matplotlib Axes, optional
         Default: a new figure.
+    title : bool or str, optional
+        True (default): "Candidates (decision: <the decision>)"; False: no
+        title, the axes taking its room; a str: that text.
+    caption : bool, optional
+        True (default): under the x label's formula, the key "black mark:
+        what the test needs at the level per candidate (<level>); red,
+        hatched: justified"; False: the formula only (the key then belongs
+        in the paper's caption).  Both are wrapped to the width under the
+        axes and their labels.
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 7.5 x 3.6);
+        not with ``ax``.
 
     Returns
     -------
@@ -546,10 +774,16 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
         half the chi2(1) quantile at twice the level; times the bootstrap's
         scale where the test was calibrated and the scale is above 1.
         The marks are the axes' only lines.
+
+    Raises
+    ------
+    ValueError
+        ``figsize`` given with ``ax``, or not two positive numbers.
     """
     from .decide import critical_value
 
-    fig, ax = _figure_and_axes(ax)
+    fig, ax = _figure_and_axes(ax, given=figsize)
+    text = _title_text(title, f"Candidates (decision: {result.physics})")
     rows = [c for c in result.ranking if c.testable]
     level = result.settings["level_per_candidate"]
     names = [c.physics for c in rows]
@@ -584,10 +818,12 @@ def plot_candidates(result: DiagnosisResult | PooledDiagnosisResult, ax: Any = N
     right.set_yticklabels([rf"$\Delta$ = {_number(x, _delta_format(x))}, "
                            f"p = {_p_text(c.p_value)}" for x, c in zip(d, rows)], fontsize="small")
     right.tick_params(length=0)
-    ax.set_xlabel(r"$\Delta(-\ln L) = -\ln L_\mathrm{base} - (-\ln L_\mathrm{extension})$"
-                  "\nblack mark: what the test needs at the level per candidate "
-                  f"({level:.2g}); red, hatched: justified")
-    ax.set_title(f"Candidates (decision: {result.physics})", fontsize="medium")
+    # (two spans, so that a narrow axes' label breaks between them)
+    xlabel = r"$\Delta(-\ln L) = -\ln L_\mathrm{base}$ $-\,(-\ln L_\mathrm{extension})$"
+    if caption:
+        xlabel += ("\nblack mark: what the test needs at the level per candidate "
+                   f"({level:.2g}); red, hatched: justified")
+    _label_axes(ax, text, xlabel)
     return fig
 
 
@@ -611,7 +847,8 @@ def _boundary_null(c: Any) -> bool:
         return False
 
 
-def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = None) -> Figure:
+def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = None, *,
+               title: bool | str = True, figsize: tuple[float, float] | None = None) -> Figure:
     """Every candidate's p-value in every diagnosis of a batch, at a glance.
 
     Parameters
@@ -621,7 +858,15 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
         (or the pooled one) writes it.
     ax : matplotlib Axes, optional
         Default: a new figure, a page (7.5 in) wide, at least 3.6 in tall
-        (its colour bar's label whole) and 0.28 in more per diagnosis.
+        (its colour bar's label whole) and 0.28 in more per diagnosis, up
+        to a page's height (9.5 in: 27 diagnoses); more diagnoses share it,
+        every k-th named where their rows are too narrow for each name.
+    title : bool or str, optional
+        True (default): "<n> diagnoses: every candidate's p-value" and the
+        key (dot, box, grey) under it; False: none, the axes taking its
+        room (the key then belongs in the caption); a str: that text.
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given; not with ``ax``.
 
     Returns
     -------
@@ -632,9 +877,18 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
         -log10 p up to 6 (where a p is below 1e-6, an arrow on the colour bar
         says the scale is capped there; grey: not
         testable on that recording); a dot where p is below the decision's
-        level per candidate (the white line on the colour bar), a box around
-        the chosen extension, the decision at the left.
+        level per candidate (the white line on the colour bar), a black box
+        with a white edge (seen on dark cells and light ones) around the
+        chosen extension, the decision at the left.
+
+    Raises
+    ------
+    ValueError
+        ``figsize`` given with ``ax``, or not two positive numbers.
     """
+    from matplotlib import patheffects
+
+    from ..plots import PAGE_HEIGHT
     from .catalogue import NAMES
 
     plt = _pyplot()
@@ -642,9 +896,11 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
     names = list(NAMES)  # then the entries of one's own the diagnoses tested
     for _, d in diagnoses:
         names += [c["physics"] for c in d["ranking"] if c["physics"] not in names]
+    _no_figsize_with(figsize, ax)
     if ax is None:
-        # at most a page wide (_subplots), as tall as the diagnoses need
-        fig, ax = _subplots(figsize=(PAGE_WIDTH, min(max(3.6, 1.9 + 0.28 * n), 60.0)), tall=True)
+        # at most a page wide (_subplots), as tall as the diagnoses need up to a page
+        fig, ax = _subplots(figsize=(PAGE_WIDTH, min(max(3.6, 1.9 + 0.28 * n), PAGE_HEIGHT)),
+                            tall=True, given=figsize)
     else:
         fig = ax.figure
     z = np.full((n, len(names)), np.nan)
@@ -659,7 +915,10 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
                     ax.plot(j, i, "k.", ms=5)
         if d["physics"] in names:
             j = names.index(d["physics"])
-            ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="k", lw=2))
+            # black, with a white edge either side: seen on viridis' dark cells too
+            ax.add_patch(plt.Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, ec="k", lw=2,
+                                       path_effects=[patheffects.withStroke(linewidth=4.5,
+                                                                            foreground="w")]))
     cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")
     im = ax.imshow(np.ma.masked_invalid(z), aspect="auto", cmap=cmap, vmin=0, vmax=6,
                    interpolation="nearest")
@@ -675,19 +934,26 @@ def plot_batch(diagnoses: Sequence[tuple[str, Mapping[str, Any]]], ax: Any = Non
         cb.ax.axhline(-math.log10(float(np.median(levels))), color="w", lw=2)
     ax.set_xticks(range(len(names)))
     ax.set_xticklabels(names, rotation=30, ha="right", fontsize="small")
-    ax.set_yticks(range(n))
-    ax.set_yticklabels([f"{k}: {d['physics']}" for k, d in diagnoses], fontsize="small")
-    ax.set_title(f"{n} {'diagnosis' if n == 1 else 'diagnoses'}: every candidate's p-value\n"
-                 "dot: below the level per candidate (white line); box: chosen; grey: not "
-                 "testable", fontsize="medium")
+    # every k-th diagnosis named where a row is narrower than a name (0.14 in at 8.3 pt)
+    row = ax.get_position().height * fig.get_figheight() / max(n, 1)
+    k = max(1, math.ceil(0.14 / row)) if row > 0 else 1
+    ax.set_yticks(range(0, n, k))
+    ax.set_yticklabels([f"{key}: {d['physics']}" for key, d in list(diagnoses)[::k]],
+                       fontsize="small")
+    text = _title_text(title, f"{n} {'diagnosis' if n == 1 else 'diagnoses'}: every "
+                              "candidate's p-value\ndot: below the level per candidate (white "
+                              "line); box: chosen; grey: not testable")
+    if text:
+        ax.set_title(text, fontsize="medium")
     return fig
 
 
-def _axes_row(n: int, axes: Any = None, height: float = 4.2):
-    """(figure, n axes in a row): new ones (constrained layout, at most a page wide), or the
-    given ones'."""
+def _axes_row(n: int, axes: Any = None, height: float = 4.2, given: Any = None):
+    """(figure, n axes in a row): new ones (constrained layout, at most a page wide, or of
+    ``given``, the caller's figsize, as it is), or the given ones'."""
+    _no_figsize_with(given, axes)
     if axes is None:
-        fig, axes = _subplots(1, n, figsize=(4.8 * n, height), squeeze=False)
+        fig, axes = _subplots(1, n, figsize=(4.8 * n, height), squeeze=False, given=given)
         return fig, axes[0]
     axes = np.atleast_1d(axes)
     return axes[0].figure, axes
@@ -717,12 +983,23 @@ def _suptitle(fig, text: str) -> None:
     fig.suptitle(_wrap(text, 0.95 * fig.get_figwidth(), size))
 
 
-def _legend_below(ax, ncols: int = 2) -> None:
+def _legend_below(ax, ncols: int = 2, title: str | None = None) -> None:
     """The axes' legend under them, clear of the data (constrained layout makes room), in
-    one column under an axes narrower than 4 in."""
+    one column under an axes narrower than 4 in; ``title``: the legend's (a panel's note
+    when the figure is drawn without titles)."""
     width = ax.get_position().width * ax.figure.get_figwidth()
-    ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.2),
-              ncols=ncols if width >= 4.0 else 1, frameon=False)
+    _legend_under(ax, ncols=ncols if width >= 4.0 else 1, title=title)
+
+
+def _panel_note(ax: Any, note: str, title: Any) -> str | None:
+    """A panel's note (its draws, its scale c): the panel's title when the figure has titles
+    (``title`` True or a str: None returned); without (False) ``note`` returned, for its
+    legend's title (kept: the panel needs it), and the panel's title cleared."""
+    if _title_text(title, "titled") is None:
+        ax.set_title("")
+        return note
+    ax.set_title(note, fontsize="small")
+    return None
 
 
 def _mark_fit(ax, value: float, stderr: float, label: str) -> None:
@@ -735,7 +1012,8 @@ def _mark_fit(ax, value: float, stderr: float, label: str) -> None:
                    alpha=0.5, lw=0, zorder=0, label="±1 s.e.")
 
 
-def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
+def plot_posterior(result: DiagnosisResult, axes: Any = None, *, title: bool | str = True,
+                   figsize: tuple[float, float] | None = None) -> Figure:
     """Marginal posteriors of the chosen extension's new parameters, with the maximum-likelihood
     fit and its ±1 standard error (from the decision likelihood) marked, and its
     profile-likelihood interval where it was made.
@@ -749,18 +1027,43 @@ def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
     axes : sequence of matplotlib Axes, optional
         One per new parameter of the chosen extension that the posterior
         has, in a row; default: a new figure.
+    title : bool or str, optional
+        True (default): the figure's title "<extension>: posterior of its
+        new parameters" and each panel's draws ("800 draws (converged)");
+        False: no titles, the panels taking their room (each panel's draws
+        become its legend's title); a str: that text as the figure's title.
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 4.8 in wide
+        per panel, at most 7.5, by 4.2); not with ``axes``.
 
     Returns
     -------
     matplotlib.figure.Figure
         Each panel's x axis is the parameter in the paper's notation with
         its unit (the extended model's), its legend under the axes.
+
+    Raises
+    ------
+    ValueError
+        The diagnosis has no posterior (no extension chosen, or not sampled:
+        :func:`~bayespilot.diagnose.sample_chosen`; a result read from JSON
+        keeps only its summary, not the draws); ``figsize`` given with
+        ``axes``, or not two positive numbers.
     """
     from ..plots import plot_marginal
 
     post, chosen = result.posterior, result.chosen
+    if post is None or chosen is None:
+        if _read_from_json(result) is not None:
+            raise ValueError(f"No posterior to draw: this diagnosis was read from JSON "
+                             f"({_read_from_json(result)}), which keeps the posterior's "
+                             f"summary, not its draws: re-run diagnose and sample_chosen (or "
+                             f"draw it from the DiagnosisResult they return)")
+        raise ValueError("the diagnosis has no posterior: no extension was chosen, or its "
+                         "posterior was not sampled (sample_chosen)")
+    text = _title_text(title, f"{chosen.physics}: posterior of its new parameters")
     names = [n for n in chosen.params if n in post.parameter_names]
-    fig, axes = _axes_row(len(names), axes)
+    fig, axes = _axes_row(len(names), axes, given=figsize)
     model = _units_model(chosen.physics, getattr(chosen, "model", None))
     for ax, n in zip(axes, names):
         plot_marginal(post, n, ax=ax)
@@ -772,14 +1075,15 @@ def plot_posterior(result: DiagnosisResult, axes: Any = None) -> Figure:
                 ax.axvline(end, color="C3", ls=":", lw=1.2,
                            label=f"{100 * iv.level:.0f} % profile interval" if k == 0 else None)
         ax.set_xlabel(parameter_label(model, n))
-        ax.set_title(f"{post.draws(n).size} draws ("
-                     f"{'converged' if post.converged else 'not converged'})", fontsize="small")
-        _legend_below(ax)
-    _suptitle(fig, f"{chosen.physics}: posterior of its new parameters")
+        note = _panel_note(ax, f"{post.draws(n).size} draws ("
+                           f"{'converged' if post.converged else 'not converged'})", title)
+        _legend_below(ax, title=note)
+    _fig_title(fig, text)
     return fig
 
 
-def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
+def plot_profile(result: DiagnosisResult, axes: Any = None, *, title: bool | str = True,
+                 figsize: tuple[float, float] | None = None) -> Figure:
     """The profile likelihood of each of the chosen extension's new parameters
     (``result.chosen.interval``, :mod:`bayespilot.diagnose.profile`): the scaled deviance at
     the profile's points, the level it must stay below, the interval and the reported fit.
@@ -791,6 +1095,15 @@ def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
         (``diagnose(refit=True, intervals=True)``, the default).
     axes : sequence of matplotlib Axes, optional
         One per parameter with an interval, in a row; default: a new figure.
+    title : bool or str, optional
+        True (default): the figure's title "<extension>: profile likelihood
+        of its new parameters" and each panel's scale c ("c = 0.52: (own
+        s.e. / test's s.e.)^2, at most 1"); False: no titles, the panels
+        taking their room (each panel's c becomes its legend's title); a
+        str: that text as the figure's title.
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 4.8 in wide
+        per panel, at most 7.5, by 4.2); not with ``axes``.
 
     Returns
     -------
@@ -802,14 +1115,16 @@ def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
     ------
     ValueError
         No extension was chosen, or it has no profile intervals (a pooled
-        diagnosis, ``diagnose(intervals=False)``).
+        diagnosis, ``diagnose(intervals=False)``); ``figsize`` given with
+        ``axes``, or not two positive numbers.
     """
     chosen = result.chosen
     if chosen is None or not chosen.interval:
         raise ValueError("the diagnosis has no profile intervals (no extension chosen, a pooled "
                          "diagnosis, or diagnose(intervals=False))")
+    text = _title_text(title, f"{chosen.physics}: profile likelihood of its new parameters")
     names = list(chosen.interval)
-    fig, axes = _axes_row(len(names), axes)
+    fig, axes = _axes_row(len(names), axes, given=figsize)
     model = _units_model(chosen.physics, getattr(chosen, "model", None))
     for ax, n in zip(axes, names):
         iv = chosen.interval[n]
@@ -826,14 +1141,16 @@ def plot_profile(result: DiagnosisResult, axes: Any = None) -> Figure:
         ax.set_xlabel(parameter_label(model, n))
         # the deviance scaled as the test's standard errors ask (profile.py): c says by what
         ax.set_ylabel(r"scaled deviance $c \cdot 2\,\Delta(-\ln L)$")
-        ax.set_title(rf"$c$ = {iv.scale:.2g}: (own s.e. / test's s.e.)$^2$, at most 1",
-                     fontsize="small")
-        _legend_below(ax)
-    _suptitle(fig, f"{chosen.physics}: profile likelihood of its new parameters")
+        note = _panel_note(ax, rf"$c$ = {iv.scale:.2g}: (own s.e. / test's s.e.)$^2$, at "
+                               "most 1", title)
+        _legend_below(ax, title=note)
+    _fig_title(fig, text)
     return fig
 
 
-def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
+def plot_shared_posterior(post: SharedPosterior, axes: Any = None, *,
+                          title: bool | str = True,
+                          figsize: tuple[float, float] | None = None) -> Figure:
     """The marginal posteriors of a pooled diagnosis's shared parameters
     (:func:`~bayespilot.diagnose.shared_posterior`), with the pooled fit and its ±1 standard
     error and the central 90 % interval marked.
@@ -845,17 +1162,31 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
         (also a pooled diagnosis's ``posterior``).
     axes : sequence of matplotlib Axes, optional
         One per shared parameter, in a row; default: a new figure.
+    title : bool or str, optional
+        True (default): the figure's title "<extension>: posterior of the
+        parameters shared by <n> runs"; False: none, the panels taking its
+        room; a str: that text.
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 4.8 in wide
+        per panel, at most 7.5, by 4.2); not with ``axes``.
 
     Returns
     -------
     matplotlib.figure.Figure
         Each panel's x axis is the parameter in the paper's notation with
         the unit its catalogue entry declares, its legend under the axes.
+
+    Raises
+    ------
+    ValueError
+        ``figsize`` given with ``axes``, or not two positive numbers.
     """
     from ..plots import _param_unit, _per_unit
 
+    text = _title_text(title, f"{post.physics}: posterior of the parameters shared by "
+                              f"{post.settings['n_runs']} runs")
     names = list(post.names)
-    fig, axes = _axes_row(len(names), axes)
+    fig, axes = _axes_row(len(names), axes, given=figsize)
     model = _units_model(post.physics)
     for a, (ax, n) in enumerate(zip(axes, names)):
         g, m = post.grid[a], np.asarray(post.marginals[n]["density"])
@@ -868,8 +1199,7 @@ def plot_shared_posterior(post: SharedPosterior, axes: Any = None) -> Figure:
         ax.set_xlabel(parameter_label(model, n))
         ax.set_ylabel("posterior density" + _per_unit(_param_unit(n, model)))
         _legend_below(ax)
-    _suptitle(fig, f"{post.physics}: posterior of the parameters shared by "
-                 f"{post.settings['n_runs']} runs")
+    _fig_title(fig, text)
     return fig
 
 
@@ -1114,7 +1444,7 @@ _STYLE = ("body{font-family:sans-serif;max-width:1000px;margin:auto}"
 
 
 def write_report(result: DiagnosisResult, directory: str | Path, *, recording: Any = None,
-                 formats: Sequence[str] = ("png",)) -> dict[str, Path]:
+                 formats: Sequence[str] = ("png",), title: bool = True) -> dict[str, Path]:
     """Write the figures, ``report.html`` and ``diagnosis.json`` to ``directory``.
 
     Parameters
@@ -1134,6 +1464,10 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         Each figure is written as a PNG (at :data:`FIGURE_DPI`, embedded in
         the page) and also, beside it, in each other format of these
         (:data:`FORMATS`: ``"pdf"``, ``"svg"``), for a paper.
+    title : bool, optional
+        True (default): each figure with its own title; False: the figures
+        without titles (``title=False`` of each plot function: for a paper,
+        whose captions say it); the page's headings and captions stay.
 
     Returns
     -------
@@ -1169,23 +1503,28 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         Neither ``result.settings["dt"]`` nor ``recording`` gives the sample
         interval (:func:`plot_residuals`; a result of ``diagnose`` has it), or
         ``formats`` names one not in :data:`FORMATS`.
+    TypeError
+        ``title`` is not True or False.
     """
     formats = _checked_formats(formats)
+    if not isinstance(title, (bool, np.bool_)):
+        raise TypeError(f"title must be True or False, got {title!r}")
+    t = bool(title)
     out = Path(directory)
     out.mkdir(parents=True, exist_ok=True)
     chosen = getattr(result, "chosen", None)
     post = getattr(result, "posterior", None)
     figures = {  # name: how to draw it, or None: it would be empty (not written)
-        "frequency_response": (lambda: plot_frequency_response(result))
+        "frequency_response": (lambda: plot_frequency_response(result, title=t))
         if "df_data" in result.arrays else None,
-        "residuals": lambda: plot_residuals(result, recording=recording),
-        "evidence": (lambda: plot_evidence(result)) if _has_p_values(result) else None,
-        "candidates": lambda: plot_candidates(result),
+        "residuals": lambda: plot_residuals(result, recording=recording, title=t),
+        "evidence": (lambda: plot_evidence(result, title=t)) if _has_p_values(result) else None,
+        "candidates": lambda: plot_candidates(result, title=t),
     }
     if chosen is not None and chosen.interval:
-        figures["profile"] = lambda: plot_profile(result)
+        figures["profile"] = lambda: plot_profile(result, title=t)
     if post is not None:
-        figures["posterior"] = lambda: plot_posterior(result)
+        figures["posterior"] = lambda: plot_posterior(result, title=t)
     if chosen is None or not chosen.interval:
         figures["profile"] = None  # (one left from an earlier report is removed)
     if post is None:
