@@ -572,7 +572,7 @@ def twins(tmp_path_factory):
 
 
 #: Cheap settings with a bootstrap (its replicates are what the seeds are for).
-BOOT = {"n_bootstrap": 3, "candidates": ["motion-washout"], "progress": False,
+BOOT = {"n_bootstrap": 2, "candidates": ["motion-washout"], "progress": False,
         "warm_cache": False}
 #: Without it, for what the seeds do not change.
 NOBOOT = dict(BOOT, n_bootstrap=0)
