@@ -30,6 +30,8 @@ from bayespilot.simulate import simulate
 #: Cheap fast fits: one start, a coarse delta_abs profile.
 FAST = {"n_starts": 1, "profile_step": 0.02}
 QUIET = {"method": "fast", "fit_options": FAST, "progress": False, "warm_cache": False}
+#: A cheap chain: 16 walkers (the least for 8 parameters), 40 steps (not converged).
+CHAIN = {"max_steps": 40, "n_walkers": 16, "check_every": 20}
 
 
 def _write(folder, name, *, subject="s1", motion_gain=1.0, seed=0, duration=20.0,
@@ -144,6 +146,8 @@ def test_results_match_direct_fits(recs, tmp_path, monkeypatch):
         assert float(row["neg_log_lik_none"]) == pytest.approx(f0.neg_log_lik, rel=1e-12)
         assert float(row["delta_bic"]) == pytest.approx(delta_bic, rel=1e-10)
         assert int(row["seed"]) == s and row["decision"] == row["error"] == ""
+        assert "posterior" not in got and "posterior_error" not in got  # (not asked for)
+        assert row["delta_abs_median"] == row["delta_abs_hdi_low"] == row["converged"] == ""
         by_condition.setdefault((row["subject"], rec.motion_gain), []).append(
             (f1, f0, delta_bic))
     conditions = _csv(out / "conditions.csv")
@@ -316,6 +320,16 @@ def test_unreadable_and_unfittable_recordings_are_named_and_nothing_runs(recs, t
     ({"workers": 1, "scheduler": "tcp://127.0.0.1:1"}, "got 1 with a scheduler"),
     ({"connect_timeout": 0}, "connect_timeout must be a positive number"),
     ({"progress": "dots"}, "progress"),
+    ({"posterior": "yes"}, "posterior must be True or False"),
+    ({"sample_options": {"max_steps": 50}}, "give them with posterior=True"),
+    ({"posterior": True, "sample_options": {"init": {"K_v": 1.0}}},
+     "'init' is not an option of sample"),
+    ({"posterior": True, "sample_options": {"seed": 1}}, "'seed' is not an option of sample"),
+    ({"posterior": True, "sample_options": {"walkers": 16}}, "'walkers' is not an option"),
+    ({"posterior": True, "sample_options": {"likelihood": "white"}}, "likelihood must be one of"),
+    ({"posterior": True, "sample_options": {"max_steps": 0}}, "max_steps must be an integer >= 1"),
+    ({"posterior": True, "sample_options": {"max_steps": 50, "min_steps": 60}},
+     r"min_steps \(60\) must not exceed max_steps \(50\)"),
 ])
 def test_bad_settings_are_refused(recs, tmp_path, monkeypatch, options, said):
     _nothing_runs(monkeypatch)
@@ -363,19 +377,32 @@ def test_compare_per_run_and_pooled(recs, tmp_path, monkeypatch):
 
 
 def test_summary_figure_marks_each_run():
+    """Each run a point (its fit), marked by delta_bic's sign, the runs of a condition side
+    by side (0.15 apart, in key order) in its column, and a run's posterior 90 % HDI (where
+    it was sampled) an error bar from its low to its high end."""
     rows = [{"key": k, "subject": "s1", "task": "FD", "motion_gain": g, "delta_abs": d,
-             "delta_bic": b, "decision": "", "error": ""}
-            for k, g, d, b in (("a", 1.0, 0.01, 5.0), ("b", 1.0, 0.002, -1.0),
-                               ("c", 0.5, 0.007, 3.0))]
+             "delta_bic": b, "decision": "", "error": "", "delta_abs_hdi_low": lo,
+             "delta_abs_hdi_high": hi}
+            for k, g, d, b, lo, hi in (("a", 1.0, 0.01, 5.0, 0.008, 0.0105),
+                                       ("b", 1.0, 0.002, -1.0, "", ""),
+                                       ("c", 0.5, 0.007, 3.0, 0.0072, 0.009))]
     rows.append({"key": "e", "error": "RuntimeError: x"})
     conditions = [{"subject": "s1", "task": "FD", "motion_gain": g,
                    "label": f"s1, FD, K_theta = {g:g}"} for g in (0.5, 1.0)]
+    from matplotlib.collections import PathCollection
+
     fig = _plot_summary(rows, conditions)
     try:
         ax = fig.axes[0]
-        points = {c.get_label(): c.get_offsets().tolist() for c in ax.collections}
-        assert points == {r"$\Delta$BIC > 0 (threshold)": [[1, 0.01], [0, 0.007]],
-                          r"$\Delta$BIC $\leq$ 0 (none)": [[1, 0.002]]}
+        points = {c.get_label(): c.get_offsets().tolist() for c in ax.collections
+                  if isinstance(c, PathCollection)}  # (the scatters; the bars are lines)
+        assert points == {r"$\Delta$BIC > 0 (threshold)": [[0.925, 0.01], [0, 0.007]],
+                          r"$\Delta$BIC $\leq$ 0 (none)": [[1.075, 0.002]]}
+        (bars,) = ax.containers
+        assert bars.get_label() == "posterior 90 % HDI"
+        (segments,) = [c.get_segments() for c in bars.lines[2]]
+        assert np.allclose(np.array(segments), [[[0.925, 0.008], [0.925, 0.0105]],
+                                                [[0, 0.0072], [0, 0.009]]], rtol=1e-12)
         assert [t.get_text() for t in ax.get_xticklabels()] == [
             r"s1, FD, $K_\theta$ = 0.5", r"s1, FD, $K_\theta$ = 1"]
         assert "delta" in ax.get_ylabel() and "IPUT" in ax.get_ylabel()
@@ -389,7 +416,9 @@ def test_on_a_local_cluster(recs, tmp_path):
     out = tmp_path / "out"
     out.mkdir()
     (out / "a.error.json").write_text(json.dumps({"key": "a", "error": "RuntimeError"}))
-    summary = fit_batch(recs[:1], out, workers=1, **QUIET)
+    with pytest.warns(RuntimeWarning, match="ConvergenceWarning in 1 recording"):
+        summary = fit_batch(recs[:1], out, workers=1, posterior=True, sample_options=CHAIN,
+                            **QUIET)
     assert (summary.total, summary.completed, summary.failed) == (1, 1, 0)
     assert not (out / "a.error.json").exists()  # retried, and its error file removed
     got = json.loads((out / "a.json").read_text())
@@ -398,3 +427,247 @@ def test_on_a_local_cluster(recs, tmp_path):
     assert got["fit_threshold"]["neg_log_lik"] == pytest.approx(f1.neg_log_lik, rel=1e-9)
     assert got["fit_none"]["neg_log_lik"] == pytest.approx(f0.neg_log_lik, rel=1e-9)
     assert got["host"] and got["versions"]["bayespilot"]
+    # the posterior came back from the worker (pickled) and was written here
+    from bayespilot.sample import Posterior
+
+    written = Posterior.from_netcdf(out / "a.nc")
+    assert written.seed == s and written.idata.posterior.sizes["chain"] == 16
+    assert got["posterior"]["summary"] == _as_stored(written.summary())
+
+
+def _as_stored(x):
+    """``x`` as a result file holds it: NaN (and infinities) as None, tuples as lists."""
+    if isinstance(x, dict):
+        return {k: _as_stored(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_as_stored(v) for v in x]
+    return None if isinstance(x, float) and not math.isfinite(x) else x
+
+
+def _sampled_here(path, batch_seed):
+    """The chain of one recording run here with sample() (CHAIN's options written out, and
+    min_steps = max_steps as ``bayespilot sample --max-steps 40`` sets it), with the seed the
+    batch gives it."""
+    import warnings
+
+    from bayespilot.model import paper_model
+    from bayespilot.sample import sample
+
+    rec = read_recording(path)
+    s = task_seed(batch_seed, [_signals_digest(rec)])
+    with warnings.catch_warnings():  # (40 steps: not converged, said)
+        warnings.simplefilter("ignore")
+        return s, sample(rec, paper_model(threshold=True), seed=s, progress=False,
+                         max_steps=40, min_steps=40, n_walkers=16, check_every=20)
+
+
+def test_the_posterior_is_sample_run_with_the_recorded_seed(recs, tmp_path, monkeypatch):
+    import arviz
+
+    from bayespilot.sample import Posterior
+
+    _run_here(monkeypatch)
+    out = tmp_path / "out"
+    with pytest.warns(RuntimeWarning, match=r"ConvergenceWarning in 2 recording\(s\) \(a, b\)"):
+        summary = fit_batch(recs[:2], out, posterior=True, sample_options=CHAIN, **QUIET)
+    assert (summary.completed, summary.failed) == (2, 0)
+    rows = {r["key"]: r for r in _csv(out / "summary.csv")}
+    for path in recs[:2]:
+        key = os.path.basename(path)
+        got = json.loads((out / f"{key}.json").read_text())
+        s, direct = _sampled_here(path, 0)
+        assert got["settings"]["seed"] == s and got["settings"]["posterior"] is True
+        assert got["settings"]["sample_options"] == {"likelihood": "eq4", "max_steps": 40,
+                                                     "min_steps": 40, "n_walkers": 16,
+                                                     "check_every": 20}
+        # the fits are the batch's as without the posterior
+        _, _, f1, _ = _direct(path, 0)
+        assert got["fit_threshold"]["neg_log_lik"] == pytest.approx(f1.neg_log_lik, rel=1e-12)
+        # the same chain, number for number: the summary bayespilot sample --json writes
+        assert set(direct.summary()) == set(PARAMETER_NAMES)
+        assert got["posterior"]["summary"] == _as_stored(direct.summary())
+        assert (got["posterior"]["converged"], got["posterior"]["steps"]) == (False, 40)
+        assert got["posterior"]["file"] == f"{key}.nc"
+        assert any(w["category"] == "ConvergenceWarning" for w in got["warnings"])
+        # the draws, read back with arviz (and as a Posterior)
+        idata = arviz.from_netcdf(str(out / f"{key}.nc"))
+        n_draws = direct.idata.posterior.sizes["draw"]
+        assert n_draws > 0 and idata.posterior["delta_abs"].shape == (16, n_draws)
+        for name in PARAMETER_NAMES:
+            np.testing.assert_array_equal(idata.posterior[name].values,
+                                          direct.idata.posterior[name].values)
+        back = Posterior.from_netcdf(out / f"{key}.nc")
+        assert back.seed == s and back.converged is False
+        # summary.csv: delta_abs's median and 90 % HDI
+        median = direct.summary()["delta_abs"]["median"]
+        low, high = direct.credible_interval("delta_abs", 0.9)
+        row = rows[key]
+        assert float(row["delta_abs_median"]) == median
+        assert (float(row["delta_abs_hdi_low"]), float(row["delta_abs_hdi_high"])) == (low, high)
+        assert low < median < high
+        assert row["converged"] == "False" and row["posterior_error"] == row["error"] == ""
+    # conditions.csv has nothing of the posteriors (module docs: not pooled)
+    assert list(_csv(out / "conditions.csv")[0]) == list(CONDITION_FIELDS)
+
+
+def test_a_sampling_that_fails_is_recorded_and_the_fits_kept(recs, tmp_path, monkeypatch):
+    import functools
+    import sys
+
+    module = sys.modules["bayespilot.sample"]
+    real = module.sample
+
+    @functools.wraps(real)  # (its signature: the batch checks the options by it)
+    def sample(recording, *args, **kwargs):  # (b's chain fails)
+        if os.path.basename(recording.source) == "b":
+            raise FloatingPointError("the chain diverged (made to fail by the test)")
+        return real(recording, *args, **kwargs)
+
+    monkeypatch.setattr(module, "sample", sample)
+    _run_here(monkeypatch)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "b.nc").write_bytes(b"an earlier posterior of b")  # (not this result's: removed)
+    with pytest.warns(RuntimeWarning, match=r"the posterior could not be sampled for 1 "
+                                            r"recording\(s\) \(b\), e.g. b: FloatingPointError: "
+                                            r"the chain diverged \(made to fail by the test\); "
+                                            r"their fits are kept"):
+        summary = fit_batch(recs[:2], out, posterior=True, sample_options=CHAIN, **QUIET)
+    assert (summary.completed, summary.failed) == (2, 0)
+    got = json.loads((out / "b.json").read_text())
+    assert got["posterior"] is None
+    assert got["posterior_error"] == ("FloatingPointError: the chain diverged (made to fail by "
+                                      "the test)")
+    _, s, f1, f0 = _direct(recs[1], 0)
+    assert got["settings"]["seed"] == s
+    for name, ref in (("fit_threshold", f1), ("fit_none", f0)):
+        assert got[name]["params"] == pytest.approx(dict(ref.params), rel=1e-12)
+        assert got[name]["neg_log_lik"] == pytest.approx(ref.neg_log_lik, rel=1e-12)
+    assert not (out / "b.nc").exists() and (out / "a.nc").is_file()
+    assert "posterior_error" not in json.loads((out / "a.json").read_text())
+    rows = {r["key"]: r for r in _csv(out / "summary.csv")}
+    assert rows["b"]["posterior_error"] == got["posterior_error"] and rows["b"]["error"] == ""
+    assert rows["b"]["delta_abs_median"] == rows["b"]["converged"] == ""
+    assert float(rows["b"]["delta_abs"]) == pytest.approx(f1.params["delta_abs"], rel=1e-12)
+    assert rows["a"]["posterior_error"] == "" and rows["a"]["delta_abs_median"] != ""
+    assert int(_csv(out / "conditions.csv")[0]["n_runs"]) == 2  # (b's fits count)
+    # a result: not redone by the next call
+    @functools.wraps(real)
+    def again(*args, **kwargs):
+        pytest.fail("sampled again")
+
+    monkeypatch.setattr(module, "sample", again)
+    again = fit_batch(recs[:2], out, posterior=True, sample_options=CHAIN, **QUIET)
+    assert (again.completed, again.skipped) == (0, 2)
+
+
+def test_resume_compares_the_posterior_settings(recs, tmp_path, monkeypatch):
+    _run_here(monkeypatch)
+    out = tmp_path / "out"
+    fit_batch(recs[:1], out, **QUIET)  # (without the posterior)
+    _nothing_runs(monkeypatch)
+    with pytest.raises(ResultConflictError, match=r"a\.json holds a fit of a from other "
+                                                  r"settings: posterior None there, True here, "
+                                                  r"sample_options None there, \{'likelihood'"):
+        fit_batch(recs[:1], out, posterior=True, sample_options=CHAIN, **QUIET)
+    # made with it: the same options (sample's defaults written out or not) are done ...
+    _run_here(monkeypatch)
+    post = tmp_path / "post"
+    fit_batch(recs[:1], post, posterior=True, sample_options=CHAIN, **QUIET)
+    files = [post / "a.json", post / "a.nc"]
+    before = [(f.read_bytes(), f.stat().st_mtime_ns) for f in files]
+    again = fit_batch(recs[:1], post, posterior=True,
+                      sample_options={**CHAIN, "likelihood": "eq4", "min_steps": 40}, **QUIET)
+    assert (again.completed, again.skipped) == (0, 1)
+    assert [(f.read_bytes(), f.stat().st_mtime_ns) for f in files] == before
+    # ... other options, or none, are not
+    _nothing_runs(monkeypatch)
+    with pytest.raises(ResultConflictError, match=r"other settings: sample_options .*"
+                                                  r"'max_steps': 60"):
+        fit_batch(recs[:1], post, posterior=True, sample_options={**CHAIN, "max_steps": 60},
+                  **QUIET)
+    with pytest.raises(ResultConflictError, match=r"other settings: posterior True there, None "
+                                                  r"here"):
+        fit_batch(recs[:1], post, **QUIET)
+    # a result whose posterior file is gone is run again
+    (post / "a.nc").unlink()
+    _run_here(monkeypatch)
+    again = fit_batch(recs[:1], post, posterior=True, sample_options=CHAIN, **QUIET)
+    assert (again.completed, again.skipped) == (1, 0) and (post / "a.nc").is_file()
+
+
+def test_the_tables_count_each_run_once_and_say_what_they_leave_out(recs, tmp_path,
+                                                                     monkeypatch):
+    """Review of the day: a recording under a new key (moved: its folder name now in its
+    key) left its old <key>.json in the folder, and conditions.csv counted the run twice;
+    a subject corrected in the sidecar kept the run in its old condition; a run with other
+    settings cut the tables to its rows without a word; and with no result left, an old
+    summary.png stayed."""
+    import shutil
+    import warnings
+
+    from bayespilot.diagnose.batch import SummaryScopeWarning
+
+    _run_here(monkeypatch)
+    out = tmp_path / "out"
+    fit_batch(recs[:2], out, **QUIET)  # a, b: subject s1
+    # b moved to a folder whose stem clashes with another b: its key is now <parent>_b
+    moved = tmp_path / "x"
+    moved.mkdir()
+    for ext in (".csv", ".json"):
+        shutil.copy(recs[1] + ext, moved / ("b" + ext))
+    other = _write(tmp_path / "y", "b", seed=7)  # another run, also stem b
+    with pytest.warns(SummaryScopeWarning, match=r"1 result file\(s\) .* hold a recording "
+                      r"that another key holds too .*\(b\)"):
+        fit_batch([recs[0], str(moved / "b"), other], out, **QUIET)
+    rows = _csv(out / "summary.csv")
+    assert sorted(r["key"] for r in rows) == ["a", "x_b", "y_b"]
+    (cond,) = _csv(out / "conditions.csv")
+    assert int(cond["n_runs"]) == 3  # a, x_b (= the old b) and y_b: each once
+    want = math.fsum(float(r["delta_bic"]) for r in rows)
+    assert float(cond["sum_delta_bic"]) == pytest.approx(want, rel=1e-12)
+    # a's subject corrected in its sidecar: no refit, a's row in its new condition
+    side = json.loads(open(recs[0] + ".json").read())
+    fixed = tmp_path / "z"
+    fixed.mkdir()
+    shutil.copy(recs[0] + ".csv", fixed / "a.csv")
+    (fixed / "a.json").write_text(json.dumps({**side, "subject": "s9"}))
+    before = json.loads((out / "a.json").read_text())
+    again = fit_batch([str(fixed / "a"), str(moved / "b"), other], out, **QUIET)
+    assert (again.completed, again.skipped) == (0, 3)
+    after = json.loads((out / "a.json").read_text())
+    assert after["subject"] == "s9" and after["fit_threshold"] == before["fit_threshold"]
+    conds = {r["subject"]: int(r["n_runs"]) for r in _csv(out / "conditions.csv")}
+    assert conds == {"s1": 2, "s9": 1}
+    # other settings in the same folder: their rows only, and said
+    with pytest.warns(SummaryScopeWarning, match=r"4 result file\(s\) .* made with other "
+                      r"settings are left out"):
+        fit_batch([recs[2]], out, **dict(QUIET, seed=5))
+    assert [r["key"] for r in _csv(out / "summary.csv")] == ["c"]
+    # no result with these settings: no figure of other results left behind
+    png = out / "summary.png"
+    assert png.is_file()
+    empty = tmp_path / "empty"
+    fit_batch([recs[2]], empty, **QUIET)
+    (empty / "c.json").unlink()
+    shutil.copy(png, empty / "summary.png")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SummaryScopeWarning)
+        from bayespilot.batch import _batch_settings, _write_summaries
+
+        _write_summaries(empty, _batch_settings(json.loads((out / "c.json").read_text())))
+    assert not (empty / "summary.png").exists()
+    assert _csv(empty / "conditions.csv") == []
+
+
+def test_prediction_error_fits_are_compared_under_their_noise_model(recs):
+    """noise='ar' with compare: the comparison's likelihood is compare's AR output-error one
+    (recorded in the settings, so the command and a Python call resume each other), unless
+    given; with white noise compare's default (Eq. 4) stays."""
+    from bayespilot.batch import _options
+
+    ar = _options("fast", "ar", False, 1, True, None, None, None)
+    assert ar["compare_options"] == {"likelihood": "coloured"}
+    given = _options("fast", "ar", False, 1, True, None, None, {"likelihood": "eq4"})
+    assert given["compare_options"] == {"likelihood": "eq4"}
+    assert _options("fast", "white", False, 1, True, None, None, None)["compare_options"] == {}

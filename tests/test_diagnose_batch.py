@@ -276,7 +276,7 @@ def test_cli_reports_on_a_finished_batch_says_none_were_written(done_without_rep
                  "--workers", "1", "--reports"])
     stdout, err = capsys.readouterr()
     assert code == 0, err
-    assert "1 diagnoses: 0 run, 1 already done" in stdout
+    assert "1 diagnosis: 0 run, 1 already done" in stdout
     assert (out / "s7-run1.json").stat().st_mtime_ns == before and not (out / "s7-run1").exists()
     (warning,) = [ln for ln in err.splitlines() if "report" in ln]
     assert warning.startswith("bayespilot: warning: 1 diagnosis finished before, without a "

@@ -6,10 +6,12 @@ threshold, and that evidence pooled per condition.  :func:`fit_batch` fits each 
 with and without the threshold (:func:`~bayespilot.fit.three_step.fit_paper` or
 :func:`~bayespilot.fit.fast.fit_fast`, the paper's model:
 :func:`~bayespilot.model.paper_model`, as ``bayespilot fit REC`` without ``--with``),
-takes the information criteria of the two (:func:`~bayespilot.compare.information_criteria`)
-and, with ``compare=True``, the Bayes factor by nested sampling
-(:func:`~bayespilot.compare.compare`), as independent tasks on a dask cluster: a local
-one by default, an existing one by address.  It is the sibling of
+takes the information criteria of the two (:func:`~bayespilot.compare.information_criteria`),
+with ``compare=True`` the Bayes factor by nested sampling
+(:func:`~bayespilot.compare.compare`) and, with ``posterior=True``, the posterior of the
+parameters by emcee (:func:`~bayespilot.sample.sample`, started as ``bayespilot sample``
+starts it), as independent tasks on a dask cluster: a local one by default, an existing
+one by address.  It is the sibling of
 :func:`bayespilot.diagnose.batch.diagnose_batch` and shares its pieces: the cluster loop
 (:func:`bayespilot.campaign.run_keyed`: atomic result files, an ``<key>.error.json`` for
 a task that raised while the others go on, which the next call retries, a progress bar,
@@ -17,7 +19,8 @@ a lost cluster stopping the batch with what finished saved), the keys
 (:func:`~bayespilot.diagnose.batch.plan_batch`: the file stem, ``<folder>_<stem>`` when
 two stems clash), the seeds (:func:`~bayespilot.diagnose.batch.task_seed` of the batch's
 ``seed`` and the recording's signals: both fits and the comparison of a recording run
-with it, whatever the order of the paths or the other recordings of the batch) and the
+with it, whatever the order of the paths or the other recordings of the batch; so does
+its posterior's chain) and the
 resume rule: a result that exists and was made from the same recording (its signals'
 digest and what the fit reads of its sidecar, K_theta among it) with the same settings
 is not redone; one made from another recording or with other settings is a
@@ -36,21 +39,38 @@ Outputs in ``out_dir``:
   ``recording_metadata`` (as :func:`~bayespilot.diagnose.batch.diagnose_batch` records
   them: one each), ``subject``, ``task``, ``motion_gain``, ``settings`` (``method``,
   ``noise``, ``iterate``, ``oversample``, ``compare``, ``nlive``, ``fit_options``,
-  ``compare_options``, ``seed``: the task's own, and ``batch_seed``), ``fit_threshold``
+  ``compare_options``, with ``posterior=True`` also ``posterior`` (true) and
+  ``sample_options`` (every option the chain ran with but the model and seed: ``sample(
+  recording, paper_model(oversample=...), seed=settings["seed"], **sample_options)``
+  repeats it), ``seed``: the task's own, and ``batch_seed``), ``fit_threshold``
   and ``fit_none`` (``FitResult.to_dict(full=False)``), ``information_criteria`` (of
   the two fits' -ln L, k counted as :func:`~bayespilot.compare.compare` counts it: the
   free parameters, those of an AR noise model among them, and 1 for the output-error
-  variance), ``comparison`` (``Comparison.to_dict()``, or null), ``warnings``
+  variance), ``comparison`` (``Comparison.to_dict()``, or null), ``posterior`` (with
+  ``posterior=True``: ``summary``, per parameter by name what ``bayespilot sample --json``
+  writes, :meth:`~bayespilot.sample.Posterior.summary`: mean, median, hdi_90, r_hat,
+  ess_bulk, ess_tail, tau; ``converged``; ``steps``; ``file``, the netCDF file's name; null
+  without it, or when the sampling failed: then ``posterior_error`` says why, and the fits
+  are kept), ``warnings``
   (``category`` and ``message``, each once), ``elapsed_seconds``, ``host``, ``versions``
   and ``bayespilot_version`` (the worker's).
+- ``<key>.nc`` (with ``posterior=True``): the posterior, ArviZ InferenceData as netCDF
+  (:meth:`~bayespilot.sample.Posterior.to_netcdf`; read it with
+  :meth:`~bayespilot.sample.Posterior.from_netcdf`, ``arviz.from_netcdf`` or ``bayespilot
+  plot``), written by this process before its ``<key>.json``.
 - ``summary.csv`` (:data:`SUMMARY_FIELDS`), one row per recording whose result (or error)
   file in ``out_dir`` was made with the batch's settings, sorted by key: this call's and
   those an earlier call on other recordings left there.
 - ``conditions.csv`` (:data:`CONDITION_FIELDS`), one row per condition (subject, task,
   K_theta) of those rows: the threshold's spread over the runs, the summed improvement
   of -ln L and BIC by the threshold, and with ``compare`` the runs' Bayes factors pooled
-  (:func:`~bayespilot.compare.pool`).
-- ``summary.png``: each run's delta_abs per condition, marked by the run's decision.
+  (:func:`~bayespilot.compare.pool`).  With ``posterior=True`` it has nothing more: the
+  runs' posteriors are not pooled (a condition's delta_abs shared by its runs, or drawn
+  from a population, is a model of its own: a hierarchical one), and a median of the
+  runs' posterior medians would say no more than ``delta_abs_median`` of their
+  estimates, with no uncertainty; each run's interval is in ``summary.csv``.
+- ``summary.png``: each run's delta_abs per condition, marked by the run's decision, with
+  its posterior's 90 % HDI as an error bar when it was sampled.
 """
 
 from __future__ import annotations
@@ -83,10 +103,13 @@ __all__ = ["fit_batch", "SUMMARY_FIELDS", "CONDITION_FIELDS"]
 #: Columns of ``summary.csv``: the recording, the parameters of its fit with threshold by
 #: name, -ln L with and without, the VAF with threshold, delta_bic (none - threshold:
 #: positive favours the threshold), with ``compare`` the ln Bayes factor, its error and the
-#: decision, the seed the task ran with and, for a task that failed, its error.
+#: decision, with ``posterior`` delta_abs's posterior median and 90 % HDI, whether the chain
+#: converged and, for a sampling that failed, its error; the seed the task ran with and,
+#: for a task that failed, its error.
 SUMMARY_FIELDS = ("key", "subject", "task", "motion_gain", *presets.PARAMETER_NAMES,
                   "neg_log_lik", "neg_log_lik_none", "vaf", "delta_bic", "log_bayes_factor",
-                  "log_bayes_factor_err", "decision", "seed", "error")
+                  "log_bayes_factor_err", "decision", "delta_abs_median", "delta_abs_hdi_low",
+                  "delta_abs_hdi_high", "converged", "posterior_error", "seed", "error")
 
 #: Columns of ``conditions.csv``: the condition (subject, '' when the recordings give none;
 #: task; K_theta) and its ``label``, the runs with a result, delta_abs's median, min and max
@@ -125,10 +148,16 @@ def _information_criteria(fit_threshold: Any, fit_none: Any, model: PilotModel,
                                 k(model._fixed(**{THRESHOLD: 0.0}), fit_none), lik.n_terms)
 
 
-def _run_fit_task(recording: Recording, settings: Mapping[str, Any]) -> dict[str, Any]:
-    """One recording's task, on a worker: both fits, their information criteria and (with
-    ``settings["compare"]``) the comparison, all seeded by ``settings["seed"]``; the
-    warnings kept (each once), not issued.  Returns the result file's computed part."""
+def _run_fit_task(recording: Recording, settings: Mapping[str, Any]
+                  ) -> tuple[dict[str, Any], Any]:
+    """One recording's task, on a worker: both fits, their information criteria, (with
+    ``settings["compare"]``) the comparison and (with ``settings.get("posterior")``) the
+    posterior, all seeded by ``settings["seed"]``; the warnings kept (each once), not
+    issued.  Returns the result file's computed part and the
+    :class:`~bayespilot.sample.Posterior` (None without one: not asked for, or its sampling
+    failed, which the result's ``posterior_error`` says; the fits are kept), which this
+    process writes as ``<key>.nc`` (it pickles as its InferenceData: tens of kB to a few
+    MB)."""
     from . import __version__
     from ._files import VERSION_KEY
     from .campaign import _fit_function, _versions
@@ -162,6 +191,17 @@ def _run_fit_task(recording: Recording, settings: Mapping[str, Any]) -> dict[str
             comparison = compare(recording, model, seed=settings["seed"],
                                  nlive=settings["nlive"], progress=False,
                                  **settings["compare_options"]).to_dict()
+        post, sampled, failed = None, None, {}
+        if settings.get("posterior"):
+            from .sample import sample
+
+            try:  # (as `bayespilot sample REC --seed S` starts it: from its own fast fit)
+                post = sample(recording, model, seed=settings["seed"], progress=False,
+                              **settings["sample_options"])
+                sampled = {"summary": post.summary(), "converged": bool(post.converged),
+                           "steps": int(post.settings["n_steps"])}
+            except Exception as exc:  # noqa: BLE001 - the fits are kept, the error recorded
+                post, failed = None, {"posterior_error": f"{type(exc).__name__}: {exc}"}
     said: list[dict[str, str]] = []
     for w in caught:
         entry = {"category": w.category.__name__, "message": str(w.message)}
@@ -169,16 +209,62 @@ def _run_fit_task(recording: Recording, settings: Mapping[str, Any]) -> dict[str
             said.append(entry)
     return {"fit_threshold": with_threshold.to_dict(full=False),
             "fit_none": without.to_dict(full=False), "information_criteria": ic,
-            "comparison": comparison, "warnings": said,
-            "elapsed_seconds": time.perf_counter() - t0, "host": platform.node(),
-            "versions": _versions(), VERSION_KEY: __version__}
+            "comparison": comparison,
+            **({"posterior": sampled, **failed} if settings.get("posterior") else {}),
+            "warnings": said, "elapsed_seconds": time.perf_counter() - t0,
+            "host": platform.node(), "versions": _versions(), VERSION_KEY: __version__}, post
+
+
+#: sample()'s arguments the batch sets itself (the recording, its model and seed, no progress
+#: bar on a worker) or leaves at their default, so that the chain starts as ``bayespilot
+#: sample`` starts it (from sample's own fit: ``init``, ``noise``) and writes no file on a
+#: worker (``backend``): not taken from ``sample_options``.
+_SET_BY_BATCH = ("recording", "model", "seed", "progress", "init", "noise", "backend")
+
+
+def _sample_options(given: Mapping[str, Any], model: PilotModel) -> dict[str, Any]:
+    """``sample_options`` checked (ValueError) and completed as the chain runs with them and
+    the result records them: ``likelihood`` and ``max_steps`` at sample()'s defaults (those
+    of ``bayespilot sample``) unless given, ``min_steps`` at min(its default, max_steps) as
+    ``bayespilot sample --max-steps`` sets it, the others as given."""
+    import inspect
+
+    from .campaign import _json_roundtrip
+    from .sample import _check_int, likelihood_options, sample
+
+    if not isinstance(given, Mapping):
+        raise ValueError(f"sample_options must be a mapping of keywords of sample(), got "
+                         f"{type(given).__name__}")
+    params = inspect.signature(sample).parameters
+    bad = sorted(map(str, (k for k in given if k not in params or k in _SET_BY_BATCH)))
+    if bad:
+        raise ValueError(f"sample_options: {', '.join(map(repr, bad))} is not an option of "
+                         f"sample() the batch passes on (it gives each recording its model and "
+                         f"seed and starts the chain as bayespilot sample does); it takes "
+                         f"{', '.join(sorted(set(params) - set(_SET_BY_BATCH)))}")
+    opts = {"likelihood": params["likelihood"].default,
+            "max_steps": params["max_steps"].default, **given}
+    likelihood_options(model, opts["likelihood"], opts.get("ar", params["ar"].default),
+                       opts.get("ar_order"))
+    max_steps = _check_int("max_steps", opts["max_steps"], 1)
+    opts.setdefault("min_steps", min(params["min_steps"].default, max_steps))
+    if _check_int("min_steps", opts["min_steps"], 0) > max_steps:
+        raise ValueError(f"sample_options: min_steps ({opts['min_steps']}) must not exceed "
+                         f"max_steps ({max_steps})")
+    try:
+        return _json_roundtrip(opts)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"sample_options must be JSON-serialisable, as the result files "
+                         f"record them ({exc})") from None
 
 
 def _options(method: str, noise: str, iterate: bool, oversample: int, compare: bool,
              nlive: int | None, fit_options: Mapping[str, Any] | None,
-             compare_options: Mapping[str, Any] | None) -> dict[str, Any]:
+             compare_options: Mapping[str, Any] | None, posterior: bool = False,
+             sample_options: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """The batch's settings, checked (ValueError), as its result files record them (without
-    the seeds)."""
+    the seeds); ``posterior`` and ``sample_options`` only with ``posterior=True`` (absent
+    when False: results made before the option still resume, as diagnose_batch's)."""
     from .campaign import Job, _json_roundtrip
     from .compare import _check_int
     from .model import paper_model
@@ -189,7 +275,7 @@ def _options(method: str, noise: str, iterate: bool, oversample: int, compare: b
         raise ValueError(f"noise must be 'white' or 'ar', got {noise!r}")
     if noise == "ar" and method != "fast":
         raise ValueError("noise='ar' (a prediction-error fit) goes with method='fast'")
-    for name, value in (("iterate", iterate), ("compare", compare)):
+    for name, value in (("iterate", iterate), ("compare", compare), ("posterior", posterior)):
         if not isinstance(value, bool):
             raise ValueError(f"{name} must be True or False, got {value!r}")
     if iterate and method != "paper":
@@ -227,9 +313,19 @@ def _options(method: str, noise: str, iterate: bool, oversample: int, compare: b
         compare_options = _json_roundtrip(dict(compare_options or {}))
     except (TypeError, ValueError) as exc:
         raise ValueError(f"compare_options must be JSON-serialisable ({exc})") from None
+    if compare and noise == "ar":
+        # the fits whiten the output error by an AR model: the comparison too (compare's
+        # AR output-error likelihood, one AR model for both), or the row's delta_bic and
+        # its Bayes factor weighed the threshold under two noise models
+        compare_options.setdefault("likelihood", "coloured")
+    if sample_options and not posterior:
+        raise ValueError("sample_options are options of the posterior's chain; give them with "
+                         "posterior=True")
+    sampled = ({"posterior": True, "sample_options": _sample_options(sample_options or {}, model)}
+               if posterior else {})
     return {"method": method, "noise": noise, "iterate": iterate, "oversample": int(oversample),
             "compare": compare, "nlive": nlive if compare else None,
-            "fit_options": fit_options, "compare_options": compare_options}
+            "fit_options": fit_options, "compare_options": compare_options, **sampled}
 
 
 def _fittable_problem(recording: Recording, options: Mapping[str, Any]) -> str | None:
@@ -273,14 +369,25 @@ def _say_warned(out: Path, keys: Sequence[str]) -> None:
     """Each kind of warning that the tasks of ``keys`` whose results are in ``out`` (those
     this call ran and saved) recorded, once: a RuntimeWarning naming how many recordings
     and which, with one message, as :func:`~bayespilot.campaign.run_campaign` says those of
-    its fits."""
+    its fits; and the posteriors that could not be sampled (``posterior_error``) likewise."""
     from ._caller import warn_at_caller
     from .campaign import _listed
 
     warned: dict[str, list[tuple[str, str]]] = defaultdict(list)
+    unsampled: list[tuple[str, str]] = []
     for key in keys:
-        for w in (_done(out, key) or {}).get("warnings") or ():
+        stored = _done(out, key) or {}
+        for w in stored.get("warnings") or ():
             warned[w["category"]].append((key, w["message"]))
+        if stored.get("posterior_error"):
+            unsampled.append((key, str(stored["posterior_error"])))
+    if unsampled:
+        named = sorted(k for k, _ in unsampled)
+        warn_at_caller(f"the posterior could not be sampled for {len(named)} recording(s) "
+                       f"({_listed(named, 3)}), e.g. {named[0]}: {dict(unsampled)[named[0]]}; "
+                       f"their fits are kept, and each result file says why under "
+                       f"'posterior_error' (delete a <key>.json to run that recording again)",
+                       RuntimeWarning)
     for category, seen in sorted(warned.items()):
         named = sorted({k for k, _ in seen})
         first = min(m for k, m in seen if k == named[0])
@@ -313,24 +420,59 @@ def _batch_settings(stored: Any) -> Any:
     return {k: v for k, v in settings.items() if k != "seed"}
 
 
-def _results(out: Path, settings: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
-    """Every result file in ``out`` (or, for a task that failed, its error file) made with
-    the batch's ``settings`` (:func:`_batch_settings`), by key."""
-    from .campaign import _read_json
+def _digest(stored: Mapping[str, Any]) -> str | None:
+    """The recording's signals' digest a result or error file records, or None."""
+    digests = stored.get("recording_digests")
+    return str(digests[0]) if isinstance(digests, list) and len(digests) == 1 else None
 
+
+def _results(out: Path, settings: Mapping[str, Any],
+             current: Mapping[str, str] | None = None) -> dict[str, dict[str, Any]]:
+    """Every result file in ``out`` (or, for a task that failed, its error file) made with
+    the batch's ``settings`` (:func:`_batch_settings`), by key; one per recording: of two
+    files of the same signals (a recording renamed or moved since, so under another key),
+    the key of this call's (``current``: key -> digest) is kept, else the first by key.
+    Warns (:class:`~bayespilot.diagnose.batch.SummaryScopeWarning`) of the files left out:
+    made with other settings, or another key's copy of a recording."""
+    from ._caller import warn_at_caller
+    from .campaign import _listed, _read_json
+    from .diagnose.batch import SummaryScopeWarning
+
+    current = dict(current or {})
     found: dict[str, dict[str, Any]] = {}
+    other: list[str] = []
     for f in sorted(out.glob("*.json")):
         failed = f.name.endswith(".error.json")
         key = f.name[:-len(".error.json")] if failed else f.stem
         stored = _read_json(f)
         if not (isinstance(stored, dict) and stored.get("key") == key
-                and (failed or "fit_threshold" in stored)
-                and _batch_settings(stored) == settings):
+                and (failed or "fit_threshold" in stored)):
+            continue
+        if _batch_settings(stored) != settings:
+            other.append(key)
             continue
         if failed:  # (a result wins over an old error file, whichever is read first)
             found.setdefault(key, stored)
         else:
             found[key] = stored
+    owner = {d: k for k, d in current.items()}  # digest -> the key kept: this call's,
+    for key in sorted(found):  # else the first by key
+        d = _digest(found[key])
+        if d is not None:
+            owner.setdefault(d, key)
+    copies = sorted(k for k in found if _digest(found[k]) is not None
+                    and owner.get(_digest(found[k]), k) != k)
+    for key in copies:
+        del found[key]
+    if other:
+        warn_at_caller(f"{len(other)} result file(s) in {out} made with other settings are "
+                       f"left out of summary.csv and conditions.csv ({_listed(sorted(other), 3)}); "
+                       f"use one folder per setting", SummaryScopeWarning)
+    if copies:
+        warn_at_caller(f"{len(copies)} result file(s) in {out} hold a recording that another "
+                       f"key holds too (renamed or moved since): left out of the tables, which "
+                       f"count each run once ({_listed(copies, 3)}); delete them",
+                       SummaryScopeWarning)
     return found
 
 
@@ -343,12 +485,18 @@ def _summary_row(stored: Mapping[str, Any]) -> dict[str, Any]:
         return {**row, "error": f"{stored.get('error')}: {stored.get('message')}"}
     fit, none = stored["fit_threshold"], stored["fit_none"]
     comparison = stored.get("comparison") or {}
+    post = stored.get("posterior") or {}
+    delta = (post.get("summary") or {}).get("delta_abs") or {}
+    low, high = delta.get("hdi_90") or (None, None)
     return {**row, **{n: fit["params"].get(n) for n in presets.PARAMETER_NAMES},
             "neg_log_lik": fit["neg_log_lik"], "neg_log_lik_none": none["neg_log_lik"],
             "vaf": fit["vaf"], "delta_bic": stored["information_criteria"]["delta_bic"],
             "log_bayes_factor": comparison.get("log_bayes_factor"),
             "log_bayes_factor_err": comparison.get("log_bayes_factor_err"),
-            "decision": comparison.get("decision")}
+            "decision": comparison.get("decision"), "delta_abs_median": delta.get("median"),
+            "delta_abs_hdi_low": low, "delta_abs_hdi_high": high,
+            "converged": post.get("converged"),
+            "posterior_error": stored.get("posterior_error")}
 
 
 def _label(subject: str, task: str, motion_gain: float) -> str:
@@ -392,12 +540,21 @@ def _condition_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]
 def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mapping[str, Any]]
                   ) -> Any:
     """Each run's delta_abs (rows of ``summary.csv`` with a result), one column per condition,
-    marked by the run's decision (with a comparison) or by the sign of its delta_bic."""
+    marked by the run's decision (with a comparison) or by the sign of its delta_bic, with
+    its posterior's 90 % HDI as an error bar where it has one; the runs of a condition side
+    by side in its column, in the order of their keys (their bars would overlap)."""
     from .diagnose.report import _subplots
     from .plots import _param_label
 
     where = {(c["subject"], c["task"], c["motion_gain"]): i for i, c in enumerate(conditions)}
     done = [r for r in rows if not r.get("error")]
+    column: dict[int, list[int]] = defaultdict(list)  # condition -> its runs (indices in done)
+    for n, r in enumerate(done):
+        column[where[(r["subject"], str(r["task"]), float(r["motion_gain"]))]].append(n)
+    x = {}
+    for i, runs in column.items():
+        step = min(0.15, 0.6 / max(len(runs) - 1, 1))
+        x.update({n: i + (j - (len(runs) - 1) / 2) * step for j, n in enumerate(runs)})
     compared = any(r.get("decision") for r in done)
     kinds = ({"threshold": ("o", "C0", "threshold"), "none": ("x", "C3", "none"),
               "inconclusive": ("s", "0.5", "inconclusive")} if compared else
@@ -406,14 +563,21 @@ def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mappin
     fig, ax = _subplots(figsize=(max(4.8, 1.6 + 1.0 * len(conditions)), 4.0))
     for kind, (marker, colour, text) in kinds.items():
         xs, ys = [], []
-        for r in done:
+        for n, r in enumerate(done):
             mine = r.get("decision") if compared else float(r["delta_bic"]) > 0
             if mine == kind:
-                i = where[(r["subject"], str(r["task"]), float(r["motion_gain"]))]
-                xs.append(i)
+                xs.append(x[n])
                 ys.append(r["delta_abs"])
         if xs:
             ax.scatter(xs, ys, marker=marker, c=colour, label=text, zorder=3)
+    bars = [(x[n], float(r["delta_abs_hdi_low"]), float(r["delta_abs_hdi_high"]))
+            for n, r in enumerate(done)
+            if r.get("delta_abs_hdi_low") not in (None, "")
+            and r.get("delta_abs_hdi_high") not in (None, "")]
+    if bars:  # (centred on the interval: it need not hold the estimate)
+        bx, lo, hi = (np.array(v, dtype=float) for v in zip(*bars))
+        ax.errorbar(bx, (lo + hi) / 2, yerr=(hi - lo) / 2, fmt="none", ecolor="0.35",
+                    elinewidth=1.0, capsize=2.5, zorder=2, label="posterior 90 % HDI")
     ax.set_xticks(range(len(conditions)))
     ax.set_xticklabels([c["label"].replace("K_theta", r"$K_\theta$") for c in conditions],
                        rotation=30 if len(conditions) > 3 else 0, ha="right"
@@ -429,30 +593,37 @@ def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mappin
     return fig
 
 
-def _write_summaries(out: Path, settings: Mapping[str, Any]) -> None:
+def _write_summaries(out: Path, settings: Mapping[str, Any],
+                     current: Mapping[str, str] | None = None) -> None:
     """``summary.csv``, ``conditions.csv`` and (when a task finished) ``summary.png`` of the
-    results in ``out`` made with ``settings`` (:func:`_batch_settings`)."""
+    results in ``out`` made with ``settings`` (:func:`_batch_settings`; ``current``: this
+    call's keys and digests, :func:`_results`); no result: an earlier ``summary.png`` is
+    removed (it showed other results)."""
     from ._files import write_csv_atomic
     from .diagnose.report import _png
 
-    found = _results(out, settings)
+    found = _results(out, settings, current)
     rows = [_summary_row(found[k]) for k in sorted(found)]
     conditions = _condition_rows([found[k] for k in sorted(found) if "fit_threshold" in found[k]])
     write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS, rows)
     write_csv_atomic(out / "conditions.csv", CONDITION_FIELDS, conditions)
     if conditions:
         _png(_plot_summary(rows, conditions), out / "summary.png")
+    else:
+        with suppress(FileNotFoundError):
+            (out / "summary.png").unlink()
 
 
 def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str = "paper",
               noise: str = "white", iterate: bool = False, oversample: int = 1,
               compare: bool = False, nlive: int | None = None, seed: int = 0,
               fit_options: Mapping[str, Any] | None = None,
-              compare_options: Mapping[str, Any] | None = None,
+              compare_options: Mapping[str, Any] | None = None, posterior: bool = False,
+              sample_options: Mapping[str, Any] | None = None,
               scheduler: "str | Client | Cluster | None" = None, workers: int | None = None,
               progress: bool | str = True, connect_timeout: float = 10.0,
               warm_cache: bool = True) -> "CampaignSummary":
-    """Fit (and compare) many recordings, with and without threshold, on dask.distributed.
+    """Fit (compare, sample) many recordings, with and without threshold, on dask.distributed.
 
     Parameters
     ----------
@@ -499,6 +670,27 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         ``{"savage_dickey_samples": False}``, which leaves out the emcee run of its
         Savage-Dickey check, about half its time); only with ``compare``.  Recorded in
         the settings.
+    posterior : bool
+        Also sample each recording's posterior of the model with threshold
+        (:func:`~bayespilot.sample.sample`, emcee until converged: 5 to 10 s for an
+        81.92-s run with the eq4 likelihood on one core, two to three times that with
+        "coloured"), after its fits, with the recording's seed and the model of the
+        fits, started as ``bayespilot sample`` starts it (from sample's own fast fit,
+        not from the batch's fits), so that ``bayespilot sample REC --seed S
+        --oversample M [--likelihood L] [--max-steps N]`` with the seed the result
+        records gives the same chain.  Its summary is in the result
+        (``posterior``) and in ``summary.csv`` (delta_abs's median and 90 % HDI,
+        ``converged``), the draws in ``<key>.nc``.  A sampling that fails is recorded
+        (``posterior_error``, said once at the end) and the fits are kept.  Recorded in
+        the settings (only when True: results made before the option still resume).
+    sample_options : mapping, optional
+        Other keywords of :func:`~bayespilot.sample.sample`, only with ``posterior``:
+        ``likelihood`` ("eq4" or "coloured", default "eq4" as ``bayespilot sample``'s),
+        ``ar``, ``ar_order``, ``max_steps`` (default 20000), ``min_steps`` (default
+        min(1000, max_steps), as ``bayespilot sample --max-steps`` sets it),
+        ``n_walkers``, ``check_every``, ``discard``, ``tau_factor``, ``tau_rtol``, ...;
+        not ``init``, ``noise``, ``backend``, ``seed``, ``progress`` (the batch's own).
+        Recorded in the settings with those defaults filled in.
     scheduler, workers, progress, connect_timeout, warm_cache
         As for :func:`~bayespilot.campaign.run_campaign` (the lines count recordings).
 
@@ -515,8 +707,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         ValueError.
     ValueError
         A bad setting (``noise="ar"`` without ``method="fast"``, ``iterate`` without
-        ``method="paper"``, ``nlive`` or ``compare_options`` without ``compare``, an
-        unknown fit option, ``workers`` not a positive integer or given with
+        ``method="paper"``, ``nlive`` or ``compare_options`` without ``compare``,
+        ``sample_options`` without ``posterior``, an unknown fit or sample option, a bad
+        likelihood or ``max_steps``, ``workers`` not a positive integer or given with
         ``scheduler``, ``connect_timeout`` not a positive number, another ``progress``),
         recordings the fits cannot use (too short, u constant:
         every one named), keys that clash, the same recording (its signals) under two
@@ -529,8 +722,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         ValueError (:class:`bayespilot.diagnose.batch.ResultConflictError`).
     CampaignError
         The cluster cannot be reached or started or is lost during the run (what
-        finished is saved), ``out_dir`` cannot be written in, or a worker lacks
-        bayespilot or has another version of it.
+        finished is saved), ``out_dir`` cannot be written in (a result or posterior
+        file among them), a worker lacks bayespilot or has another version of it, or
+        (``posterior``) arviz cannot be imported here.
     TypeError
         A ``scheduler`` that is not an address (str), a ``distributed.Client`` or a
         ``distributed.deploy.Cluster``.
@@ -539,8 +733,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
     -----
     RuntimeWarning
         Once per kind of warning the tasks issued on the workers (a
-        QuestionableRecordingWarning, an EstimateOnBoundWarning, ...), naming how many
-        recordings and which; each result file lists its own under ``warnings``.
+        QuestionableRecordingWarning, an EstimateOnBoundWarning, a ConvergenceWarning of
+        a chain, ...), naming how many recordings and which; each result file lists its
+        own under ``warnings``.  Once for the posteriors that could not be sampled.
 
     Examples
     --------
@@ -566,7 +761,15 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         raise ValueError(f"connect_timeout must be a positive number of seconds, "
                          f"got {connect_timeout!r}")
     options = _options(method, noise, iterate, oversample, compare, nlive, fit_options,
-                       compare_options)
+                       compare_options, posterior, sample_options)
+    if options.get("posterior"):  # (this process writes the posteriors: said now)
+        from .sample import _arviz
+
+        try:
+            _arviz()
+        except Exception as exc:  # noqa: BLE001 - whatever arviz's import raises
+            raise C.CampaignError(f"posterior=True writes each posterior with arviz, which "
+                                  f"cannot be imported ({type(exc).__name__}: {exc})") from None
     task_seed(seed, [])  # (a bad seed: the ValueError, before any file is read)
     first: dict[str, str] = {}  # a recording named twice (its .csv and its .json) is one
     for p in map(str, paths):
@@ -625,7 +828,31 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
                 "which the diagnosis reads", "which the fit reads")
             raise ResultConflictError(f"{out / (key + '.json')} holds a fit of {key} from "
                                       f"{said}; use another output folder or delete it")
+    for key, (t, old) in done.items():
+        if old.get("subject") != headers[key]["subject"]:
+            # (a subject corrected in the sidecar since: no refit, the fits do not read it,
+            # but the tables group by it; kept, a resume left the run in its old condition)
+            C._write_json_atomic(out / f"{key}.json", {**old, "subject": headers[key]["subject"]})
+    if options.get("posterior"):  # (a result whose posterior file is gone: run again)
+        done = {key: (t, old) for key, (t, old) in done.items()
+                if not old.get("posterior") or (out / f"{key}.nc").is_file()}
     pending = [t for t in tasks if t.key not in done]
+
+    def to_json(key: str, value: Any) -> dict[str, Any]:
+        result, post = value  # (post: the Posterior, or None; _run_fit_task)
+        nc = out / f"{key}.nc"
+        if post is not None:  # (before <key>.json: a result names a file that exists)
+            try:
+                post.to_netcdf(nc)
+            except OSError as exc:
+                raise C.CampaignError(f"{nc}: cannot write the posterior "
+                                      f"({exc.strerror or exc})") from None
+            result = {**result, "posterior": {**result["posterior"], "file": nc.name}}
+        elif options.get("posterior"):  # (failed: an earlier file is not this result's)
+            with suppress(FileNotFoundError):
+                nc.unlink()
+        return C._jsonable({"key": key, **headers[key], **result})
+
     try:
         completed, errors = C.run_keyed(
             [(t.key, _run_fit_task, (recs[t.paths[0]], headers[t.key]["settings"]),
@@ -634,13 +861,13 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
             progress=progress, connect_timeout=connect_timeout,
             warm=(lambda: C._warm_numba_cache({method})) if warm_cache else None,
             desc="recordings", unit="recording",
-            to_json=lambda key, value: C._jsonable({"key": key, **headers[key], **value}),
-            scatter=True)
+            to_json=to_json, scatter=True)
     except BaseException:  # (the run stopped: what finished is saved, and its warnings
         with suppress(Warning):  # said, but a warning made an error must not hide why)
             _say_warned(out, [t.key for t in pending])
         raise
     _say_warned(out, [t.key for t in pending])
-    _write_summaries(out, _batch_settings(next(iter(headers.values()))))
+    _write_summaries(out, _batch_settings(next(iter(headers.values()))),
+                     {t.key: digests[t.paths[0]] for t in tasks})
     return C.CampaignSummary(len(tasks), completed, len(done), len(errors), errors, out,
                              time.perf_counter() - t0, "recordings")

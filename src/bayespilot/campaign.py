@@ -589,7 +589,9 @@ class CampaignSummary:
         return self.failed == 0
 
     def __str__(self) -> str:
-        return (f"{self.total} {self.what}: {self.completed} run, {self.skipped} already done, "
+        one = {"fits": "fit", "recordings": "recording", "diagnoses": "diagnosis"}
+        what = one.get(self.what, self.what) if self.total == 1 else self.what
+        return (f"{self.total} {what}: {self.completed} run, {self.skipped} already done, "
                 f"{self.failed} failed ({self.elapsed:.1f} s) -> {self.out_dir}")
 
     def to_dict(self) -> dict[str, Any]:
