@@ -167,6 +167,13 @@ def test_a_folder_holding_another_settings_result_is_exit_2(done, folder, monkey
     (["--workers", "1", "--scheduler", "tcp://127.0.0.1:9"],
      "give --scheduler (an existing cluster) or --workers (a local one), not both"),
     (["--scheduler", "tcp://host:8786/"], "not a dask scheduler address"),
+    (["--method", "fast", "--max-steps", "50"],
+     "argument --max-steps: it sets the chain of --posterior; give --posterior too, or leave "
+     "--max-steps out"),
+    (["--method", "fast", "--likelihood", "coloured"],
+     "argument --likelihood: it sets the chain of --posterior; give --posterior too, or "
+     "leave --likelihood out"),
+    (["--posterior", "--max-steps", "0"], "argument --max-steps: must be >= 1, got 0"),
 ])
 def test_options_that_do_not_go_together_are_exit_2(folder, tmp_path, monkeypatch, capsys,
                                                      argv, said):
@@ -288,7 +295,8 @@ def test_the_options_reach_the_batch(folder, tmp_path, monkeypatch, capsys):
     paths, got, kwargs = seen[0]
     assert paths == [str(folder / "s1-run1")] and str(got) == str(out)
     assert kwargs == {"method": "paper", "noise": "white", "iterate": True, "oversample": 2,
-                      "compare": True, "nlive": 30, "seed": 4, "scheduler": None,
+                      "compare": True, "nlive": 30, "seed": 4, "posterior": False,
+                      "sample_options": None, "scheduler": None,
                       "workers": 1, "progress": "lines", "connect_timeout": 10.0}
     main(["fit-batch", str(folder), "--out", str(out), "--method", "fast", "--noise", "ar",
           "-q"])
@@ -297,3 +305,54 @@ def test_the_options_reach_the_batch(folder, tmp_path, monkeypatch, capsys):
     assert (kwargs["method"], kwargs["noise"], kwargs["iterate"], kwargs["compare"],
             kwargs["nlive"], kwargs["seed"], kwargs["progress"], kwargs["workers"]) == (
         "fast", "ar", False, False, None, 0, False, None)
+    # --posterior: only the chain's options given (the batch fills in sample's defaults,
+    # those of bayespilot sample, so that a Python call's results resume the command's)
+    for argv, options in ((["--likelihood", "coloured", "--max-steps", "500"],
+                           {"likelihood": "coloured", "max_steps": 500}), ([], {})):
+        main(["fit-batch", str(folder), "--out", str(out), "--posterior", *argv, "-q"])
+        assert (seen[-1][2]["posterior"], seen[-1][2]["sample_options"]) == (True, options)
+
+
+def test_a_posterior_is_the_one_bayespilot_sample_gives_with_the_recorded_seed(
+        folder, tmp_path, monkeypatch, capsys):
+    """--posterior: each recording's chain is `bayespilot sample REC --seed S` with the seed
+    its result records and the same --max-steps (the same summary, number for number, and
+    the same draws in DIR/<key>.nc); summary.csv has delta_abs's median and 90 % HDI."""
+    import arviz
+    import numpy as np
+
+    _run_here(monkeypatch)
+    out = tmp_path / "fits"
+    rec = str(folder / "s2-run1")
+    code = main(["fit-batch", rec, "--out", str(out), "--method", "fast", "--posterior",
+                 "--max-steps", "30", "--workers", "1"])
+    stdout, err = capsys.readouterr()
+    assert code == 0, err
+    lines = stdout.splitlines()
+    assert lines[0].startswith("1 recording(s) to fit with and without threshold (the fast "
+                               "estimator), with the posterior sampled by emcee (eq4 "
+                               "likelihood, at most 30 steps), on 1 local worker(s) -> ")
+    assert lines[-1].endswith("and one <key>.json and <key>.nc (its posterior) per recording")
+    # the chain stopped at 30 steps: said once, as the command's warning line
+    assert "bayespilot: warning: ConvergenceWarning in 1 recording(s) (s2-run1)" in err
+    result = json.loads((out / "s2-run1.json").read_text(encoding="utf-8"))
+    seed = result["settings"]["seed"]
+    assert result["settings"]["sample_options"] == {"likelihood": "eq4", "max_steps": 30,
+                                                    "min_steps": 30}
+    alone = tmp_path / "alone"
+    assert main(["sample", rec, "-o", str(alone) + ".nc", "--json", str(alone) + ".json",
+                 "--seed", str(seed), "--max-steps", "30", "-q"]) == 0
+    capsys.readouterr()
+    summary = json.loads((tmp_path / "alone.json").read_text(encoding="utf-8"))
+    assert result["posterior"]["summary"] == summary
+    assert (result["posterior"]["converged"], result["posterior"]["steps"]) == (False, 30)
+    batch, single = (arviz.from_netcdf(str(f)) for f in (out / "s2-run1.nc",
+                                                          tmp_path / "alone.nc"))
+    for name in summary:
+        np.testing.assert_array_equal(batch.posterior[name].values,
+                                      single.posterior[name].values)
+    (row,) = _rows((out / "summary.csv").read_text(encoding="utf-8"))
+    assert float(row["delta_abs_median"]) == summary["delta_abs"]["median"]
+    assert [float(row["delta_abs_hdi_low"]), float(row["delta_abs_hdi_high"])] == \
+        summary["delta_abs"]["hdi_90"]
+    assert row["converged"] == "False" and row["posterior_error"] == ""

@@ -217,19 +217,75 @@ def _oversample_argument(p: argparse.ArgumentParser) -> None:
 # --- helpers --------------------------------------------------------------------------
 
 
-def _save_figure(fig, path: Path, dpi: int = PLOT_DPI) -> None:
-    """Write a figure (format from ``path``'s suffix) and close it; a failed write is a
-    runtime failure (exit 1).  ``dpi`` sets a PNG's resolution; in a PDF or SVG only the
-    rasterized point clouds (the pair plot's) use it.  A PDF's fonts are embedded as
-    TrueType and an SVG's text stays text (``_figstyle.VECTOR_TEXT``)."""
+def _save_figure(fig, path: Path, dpi: int = PLOT_DPI,
+                 formats: Sequence[str] = ()) -> list[Path]:
+    """Write a figure (format from ``path``'s suffix; with ``formats``, once in each of them,
+    ``path`` with its suffix replaced: ``--format`` given twice) and close it; the files
+    written.  A failed write is a runtime failure (exit 1).  ``dpi`` sets a PNG's
+    resolution; in a PDF or SVG only the rasterized point clouds (the pair plot's) use it.
+    A PDF's fonts are embedded as TrueType and an SVG's text stays text
+    (``_figstyle.VECTOR_TEXT``)."""
+    paths = [Path(path).with_suffix(f".{fmt}") for fmt in formats] or [Path(path)]
     try:
-        save_figure(fig, path, dpi)
-    except OSError as exc:
-        raise CommandFailed(f"{path}: cannot write the plot ({_os_reason(exc)})") from None
+        for one in paths:
+            try:
+                save_figure(fig, one, dpi)
+            except OSError as exc:
+                raise CommandFailed(f"{one}: cannot write the plot "
+                                    f"({_os_reason(exc)})") from None
     finally:
         import matplotlib.pyplot as plt
 
         plt.close(fig)
+    return paths
+
+
+@contextlib.contextmanager
+def _untitled_notes():
+    """Within: the ConvergenceWarnings of figures drawn without their titles (a posterior
+    figure's title says "not converged", :func:`bayespilot.plots._warn_untitled`) kept in
+    the list yielded, not shown: the command says it once, in its own words."""
+    from .sample import ConvergenceWarning
+
+    kept: list = []
+    with _warnings_of(ConvergenceWarning, kept.append):
+        yield kept
+
+
+def _formats(args: argparse.Namespace) -> tuple[str, ...]:
+    """The formats ``--format`` asks for (:func:`_figure_arguments`), each once, in the
+    order given; png when none is given."""
+    return tuple(dict.fromkeys(args.format or ("png",)))
+
+
+def _figure_arguments(p: argparse.ArgumentParser, *, format_help: str = "",
+                      dpi_help: str = "") -> None:
+    """--format (repeatable) and --dpi of a command that writes figures: 'plot', 'replicate',
+    'diagnose-batch' and 'demo' (:func:`_formats`, :func:`_save_figure`); ``format_help``,
+    ``dpi_help``: the command's own words after the options' help."""
+    p.add_argument("--format", action="append", choices=PLOT_FORMATS, default=None,
+                   help="file format of the figures: png (default), or pdf and svg, which "
+                        "are vector (fonts embedded as TrueType, SVG text kept as text), for "
+                        "a paper; give it twice for two formats (--format pdf --format png)"
+                        + format_help)
+    p.add_argument("--dpi", type=_whole_number(20), default=PLOT_DPI, metavar="N",
+                   help=f"resolution of a PNG, dots per inch (default {PLOT_DPI}, for the "
+                        f"screen; 300 or more for print){dpi_help}")
+
+
+def _no_title_argument(p: argparse.ArgumentParser, what: str,
+                       note: str = "; a chain that has not converged, which a title said, "
+                                   "is said on stderr instead") -> None:
+    """--no-title of a command that writes figures (``what``: which; ``note``: where what
+    the titles said goes)."""
+    p.add_argument("--no-title", action="store_true",
+                   help=f"draw {what} without their titles, for a paper whose captions say "
+                        f"what they said{note}")
+
+
+def _title(args: argparse.Namespace) -> bool:
+    """The ``title=`` of the plot functions: False with --no-title."""
+    return not args.no_title
 
 
 def _cluster_where(args: argparse.Namespace) -> str:
@@ -717,14 +773,20 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     given = {k: getattr(args, k) for k in _DEMO_ONLY if getattr(args, k) is not None}
     if args.quick and given:
         raise UsageError("argument --quick: the quick check is fixed (one 81.92-s run of task FD, "
-                         "K_theta = 1, F_n = 0.2) and takes only --out and --seed; "
-                         f"drop {', '.join(_DEMO_ONLY[k] for k in given)} or --quick")
+                         "K_theta = 1, F_n = 0.2) and takes only --out, --seed, --format, "
+                         f"--dpi and --no-title; drop {', '.join(_DEMO_ONLY[k] for k in given)} "
+                         "or --quick")
+    formats = _formats(args)
     if not args.quick:
         from .example import run_example
 
+        # (the figures' options too only when given: run_example's defaults are the same)
+        figure = {k: v for k, v, given_it in (("formats", formats, bool(args.format)),
+                                              ("dpi", args.dpi, args.dpi != PLOT_DPI),
+                                              ("title", False, args.no_title)) if given_it}
         try:  # (warnings one line each, as they come: the demo runs for minutes)
             with _warnings_of(RuntimeWarning, _warning_lines_once()):
-                report = run_example(args.out, seed=args.seed, **given,
+                report = run_example(args.out, seed=args.seed, **given, **figure,
                                      progress=_progress(args), say=lambda text: _say(args, text))
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
@@ -752,11 +814,11 @@ def _cmd_demo(args: argparse.Namespace) -> int:
           f"{with_thr:.2f}")
     print(f"-ln L at Table 3 parameters, without threshold (delta_abs = 0):      {without_thr:.2f}")
     print(f"VAF with threshold: {vaf:.2f} %   (without: {vaf0:.2f} %)")
-    png = out / "traces.png"
-    _save_figure(plot_traces(rec, canal=sim.channels["vestibular"]["pre"],
-                             delta_abs=truth["delta_abs"]), png)
-    _say(args, f"wrote {png} (e, u, theta_ddot_m and the canal output i with the band "
-               f"+-delta_abs)")
+    written = _save_figure(plot_traces(rec, canal=sim.channels["vestibular"]["pre"],
+                                       delta_abs=truth["delta_abs"], title=_title(args)),
+                           out / "traces", args.dpi, formats)
+    _say(args, f"wrote {' and '.join(str(p) for p in written)} (e, u, theta_ddot_m and the "
+               f"canal output i with the band +-delta_abs)")
     return EXIT_OK
 
 
@@ -879,10 +941,12 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
     if any(r["threshold"] for r in results):
         from .plots import plot_threshold_histograms
 
-        _save_figure(plot_threshold_histograms(results, fractions=fractions,
-                                               method=args.method, upper=args.hist_upper),
-                     png)
-        _say(args, f"wrote {csv_path}, {md_path} and {png}")
+        figures = _save_figure(plot_threshold_histograms(results, fractions=fractions,
+                                                         method=args.method,
+                                                         upper=args.hist_upper,
+                                                         title=_title(args)),
+                               png, args.dpi, _formats(args))
+        _say(args, f"wrote {csv_path}, {md_path} and {' and '.join(map(str, figures))}")
     else:
         _say(args, f"wrote {csv_path} and {md_path} (no fit with threshold finished: no figure)")
     if summary.failed:
@@ -1237,7 +1301,9 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     from . import presets
     from .plots import _posterior_model, plot_chains, plot_marginal, plot_pair
 
-    figures = [Path(args.output) / f"{name}.{args.format}" for name in ("pair", "trace")]
+    formats = _formats(args)
+    figures = [Path(args.output) / f"{name}.{fmt}" for name in ("pair", "trace")
+               for fmt in formats]
     if Path(args.posterior).name.startswith("marginal_"):  # (marginal_<parameter>.<format>)
         figures.append(Path(args.output) / Path(args.posterior).name)
     _refuse_overwriting([("-o/--output", f) for f in figures],
@@ -1256,19 +1322,24 @@ def _cmd_plot(args: argparse.Namespace) -> int:
     written = []
     # delta_abs (or the first parameter), then each parameter an extension adds
     added = [n for n in names if n not in presets.PARAMETER_NAMES and not n.startswith("pacf_")]
-    for name in dict.fromkeys([main, *added]):
-        path = out / f"marginal_{name}.{args.format}"
-        _save_figure(plot_marginal(post, name, truth=truth.get(name), model=model), path,
-                     args.dpi)
-        written.append(path)
-    pair = [n for n in ("K_m", "tau_m", "delta_abs") if n in names]
-    if pair:
-        path = out / f"pair.{args.format}"
-        _save_figure(plot_pair(post, pair, truth=truth, model=model), path, args.dpi)
-        written.append(path)
-    path = out / f"trace.{args.format}"
-    _save_figure(plot_chains(post, model=model), path, args.dpi)
-    written.append(path)
+    title = _title(args)
+    # (without titles each figure's ConvergenceWarning: said once, below, in the command's words)
+    with _untitled_notes() as notes:
+        for name in dict.fromkeys([main, *added]):
+            written += _save_figure(plot_marginal(post, name, truth=truth.get(name),
+                                                  model=model, title=title),
+                                    out / f"marginal_{name}", args.dpi, formats)
+        pair = [n for n in ("K_m", "tau_m", "delta_abs") if n in names]
+        if pair:
+            written += _save_figure(plot_pair(post, pair, truth=truth, model=model,
+                                              title=title), out / "pair", args.dpi, formats)
+        written += _save_figure(plot_chains(post, model=model, title=title), out / "trace",
+                                args.dpi, formats)
+    if notes:
+        steps = post.settings.get("n_steps")
+        print(f"{PROG}: warning: {args.posterior}: the chain has not converged"
+              f"{f' ({steps} steps)' if steps else ''}; the figures' titles, which say so, are "
+              f"left out (--no-title): say it in their captions", file=sys.stderr)
     note = (f" (true {main} = {truth[main]:g} marked)" if main in truth else "")
     _say(args, "wrote " + ", ".join(str(p) for p in written) + note)
     return EXIT_OK
@@ -1303,6 +1374,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     if args.report_format and not args.report:
         raise UsageError("argument --report-format: needs --report DIR (the folder the "
                          "figures are written to)")
+    if args.no_title and not args.report:
+        raise UsageError("argument --no-title: needs --report DIR (the figures it leaves the "
+                         "titles out of)")
     if args.posterior is not None:
         want = ".nc" if len(args.recording) == 1 else ".json"
         if Path(args.posterior).suffix != want:
@@ -1397,7 +1471,7 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
         _say(args, f"wrote {args.json}")
     if args.report:
         try:
-            paths = res.report(args.report, formats=args.report_format)
+            paths = res.report(args.report, formats=args.report_format, title=_title(args))
         except OSError as exc:
             raise CommandFailed(f"{args.report}: cannot write the report "
                                 f"({_os_reason(exc)})") from None
@@ -1455,12 +1529,14 @@ def _batch_keys(paths: Sequence[str], *, pool: bool) -> list[str] | None:
 
 
 def _batch_files(paths: Sequence[str], out: str | Path, *, pool: bool,
-                 reports: bool, keys: Sequence[str] | None = None) -> list[Path]:
+                 reports: bool, keys: Sequence[str] | None = None,
+                 formats: Sequence[str] = ("png",)) -> list[Path]:
     """The files ``diagnose_batch(paths, out, pool=pool, reports=reports)`` may write (those of
     ``fit_batch(paths, out)`` with ``pool`` and ``reports`` False, but for its
     ``conditions.csv``).
 
-    ``summary.csv`` and ``summary.png``, and for each diagnosis ``<key>.json`` (or
+    ``summary.csv`` and ``summary.<format>`` of each of ``formats`` (``summary.png``), and
+    for each diagnosis ``<key>.json`` (or
     ``<key>.error.json``) and, with ``reports``, its report in ``<key>/``.  The keys are
     the batch's own (``plan_batch`` on the recordings, a recording named twice counted
     once, as the batch does): guessed from the recordings' names, ``a/run out/run --out
@@ -1479,13 +1555,15 @@ def _batch_files(paths: Sequence[str], out: str | Path, *, pool: bool,
         As ``diagnose_batch`` takes them.
     keys : sequence of str, optional
         The batch's keys, if :func:`_batch_keys` has given them already (None: taken here).
+    formats : sequence of str, optional
+        The formats of the summary's figure (diagnose-batch's --format).
 
     Returns
     -------
     list of Path
     """
     out = Path(out)
-    files = [out / "summary.csv", out / "summary.png"]
+    files = [out / "summary.csv", *(out / f"summary.{fmt}" for fmt in formats)]
     if keys is None:
         keys = _batch_keys(paths, pool=pool) or ()
     for key in keys:
@@ -1532,8 +1610,10 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     paths = _recordings_in(args.recording)
     read = [f for p in paths for f in _recording_files(p)]
     keys = _batch_keys(paths, pool=args.pool) or []  # (none: the batch refuses the input)
+    formats = _formats(args)
     _refuse_overwriting([("--out", f) for f in _batch_files(paths, args.out, pool=args.pool,
-                                                            reports=args.reports, keys=keys)],
+                                                            reports=args.reports, keys=keys,
+                                                            formats=formats)],
                         [*read, *_code_files(args.extension, "--extension")])
     # (said before the recordings are read: a refusal of one of them may follow, and nothing
     # has run then)
@@ -1555,7 +1635,8 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
                                  alpha=args.alpha, n_bootstrap=args.bootstrap,
                                  n_calibrate=args.calibrate,
                                  noise_passes=args.noise_passes, reports=args.reports,
-                                 posterior=args.posterior,
+                                 posterior=args.posterior, formats=formats, dpi=args.dpi,
+                                 title=_title(args),
                                  scheduler=args.scheduler, workers=args.workers,
                                  progress=_cluster_progress(args),
                                  connect_timeout=args.connect_timeout)
@@ -1575,9 +1656,10 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
         reports = " with its report in <key>/"
     scope = (f" (with {earlier} diagnos{'is' if earlier == 1 else 'es'} an earlier run made "
              f"in {args.out} with these settings)" if earlier > 0 else "")
-    png = Path(args.out) / "summary.png"  # (written when any diagnosis finished)
+    # (the figure is written when any diagnosis finished)
+    figures = [f for f in (Path(args.out) / f"summary.{fmt}" for fmt in formats) if f.is_file()]
     _say(args, f"wrote {Path(args.out) / 'summary.csv'}{scope}"
-               f"{f', {png}' if png.is_file() else ''} and one <key>.json per "
+               f"{''.join(f', {f}' for f in figures)} and one <key>.json per "
                f"diagnosis{reports}")
     if summary.failed:
         raise CommandFailed(f"{summary.failed} of {summary.total} diagnoses failed (messages in "
@@ -1587,12 +1669,21 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
 
 def _cmd_fit_batch(args: argparse.Namespace) -> int:
     from .batch import fit_batch
-    from .diagnose.batch import _the_recording
+    from .diagnose.batch import SummaryScopeWarning, _the_recording
 
     _fit_method_rules(args)
     if args.nlive is not None and not args.compare:
         raise UsageError("argument --nlive: it sets the nested sampling of --compare; give "
                          "--compare too, or leave --nlive out")
+    for flag, value in (("--likelihood", args.likelihood), ("--max-steps", args.max_steps)):
+        if value is not None and not args.posterior:
+            raise UsageError(f"argument {flag}: it sets the chain of --posterior; give "
+                             f"--posterior too, or leave {flag} out")
+    # (only those given: the batch fills in sample()'s defaults, bayespilot sample's, so that
+    # a Python call's results resume the command's)
+    sample_options = ({k: v for k, v in (("likelihood", args.likelihood),
+                                         ("max_steps", args.max_steps)) if v is not None}
+                      if args.posterior else None)
     _cluster_choice(args)
     paths = _recordings_in(args.recording)
     out = Path(args.out)
@@ -1604,16 +1695,23 @@ def _cmd_fit_batch(args: argparse.Namespace) -> int:
     how = (f"the paper's three-step procedure{', iterated' if args.iterate else ''}"
            if args.method == "paper" else
            f"the fast estimator{', prediction error' if args.noise == 'ar' else ''}")
+    if args.posterior:
+        _import_arviz()  # (the posteriors are written here: said before anything runs)
+    extra = [*(["compared by nested sampling"] if args.compare else []),
+             *([f"with the posterior sampled by emcee ({args.likelihood or 'eq4'} likelihood, "
+                f"at most {args.max_steps or 20000} steps)"] if args.posterior else [])]
     _say(args, f"{len({_the_recording(p) for p in paths})} recording(s) to fit with and without "
-               f"threshold ({how}){', compared by nested sampling,' if args.compare else ''} "
+               f"threshold ({how}){''.join(', ' + e for e in extra)}{',' if extra else ''} "
                f"on {_cluster_where(args)} -> {out}; each is read and checked before anything "
                f"runs")
     # (the fits' warnings, said once per kind at the end from their results, and the
     # cluster's: the command's lines; the recordings' as diagnose-batch says them)
-    with _batch_errors(), _questionable_said(), _warnings_of(RuntimeWarning, _warning_line):
+    with _batch_errors(), _questionable_said(), \
+            _warnings_of((RuntimeWarning, SummaryScopeWarning), _warning_line):
         summary = fit_batch(paths, out, method=args.method, noise=args.noise,
                             iterate=args.iterate, oversample=args.oversample,
                             compare=args.compare, nlive=args.nlive, seed=args.seed,
+                            posterior=args.posterior, sample_options=sample_options,
                             scheduler=args.scheduler, workers=args.workers,
                             progress=_cluster_progress(args),
                             connect_timeout=args.connect_timeout)
@@ -1631,9 +1729,11 @@ def _cmd_fit_batch(args: argparse.Namespace) -> int:
     scope = (f" (with {earlier} recording{'' if earlier == 1 else 's'} an earlier run fitted "
              f"in {out} with these settings)" if earlier > 0 else "")
     png = out / "summary.png"  # (written when any fit finished)
+    posteriors = " and <key>.nc (its posterior)" if args.posterior else ""
     _say(args, f"wrote {out / 'conditions.csv'} (one row per subject, task and K_theta), "
                f"{out / 'summary.csv'} (one row per recording){scope}"
-               f"{f', {png}' if png.is_file() else ''} and one <key>.json per recording")
+               f"{f', {png}' if png.is_file() else ''} and one <key>.json{posteriors} per "
+               f"recording")
     if summary.failed:
         raise CommandFailed(f"{summary.failed} of {summary.total} recordings' fits failed "
                             f"(messages in {out}/<key>.error.json); run the same command "
@@ -1993,14 +2093,20 @@ also compiles the numerical kernels.
 --quick instead simulates one run (FD, K_theta = 1, F_n = 0.2) to
 DIR/recording.csv + .json, prints -ln L at the paper's parameters with and
 without threshold and the VAF, and plots the traces to DIR/traces.png, in
-seconds. This check is fixed: it takes --out and --seed only, and --task,
---motion-gains, --duration, --max-steps, --nlive or --likelihood with it is a
-usage error.
+seconds. This check is fixed: it takes --out, --seed and the figures' options
+only, and --task, --motion-gains, --duration, --max-steps, --nlive or
+--likelihood with it is a usage error.
+
+The figures are PNGs unless --format pdf or svg (vector, for a paper; --format
+twice: both; report.md then shows the PNGs if written, else the SVGs, else links
+the PDFs); --no-title draws them without their titles (the run, its draws and
+likelihood, "not converged": the last is said on stderr).
 
 Examples:
   bayespilot demo
   bayespilot demo --out /tmp/demo --seed 7 --motion-gains 0.25,0.5,0.75,1
   bayespilot demo --quick
+  bayespilot demo --quick --format pdf --no-title
 """
 
 
@@ -2019,8 +2125,10 @@ as soon as it finishes. Running the same command again skips the fits already
 in DIR, so an interrupted campaign resumes where it stopped; a fit that failed
 is in DIR/<key>.error.json and is retried. At the end the command writes
 DIR/summary.csv and DIR/summary.md (mu, sigma and N50 of delta_abs per cell
-beside the paper's, with a binomial check) and DIR/delta_abs_histograms.png.
-The full study is 8000 fits (4000 with threshold, 4000 without).
+beside the paper's, with a binomial check) and DIR/delta_abs_histograms.png
+(--format pdf or svg: .pdf or .svg, vector, for a paper; --format twice: both;
+--no-title: without the figure's title, its key "differs from the paper" then
+in the legend). The full study is 8000 fits (4000 with threshold, 4000 without).
 
 Examples:
   bayespilot replicate --realizations 100 --out replication
@@ -2028,6 +2136,7 @@ Examples:
       --remnant-fractions 0,0.2 --out quick --workers 2
   bayespilot replicate --realizations 100 --out replication --scheduler tcp://10.0.0.5:8786
   bayespilot replicate --realizations 8 --fits threshold --out iterated --fit-option iterate=true
+  bayespilot replicate --realizations 100 --out replication --format pdf --no-title
 """
 
 SAMPLE_EPILOG = """\
@@ -2089,12 +2198,14 @@ gets marginal_NAME.png for each parameter the extension adds, and its axes
 carry the extension's units. With --format pdf or svg the same names end in
 .pdf or .svg (vector figures for a paper, fonts embedded as TrueType, SVG
 text kept as text: --dpi then only sets the resolution of the pair plot's
-point clouds).
+point clouds); --format given twice writes both. --no-title leaves out the
+figures' titles (the draws, the likelihood, "not converged"), for a paper
+whose captions say it; a chain that has not converged is then said on stderr.
 
 Examples:
   bayespilot plot out/run-post.nc -o out/run-plots
-  bayespilot plot out/run-post.nc -o out/run-plots --format pdf
-  bayespilot plot out/run-post.nc -o out/run-plots --format svg --dpi 300
+  bayespilot plot out/run-post.nc -o out/run-plots --format pdf --no-title
+  bayespilot plot out/run-post.nc -o out/run-plots --format svg --format png --dpi 300
 """
 
 DIAGNOSE_BATCH_EPILOG = """\
@@ -2120,7 +2231,12 @@ in DIR (a warning names any made with other settings, left out): the
 decision (physics, mismatch), the chosen extension's p_value,
 delta_neg_log_lik and params, the candidate with the smallest p-value, or
 the error; DIR/summary.png draws every candidate's p-value in every
-diagnosis. --extension FILE.py:NAME adds a lab's own catalogue entries, sent
+diagnosis, one named row each (past about 55 diagnoses the figure grows
+beyond a page, up to 60 in). For a paper: --format pdf or svg writes
+DIR/summary.pdf or .svg instead (twice: both) and each report's figures in
+that format beside their PNGs, which the report's page embeds; --no-title
+draws the summary and the reports' figures without their titles.
+--extension FILE.py:NAME adds a lab's own catalogue entries, sent
 to the workers whole (one from package.module:NAME must be importable on
 them). About 21 s per recording of 81.92 s on one core (with --bootstrap
 39), see docs/performance.md.
@@ -2128,6 +2244,7 @@ them). About 21 s per recording of 81.92 s on one core (with --bootstrap
 Examples:
   bayespilot diagnose-batch recordings/ --out diagnoses
   bayespilot diagnose-batch recordings/ --out pooled --pool --reports
+  bayespilot diagnose-batch recordings/ --out paper --reports --format pdf --no-title
   bayespilot diagnose-batch recordings/ --out pooled-post --pool --posterior
   bayespilot diagnose-batch recordings/ --out diagnoses --scheduler tcp://10.0.0.5:8786
 """
@@ -2161,10 +2278,23 @@ DIR/summary.png draws every run's delta_abs per condition. One fit of an
 81.92-s run takes about 2 s (--method fast) or 7 s (--method paper), two
 per recording; --compare adds minutes per recording.
 
+--posterior also samples each recording's posterior after its fits, as
+'bayespilot sample REC --seed S' samples it (the same --likelihood and
+--max-steps, with their defaults, and --oversample), S the seed its result
+records, so that command repeats the chain: 5 to 10 s for an 81.92-s run
+(eq4), two to three times that with --likelihood coloured. DIR/<key>.nc holds the draws
+(netCDF, for 'bayespilot plot' or arviz), <key>.json the summary that
+'bayespilot sample --json' writes under 'posterior', and summary.csv
+delta_abs's posterior median and 90 % HDI (delta_abs_median,
+delta_abs_hdi_low, delta_abs_hdi_high) and whether the chain converged;
+summary.png draws the interval as an error bar. A sampling that fails is
+said and recorded (posterior_error) and the fits are kept.
+
 Examples:
   bayespilot fit-batch recordings/ --out fits
   bayespilot fit-batch recordings/ --out fits-pem --method fast --noise ar
   bayespilot fit-batch recordings/ --out compared --method fast --compare --nlive 200
+  bayespilot fit-batch recordings/ --out posteriors --method fast --posterior
   bayespilot fit-batch recordings/ --out fits --scheduler tcp://10.0.0.5:8786
 """
 
@@ -2200,6 +2330,10 @@ intervals to the summary and JSON and posterior.png to the report.
 top-ranked candidate) against the base model by nested sampling: ln BF with
 priors uniform on the bounds, three runs per model, several minutes at
 N = 8192; beside the decision, which stays the likelihood-ratio test's.
+For a paper, --report-format pdf (or svg) also writes each figure as a vector
+file beside its PNG, and --no-title draws the report's figures without their
+titles (a panel's note, such as a posterior's draws and "not converged", then
+in its legend).
 
 Several recordings (runs of one condition) are diagnosed together: each run
 keeps its own pilot parameters, the extension's parameters are shared, and
@@ -2218,6 +2352,7 @@ Examples:
   bayespilot diagnose out/run --extension mylab_entries.py:VISUAL_LAG
   bayespilot diagnose out/run --report out/run-diagnosis --posterior out/run-ext.nc
   bayespilot diagnose out/run1 out/run2 out/run3 out/run4 --report out/pooled
+  bayespilot diagnose out/run --report out/paper --report-format pdf --no-title
 """
 
 def _common(parser: argparse.ArgumentParser, *, sub: bool) -> None:
@@ -2322,8 +2457,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true",
                    help="instead, the fixed seconds-long check: one simulated run (FD, "
                         "K_theta = 1, F_n = 0.2), -ln L at the paper's parameters and a plot; "
-                        "takes only --out and --seed (--task, --motion-gains, --duration, "
-                        "--max-steps, --nlive and --likelihood are refused with it)")
+                        "takes only --out, --seed, --format, --dpi and --no-title (--task, "
+                        "--motion-gains, --duration, --max-steps, --nlive and --likelihood are "
+                        "refused with it)")
     # defaults None: the full demo's (run_example's) apply, and one given with --quick is seen
     p.add_argument("--task", type=_task_name, default=None, help="FD or FT (default FD)")
     p.add_argument("--motion-gains", type=_csv_of(_positive, "numbers > 0"), default=None,
@@ -2337,6 +2473,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--likelihood", choices=("coloured", "eq4"), default=None,
                    help="'coloured': the prediction-error likelihood (default); 'eq4': the "
                         "paper's Eq. 4, for the fits, posteriors and comparisons")
+    _figure_arguments(p, dpi_help="; pdf and svg use it only for the pair plot's rasterized "
+                                  "point clouds")
+    _no_title_argument(p, "the figures")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_demo)
 
@@ -2387,6 +2526,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "the Table 1 bound and the axis of the paper's Figs. 14/15); 'auto': "
                         "just above nearly all estimates, to show the shape of tight "
                         "distributions (fits beyond the end are counted in the last bin)")
+    _figure_arguments(p)
+    _no_title_argument(p, "the histograms", note=" (its key, 'differs from the paper', "
+                                                 "then in the legend)")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_replicate)
 
@@ -2434,11 +2576,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("posterior", metavar="POST.nc", help="netCDF file from 'bayespilot sample'")
     p.add_argument("-o", "--output", type=_output_path, required=True, metavar="DIR",
                    help="folder for the figures (created if missing)")
-    p.add_argument("--format", choices=PLOT_FORMATS, default="png",
-                   help="file format of the figures (default png; pdf and svg are vector)")
-    p.add_argument("--dpi", type=_whole_number(20), default=PLOT_DPI, metavar="N",
-                   help=f"resolution of a PNG, dots per inch (default {PLOT_DPI}); pdf and svg "
-                        f"use it only for the pair plot's rasterized point clouds")
+    _figure_arguments(p, dpi_help="; pdf and svg use it only for the pair plot's rasterized "
+                                  "point clouds")
+    _no_title_argument(p, "the figures")
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_plot)
 
@@ -2457,6 +2597,11 @@ def build_parser() -> argparse.ArgumentParser:
                    metavar="{pdf,svg}",
                    help="with --report, also write each figure in this vector format beside "
                         "its PNG, for a paper (fonts as TrueType; may be given twice)")
+    p.add_argument("--no-title", action="store_true",
+                   help="with --report, draw its figures without their titles, for a paper "
+                        "whose captions say what they said (a panel's note, such as a "
+                        "posterior's 'not converged', moves into its legend; the page's "
+                        "headings and captions stay)")
     _diagnose_arguments(p)
     p.add_argument("--posterior", type=_output_path, metavar="POST.nc",
                    help="one recording: also sample the posterior of the chosen extended model "
@@ -2490,6 +2635,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where an extension is chosen, also its posterior (one run: emcee, "
                         "minutes; pooled: the shared parameters on a grid, seconds), in each "
                         "<key>.json and summary.csv")
+    _figure_arguments(p, format_help="; with --reports also each report's figures in it, "
+                                     "beside the PNGs its page embeds",
+                      dpi_help=" (the summary's figure; a report's PNGs, which its page "
+                               "embeds, stay at the default)")
+    _no_title_argument(p, "the summary's figure and the reports' figures",
+                       note=" (the summary's key, its dot, box and grey, then belongs in "
+                            "the caption)")
     _diagnose_arguments(p, seed_help=_batch_seed_help(
         "each diagnosis runs with its own seed drawn from S and its recordings' content (not "
         "from their paths, order or the other recordings; run j of a pooled one uses its "
@@ -2518,6 +2670,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--nlive", type=_whole_number(20), default=None, metavar="N",
                    help="with --compare: live points of each nested-sampling run (default "
                         "200, compare's)")
+    p.add_argument("--posterior", action="store_true",
+                   help="also sample each recording's posterior (emcee, as 'bayespilot sample' "
+                        "samples one, with the recording's seed: seconds to a minute each), "
+                        "written as DIR/<key>.nc, its summary in <key>.json and delta_abs's "
+                        "median and 90%% HDI in summary.csv")
+    p.add_argument("--likelihood", choices=("eq4", "coloured"), default=None,
+                   help="with --posterior: 'eq4': white output error (the paper's Eq. 4, "
+                        "default); 'coloured': AR output error (a prediction-error "
+                        "likelihood, its AR model profiled), as 'bayespilot sample' takes it")
+    p.add_argument("--max-steps", type=_count, default=None, metavar="N",
+                   help="with --posterior: stop each chain after N steps even if not "
+                        "converged (default 20000, as 'bayespilot sample')")
     _seed_argument(p, _batch_seed_help(
         "each recording's fits run with its own seed drawn from S and its content (not from "
         "its path, order or the other recordings)", "fit"))

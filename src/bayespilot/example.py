@@ -24,6 +24,7 @@ Everything is seeded: the same seed gives the same numbers, figures and files
 
 from __future__ import annotations
 
+import contextlib
 import math
 import time
 import warnings
@@ -38,19 +39,31 @@ from ._files import dumps, write_text_atomic
 __all__ = ["run_example"]
 
 
-def _save(fig, path: Path) -> None:
+def _save(fig, path: Path, *, formats: Sequence[str] = ("png",), dpi: int | None = None) -> None:
+    """``fig`` written as ``path`` with each of ``formats``' suffixes (at ``dpi``, default
+    the resolution of every figure written), then closed."""
     import matplotlib.pyplot as plt
 
-    from ._figstyle import save_figure  # (at the resolution of every figure written)
+    from ._figstyle import PLOT_DPI, save_figure
 
-    save_figure(fig, path)
-    plt.close(fig)
+    try:
+        for fmt in formats:
+            save_figure(fig, path.with_suffix(f".{fmt}"), PLOT_DPI if dpi is None else dpi)
+    finally:
+        plt.close(fig)
+
+
+def _shown(formats: Sequence[str]) -> str:
+    """The format report.md shows its figures in: PNG if written, else SVG (both shown by a
+    Markdown viewer), else the first (a PDF: a link)."""
+    return next((f for f in ("png", "svg") if f in formats), formats[0])
 
 
 def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
                 motion_gains: Sequence[float] = (0.5, 1.0), task: str = "FD",
                 remnant_fraction: float = 0.15, duration: float | None = None,
                 max_steps: int = 6000, nlive: int = 150, likelihood: str = "coloured",
+                formats: Sequence[str] = ("png",), dpi: int | None = None, title: bool = True,
                 progress: bool = True, say: Callable[[str], None] = print) -> Path:
     """Run the worked example and write its report.
 
@@ -78,6 +91,19 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         The likelihood of the fits, posteriors and comparisons: the
         prediction-error one (an AR model of the output error, estimated once
         per run and shared by all three; default) or the paper's Eq. 4.
+    formats : sequence of str
+        The formats of the figures, ``figures/<name>.<format>`` each: ``"png"``
+        (default), ``"pdf"``, ``"svg"`` (vector, for a paper); ``report.md``
+        shows the PNGs if written, else the SVGs, else links the PDFs.
+    dpi : int, optional
+        Resolution of a PNG (default
+        :data:`~bayespilot._figstyle.PLOT_DPI`); a PDF or SVG uses it only
+        for the pair plot's rasterized point clouds.
+    title : bool
+        True (default): each figure with its title (the run, its draws,
+        likelihood and convergence); False: none, for a paper whose captions
+        say it (a chain that has not converged is still said, by the warning
+        below).
     progress : bool
         Progress bars of the sampler.
     say : callable
@@ -94,6 +120,15 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         Once, at the end, naming the runs whose emcee chain reached
         ``max_steps`` before the autocorrelation criterion held (their
         posteriors are rough estimates; raise ``max_steps``).
+
+    Raises
+    ------
+    ValueError
+        A ``task``, ``likelihood``, ``motion_gains`` or ``seed`` out of range,
+        or ``formats`` empty or naming one not in ``("png", "pdf", "svg")``;
+        nothing is written.
+    TypeError
+        ``title`` is not True or False; nothing is written.
 
     Examples
     --------
@@ -119,6 +154,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     from .likelihood import coloured_discard
     from .sample import ConvergenceWarning
 
+    from ._figstyle import PLOT_FORMATS
     from ._seeds import resolve_seed
 
     seed = resolve_seed(seed)  # (checked before a folder is made; None: a fresh one)
@@ -126,6 +162,17 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         raise ValueError(f"task must be 'FD' or 'FT', got {task!r}")
     if likelihood not in ("coloured", "eq4"):
         raise ValueError(f"likelihood must be 'coloured' or 'eq4', got {likelihood!r}")
+    formats = tuple(dict.fromkeys([formats] if isinstance(formats, str) else formats))
+    if not formats or any(f not in PLOT_FORMATS for f in formats):
+        raise ValueError(f"formats must be one or more of {', '.join(PLOT_FORMATS)}, got "
+                         f"{formats!r}")
+    if not isinstance(title, (bool, np.bool_)):
+        raise TypeError(f"title must be True or False, got {title!r}")
+    title = bool(title)
+    # the figures' formats and resolution, for _save only where they are not its defaults
+    # (then _save(fig, path), as before they were options)
+    figure = {k: v for k, v, default in (("formats", formats, ("png",)), ("dpi", dpi, None))
+              if v != default}
     gains = [float(k) for k in motion_gains]
     if not gains or any(not (k > 0) for k in gains):
         raise ValueError(f"motion_gains must be positive numbers, got {motion_gains!r}")
@@ -148,7 +195,8 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         rec = read_recording(csv)
         if i == 0:
             _save(plot_traces(rec, canal=sim.channels["vestibular"]["pre"],
-                              delta_abs=truth["delta_abs"]), dirs["figures"] / "traces.png")
+                              delta_abs=truth["delta_abs"], title=title),
+                  dirs["figures"] / "traces.png", **figure)
         say(f"[{i + 1}/{len(gains)}] {name}: fitting with and without threshold ...")
         opts: dict = {}
         if likelihood == "coloured":
@@ -195,18 +243,24 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
                      "nll": fit.neg_log_lik, "nll0": fit0.neg_log_lik, "vaf": fit.vaf,
                      "log_bf": cmp_.log_bayes_factor, "log_bf_err": cmp_.log_bayes_factor_err,
                      "decision": cmp_.decision, "converged": post.converged})
-        fig = plot_marginal(post, "delta_abs", truth=true_d)
-        title = (f"{task}, $K_\\theta$ = {kt:g}: posterior of {symbol('delta_abs')}, "
-                 f"{_run_note(post, d.size)}")  # (draws, likelihood, convergence)
-        fig.axes[0].set_title(_wrap(title, fig.get_figwidth() - 0.3, 10.0), fontsize="medium")
-        _save(fig, dirs["figures"] / f"delta_abs_{name}.png")
-    _save(plot_pair(posteriors[-1], truth=truth), dirs["figures"] / "pair.png")
+        with _untitled(title):
+            fig = plot_marginal(post, "delta_abs", truth=true_d, title=title)
+        if title:
+            text = (f"{task}, $K_\\theta$ = {kt:g}: posterior of {symbol('delta_abs')}, "
+                    f"{_run_note(post, d.size)}")  # (draws, likelihood, convergence)
+            fig.axes[0].set_title(_wrap(text, fig.get_figwidth() - 0.3, 10.0),
+                                  fontsize="medium")
+        _save(fig, dirs["figures"] / f"delta_abs_{name}.png", **figure)
+    with _untitled(title):
+        fig = plot_pair(posteriors[-1], truth=truth, title=title)
+    _save(fig, dirs["figures"] / "pair.png", **figure)
     pooled = pool(comparisons, label=f"{task}, K_theta {', '.join(f'{k:g}' for k in gains)}")
     write_text_atomic(out / "pooled_comparison.json", dumps(pooled.to_dict()))
     elapsed = time.perf_counter() - t_start
     report = out / "report.md"
     report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
-                              coloured_discard(rec)),  # (every run is of one duration)
+                              coloured_discard(rec),  # (every run is of one duration)
+                              _shown(formats)),
                       encoding="utf-8")
     say(f"wrote {report} ({elapsed:.0f} s)")
     plt.close("all")
@@ -234,8 +288,21 @@ def _warn_unconverged(runs: Sequence[tuple[str, float]], max_steps: int) -> None
         "(bayespilot demo --max-steps)", None, max_steps))
 
 
+@contextlib.contextmanager
+def _untitled(title: bool):
+    """Around a posterior figure drawn without its title (``title`` False): its
+    ConvergenceWarning (the title said "not converged") ignored; the demo says it once, at
+    the end, for every run (:func:`_warn_unconverged`)."""
+    from .sample import ConvergenceWarning
+
+    with warnings.catch_warnings():
+        if not title:
+            warnings.simplefilter("ignore", ConvergenceWarning)
+        yield
+
+
 def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
-            lead_in: float) -> str:
+            lead_in: float, ext: str = "png") -> str:
     from .compare import DECISION_LEVEL, DECISION_Z
 
     true_d = truth["delta_abs"]
@@ -282,14 +349,14 @@ def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
         "The first run's signals (tracking error e, control u, motion theta_ddot_m and the canal "
         "output i with the +-delta_abs band):",
         "",
-        "![traces](figures/traces.png)",
+        f"![traces](figures/traces.{ext})",
         "",
     ]
     for r in rows:
         lines += [f"Posterior of delta_abs, {r['run']} (dashed: the true value):", "",
-                  f"![delta_abs {r['run']}](figures/delta_abs_{r['run']}.png)", ""]
+                  f"![delta_abs {r['run']}](figures/delta_abs_{r['run']}.{ext})", ""]
     lines += ["Pair plot of K_m, tau_m and delta_abs for the last run:", "",
-              "![pair](figures/pair.png)", "",
+              f"![pair](figures/pair.{ext})", "",
               "Files: `recordings/` (the simulated runs in the recording format), `fits/` "
               "(maximum-likelihood fits, JSON), `posteriors/` (arviz netCDF), `comparisons/` "
               "(JSON), `pooled_comparison.json`.", ""]

@@ -549,8 +549,8 @@ class DiagnosisResult(_DiagnosisJSON):
                    bayes_factor=None if bf is None else ExtensionBayesFactor.from_dict(bf),
                    units=dict(d.get("units") or {}))
 
-    def report(self, directory: str | Path, *,
-               formats: Sequence[str] = ("png",)) -> dict[str, Path]:
+    def report(self, directory: str | Path, *, formats: Sequence[str] = ("png",),
+               title: bool = True) -> dict[str, Path]:
         """Write PNG figures, ``report.html`` (figures embedded) and ``diagnosis.json``.
 
         Parameters
@@ -562,6 +562,11 @@ class DiagnosisResult(_DiagnosisJSON):
             Also write each figure in these formats beside its PNG (``"pdf"``,
             ``"svg"``: for a paper; fonts embedded as TrueType, SVG text kept
             as text); another name is refused (ValueError).
+        title : bool, optional
+            True (default): each figure with its own title; False: the figures
+            without titles, for a paper whose captions say it (a panel's note,
+            such as a posterior's draws and convergence, moves into its legend;
+            :func:`~bayespilot.diagnose.report.write_report`).
 
         Returns
         -------
@@ -575,6 +580,8 @@ class DiagnosisResult(_DiagnosisJSON):
             The result was read from a file (:meth:`from_json`), which keeps
             the numbers but not the signals the figures are drawn from; or
             ``formats`` names one that is not ``"png"``, ``"pdf"`` or ``"svg"``.
+        TypeError
+            ``title`` is not True or False.
         """
         from .report import write_report
 
@@ -585,7 +592,7 @@ class DiagnosisResult(_DiagnosisJSON):
                              f"numbers, not the signals the report's figures are drawn from; "
                              f"diagnose the recording again to write its report")
 
-        return write_report(self, directory, formats=formats)
+        return write_report(self, directory, formats=formats, title=title)
 
 
 def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1,

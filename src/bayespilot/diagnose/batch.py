@@ -62,7 +62,8 @@ Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``
 the worker that made the diagnosis, not of the process that writes the file),
 ``<key>/`` (the report, with
 ``reports=True``), ``summary.png`` (every candidate's p-value in every
-diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`) and
+diagnosis, :func:`~bayespilot.diagnose.report.plot_batch`, each diagnosis
+named; ``summary.<format>`` of each of ``formats``) and
 ``summary.csv`` (one row per key: the decision, the
 chosen extension's p-value, -ln L improvement and parameters, with
 ``posterior=True`` its posterior's medians and 90 % intervals, the candidate
@@ -688,7 +689,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                    n_calibrate: int | None = None, noise_passes: int = 1,
                    candidates: Sequence[str | Extension] | None = None,
                    posterior: bool = False,
-                   reports: bool = False, scheduler: "str | Client | Cluster | None" = None,
+                   reports: bool = False, title: bool = True,
+                   formats: Sequence[str] = ("png",), dpi: int | None = None,
+                   scheduler: "str | Client | Cluster | None" = None,
                    workers: int | None = None,
                    progress: bool | str = True, connect_timeout: float = 10.0,
                    warm_cache: bool = True) -> "CampaignSummary":
@@ -738,6 +741,20 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         :class:`MissingReportWarning` names it (a report needs the traces,
         which the result file does not keep; delete its ``<key>.json`` and
         call again to redo it with its report).
+    title : bool
+        True (default): the figures with their titles; False: ``summary.png``
+        and the reports' figures without (``title=False`` of
+        :func:`~bayespilot.diagnose.report.plot_batch` and of the reports,
+        for a paper whose captions say it).  Like ``reports`` and the two
+        below, not a setting of the result files.
+    formats : sequence of str
+        The formats of the summary's figure, ``summary.<format>`` each
+        (``"png"``, ``"pdf"``, ``"svg"``; default PNG only); each report
+        writes its PNGs (its page embeds them) and, beside them, the others.
+    dpi : int, optional
+        The resolution of ``summary.png`` (default
+        :data:`~bayespilot.diagnose.report.FIGURE_DPI`); a report's PNGs stay
+        at that default.
     scheduler, workers, progress, connect_timeout, warm_cache
         As for :func:`~bayespilot.campaign.run_campaign` (the lines say
         diagnoses).
@@ -756,8 +773,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         A bad setting, a recording the settings do not suit (too short), keys
         that clash, ``pool`` without subjects, the same recording (the same
         signals) under two names in one pooled condition, an entry of one's
-        own that ``register_extension`` refuses or that cannot be pickled;
-        nothing is run.
+        own that ``register_extension`` refuses or that cannot be pickled,
+        ``formats`` empty or naming one not in ``("png", "pdf", "svg")``, a
+        ``dpi`` that is not a whole number >= 1; nothing is run.
     ResultConflictError
         ``out_dir`` holds a result of the same key made from other recordings
         or settings (the message says which); nothing is run.  The recordings
@@ -778,7 +796,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         given is closed.
     TypeError
         A ``scheduler`` that is not an address (str), a
-        ``distributed.Client`` or a ``distributed.deploy.Cluster``.
+        ``distributed.Client`` or a ``distributed.deploy.Cluster``; a
+        ``title`` that is not True or False (nothing is run).
 
     Warns
     -----
@@ -812,6 +831,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     t0 = time.perf_counter()
     if not isinstance(posterior, bool):
         raise ValueError(f"posterior must be True or False, got {posterior!r}")
+    figure = _figure_options(title, formats, dpi)  # (checked before anything is run)
     C._check_progress(progress)
     paths = [str(p) for p in paths]
     if not paths:
@@ -950,7 +970,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         t = by_key[key]
         if reports:
             try:
-                res.report(out / key)
+                res.report(out / key, formats=figure["formats"], title=figure["title"])
             except OSError as exc:
                 raise C.CampaignError(f"{out / key}: cannot write the report "
                                       f"({exc.strerror or exc})") from None
@@ -986,7 +1006,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                       f"settings ({', '.join(other[:5])}{' ...' if n > 5 else ''}), left out "
                       f"of summary.csv: it covers the diagnoses made with this batch's "
                       f"settings", SummaryScopeWarning, stacklevel=2)
-    write_summary(sorted([*tasks, *earlier], key=lambda t: t.key), out)
+    # (the figure's options only where they differ from write_summary's defaults: a batch
+    # with the defaults calls write_summary(tasks, out), as before they were options)
+    given = {k: v for k, v in figure.items() if v != _FIGURE_DEFAULTS[k]}
+    write_summary(sorted([*tasks, *earlier], key=lambda t: t.key), out, **given)
     return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
                              time.perf_counter() - t0, "diagnoses")
 
@@ -1124,11 +1147,67 @@ def batch_summary_rows(tasks: Sequence[DiagnoseTask], out_dir: str | Path,
     return rows
 
 
-def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
+#: :func:`write_summary`'s figure options when not given (diagnose_batch's defaults).
+_FIGURE_DEFAULTS = {"title": True, "formats": ("png",), "dpi": None}
+
+#: The summary figure's height per diagnosis (in) beyond a page's diagnoses, so that
+#: :func:`~bayespilot.diagnose.report.plot_batch` names every row (it names every k-th where
+#: a row of its axes, before the layout, is narrower than 0.14 in: 0.19 in of figure gives
+#: 0.146 in of axes at matplotlib's default subplot margins, 0.77 of the height) ...
+SUMMARY_ROW_HEIGHT = 0.19
+#: ... up to this height (in; matplotlib draws at most 2**16 pixels a side: 60 in is 36000 at
+#: 600 dpi); a batch of more diagnoses than fit (about 315) has every k-th named.
+SUMMARY_MAX_HEIGHT = 60.0
+
+
+def _figure_options(title: Any, formats: Any, dpi: Any) -> dict[str, Any]:
+    """diagnose_batch's ``title``, ``formats`` and ``dpi`` checked: TypeError for a title that
+    is not a bool, ValueError for formats that are not names among PNG, PDF and SVG (or
+    none) and for a dpi that is not a whole number >= 1."""
+    import numpy as np
+
+    from .report import FORMATS
+
+    if not isinstance(title, (bool, np.bool_)):
+        raise TypeError(f"title must be True or False, got {title!r}")
+    if isinstance(formats, str):
+        formats = (formats,)
+    try:
+        formats = tuple(dict.fromkeys(formats))
+    except TypeError:
+        raise ValueError(f"formats must be names among {', '.join(FORMATS)}, got "
+                         f"{formats!r}") from None
+    bad = [f for f in formats if f not in FORMATS]
+    if bad or not formats:
+        raise ValueError(f"formats must be one or more of {', '.join(FORMATS)}, got "
+                         f"{bad[0] if bad else 'none'}")
+    if dpi is not None and (isinstance(dpi, bool) or not isinstance(dpi, (int, np.integer))
+                            or dpi < 1):
+        raise ValueError(f"dpi must be a whole number >= 1, got {dpi!r}")
+    return {"title": bool(title), "formats": formats, "dpi": None if dpi is None else int(dpi)}
+
+
+def _summary_figsize(n: int) -> tuple[float, float] | None:
+    """The size of the summary figure of ``n`` diagnoses: None (plot_batch's own, a page at
+    most) while a page names every row, else a page wide and :data:`SUMMARY_ROW_HEIGHT` per
+    diagnosis, up to :data:`SUMMARY_MAX_HEIGHT`."""
+    from ..plots import PAGE_HEIGHT, PAGE_WIDTH
+
+    tall = SUMMARY_ROW_HEIGHT * n
+    if tall <= PAGE_HEIGHT:
+        return None
+    return PAGE_WIDTH, min(tall, SUMMARY_MAX_HEIGHT)
+
+
+def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path, *, title: bool = True,
+                  formats: Sequence[str] = ("png",), dpi: int | None = None) -> Path:
     """Write ``out_dir/summary.csv`` (:func:`batch_summary_rows`) and, when any diagnosis
-    finished, ``out_dir/summary.png`` (:func:`~bayespilot.diagnose.report.plot_batch`);
-    returns the CSV's path."""
-    from .report import _png, plot_batch
+    finished, ``out_dir/summary.<format>`` for each of ``formats`` (default PNG,
+    :func:`~bayespilot.diagnose.report.plot_batch` with ``title``, at ``dpi``, default
+    :data:`~bayespilot.diagnose.report.FIGURE_DPI`; beyond a page's diagnoses the figure
+    grows so that every one is named, :func:`_summary_figsize`); returns the CSV's path."""
+    from .._figstyle import save_figure
+    from .report import FIGURE_DPI, _pyplot, plot_batch
 
     out = Path(out_dir)
     found = _diagnoses(tasks, out)
@@ -1136,5 +1215,10 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path) -> Path:
                             batch_summary_rows(tasks, out, found))
     done = [(key, d) for key, d in found.items() if d is not None]
     if done:
-        _png(plot_batch(done), out / "summary.png")  # (closed even when saving fails)
+        fig = plot_batch(done, title=title, figsize=_summary_figsize(len(done)))
+        try:  # (closed even when saving fails)
+            for fmt in dict.fromkeys(formats):
+                save_figure(fig, out / f"summary.{fmt}", FIGURE_DPI if dpi is None else dpi)
+        finally:
+            _pyplot().close(fig)
     return path

@@ -426,8 +426,8 @@ class PooledDiagnosisResult(_DiagnosisJSON):
                    posterior=None if post is None else SharedPosterior.from_dict(post),
                    units=dict(d.get("units") or {}))
 
-    def report(self, directory: str | Path, *,
-               formats: Sequence[str] = ("png",)) -> dict[str, Path]:
+    def report(self, directory: str | Path, *, formats: Sequence[str] = ("png",),
+               title: bool = True) -> dict[str, Path]:
         """Write ``candidates.png``, ``runs.png``, ``diagnosis.json`` and ``report.html``
         (and ``posterior.png`` once :func:`~bayespilot.diagnose.shared_posterior` has run).
 
@@ -441,6 +441,11 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         formats : sequence of str, optional
             Also write each figure in these formats beside its PNG (``"pdf"``,
             ``"svg"``), as :meth:`DiagnosisResult.report` does.
+        title : bool, optional
+            True (default): each figure with its own title; False: the figures
+            without titles (``title=False`` of :func:`plot_runs` and of the
+            report's plot functions), for a paper whose captions say it; the
+            page's headings and captions stay.
 
         Returns
         -------
@@ -458,6 +463,8 @@ class PooledDiagnosisResult(_DiagnosisJSON):
             ``directory`` cannot be created or a file in it written.
         ValueError
             ``formats`` names one that is not ``"png"``, ``"pdf"`` or ``"svg"``.
+        TypeError
+            ``title`` is not True or False.
         """
         import html
 
@@ -466,11 +473,15 @@ class PooledDiagnosisResult(_DiagnosisJSON):
                              plot_shared_posterior)
 
         formats = _checked_formats(formats)
+        if not isinstance(title, (bool, np.bool_)):  # (before anything is written)
+            raise TypeError(f"title must be True or False, got {title!r}")
+        t = bool(title)
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
-        figures = {"candidates": lambda: plot_candidates(self), "runs": lambda: plot_runs(self),
+        figures = {"candidates": lambda: plot_candidates(self, title=t),
+                   "runs": lambda: plot_runs(self, title=t),
                    "posterior": None if self.posterior is None
-                   else (lambda: plot_shared_posterior(self.posterior))}
+                   else (lambda: plot_shared_posterior(self.posterior, title=t))}
         paths = _write_figures(_listed(figures), out, formats)  # (names in report.FIGURES)
         paths["json"] = out / "diagnosis.json"
         self.to_json(paths["json"])
@@ -506,17 +517,47 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         return paths
 
 
-def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
+def plot_runs(result: PooledDiagnosisResult, ax: Any = None, *, title: bool | str = True,
+              figsize: tuple[float, float] | None = None):
     """Each run's improvement of -ln L per candidate at the pooled fit (grouped bars).
 
     A real omission improves every run a little; one run's artefact improves one run.
-    The runs are named by their source's file stem (``run j`` without one), in a legend
-    beside the axes, each run's bars hatched differently as well as coloured (told apart in
-    greyscale); a new figure (at most a page, 7.5 in, wide) uses constrained layout, given
-    axes' figure is left as it is.
-    """
-    from .report import PAGE_WIDTH, _figure_and_axes
 
+    Parameters
+    ----------
+    result : PooledDiagnosisResult
+        A pooled diagnosis (:func:`diagnose_pooled`).
+    ax : matplotlib Axes, optional
+        Default: a new figure (constrained layout, a page, 7.5 in, wide at
+        most); given axes' figure is left as it is.
+    title : bool or str, optional
+        True (default): "Each run's share (decision: <extension>)"; False:
+        none, the axes taking its room (for a paper, whose caption says
+        it); a str: that text.  The convention of every plot function
+        (:mod:`bayespilot.plots`).
+    figsize : (float, float), optional
+        Width and height (in) of a new figure, as given (default 7.5 x 4);
+        not with ``ax``.  Narrower than 5 in (a column), the runs' legend
+        goes under the axes instead of beside them.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The runs named by their source's file stem (``run j`` without one),
+        in a legend titled "run", each run's bars hatched differently as
+        well as coloured (told apart in greyscale).
+
+    Raises
+    ------
+    TypeError
+        ``title`` is not True, False or a str.
+    ValueError
+        ``figsize`` given with ``ax``, or not two positive numbers.
+    """
+    from ..plots import _title_text
+    from .report import PAGE_WIDTH, _figure_and_axes, _label_axes, _legend_under
+
+    text = _title_text(title, f"Each run's share (decision: {result.physics})")
     # each run's name: its source's file stem (recs/s1_run2.csv -> s1_run2), "run j" without
     # one; a name two runs share gets its run number
     names = []
@@ -524,7 +565,7 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
         src = r.get("source")
         names.append((Path(str(src)).stem or str(src)) if src else f"run {j + 1}")
     names = [f"{n} (run {j + 1})" if names.count(n) > 1 else n for j, n in enumerate(names)]
-    fig, ax = _figure_and_axes(ax, figsize=(PAGE_WIDTH, 4))
+    fig, ax = _figure_and_axes(ax, figsize=(PAGE_WIDTH, 4), given=figsize)
     rows = [c for c in result.ranking if c.testable]
     R = len(result.runs)
     width = 0.8 / max(R, 1)
@@ -544,9 +585,16 @@ def plot_runs(result: PooledDiagnosisResult, ax: Any = None):
     ax.set_axisbelow(True)
     ax.set_xlabel(r"$\Delta(-\ln L)$ of each run at the pooled fit: "
                   r"$-\ln L_\mathrm{base} - (-\ln L_\mathrm{pooled\ extension})$")
-    ax.set_title(f"Each run's share (decision: {result.physics})", fontsize="medium")
-    ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), title="run",
-              title_fontsize="small")
+    if fig.get_figwidth() < 5.0:
+        # a column's width: the title and x label wrapped to the axes' room, the runs' legend
+        # under them (beside them, the names left the bars no room)
+        _label_axes(ax, text, ax.get_xlabel())
+        _legend_under(ax, title="run")
+    else:
+        if text:
+            ax.set_title(text, fontsize="medium")
+        ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0), title="run",
+                  title_fontsize="small")
     return fig
 
 
