@@ -63,3 +63,14 @@ def ft_rec(ft_sim):
 @pytest.fixture(scope="session")
 def model():
     return paper_model()
+
+
+@pytest.fixture(autouse=True)
+def _close_figures():
+    """Close the figures a test left open: pyplot keeps every one (over 20 it warns, and a
+    worker's memory grows with each test file of figures).  The Figure objects a test or a
+    fixture holds stay usable."""
+    yield
+    plt = sys.modules.get("matplotlib.pyplot")
+    if plt is not None:
+        plt.close("all")
