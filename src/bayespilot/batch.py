@@ -160,7 +160,7 @@ def _run_fit_task(recording: Recording, settings: Mapping[str, Any]
     MB)."""
     from . import __version__
     from ._files import VERSION_KEY
-    from .campaign import _fit_function, _versions
+    from .campaign import _fit_function, _versions, _warnings_once
     from .model import paper_model
     from .noise import ARNoise
 
@@ -202,11 +202,7 @@ def _run_fit_task(recording: Recording, settings: Mapping[str, Any]
                            "steps": int(post.settings["n_steps"])}
             except Exception as exc:  # noqa: BLE001 - the fits are kept, the error recorded
                 post, failed = None, {"posterior_error": f"{type(exc).__name__}: {exc}"}
-    said: list[dict[str, str]] = []
-    for w in caught:
-        entry = {"category": w.category.__name__, "message": str(w.message)}
-        if entry not in said:
-            said.append(entry)
+    said = _warnings_once(caught)
     return {"fit_threshold": with_threshold.to_dict(full=False),
             "fit_none": without.to_dict(full=False), "information_criteria": ic,
             "comparison": comparison,
@@ -371,7 +367,7 @@ def _say_warned(out: Path, keys: Sequence[str]) -> None:
     and which, with one message, as :func:`~bayespilot.campaign.run_campaign` says those of
     its fits; and the posteriors that could not be sampled (``posterior_error``) likewise."""
     from ._caller import warn_at_caller
-    from .campaign import _listed
+    from .campaign import _listed, _say_each_kind
 
     warned: dict[str, list[tuple[str, str]]] = defaultdict(list)
     unsampled: list[tuple[str, str]] = []
@@ -388,12 +384,7 @@ def _say_warned(out: Path, keys: Sequence[str]) -> None:
                        f"their fits are kept, and each result file says why under "
                        f"'posterior_error' (delete a <key>.json to run that recording again)",
                        RuntimeWarning)
-    for category, seen in sorted(warned.items()):
-        named = sorted({k for k, _ in seen})
-        first = min(m for k, m in seen if k == named[0])
-        warn_at_caller(f"{category} in {len(named)} recording(s) ({_listed(named, 3)}), e.g. "
-                       f"{named[0]}: {first}; each result file lists its warnings under "
-                       f"'warnings'", RuntimeWarning)
+    _say_each_kind(warned, "recording(s)")
 
 
 def _view(stored: Any) -> Any:

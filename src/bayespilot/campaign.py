@@ -447,6 +447,28 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def _warnings_once(caught: Iterable[Any]) -> list[dict[str, str]]:
+    """The warnings a task recorded (``warnings.catch_warnings(record=True)``) as its result
+    file keeps them: ``category`` (the class's name) and ``message``, each once, in order."""
+    said: list[dict[str, str]] = []
+    for w in caught:
+        entry = {"category": w.category.__name__, "message": str(w.message)}
+        if entry not in said:
+            said.append(entry)
+    return said
+
+
+def _say_each_kind(warned: Mapping[str, Sequence[tuple[str, str]]], what: str) -> None:
+    """Say each kind of warning the tasks recorded once (``warned``: category -> (key,
+    message) pairs): a RuntimeWarning naming how many tasks (``what``, e.g. "fit(s)") and
+    which, with one task's message."""
+    for category, seen in sorted(warned.items()):
+        keys = sorted({k for k, _ in seen})
+        warn_at_caller(f"{category} in {len(keys)} {what} ({_listed(keys, 3)}), e.g. "
+                       f"{keys[0]}: {min(m for k, m in seen if k == keys[0])}; each result "
+                       f"file lists its warnings under 'warnings'", RuntimeWarning)
+
+
 def run_job(job: Job) -> dict[str, Any]:
     """Simulate one realization and fit it; return a JSON-ready dict.
 
@@ -520,11 +542,7 @@ def run_job(job: Job) -> dict[str, Any]:
                        duration=job.duration, **noise)
         fit = _fit_function(job.method)(sim.recording, threshold=job.threshold,
                                         seed=job.fit_seed, **job.fit_kwargs)
-    said: list[dict[str, str]] = []
-    for w in caught:
-        entry = {"category": w.category.__name__, "message": str(w.message)}
-        if entry not in said:
-            said.append(entry)
+    said = _warnings_once(caught)
     out: dict[str, Any] = {"key": job.key, **job.to_dict(), "job": job.to_dict(),
                            "remnant_seed": job.remnant_seed, "fit_seed": job.fit_seed,
                            # exact copies: readers of JSON numbers as doubles round seeds > 2**53
@@ -1265,11 +1283,7 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
         return value
 
     def say_warned() -> None:
-        for category, seen in sorted(warned.items()):
-            keys = sorted({k for k, _ in seen})
-            warn_at_caller(f"{category} in {len(keys)} fit(s) ({_listed(keys, 3)}), e.g. "
-                           f"{keys[0]}: {min(m for k, m in seen if k == keys[0])}; each result "
-                           f"file lists its warnings under 'warnings'", RuntimeWarning)
+        _say_each_kind(warned, "fit(s)")
 
     try:
         completed, errors = run_keyed(
