@@ -442,8 +442,10 @@ def test_demo_passes_only_the_options_given(tmp_path, capsys, monkeypatch):
     assert _run(capsys, "demo", "--out", tmp_path / "d", "-q")[0] == 0
     assert _run(capsys, "demo", "--out", tmp_path / "d", "--task", "FT", "--nlive", "20",
                 "--motion-gains", "1", "-q")[0] == 0
-    strip = [{k: v for k, v in c.items() if k not in ("progress", "say")} for c in calls]
+    figure = {"formats": ("png",), "dpi": 200, "title": True}  # (run_example's own, in effect)
+    strip = [{k: v for k, v in c.items() if k not in ("progress", "say", *figure)} for c in calls]
     assert strip == [{"seed": 0}, {"seed": 0, "task": "FT", "nlive": 20, "motion_gains": (1.0,)}]
+    assert all({k: c[k] for k in figure} == figure for c in calls)
 
 
 def test_demo_warnings_are_one_line_each(tmp_path, capsys, monkeypatch):

@@ -377,6 +377,15 @@ def test_diagnose_batch_formats_dpi_and_no_title(lone, tmp_path, capsys, monkeyp
     assert all(sup == "" and not [t for t in axes if "decision" in t or "p-value" in t]
                for _, sup, axes in saved)
     assert f"{out / 'summary.svg'}, {out / 'summary.png'}" in stdout
+    # again with other figure options: the finished diagnosis's report is not redrawn (its
+    # traces are not kept), and that is said; the summary in the new format alone
+    code, stdout, err = _run(capsys, "diagnose-batch", lone, "--out", out, "--bootstrap", "0",
+                             "--reports", "--format", "pdf")
+    assert code == 0, err
+    assert "1 report(s) of diagnoses finished before are left as they were drawn" in err
+    assert "s9-run1" in err and not (report / "candidates.pdf").exists()
+    assert (out / "summary.pdf").is_file()
+    assert not (out / "summary.png").exists() and not (out / "summary.svg").exists()
 
 
 def test_diagnose_batch_refuses_bad_figure_options_before_running(lone, tmp_path):

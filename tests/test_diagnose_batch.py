@@ -718,7 +718,7 @@ def _stub_batch(monkeypatch):
         return len(tasks), {}
 
     monkeypatch.setattr(C, "run_keyed", run_keyed)
-    monkeypatch.setattr(B, "write_summary", lambda tasks, out: None)
+    monkeypatch.setattr(B, "write_summary", lambda tasks, out, **figure: None)
     return ran
 
 

@@ -30,9 +30,9 @@ def demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("demo")
     save = example._save
 
-    def keep_titles(fig, path):
+    def keep_titles(fig, path, **figure):
         TITLES[path.name] = [ax.get_title() for ax in fig.axes]
-        save(fig, path)
+        save(fig, path, **figure)
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(example, "_save", keep_titles)

@@ -18,6 +18,33 @@ PLOT_FORMATS = ("png", "pdf", "svg")
 VECTOR_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
 
 
+def figure_options(title, formats, dpi) -> dict:
+    """The figure options a command or a batch takes, checked before anything runs:
+    ``title`` True or False (TypeError otherwise), ``formats`` one or more of
+    :data:`PLOT_FORMATS` (a name, or a sequence of them, each once in the order given) and
+    ``dpi`` None or a whole number >= 1 (ValueError otherwise).  Returns ``{"title": bool,
+    "formats": tuple, "dpi": int | None}``."""
+    import numbers
+
+    if not isinstance(title, bool) and type(title).__name__ != "bool_":
+        raise TypeError(f"title must be True or False, got {title!r}")
+    if isinstance(formats, str):
+        formats = (formats,)
+    try:
+        formats = tuple(dict.fromkeys(formats))
+    except TypeError:
+        raise ValueError(f"formats must be names among {', '.join(PLOT_FORMATS)}, got "
+                         f"{formats!r}") from None
+    bad = [f for f in formats if f not in PLOT_FORMATS]
+    if bad or not formats:
+        raise ValueError(f"formats must be one or more of {', '.join(PLOT_FORMATS)}, got "
+                         f"{bad[0] if bad else 'none'}")
+    if dpi is not None and (isinstance(dpi, bool) or not isinstance(dpi, numbers.Integral)
+                            or dpi < 1):
+        raise ValueError(f"dpi must be a whole number >= 1, got {dpi!r}")
+    return {"title": bool(title), "formats": formats, "dpi": None if dpi is None else int(dpi)}
+
+
 def save_figure(fig, path, dpi: int = PLOT_DPI) -> None:
     """Write ``fig`` to ``path`` (format from its suffix) at ``dpi``, a vector format with
     its text kept (:data:`VECTOR_TEXT`); the figure stays open (the caller closes it).

@@ -780,10 +780,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     if not args.quick:
         from .example import run_example
 
-        # (the figures' options too only when given: run_example's defaults are the same)
-        figure = {k: v for k, v, given_it in (("formats", formats, bool(args.format)),
-                                              ("dpi", args.dpi, args.dpi != PLOT_DPI),
-                                              ("title", False, args.no_title)) if given_it}
+        figure = {"formats": formats, "dpi": args.dpi, "title": not args.no_title}
         try:  # (warnings one line each, as they come: the demo runs for minutes)
             with _warnings_of(RuntimeWarning, _warning_lines_once()):
                 report = run_example(args.out, seed=args.seed, **given, **figure,
@@ -2231,7 +2228,7 @@ in DIR (a warning names any made with other settings, left out): the
 decision (physics, mismatch), the chosen extension's p_value,
 delta_neg_log_lik and params, the candidate with the smallest p-value, or
 the error; DIR/summary.png draws every candidate's p-value in every
-diagnosis, one named row each (past about 55 diagnoses the figure grows
+diagnosis, one named row each (past about 50 diagnoses the figure grows
 beyond a page, up to 60 in). For a paper: --format pdf or svg writes
 DIR/summary.pdf or .svg instead (twice: both) and each report's figures in
 that format beside their PNGs, which the report's page embeds; --no-title

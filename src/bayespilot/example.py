@@ -154,7 +154,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     from .likelihood import coloured_discard
     from .sample import ConvergenceWarning
 
-    from ._figstyle import PLOT_FORMATS
+    from ._figstyle import figure_options
     from ._seeds import resolve_seed
 
     seed = resolve_seed(seed)  # (checked before a folder is made; None: a fresh one)
@@ -162,17 +162,9 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         raise ValueError(f"task must be 'FD' or 'FT', got {task!r}")
     if likelihood not in ("coloured", "eq4"):
         raise ValueError(f"likelihood must be 'coloured' or 'eq4', got {likelihood!r}")
-    formats = tuple(dict.fromkeys([formats] if isinstance(formats, str) else formats))
-    if not formats or any(f not in PLOT_FORMATS for f in formats):
-        raise ValueError(f"formats must be one or more of {', '.join(PLOT_FORMATS)}, got "
-                         f"{formats!r}")
-    if not isinstance(title, (bool, np.bool_)):
-        raise TypeError(f"title must be True or False, got {title!r}")
-    title = bool(title)
-    # the figures' formats and resolution, for _save only where they are not its defaults
-    # (then _save(fig, path), as before they were options)
-    figure = {k: v for k, v, default in (("formats", formats, ("png",)), ("dpi", dpi, None))
-              if v != default}
+    # (checked before a folder is made or a run simulated: a bad dpi failed after the first)
+    figure = figure_options(title, formats, dpi)
+    title = figure.pop("title")
     gains = [float(k) for k in motion_gains]
     if not gains or any(not (k > 0) for k in gains):
         raise ValueError(f"motion_gains must be positive numbers, got {motion_gains!r}")
@@ -260,7 +252,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     report = out / "report.md"
     report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
                               coloured_discard(rec),  # (every run is of one duration)
-                              _shown(formats)),
+                              _shown(figure["formats"])),
                       encoding="utf-8")
     say(f"wrote {report} ({elapsed:.0f} s)")
     plt.close("all")

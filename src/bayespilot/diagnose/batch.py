@@ -98,10 +98,12 @@ import re
 import time
 import warnings
 from collections import Counter, defaultdict
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
+from .._figstyle import figure_options
 from .._files import json_ready, replacing, write_csv_atomic
 from ..campaign import CampaignError
 from ..recording import _signals_digest
@@ -831,7 +833,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     t0 = time.perf_counter()
     if not isinstance(posterior, bool):
         raise ValueError(f"posterior must be True or False, got {posterior!r}")
-    figure = _figure_options(title, formats, dpi)  # (checked before anything is run)
+    figure = figure_options(title, formats, dpi)  # (checked before anything is run)
     C._check_progress(progress)
     paths = [str(p) for p in paths]
     if not paths:
@@ -927,7 +929,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             f"seed and its recordings, so {'it' if one else 'they'} would not be repeated by "
             f"this batch: use another output folder, or delete "
             f"{'its' if one else 'their'} <key>.json to redo {'it' if one else 'them'}")
-    pending, skipped, unreported = [], 0, []
+    pending, skipped, unreported, as_drawn = [], 0, [], []
     for t in tasks:
         old = found.get(t.key)
         if old is None:
@@ -950,6 +952,15 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         skipped += 1
         if reports and not (out / t.key / "report.html").is_file():
             unreported.append(t.key)
+        elif reports and figure != _FIGURE_DEFAULTS:
+            as_drawn.append(t.key)
+    if as_drawn:  # (--format, --no-title, --dpi reach the reports this call draws only)
+        n = len(as_drawn)
+        warnings.warn(f"{n} report(s) of diagnoses finished before are left as they were "
+                      f"drawn, not in the figure options asked for now ({', '.join(as_drawn[:5])}"
+                      f"{' ...' if n > 5 else ''}): a report needs the diagnosis's traces, "
+                      f"which <key>.json does not keep; delete a <key>.json and run again to "
+                      f"redraw its report", MissingReportWarning, stacklevel=2)
     if unreported:
         n = len(unreported)
         one = n == 1
@@ -1006,10 +1017,7 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                       f"settings ({', '.join(other[:5])}{' ...' if n > 5 else ''}), left out "
                       f"of summary.csv: it covers the diagnoses made with this batch's "
                       f"settings", SummaryScopeWarning, stacklevel=2)
-    # (the figure's options only where they differ from write_summary's defaults: a batch
-    # with the defaults calls write_summary(tasks, out), as before they were options)
-    given = {k: v for k, v in figure.items() if v != _FIGURE_DEFAULTS[k]}
-    write_summary(sorted([*tasks, *earlier], key=lambda t: t.key), out, **given)
+    write_summary(sorted([*tasks, *earlier], key=lambda t: t.key), out, **figure)
     return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
                              time.perf_counter() - t0, "diagnoses")
 
@@ -1160,33 +1168,6 @@ SUMMARY_ROW_HEIGHT = 0.19
 SUMMARY_MAX_HEIGHT = 60.0
 
 
-def _figure_options(title: Any, formats: Any, dpi: Any) -> dict[str, Any]:
-    """diagnose_batch's ``title``, ``formats`` and ``dpi`` checked: TypeError for a title that
-    is not a bool, ValueError for formats that are not names among PNG, PDF and SVG (or
-    none) and for a dpi that is not a whole number >= 1."""
-    import numpy as np
-
-    from .report import FORMATS
-
-    if not isinstance(title, (bool, np.bool_)):
-        raise TypeError(f"title must be True or False, got {title!r}")
-    if isinstance(formats, str):
-        formats = (formats,)
-    try:
-        formats = tuple(dict.fromkeys(formats))
-    except TypeError:
-        raise ValueError(f"formats must be names among {', '.join(FORMATS)}, got "
-                         f"{formats!r}") from None
-    bad = [f for f in formats if f not in FORMATS]
-    if bad or not formats:
-        raise ValueError(f"formats must be one or more of {', '.join(FORMATS)}, got "
-                         f"{bad[0] if bad else 'none'}")
-    if dpi is not None and (isinstance(dpi, bool) or not isinstance(dpi, (int, np.integer))
-                            or dpi < 1):
-        raise ValueError(f"dpi must be a whole number >= 1, got {dpi!r}")
-    return {"title": bool(title), "formats": formats, "dpi": None if dpi is None else int(dpi)}
-
-
 def _summary_figsize(n: int) -> tuple[float, float] | None:
     """The size of the summary figure of ``n`` diagnoses: None (plot_batch's own, a page at
     most) while a page names every row, else a page wide and :data:`SUMMARY_ROW_HEIGHT` per
@@ -1207,17 +1188,23 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path, *, title: 
     :data:`~bayespilot.diagnose.report.FIGURE_DPI`; beyond a page's diagnoses the figure
     grows so that every one is named, :func:`_summary_figsize`); returns the CSV's path."""
     from .._figstyle import save_figure
-    from .report import FIGURE_DPI, _pyplot, plot_batch
+    from .report import FIGURE_DPI, FORMATS, _pyplot, plot_batch
 
     out = Path(out_dir)
     found = _diagnoses(tasks, out)
     path = write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS,
                             batch_summary_rows(tasks, out, found))
     done = [(key, d) for key, d in found.items() if d is not None]
+    formats = figure_options(title, formats, dpi)["formats"]
+    # (a summary figure of another format, or of nothing now, showed other diagnoses)
+    for fmt in FORMATS:
+        if fmt not in formats or not done:
+            with suppress(FileNotFoundError):
+                (out / f"summary.{fmt}").unlink()
     if done:
         fig = plot_batch(done, title=title, figsize=_summary_figsize(len(done)))
         try:  # (closed even when saving fails)
-            for fmt in dict.fromkeys(formats):
+            for fmt in formats:
                 save_figure(fig, out / f"summary.{fmt}", FIGURE_DPI if dpi is None else dpi)
         finally:
             _pyplot().close(fig)
