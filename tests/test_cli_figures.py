@@ -25,6 +25,7 @@ from bayespilot.diagnose import NAMES  # noqa: E402
 from bayespilot.io import write_recording  # noqa: E402
 from bayespilot.recording import Recording  # noqa: E402
 from bayespilot.simulate import simulate  # noqa: E402
+from test_diagnose_batch import _run_here  # noqa: E402  (tasks run in this process)
 
 
 @pytest.fixture(autouse=True)
@@ -74,19 +75,6 @@ def saved(monkeypatch):
     for module in (cli, F, R):  # (each module's own name for it, imported or not yet)
         monkeypatch.setattr(module, "save_figure", spy)
     return kept
-
-
-def _run_here(monkeypatch):
-    """The batches' and campaigns' tasks run in this process (run_keyed replaced, no
-    cluster), as tests/test_diagnose_batch.py does."""
-    from bayespilot import campaign as C
-
-    def run_keyed(tasks, out, *, to_json, **kwargs):
-        for key, fn, args, _ in tasks:
-            C._write_json_atomic(out / f"{key}.json", to_json(key, fn(*args)))
-        return len(tasks), {}
-
-    monkeypatch.setattr(C, "run_keyed", run_keyed)
 
 
 # --- plot --------------------------------------------------------------------------------------
