@@ -1,6 +1,6 @@
 """Figs. 6-9 of Pool et al. (2012) on simulated data: how the three steps behave.
 
-Run:  python analyses/fit_procedure.py [--remnant-fraction 0.2] [--realization 0] [--fast-check]
+Run:  python analyses/fit_procedure.py [--remnant-fraction 0.2] [--realization 0]
 
 Simulates one run per task (FD, FT) and motion gain K_theta (0.25, 0.5, 0.75,
 1) with the Table 3 pilot (delta_abs = 0.0075 IPUT) and remnant fraction F_n,

@@ -567,8 +567,8 @@ def test_resume_compares_the_posterior_settings(recs, tmp_path, monkeypatch):
     fit_batch(recs[:1], out, **QUIET)  # (without the posterior)
     _nothing_runs(monkeypatch)
     with pytest.raises(ResultConflictError, match=r"a\.json holds a fit of a from other "
-                                                  r"settings: posterior None there, True here, "
-                                                  r"sample_options None there, \{'likelihood'"):
+                                                  r"settings: posterior not set there, True here, "
+                                                  r"sample_options not set there, \{'likelihood'"):
         fit_batch(recs[:1], out, posterior=True, sample_options=CHAIN, **QUIET)
     # made with it: the same options (sample's defaults written out or not) are done ...
     _run_here(monkeypatch)
@@ -586,7 +586,7 @@ def test_resume_compares_the_posterior_settings(recs, tmp_path, monkeypatch):
                                                   r"'max_steps': 60"):
         fit_batch(recs[:1], post, posterior=True, sample_options={**CHAIN, "max_steps": 60},
                   **QUIET)
-    with pytest.raises(ResultConflictError, match=r"other settings: posterior True there, None "
+    with pytest.raises(ResultConflictError, match=r"other settings: posterior True there, not set "
                                                   r"here"):
         fit_batch(recs[:1], post, **QUIET)
     # a result whose posterior file is gone is run again

@@ -680,8 +680,11 @@ def _differs(old: Any, new: Any, names: Mapping[str, str] | None = None) -> str:
     if "batch_seed" in keys:  # (the diagnosis's seed follows from it)
         keys = [k for k in keys if k != "seed"]
     if keys or not said:
-        said.append("other settings: " + ", ".join(f"{k} {old['settings'].get(k)!r} there, "
-                                                   f"{new['settings'].get(k)!r} here"
+        def value(settings: Mapping[str, Any], k: str) -> str:  # (a setting one file lacks:
+            return repr(settings[k]) if k in settings else "not set"  # not "None")
+
+        said.append("other settings: " + ", ".join(f"{k} {value(old['settings'], k)} there, "
+                                                   f"{value(new['settings'], k)} here"
                                                    for k in keys))
     return " and ".join(said)
 
