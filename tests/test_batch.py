@@ -316,7 +316,7 @@ def test_unreadable_and_unfittable_recordings_are_named_and_nothing_runs(recs, t
     ({"fit_options": {"noise": "ar"}}, "give noise as fit_batch's own"),
     ({"oversample": 0}, "oversample"),
     ({"seed": -1}, "seed must be an integer >= 0"),
-    ({"workers": 0}, "workers is the size of the local cluster, a positive integer"),
+    ({"workers": 0}, "workers must be a positive integer, got 0"),
     ({"workers": 1, "scheduler": "tcp://127.0.0.1:1"}, "got 1 with a scheduler"),
     ({"connect_timeout": 0}, "connect_timeout must be a positive number"),
     ({"progress": "dots"}, "progress"),

@@ -378,9 +378,16 @@ def test_diagnose_batch_refuses_bad_figure_options_before_running(lone, tmp_path
     for kw, error, match in (({"title": "no"}, TypeError, "title must be True or False"),
                              ({"formats": ()}, ValueError, "formats must be one or more"),
                              ({"formats": ("eps",)}, ValueError, "got eps"),
-                             ({"dpi": 0}, ValueError, "dpi must be")):
+                             ({"dpi": 0}, ValueError, "dpi must be"),
+                             # (the cluster options too, as run_campaign and fit_batch check
+                             # them: they were found only after every recording was read)
+                             ({"workers": 0}, ValueError, "workers must be a positive integer"),
+                             ({"workers": 1, "scheduler": "tcp://127.0.0.1:1"}, ValueError,
+                              "do not give it with scheduler"),
+                             ({"connect_timeout": 0}, ValueError,
+                              "connect_timeout must be a positive")):
         with pytest.raises(error, match=match):
-            diagnose_batch([str(lone / "s9-run1")], tmp_path / "never", workers=1, **kw)
+            diagnose_batch([str(lone / "s9-run1")], tmp_path / "never", **{"workers": 1, **kw})
     assert not (tmp_path / "never").exists()
 
 

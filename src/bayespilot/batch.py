@@ -76,7 +76,6 @@ Outputs in ``out_dir``:
 from __future__ import annotations
 
 import math
-import numbers
 import platform
 import tempfile
 import time
@@ -740,17 +739,7 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
     from .recording import RecordingError, _signals_digest
 
     t0 = time.perf_counter()
-    C._check_progress(progress)
-    C._check_scheduler(scheduler)
-    if workers is not None and (scheduler is not None or isinstance(workers, bool)
-                                or not isinstance(workers, numbers.Integral) or workers < 1):
-        raise ValueError(f"workers is the size of the local cluster, a positive integer "
-                         f"without scheduler; got {workers!r}"
-                         f"{' with a scheduler' if scheduler is not None else ''}")
-    if isinstance(connect_timeout, bool) or not (isinstance(connect_timeout, numbers.Real)
-                                                 and connect_timeout > 0):
-        raise ValueError(f"connect_timeout must be a positive number of seconds, "
-                         f"got {connect_timeout!r}")
+    C._check_cluster_options(scheduler, workers, progress, connect_timeout)
     options = _options(method, noise, iterate, oversample, compare, nlive, fit_options,
                        compare_options, posterior, sample_options)
     if options.get("posterior"):  # (this process writes the posteriors: said now)

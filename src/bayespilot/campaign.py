@@ -904,6 +904,28 @@ LINES_EVERY = 60.0
 _LINES_TICK = 1.0
 
 
+def _check_cluster_options(scheduler: Any, workers: Any, progress: Any,
+                           connect_timeout: Any) -> None:
+    """The cluster options of run_campaign, diagnose_batch and fit_batch, checked before
+    anything is read or run: ``scheduler`` (TypeError, :func:`_check_scheduler`),
+    ``progress``; ``workers`` None or a positive integer and only without ``scheduler``, and
+    ``connect_timeout`` a positive number of seconds (ValueError)."""
+    import numbers
+
+    _check_scheduler(scheduler)
+    _check_progress(progress)
+    if workers is not None:
+        if scheduler is not None:
+            raise ValueError(f"workers sets the size of the local cluster; do not give it "
+                             f"with scheduler (got {workers!r} with a scheduler)")
+        if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or workers < 1:
+            raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    if isinstance(connect_timeout, bool) or not (isinstance(connect_timeout, numbers.Real)
+                                                 and connect_timeout > 0):
+        raise ValueError(f"connect_timeout must be a positive number of seconds, "
+                         f"got {connect_timeout!r}")
+
+
 def _check_progress(progress: Any) -> None:
     """A ValueError unless ``progress`` is True, False (or 1, 0), ``"bar"`` or ``"lines"``."""
     if not (isinstance(progress, (bool, np.bool_)) or progress in ("bar", "lines")
@@ -1244,17 +1266,7 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
     if dupes:
         raise ValueError(f"duplicate job keys: {', '.join(dupes[:5])}"
                          f"{' ...' if len(dupes) > 5 else ''}")
-    _check_scheduler(scheduler)
-    _check_progress(progress)
-    if workers is not None:
-        if scheduler is not None:
-            raise ValueError("workers sets the size of the local cluster; do not give it "
-                             "with scheduler")
-        if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1:
-            raise ValueError(f"workers must be a positive integer, got {workers!r}")
-    if not (isinstance(connect_timeout, (int, float)) and connect_timeout > 0):
-        raise ValueError(f"connect_timeout must be a positive number of seconds, "
-                         f"got {connect_timeout!r}")
+    _check_cluster_options(scheduler, workers, progress, connect_timeout)
     out = Path(out_dir)
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -780,7 +780,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         signals) under two names in one pooled condition, an entry of one's
         own that ``register_extension`` refuses or that cannot be pickled,
         ``formats`` empty or naming one not in ``("png", "pdf", "svg")``, a
-        ``dpi`` that is not a whole number >= 1; nothing is run.
+        ``dpi`` that is not a whole number >= 1, ``workers`` not a positive
+        integer or given with ``scheduler``, ``connect_timeout`` not a positive
+        number; nothing is run.
     ResultConflictError
         ``out_dir`` holds a result of the same key made from other recordings
         or settings (the message says which); nothing is run.  The recordings
@@ -837,7 +839,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     if not isinstance(posterior, bool):
         raise ValueError(f"posterior must be True or False, got {posterior!r}")
     figure = figure_options(title, formats, dpi)  # (checked before anything is run)
-    C._check_progress(progress)
+    # (a bad workers or connect_timeout was found only after every recording was read)
+    C._check_cluster_options(scheduler, workers, progress, connect_timeout)
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no recordings given")
