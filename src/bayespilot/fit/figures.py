@@ -103,8 +103,7 @@ def _panel_title(labels: Sequence[str] | None, k: int, default: str, title) -> s
     which ``title=False`` leaves out."""
     if labels is not None:
         return labels[k]
-    dropped = (isinstance(title, (bool, np.bool_)) and not title) or title == ""
-    return None if dropped else default
+    return None if _title_text(title, default) is None else default  # (False or "": none)
 
 
 def _legend_above(fig, handles, labels, ncols: int, *, title=True,
@@ -302,12 +301,7 @@ def plot_ga_convergence(results: Sequence[FitResult], labels: Sequence[str] | No
         Size of the figure, inches (default 3 in per column and 1.7 in per
         row, at most 7.5 x 9.5 in).
     title : bool or str, default True
-        True: as the figure has always been, no figure title and each
-        panel titled (its label, else "fit 1", ...); False (or ""): no
-        figure title and no default panel titles, the panels taking their
-        room (titles given by ``labels`` stay: they name the panels); a
-        str: that text as the figure's title, heading the legend above the
-        panels.
+        As for :func:`plot_step_one_thresholds`.
 
     Returns
     -------
@@ -406,12 +400,7 @@ def plot_step_two(results: Sequence[FitResult], labels: Sequence[str] | None = N
         Size of the figure, inches (default 3 in per panel, at most 7.5 in
         wide).
     title : bool or str, default True
-        True: as the figure has always been, no figure title and each
-        panel titled (its label, else "fit 1", ...); False (or ""): no
-        figure title and no default panel titles, the panels taking their
-        room (titles given by ``labels`` stay: they name the panels); a
-        str: that text as the figure's title, heading the legend above the
-        panels.
+        As for :func:`plot_step_one_thresholds`.
 
     Returns
     -------
@@ -495,12 +484,7 @@ def plot_step_three(results: Sequence[FitResult],
         Size of the figure, inches (default 3 in per panel, at most 7.5 in
         wide).
     title : bool or str, default True
-        True: as the figure has always been, no figure title and each
-        panel titled (its label, else "fit 1", ...); False (or ""): no
-        figure title and no default panel titles, the panels taking their
-        room (titles given by ``labels`` stay: they name the panels); a
-        str: that text as the figure's title, heading the legend above the
-        panels.
+        As for :func:`plot_step_one_thresholds`.
 
     Returns
     -------
