@@ -406,10 +406,15 @@ def test_summary_figure_marks_each_run():
         assert [t.get_text() for t in ax.get_xticklabels()] == [
             r"s1, FD, $K_\theta$ = 0.5", r"s1, FD, $K_\theta$ = 1"]
         assert "delta" in ax.get_ylabel() and "IPUT" in ax.get_ylabel()
+        assert ax.get_title() == "The threshold of 3 runs in 2 conditions"
     finally:
         import matplotlib.pyplot as plt
 
         plt.close(fig)
+    for title, said in ((False, ""), ("Fig. 3", "Fig. 3")):  # (none; one's own)
+        assert _plot_summary(rows[:1], conditions[1:], title=title).axes[0].get_title() == said
+    with pytest.raises(TypeError, match="title must be True"):
+        _plot_summary(rows, conditions, title=None)
 
 
 def test_on_a_local_cluster(recs, tmp_path):
@@ -551,14 +556,24 @@ def test_a_sampling_that_fails_is_recorded_and_the_fits_kept(recs, tmp_path, mon
     assert float(rows["b"]["delta_abs"]) == pytest.approx(f1.params["delta_abs"], rel=1e-12)
     assert rows["a"]["posterior_error"] == "" and rows["a"]["delta_abs_median"] != ""
     assert int(_csv(out / "conditions.csv")[0]["n_runs"]) == 2  # (b's fits count)
-    # a result: not redone by the next call
+    # the next call samples b again (its fits again too, the same), not a
+    sampled = []
+
     @functools.wraps(real)
-    def again(*args, **kwargs):
-        pytest.fail("sampled again")
+    def again(recording, *args, **kwargs):
+        sampled.append(os.path.basename(recording.source))
+        return real(recording, *args, **kwargs)
 
     monkeypatch.setattr(module, "sample", again)
-    again = fit_batch(recs[:2], out, posterior=True, sample_options=CHAIN, **QUIET)
-    assert (again.completed, again.skipped) == (0, 2)
+    with pytest.warns(RuntimeWarning, match="ConvergenceWarning in 1 recording"):
+        again = fit_batch(recs[:2], out, posterior=True, sample_options=CHAIN, **QUIET)
+    assert (again.completed, again.skipped, sampled) == (1, 1, ["b"])
+    now = json.loads((out / "b.json").read_text())
+    assert "posterior_error" not in now and now["posterior"]["file"] == "b.nc"
+    assert (now["fit_threshold"]["params"], now["fit_threshold"]["neg_log_lik"]) == (
+        got["fit_threshold"]["params"], got["fit_threshold"]["neg_log_lik"])
+    assert (out / "b.nc").is_file()
+    assert [r["posterior_error"] for r in _csv(out / "summary.csv")] == ["", ""]
 
 
 def test_resume_compares_the_posterior_settings(recs, tmp_path, monkeypatch):

@@ -139,6 +139,63 @@ def test_a_rerun_skips_the_finished_and_says_where_it_wrote(done, folder, monkey
                          f"{out / 'summary.png'} and one <key>.json per recording")
 
 
+def test_the_summary_figure_in_the_formats_asked_for(done, folder, tmp_path, monkeypatch,
+                                                     capsys):
+    """--format (repeatable), --dpi and --no-title reach the summary figure; a rerun that
+    asks for other formats removes the figure of a format not asked for (it showed the
+    folder's results as they were)."""
+    import shutil
+
+    import matplotlib.image
+
+    out = tmp_path / "fits"
+    shutil.copytree(done[0], out)
+    _run_here(monkeypatch)
+    assert main(["fit-batch", str(folder), "--out", str(out), "--method", "fast", "--format",
+                 "pdf", "--format", "png", "--dpi", "50", "--no-title", "--workers", "1"]) == 0
+    said = capsys.readouterr().out.splitlines()[-1]
+    assert said.endswith(f"{out / 'summary.csv'} (one row per recording), "
+                         f"{out / 'summary.pdf'}, {out / 'summary.png'} and one <key>.json "
+                         f"per recording")
+    assert (out / "summary.pdf").read_bytes()[:5] == b"%PDF-"
+    # 50 dpi: the figure's 4.8 x 4.0 in (two conditions) as 240 x 200 pixels
+    assert matplotlib.image.imread(out / "summary.png").shape[:2] == (200, 240)
+    assert main(["fit-batch", str(folder), "--out", str(out), "--method", "fast", "--format",
+                 "svg", "--workers", "1", "-q"]) == 0
+    assert sorted(p.name for p in out.glob("summary.*")) == ["summary.csv", "summary.svg"]
+
+
+def test_a_sampling_that_fails_is_exit_1_and_the_next_run_samples_it(
+        folder, tmp_path, monkeypatch, capsys):
+    import functools
+    import sys
+
+    module = sys.modules["bayespilot.sample"]
+    real = module.sample
+
+    @functools.wraps(real)  # (its signature: the batch checks the options by it)
+    def sample(*args, **kwargs):
+        raise FloatingPointError("the chain diverged (made to fail by the test)")
+
+    monkeypatch.setattr(module, "sample", sample)
+    _run_here(monkeypatch)
+    out = tmp_path / "fits"
+    argv = ["fit-batch", str(folder / "s2-run1"), "--out", str(out), "--method", "fast",
+            "--posterior", "--max-steps", "30", "--workers", "1", "-q"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == (f"bayespilot: error: 1 of 1 recordings' posteriors could not be "
+                       f"sampled (why: 'posterior_error' in {out}/<key>.json; their fits are "
+                       f"kept); run the same command again to sample them again")
+    assert any("the posterior could not be sampled for 1 recording(s) (s2-run1)" in line
+               for line in err)
+    monkeypatch.setattr(module, "sample", real)
+    assert main(argv) == 0  # (sampled now: 30 steps, not converged, said as a warning)
+    (row,) = _rows((out / "summary.csv").read_text(encoding="utf-8"))
+    assert row["posterior_error"] == "" and row["delta_abs_median"] != ""
+    assert (out / "s2-run1.nc").is_file()
+
+
 def test_a_folder_holding_another_settings_result_is_exit_2(done, folder, monkeypatch, capsys):
     out, code, _, _ = done
     assert code == 0
@@ -297,7 +354,8 @@ def test_the_options_reach_the_batch(folder, tmp_path, monkeypatch, capsys):
     assert kwargs == {"method": "paper", "noise": "white", "iterate": True, "oversample": 2,
                       "compare": True, "nlive": 30, "seed": 4, "posterior": False,
                       "sample_options": None, "scheduler": None,
-                      "workers": 1, "progress": "lines", "connect_timeout": 10.0}
+                      "workers": 1, "progress": "lines", "connect_timeout": 10.0,
+                      "title": True, "formats": ("png",), "dpi": 200}
     main(["fit-batch", str(folder), "--out", str(out), "--method", "fast", "--noise", "ar",
           "-q"])
     paths, _, kwargs = seen[1]

@@ -69,8 +69,9 @@ Outputs in ``out_dir``:
   from a population, is a model of its own: a hierarchical one), and a median of the
   runs' posterior medians would say no more than ``delta_abs_median`` of their
   estimates, with no uncertainty; each run's interval is in ``summary.csv``.
-- ``summary.png``: each run's delta_abs per condition, marked by the run's decision, with
-  its posterior's 90 % HDI as an error bar when it was sampled.
+- ``summary.png`` (``summary.<format>`` for each of ``formats``): each run's delta_abs per
+  condition, marked by the run's decision, with its posterior's 90 % HDI as an error bar
+  when it was sampled.
 """
 
 from __future__ import annotations
@@ -88,6 +89,7 @@ from typing import TYPE_CHECKING, Any, Mapping, Sequence
 import numpy as np
 
 from . import presets
+from ._figstyle import figure_options
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -381,7 +383,7 @@ def _say_warned(out: Path, keys: Sequence[str]) -> None:
         warn_at_caller(f"the posterior could not be sampled for {len(named)} recording(s) "
                        f"({_listed(named, 3)}), e.g. {named[0]}: {dict(unsampled)[named[0]]}; "
                        f"their fits are kept, and each result file says why under "
-                       f"'posterior_error' (delete a <key>.json to run that recording again)",
+                       f"'posterior_error' (the next call with these settings runs them again)",
                        RuntimeWarning)
     _say_each_kind(warned, "recording(s)")
 
@@ -527,14 +529,15 @@ def _condition_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]
     return rows
 
 
-def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mapping[str, Any]]
-                  ) -> Any:
+def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mapping[str, Any]],
+                  title: bool | str = True) -> Any:
     """Each run's delta_abs (rows of ``summary.csv`` with a result), one column per condition,
     marked by the run's decision (with a comparison) or by the sign of its delta_bic, with
     its posterior's 90 % HDI as an error bar where it has one; the runs of a condition side
-    by side in its column, in the order of their keys (their bars would overlap)."""
+    by side in its column, in the order of their keys (their bars would overlap); ``title``
+    as every plot function takes it (:func:`bayespilot.plots.plot_trace`)."""
     from .diagnose.report import _subplots
-    from .plots import _param_label
+    from .plots import _param_label, _title_text
 
     where = {(c["subject"], c["task"], c["motion_gain"]): i for i, c in enumerate(conditions)}
     done = [r for r in rows if not r.get("error")]
@@ -577,31 +580,45 @@ def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mappin
     ax.set_ylabel(_param_label("delta_abs"))
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize="small", title="per run", title_fontsize="small")
-    ax.set_title(f"The threshold of {len(done)} run{'s' if len(done) != 1 else ''} in "
-                 f"{len(conditions)} condition{'s' if len(conditions) != 1 else ''}",
-                 fontsize="medium")
+    text = _title_text(title, f"The threshold of {len(done)} run{'s' if len(done) != 1 else ''}"
+                              f" in {len(conditions)} condition"
+                              f"{'s' if len(conditions) != 1 else ''}")
+    if text:
+        ax.set_title(text, fontsize="medium")
     return fig
 
 
 def _write_summaries(out: Path, settings: Mapping[str, Any],
-                     current: Mapping[str, str] | None = None) -> None:
-    """``summary.csv``, ``conditions.csv`` and (when a task finished) ``summary.png`` of the
-    results in ``out`` made with ``settings`` (:func:`_batch_settings`; ``current``: this
-    call's keys and digests, :func:`_results`); no result: an earlier ``summary.png`` is
-    removed (it showed other results)."""
+                     current: Mapping[str, str] | None = None,
+                     figure: Mapping[str, Any] | None = None) -> None:
+    """``summary.csv``, ``conditions.csv`` and (when a task finished) ``summary.<format>`` of
+    the results in ``out`` made with ``settings`` (:func:`_batch_settings`; ``current``: this
+    call's keys and digests, :func:`_results`; ``figure``: title, formats and dpi,
+    :func:`bayespilot._figstyle.figure_options`, default a titled PNG at
+    :data:`~bayespilot.diagnose.report.FIGURE_DPI`); a summary figure of another format, or
+    of no result now, is removed (it showed other results)."""
+    from ._figstyle import save_figure
     from ._files import write_csv_atomic
-    from .diagnose.report import _png
+    from .diagnose.report import FIGURE_DPI, FORMATS, _pyplot
 
     found = _results(out, settings, current)
     rows = [_summary_row(found[k]) for k in sorted(found)]
     conditions = _condition_rows([found[k] for k in sorted(found) if "fit_threshold" in found[k]])
     write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS, rows)
     write_csv_atomic(out / "conditions.csv", CONDITION_FIELDS, conditions)
+    figure = {"title": True, "formats": ("png",), "dpi": None, **(figure or {})}
+    for fmt in FORMATS:
+        if fmt not in figure["formats"] or not conditions:
+            with suppress(FileNotFoundError):
+                (out / f"summary.{fmt}").unlink()
     if conditions:
-        _png(_plot_summary(rows, conditions), out / "summary.png")
-    else:
-        with suppress(FileNotFoundError):
-            (out / "summary.png").unlink()
+        fig = _plot_summary(rows, conditions, title=figure["title"])
+        try:  # (closed even when saving fails)
+            for fmt in figure["formats"]:
+                save_figure(fig, out / f"summary.{fmt}",
+                            FIGURE_DPI if figure["dpi"] is None else figure["dpi"])
+        finally:
+            _pyplot().close(fig)
 
 
 def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str = "paper",
@@ -612,7 +629,8 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
               sample_options: Mapping[str, Any] | None = None,
               scheduler: "str | Client | Cluster | None" = None, workers: int | None = None,
               progress: bool | str = True, connect_timeout: float = 10.0,
-              warm_cache: bool = True) -> "CampaignSummary":
+              warm_cache: bool = True, title: bool = True, formats: Sequence[str] = ("png",),
+              dpi: int | None = None) -> "CampaignSummary":
     """Fit (compare, sample) many recordings, with and without threshold, on dask.distributed.
 
     Parameters
@@ -671,7 +689,8 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         records gives the same chain.  Its summary is in the result
         (``posterior``) and in ``summary.csv`` (delta_abs's median and 90 % HDI,
         ``converged``), the draws in ``<key>.nc``.  A sampling that fails is recorded
-        (``posterior_error``, said once at the end) and the fits are kept.  Recorded in
+        (``posterior_error``, said once at the end) and the fits are kept; the next call
+        runs that recording again (as it does one whose ``<key>.nc`` is gone).  Recorded in
         the settings (only when True: results made before the option still resume).
     sample_options : mapping, optional
         Other keywords of :func:`~bayespilot.sample.sample`, only with ``posterior``:
@@ -683,6 +702,15 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         Recorded in the settings with those defaults filled in.
     scheduler, workers, progress, connect_timeout, warm_cache
         As for :func:`~bayespilot.campaign.run_campaign` (the lines count recordings).
+    title : bool
+        True (default): the summary figure with its title (how many runs in how many
+        conditions); False: without, for a paper whose caption says it.
+    formats : sequence of str
+        The formats of the summary figure, ``summary.<format>`` each (default PNG; "pdf"
+        and "svg" are vector); one of another format left by an earlier call is removed.
+    dpi : int, optional
+        The resolution of ``summary.png`` (default
+        :data:`~bayespilot.diagnose.report.FIGURE_DPI`).
 
     Returns
     -------
@@ -700,8 +728,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         ``method="paper"``, ``nlive`` or ``compare_options`` without ``compare``,
         ``sample_options`` without ``posterior``, an unknown fit or sample option, a bad
         likelihood or ``max_steps``, ``workers`` not a positive integer or given with
-        ``scheduler``, ``connect_timeout`` not a positive number, another ``progress``),
-        recordings the fits cannot use (too short, u constant:
+        ``scheduler``, ``connect_timeout`` not a positive number, another ``progress``,
+        ``formats`` empty or naming one not in ("png", "pdf", "svg"), a ``dpi`` that is not
+        a whole number >= 1), recordings the fits cannot use (too short, u constant:
         every one named), keys that clash, the same recording (its signals) under two
         names; nothing is run.
     ResultConflictError
@@ -717,7 +746,7 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         (``posterior``) arviz cannot be imported here.
     TypeError
         A ``scheduler`` that is not an address (str), a ``distributed.Client`` or a
-        ``distributed.deploy.Cluster``.
+        ``distributed.deploy.Cluster``; a ``title`` that is not True or False.
 
     Warns
     -----
@@ -740,6 +769,7 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
 
     t0 = time.perf_counter()
     C._check_cluster_options(scheduler, workers, progress, connect_timeout)
+    figure = figure_options(title, formats, dpi)
     options = _options(method, noise, iterate, oversample, compare, nlive, fit_options,
                        compare_options, posterior, sample_options)
     if options.get("posterior"):  # (this process writes the posteriors: said now)
@@ -813,9 +843,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
             # (a subject corrected in the sidecar since: no refit, the fits do not read it,
             # but the tables group by it; kept, a resume left the run in its old condition)
             C._write_json_atomic(out / f"{key}.json", {**old, "subject": headers[key]["subject"]})
-    if options.get("posterior"):  # (a result whose posterior file is gone: run again)
-        done = {key: (t, old) for key, (t, old) in done.items()
-                if not old.get("posterior") or (out / f"{key}.nc").is_file()}
+    if options.get("posterior"):  # (a result whose posterior failed, or whose posterior
+        done = {key: (t, old) for key, (t, old) in done.items()  # file is gone: run again)
+                if old.get("posterior") and (out / f"{key}.nc").is_file()}
     pending = [t for t in tasks if t.key not in done]
 
     def to_json(key: str, value: Any) -> dict[str, Any]:
@@ -848,6 +878,6 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         raise
     _say_warned(out, [t.key for t in pending])
     _write_summaries(out, _batch_settings(next(iter(headers.values()))),
-                     {t.key: digests[t.paths[0]] for t in tasks})
+                     {t.key: digests[t.paths[0]] for t in tasks}, figure)
     return C.CampaignSummary(len(tasks), completed, len(done), len(errors), errors, out,
                              time.perf_counter() - t0, "recordings")

@@ -1686,7 +1686,8 @@ def _cmd_fit_batch(args: argparse.Namespace) -> int:
     out = Path(args.out)
     keys = _batch_keys(paths, pool=False) or []  # (none: the batch refuses the input)
     _refuse_overwriting([("--out", f) for f in [*_batch_files(paths, out, pool=False,
-                                                              reports=False, keys=keys),
+                                                              reports=False, keys=keys,
+                                                              formats=_formats(args)),
                                                 out / "conditions.csv"]],
                         [f for p in paths for f in _recording_files(p)])
     how = (f"the paper's three-step procedure{', iterated' if args.iterate else ''}"
@@ -1711,7 +1712,8 @@ def _cmd_fit_batch(args: argparse.Namespace) -> int:
                             posterior=args.posterior, sample_options=sample_options,
                             scheduler=args.scheduler, workers=args.workers,
                             progress=_cluster_progress(args),
-                            connect_timeout=args.connect_timeout)
+                            connect_timeout=args.connect_timeout, title=_title(args),
+                            formats=_formats(args), dpi=args.dpi)
     _say(args, str(summary))
     try:
         table = (out / "conditions.csv").read_text(encoding="utf-8")
@@ -1725,17 +1727,32 @@ def _cmd_fit_batch(args: argparse.Namespace) -> int:
     earlier = _earlier_rows(runs, summary)
     scope = (f" (with {earlier} recording{'' if earlier == 1 else 's'} an earlier run fitted "
              f"in {out} with these settings)" if earlier > 0 else "")
-    png = out / "summary.png"  # (written when any fit finished)
+    figures = [out / f"summary.{fmt}" for fmt in _formats(args)]  # (when any fit finished)
     posteriors = " and <key>.nc (its posterior)" if args.posterior else ""
     _say(args, f"wrote {out / 'conditions.csv'} (one row per subject, task and K_theta), "
                f"{out / 'summary.csv'} (one row per recording){scope}"
-               f"{f', {png}' if png.is_file() else ''} and one <key>.json{posteriors} per "
-               f"recording")
+               f"{''.join(f', {f}' for f in figures if f.is_file())} and one "
+               f"<key>.json{posteriors} per recording")
     if summary.failed:
         raise CommandFailed(f"{summary.failed} of {summary.total} recordings' fits failed "
                             f"(messages in {out}/<key>.error.json); run the same command "
                             f"again to retry them")
+    unsampled = _unsampled(runs, keys) if args.posterior else 0
+    if unsampled:
+        raise CommandFailed(f"{unsampled} of {summary.total} recordings' posteriors could not "
+                            f"be sampled (why: 'posterior_error' in {out}/<key>.json; their "
+                            f"fits are kept); run the same command again to sample them again")
     return EXIT_OK
+
+
+def _unsampled(summary_csv: str, keys: Sequence[str]) -> int:
+    """How many rows of fit-batch's ``summary.csv`` (its text) of ``keys`` (this call's
+    recordings) record a ``posterior_error``."""
+    import csv
+
+    mine = set(keys)
+    return sum(1 for row in csv.DictReader(summary_csv.splitlines(keepends=True))
+               if row.get("key") in mine and row.get("posterior_error"))
 
 
 # --- the parser ------------------------------------------------------------------------
@@ -2285,7 +2302,9 @@ records, so that command repeats the chain: 5 to 10 s for an 81.92-s run
 delta_abs's posterior median and 90 % HDI (delta_abs_median,
 delta_abs_hdi_low, delta_abs_hdi_high) and whether the chain converged;
 summary.png draws the interval as an error bar. A sampling that fails is
-said and recorded (posterior_error) and the fits are kept.
+said and recorded (posterior_error), the fits are kept and the command exits
+with 1; run it again to sample those recordings again. --format pdf (or svg)
+and --no-title draw the summary figure for a paper.
 
 Examples:
   bayespilot fit-batch recordings/ --out fits
@@ -2679,6 +2698,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-steps", type=_count, default=None, metavar="N",
                    help="with --posterior: stop each chain after N steps even if not "
                         "converged (default 20000, as 'bayespilot sample')")
+    _figure_arguments(p, dpi_help=" (the summary's figure)")
+    _no_title_argument(p, "the summary's figure", note=" (how many runs in how many "
+                       "conditions)")
     _seed_argument(p, _batch_seed_help(
         "each recording's fits run with its own seed drawn from S and its content (not from "
         "its path, order or the other recordings)", "fit"))
