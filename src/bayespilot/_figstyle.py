@@ -16,6 +16,10 @@ PLOT_FORMATS = ("png", "pdf", "svg")
 #: default, fail the font checks of AIAA's and IEEE's PDF submission), text as text in an
 #: SVG; save with ``matplotlib.rc_context(VECTOR_TEXT)``.
 VECTOR_TEXT = {"pdf.fonttype": 42, "ps.fonttype": 42, "svg.fonttype": "none"}
+#: What makes an SVG the same each time the same figure is saved: its ids (of clip paths,
+#: ...) hashed with this fixed salt, not a random one (matplotlib's ``svg.hashsalt``); the
+#: dates are left out by :func:`save_figure`'s ``metadata``.
+REPRODUCIBLE = {"svg.hashsalt": "bayespilot"}
 
 
 def figure_options(title, formats, dpi) -> dict:
@@ -53,6 +57,11 @@ def save_figure(fig, path, dpi: int = PLOT_DPI) -> None:
     beside it, then renamed), so an interrupt or a full disk leaves the old file or the new
     one, never a truncated one.  A ``path`` without a suffix gets matplotlib's default
     format's, as ``savefig`` gives it; a file object is written to directly.
+
+    The same figure gives the same bytes (:data:`REPRODUCIBLE`, :func:`_metadata`): an SVG
+    without a date and with ids from a fixed salt, a PDF without a creation date, so that a
+    command run twice writes identical files (for version control and checksums).  A PNG is
+    written as matplotlib writes it (it has no date).
     """
     import os
 
@@ -61,8 +70,9 @@ def save_figure(fig, path, dpi: int = PLOT_DPI) -> None:
     from ._files import replacing
 
     if not isinstance(path, (str, os.PathLike)):  # a file object: nothing to replace
-        with matplotlib.rc_context(VECTOR_TEXT):
-            fig.savefig(path, dpi=dpi)
+        with matplotlib.rc_context({**VECTOR_TEXT, **REPRODUCIBLE}):
+            fmt = matplotlib.rcParams["savefig.format"]  # (what savefig writes to it)
+            fig.savefig(path, dpi=dpi, **_metadata(fmt))
         return
     path = os.fspath(path)
     fmt = os.path.splitext(path)[1][1:]
@@ -70,5 +80,13 @@ def save_figure(fig, path, dpi: int = PLOT_DPI) -> None:
         fmt = matplotlib.rcParams["savefig.format"]
         path = f"{path.rstrip('.')}.{fmt}"
     # format= given: savefig would take it from the temporary file's suffix (".tmp")
-    with matplotlib.rc_context(VECTOR_TEXT), replacing(path) as tmp:
-        fig.savefig(tmp, dpi=dpi, format=fmt)
+    with matplotlib.rc_context({**VECTOR_TEXT, **REPRODUCIBLE}), replacing(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format=fmt, **_metadata(fmt))
+
+
+def _metadata(fmt: str) -> dict:
+    """``savefig``'s keyword that leaves the date out of a figure of format ``fmt``: an SVG's
+    ``Date`` (its ``dc:date``) and a PDF's ``CreationDate`` set to None, which matplotlib
+    leaves out; none for the other formats (a PNG has no date)."""
+    key = {"svg": "Date", "pdf": "CreationDate"}.get(str(fmt).lower())
+    return {} if key is None else {"metadata": {key: None}}

@@ -478,10 +478,11 @@ def run_job(job: Job) -> dict[str, Any]:
     ``remnant_seed``, ``fit_seed`` and the same as exact decimal text,
     ``remnant_seed_text``, ``fit_seed_text`` (the seeds reach 2**63; a reader
     that takes JSON numbers as doubles, such as jq or JavaScript, rounds the
-    integers above 2**53); ``true_params``; ``K_n`` and ``F_n`` (the remnant
-    gain and the fraction **reached**; ``remnant_fraction`` is the one asked
-    for, the ``F_n`` of :func:`summarise`), and ``F_n_reached``, the same
-    reached fraction under an unambiguous name; ``fit`` (``FitResult.to_dict(full=False)``);
+    integers above 2**53), and so ``fit["seed_text"]`` beside ``fit["seed"]``;
+    ``true_params``; ``K_n`` and ``F_n`` (the remnant gain and the fraction **reached**;
+    ``remnant_fraction`` is the one asked for, the ``F_n`` of :func:`summarise`), and
+    ``F_n_reached``, the same reached fraction under an unambiguous name; ``fit``
+    (``FitResult.to_dict(full=False)``);
     ``step1_delta_abs`` and ``check`` (paper method with threshold only: the fit's own
     check, ``gap``, ``neg_log_lik`` and ``delta_abs``, see
     :class:`~bayespilot.fit.result.NotAtMaximumWarning`, which is not issued here);
@@ -551,6 +552,9 @@ def run_job(job: Job) -> dict[str, Any]:
                            "true_params": dict(sim.params), "K_n": sim.remnant_gain,
                            "F_n": sim.remnant_fraction, "F_n_reached": sim.remnant_fraction,
                            "fit": fit.to_dict(full=False), "warnings": said}
+    if isinstance(out["fit"].get("seed"), (int, np.integer)) \
+            and not isinstance(out["fit"]["seed"], bool):
+        out["fit"]["seed_text"] = str(out["fit"]["seed"])  # (the same seed, nested: as exact)
     step1 = fit.steps.get("step1_delta_abs")
     if step1 is not None:
         out["step1_delta_abs"] = step1
@@ -733,6 +737,25 @@ def _scheduler_name(scheduler: Any) -> str:
             else f"an unknown address (of the {kind} given)")
 
 
+def _worker_numba_threads(workers: int, cpu_count: int | None = None,
+                          environ: Mapping[str, str] | None = None) -> int:
+    """The numba threads of each worker of a local cluster of ``workers`` processes.
+
+    The cores shared among the workers, ``cpu_count // workers`` (at least 1; ``cpu_count``
+    default :func:`os.cpu_count`), unless the user's ``NUMBA_NUM_THREADS`` (in ``environ``,
+    default :data:`os.environ`) is a whole number >= 1 below it: that one, as the user asked
+    (a higher one is not taken: the workers would oversubscribe the cores; a value that is
+    not a whole number >= 1 is not the user's thread count, and the share is used)."""
+    cpus = os.cpu_count() if cpu_count is None else cpu_count
+    share = max(1, int(cpus or 1) // max(1, int(workers)))
+    asked = (os.environ if environ is None else environ).get("NUMBA_NUM_THREADS", "")
+    try:
+        user = int(asked.strip())
+    except ValueError:
+        return share
+    return min(share, user) if user >= 1 else share
+
+
 def _connect(stack: ExitStack, scheduler: "str | Client | Cluster | None", workers: int | None,
              connect_timeout: float):
     """A distributed.Client: to ``scheduler``, or to a LocalCluster closed with ``stack``.
@@ -744,7 +767,7 @@ def _connect(stack: ExitStack, scheduler: "str | Client | Cluster | None", worke
 
     if scheduler is None:
         n = int(workers or os.cpu_count() or 1)
-        numba_threads = max(1, (os.cpu_count() or 1) // n)
+        numba_threads = _worker_numba_threads(n)
         # Two attempts: a worker process that fails to come up (an AssertionError from the
         # nanny, as in dask/distributed#1286) failed one clean-clone test run here on
         # 2026-11-25 and did not recur on rerunning; a second failure is reported.

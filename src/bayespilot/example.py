@@ -6,7 +6,8 @@ few minutes on a laptop:
 
 1. simulate one run per motion gain K_theta (Table 3 pilot of the paper,
    delta_abs = 0.0075 IPUT, remnant fraction F_n) and write each as a
-   recording (CSV + JSON sidecar), then read it back as a user's file;
+   recording (CSV + JSON sidecar, with the truth under ``"simulation"`` as
+   ``bayespilot simulate`` writes it), then read it back as a user's file;
 2. fit each with the fast maximum-likelihood estimator, with and without
    threshold (:func:`bayespilot.fit.fast.fit_fast`), by default as
    prediction-error fits that share one AR model of the output error;
@@ -145,7 +146,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     from ._labels import symbol
     from .compare import compare, pool
     from .fit.fast import fit_fast
-    from .io import read_recording, write_recording
+    from .io import read_recording
     from .plots import _pyplot, _run_note, _wrap, plot_marginal, plot_pair, plot_traces
     from .sample import sample
     from .simulate import simulate
@@ -183,7 +184,9 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         say(f"[{i + 1}/{len(gains)}] {name}: simulating (F_n = {remnant_fraction:g}, seed {s}) ...")
         sim = simulate(task=task, motion_gain=kt, remnant_fraction=remnant_fraction, seed=s,
                        duration=duration)
-        csv, _ = write_recording(sim.recording, dirs["recordings"] / f"{name}.csv")
+        # with its truth (the sidecar's "simulation": true parameters, seed, release), as
+        # `bayespilot simulate` writes it, so that the posterior file has true_* attributes
+        csv, _ = sim.write(dirs["recordings"] / f"{name}.csv")
         rec = read_recording(csv)
         if i == 0:
             _save(plot_traces(rec, canal=sim.channels["vestibular"]["pre"],

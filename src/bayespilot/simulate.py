@@ -297,10 +297,13 @@ class Simulation:
         """The recording with the truth in its metadata, under ``"simulation"``.
 
         ``metadata["simulation"]`` holds ``parameters`` (the true parameters),
-        ``seed``, ``remnant_gain``, ``remnant_fraction``, ``T_n`` and
+        ``seed``, ``remnant_gain``, ``remnant_fraction``, ``T_n``,
         ``settings`` (:attr:`settings`: the integration's oversampling, the
         run-in, the noise convention, the forcing scale, the fraction asked
-        for; what a replay needs beside the seed): what ``bayespilot
+        for; what a replay needs beside the seed) and ``bayespilot_version``
+        (the release that simulated it: the data depend on the simulator's
+        code; a sidecar without it, of an older release, reads the same;
+        ``docs/recording-format.md``): what ``bayespilot
         simulate`` writes, so that a posterior of the recording shows the
         truth (``Posterior.truth``) and the file keeps it.  The diagnosis
         never reads it.
@@ -309,13 +312,17 @@ class Simulation:
         -------
         Recording
         """
+        from . import __version__
+        from ._files import VERSION_KEY
+
         meta = dict(self.recording.metadata)
         meta["simulation"] = {"parameters": {k: float(v) for k, v in self.params.items()},
                               "seed": None if self.seed is None else int(self.seed),
                               "remnant_gain": float(self.remnant_gain),
                               "remnant_fraction": float(self.remnant_fraction),
                               "T_n": self.settings.get("T_n"),
-                              "settings": json_ready(dict(self.settings))}
+                              "settings": json_ready(dict(self.settings)),
+                              VERSION_KEY: __version__}
         return replace(self.recording, metadata=meta)
 
     def write(self, path: str | os.PathLike) -> tuple[Path, Path]:
