@@ -147,7 +147,8 @@ def test_results_match_direct_fits(recs, tmp_path, monkeypatch):
         assert float(row["delta_bic"]) == pytest.approx(delta_bic, rel=1e-10)
         assert int(row["seed"]) == s and row["decision"] == row["error"] == ""
         assert "posterior" not in got and "posterior_error" not in got  # (not asked for)
-        assert row["delta_abs_median"] == row["delta_abs_hdi_low"] == row["converged"] == ""
+        assert (row["delta_abs_posterior_median"] == row["delta_abs_posterior_hdi_low"]
+                == row["converged"] == "")
         by_condition.setdefault((row["subject"], rec.motion_gain), []).append(
             (f1, f0, delta_bic))
     conditions = _csv(out / "conditions.csv")
@@ -381,8 +382,8 @@ def test_summary_figure_marks_each_run():
     by side (0.15 apart, in key order) in its column, and a run's posterior 90 % HDI (where
     it was sampled) an error bar from its low to its high end."""
     rows = [{"key": k, "subject": "s1", "task": "FD", "motion_gain": g, "delta_abs": d,
-             "delta_bic": b, "decision": "", "error": "", "delta_abs_hdi_low": lo,
-             "delta_abs_hdi_high": hi}
+             "delta_bic": b, "decision": "", "error": "",
+             "delta_abs_posterior_hdi_low": lo, "delta_abs_posterior_hdi_high": hi}
             for k, g, d, b, lo, hi in (("a", 1.0, 0.01, 5.0, 0.008, 0.0105),
                                        ("b", 1.0, 0.002, -1.0, "", ""),
                                        ("c", 0.5, 0.007, 3.0, 0.0072, 0.009))]
@@ -507,8 +508,9 @@ def test_the_posterior_is_sample_run_with_the_recorded_seed(recs, tmp_path, monk
         median = direct.summary()["delta_abs"]["median"]
         low, high = direct.credible_interval("delta_abs", 0.9)
         row = rows[key]
-        assert float(row["delta_abs_median"]) == median
-        assert (float(row["delta_abs_hdi_low"]), float(row["delta_abs_hdi_high"])) == (low, high)
+        assert float(row["delta_abs_posterior_median"]) == median
+        assert (float(row["delta_abs_posterior_hdi_low"]),
+                float(row["delta_abs_posterior_hdi_high"])) == (low, high)
         assert low < median < high
         assert row["converged"] == "False" and row["posterior_error"] == row["error"] == ""
     # conditions.csv has nothing of the posteriors (module docs: not pooled)
@@ -552,9 +554,10 @@ def test_a_sampling_that_fails_is_recorded_and_the_fits_kept(recs, tmp_path, mon
     assert "posterior_error" not in json.loads((out / "a.json").read_text())
     rows = {r["key"]: r for r in _csv(out / "summary.csv")}
     assert rows["b"]["posterior_error"] == got["posterior_error"] and rows["b"]["error"] == ""
-    assert rows["b"]["delta_abs_median"] == rows["b"]["converged"] == ""
+    assert rows["b"]["delta_abs_posterior_median"] == rows["b"]["converged"] == ""
     assert float(rows["b"]["delta_abs"]) == pytest.approx(f1.params["delta_abs"], rel=1e-12)
-    assert rows["a"]["posterior_error"] == "" and rows["a"]["delta_abs_median"] != ""
+    assert (rows["a"]["posterior_error"] == ""
+            and rows["a"]["delta_abs_posterior_median"] != "")
     assert int(_csv(out / "conditions.csv")[0]["n_runs"]) == 2  # (b's fits count)
     # the next call samples b again (its fits again too, the same), not a
     sampled = []

@@ -192,7 +192,7 @@ def test_a_sampling_that_fails_is_exit_1_and_the_next_run_samples_it(
     monkeypatch.setattr(module, "sample", real)
     assert main(argv) == 0  # (sampled now: 30 steps, not converged, said as a warning)
     (row,) = _rows((out / "summary.csv").read_text(encoding="utf-8"))
-    assert row["posterior_error"] == "" and row["delta_abs_median"] != ""
+    assert row["posterior_error"] == "" and row["delta_abs_posterior_median"] != ""
     assert (out / "s2-run1.nc").is_file()
 
 
@@ -410,7 +410,8 @@ def test_a_posterior_is_the_one_bayespilot_sample_gives_with_the_recorded_seed(
         np.testing.assert_array_equal(batch.posterior[name].values,
                                       single.posterior[name].values)
     (row,) = _rows((out / "summary.csv").read_text(encoding="utf-8"))
-    assert float(row["delta_abs_median"]) == summary["delta_abs"]["median"]
-    assert [float(row["delta_abs_hdi_low"]), float(row["delta_abs_hdi_high"])] == \
+    assert float(row["delta_abs_posterior_median"]) == summary["delta_abs"]["median"]
+    assert [float(row["delta_abs_posterior_hdi_low"]),
+            float(row["delta_abs_posterior_hdi_high"])] == \
         summary["delta_abs"]["hdi_90"]
     assert row["converged"] == "False" and row["posterior_error"] == ""

@@ -68,7 +68,10 @@ Outputs in ``out_dir``:
   runs' posteriors are not pooled (a condition's delta_abs shared by its runs, or drawn
   from a population, is a model of its own: a hierarchical one), and a median of the
   runs' posterior medians would say no more than ``delta_abs_median`` of their
-  estimates, with no uncertainty; each run's interval is in ``summary.csv``.
+  estimates, with no uncertainty; each run's interval is in ``summary.csv``
+  (``delta_abs_posterior_median``, ``delta_abs_posterior_hdi_low`` and
+  ``delta_abs_posterior_hdi_high``: named apart from ``conditions.csv``'s columns, so that
+  the two tables can be joined).
 - ``summary.png`` (``summary.<format>`` for each of ``formats``): each run's delta_abs per
   condition, marked by the run's decision, with its posterior's 90 % HDI as an error bar
   when it was sampled.
@@ -104,13 +107,16 @@ __all__ = ["fit_batch", "SUMMARY_FIELDS", "CONDITION_FIELDS"]
 #: Columns of ``summary.csv``: the recording, the parameters of its fit with threshold by
 #: name, -ln L with and without, the VAF with threshold, delta_bic (none - threshold:
 #: positive favours the threshold), with ``compare`` the ln Bayes factor, its error and the
-#: decision, with ``posterior`` delta_abs's posterior median and 90 % HDI, whether the chain
-#: converged and, for a sampling that failed, its error; the seed the task ran with and,
-#: for a task that failed, its error.
+#: decision, with ``posterior`` delta_abs's posterior median and 90 % HDI
+#: (``delta_abs_posterior_*``: not ``conditions.csv``'s ``delta_abs_median``, the median of
+#: the runs' estimates), whether the chain converged and, for a sampling that failed, its
+#: error; the seed the task ran with and, for a task that failed, its error.  Every column is
+#: always written: one not computed (no ``compare``, no ``posterior``, a failed task) is
+#: empty, as are None, NaN and infinite values.
 SUMMARY_FIELDS = ("key", "subject", "task", "motion_gain", *presets.PARAMETER_NAMES,
                   "neg_log_lik", "neg_log_lik_none", "vaf", "delta_bic", "log_bayes_factor",
-                  "log_bayes_factor_err", "decision", "delta_abs_median", "delta_abs_hdi_low",
-                  "delta_abs_hdi_high", "converged", "posterior_error", "seed", "error")
+                  "log_bayes_factor_err", "decision", "delta_abs_posterior_median",
+                  "delta_abs_posterior_hdi_low", "delta_abs_posterior_hdi_high", "converged", "posterior_error", "seed", "error")
 
 #: Columns of ``conditions.csv``: the condition (subject, '' when the recordings give none;
 #: task; K_theta) and its ``label``, the runs with a result, delta_abs's median, min and max
@@ -485,8 +491,9 @@ def _summary_row(stored: Mapping[str, Any]) -> dict[str, Any]:
             "vaf": fit["vaf"], "delta_bic": stored["information_criteria"]["delta_bic"],
             "log_bayes_factor": comparison.get("log_bayes_factor"),
             "log_bayes_factor_err": comparison.get("log_bayes_factor_err"),
-            "decision": comparison.get("decision"), "delta_abs_median": delta.get("median"),
-            "delta_abs_hdi_low": low, "delta_abs_hdi_high": high,
+            "decision": comparison.get("decision"),
+            "delta_abs_posterior_median": delta.get("median"),
+            "delta_abs_posterior_hdi_low": low, "delta_abs_posterior_hdi_high": high,
             "converged": post.get("converged"),
             "posterior_error": stored.get("posterior_error")}
 
@@ -563,10 +570,11 @@ def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mappin
                 ys.append(r["delta_abs"])
         if xs:
             ax.scatter(xs, ys, marker=marker, c=colour, label=text, zorder=3)
-    bars = [(x[n], float(r["delta_abs_hdi_low"]), float(r["delta_abs_hdi_high"]))
+    bars = [(x[n], float(r["delta_abs_posterior_hdi_low"]),
+             float(r["delta_abs_posterior_hdi_high"]))
             for n, r in enumerate(done)
-            if r.get("delta_abs_hdi_low") not in (None, "")
-            and r.get("delta_abs_hdi_high") not in (None, "")]
+            if r.get("delta_abs_posterior_hdi_low") not in (None, "")
+            and r.get("delta_abs_posterior_hdi_high") not in (None, "")]
     if bars:  # (centred on the interval: it need not hold the estimate)
         bx, lo, hi = (np.array(v, dtype=float) for v in zip(*bars))
         ax.errorbar(bx, (lo + hi) / 2, yerr=(hi - lo) / 2, fmt="none", ecolor="0.35",
@@ -687,8 +695,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         not from the batch's fits), so that ``bayespilot sample REC --seed S
         --oversample M [--likelihood L] [--max-steps N]`` with the seed the result
         records gives the same chain.  Its summary is in the result
-        (``posterior``) and in ``summary.csv`` (delta_abs's median and 90 % HDI,
-        ``converged``), the draws in ``<key>.nc``.  A sampling that fails is recorded
+        (``posterior``) and in ``summary.csv`` (delta_abs's median and 90 % HDI:
+        ``delta_abs_posterior_median``, ``delta_abs_posterior_hdi_low`` and
+        ``delta_abs_posterior_hdi_high``; ``converged``), the draws in ``<key>.nc``.  A sampling that fails is recorded
         (``posterior_error``, said once at the end) and the fits are kept; the next call
         runs that recording again (as it does one whose ``<key>.nc`` is gone).  Recorded in
         the settings (only when True: results made before the option still resume).
@@ -737,8 +746,12 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         ``out_dir`` holds a result of one of the batch's keys made from another recording
         (by its signals, or by what the fit reads of its sidecar: K_theta, the sample
         rate, the task, the plant, the forcing) or with other settings: the message names
-        the file and says what differs; nothing is run.  A CampaignError and a
-        ValueError (:class:`bayespilot.diagnose.batch.ResultConflictError`).
+        the file and says what differs; nothing is run.  Also an ``out_dir`` that holds
+        results of another command (``<key>.json`` of
+        :func:`~bayespilot.diagnose.batch.diagnose_batch`, with ``diagnosis``, or a
+        ``summary.csv`` this function did not write), which the batch would replace: the
+        message names them.  A CampaignError and a ValueError
+        (:class:`bayespilot.diagnose.batch.ResultConflictError`).
     CampaignError
         The cluster cannot be reached or started or is lost during the run (what
         finished is saved), ``out_dir`` cannot be written in (a result or posterior
@@ -763,7 +776,8 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
     """
     from . import campaign as C
     from .diagnose.batch import (ResultConflictError, _differs, _recording_metadata,
-                                 _the_recording, plan_batch, task_seed)
+                                 _refuse_another_commands_folder, _the_recording, plan_batch,
+                                 task_seed)
     from .io import read_recording
     from .recording import RecordingError, _signals_digest
 
@@ -781,6 +795,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
             raise C.CampaignError(f"posterior=True writes each posterior with arviz, which "
                                   f"cannot be imported ({type(exc).__name__}: {exc})") from None
     task_seed(seed, [])  # (a bad seed: the ValueError, before any file is read)
+    # (a folder of diagnose-batch's, or a summary.csv of another's: refused before the
+    # recordings are read)
+    _refuse_another_commands_folder(Path(out_dir), "fit-batch")
     first: dict[str, str] = {}  # a recording named twice (its .csv and its .json) is one
     for p in map(str, paths):
         first.setdefault(_the_recording(p), p)

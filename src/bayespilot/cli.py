@@ -393,6 +393,11 @@ def _read_params(path: str, model, *, require: Sequence[str] = (),
                    + (f", of {obj['source']}" if obj.get("source") else "")
                    + "): its params are taken")
         obj, what = obj["params"], "fit's parameter"
+    kind = _result_kind(obj) if what == "parameter" else None
+    if kind is not None:  # (its keys are not parameter names: said as the file it is)
+        raise UsageError(f"{p}: is {kind}, not a parameter file: give a JSON object of "
+                         f"parameter values by name ({', '.join(names)}), e.g. "
+                         f"{{\"K_v\": 1.057}}, or a fit's result ('bayespilot fit --json')")
     unknown = [k for k in obj if k not in names]
     if unknown:
         hint = ""
@@ -426,6 +431,30 @@ def _read_params(path: str, model, *, require: Sequence[str] = (),
         raise UsageError(f"{p}: missing parameter(s) {', '.join(missing)} "
                          f"(this command needs {', '.join(require)})")
     return values
+
+
+def _result_kind(obj: Mapping[str, object]) -> str | None:
+    """What a JSON object read as a parameter file is when it is another of bayespilot's files
+    (a diagnosis, a batch's result, a comparison, a posterior's summary, a recording's
+    sidecar), said for the refusal; None for anything else (a parameter file, or a file
+    whose unknown names are said one by one)."""
+    fmt = obj.get("format")
+    if isinstance(fmt, str) and fmt.startswith("bayespilot-recording/"):
+        return "a recording's JSON sidecar"
+    if "fit_threshold" in obj and "fit_none" in obj:
+        return ("a result of 'bayespilot fit-batch' (its fits are under \"fit_threshold\" "
+                "and \"fit_none\"; 'bayespilot fit REC --json' writes one fit's file)")
+    if "diagnosis" in obj and "recordings" in obj:
+        return "a result of 'bayespilot diagnose-batch' (a diagnosis)"
+    if "ranking" in obj and "physics" in obj:
+        return "a diagnosis ('bayespilot diagnose --json')"
+    if "log_bayes_factor" in obj and "decision" in obj:
+        return "a comparison ('bayespilot compare --json')"
+    if "job" in obj and "fit" in obj:
+        return "a result of 'bayespilot replicate' (a simulated run's fit)"
+    if obj and all(isinstance(v, dict) and "median" in v and "r_hat" in v for v in obj.values()):
+        return "a posterior's summary ('bayespilot sample --json': statistics per parameter)"
+    return None
 
 
 def _entries_adding(names: Sequence[str], model) -> list[tuple[str, list[str]]]:
@@ -653,7 +682,8 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
                          f"at {rate:g} Hz")
     _refuse_overwriting([("-o/--output", f) for f in _stem_files(args.output)],
                         [("the --params file", args.params),
-                         *_code_files(args.extended_by, "--with")])
+                         *_code_files(args.extended_by, "--with")],
+                        recordings=False)  # (its own rule: a simulated one is replaced)
     if not args.force:
         _refuse_replacing_a_recording(args.output)
     model = _paper_model_with(args, fitted=False)
@@ -797,6 +827,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     task, motion_gain, fraction = "FD", 1.0, 0.2
     truth = presets.paper_parameters(task)
     out = Path(args.out)
+    # (a recording there of the demo's own is replaced, as a rerun does; a lab's is refused)
+    _refuse_replacing_a_recording(out / "recording", "--out", force=False)
     _say(args, f"Simulating task {task} at K_theta = {motion_gain:g}, remnant fraction "
                f"F_n = {fraction:g}, Table 3 parameters of Pool et al. (2012), seed {args.seed} ...")
     sim, csv_path, json_path = _simulate_and_write(out / "recording", truth, task=task,
@@ -899,6 +931,14 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
         arg = "--remnant" if "Table 4" in str(exc) else "--fit-option"
         raise UsageError(f"argument {arg}: {exc}") from None
     out = Path(args.out)
+    _refuse_overwriting([("--out", out / "summary.csv"), ("--out", out / "summary.md")], [])
+    from .diagnose.batch import _summary_of
+
+    other = _summary_of(out / "summary.csv")
+    if other in ("fit-batch", "diagnose-batch"):  # (its tables would be replaced by ours)
+        raise UsageError(f"argument --out: {out / 'summary.csv'} is the summary of "
+                         f"'bayespilot {other}', which replicate would replace with its own; "
+                         f"use another --out folder")
     _say(args, f"{len(jobs)} fits ({args.method} method, {args.realizations} realization(s) x "
                f"{len(args.tasks)} task(s) x {len(args.motion_gains)} K_theta x "
                f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on "
@@ -1100,13 +1140,17 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def _refuse_overwriting(outputs: Sequence[tuple[str, str | Path | None]],
-                        inputs: Sequence[tuple[str, str | Path | None]]) -> None:
+                        inputs: Sequence[tuple[str, str | Path | None]], *,
+                        recordings: bool = True) -> None:
     """Refuse (exit 2), before anything is computed, an output that is a file the command
-    reads, or another output of it.
+    reads, another output of it, or a file of a recording.
 
     The outputs are replaced atomically and the command says it succeeded, so a typo
     (``--json out/run.json`` for ``out/run-fit.json``) destroyed the recording's sidecar,
-    the ``--params`` file or the posterior read, without a word.
+    the ``--params`` file or the posterior read, without a word; so did one that named
+    another recording's file (``--json recs/s2-run1.csv``, ``--json recs/s1-run2.json``):
+    a lab's measurement, which cannot be made again (:func:`_recording_part`).  A previous
+    result of the command (a fit's JSON written again) is replaced, as the option says.
 
     Parameters
     ----------
@@ -1117,11 +1161,15 @@ def _refuse_overwriting(outputs: Sequence[tuple[str, str | Path | None]],
         Each file the command reads, said as ``what`` (e.g. "the --params file"); None is
         not given.  An input that is also an output (``sample --backend``) is left out of
         ``inputs``: writing it is what the option asks for.
+    recordings : bool
+        Also refuse an output that is an existing recording's file (True); ``simulate``,
+        which writes recordings, has its own rule (:func:`_refuse_replacing_a_recording`).
 
     Raises
     ------
     UsageError
-        An output is one of the inputs, or two outputs are one file.
+        An output is one of the inputs, two outputs are one file, or (``recordings``) an
+        output is a file of an existing recording.
     """
     read = [(what, Path(path)) for what, path in inputs if path is not None]
     seen: list[tuple[str, Path]] = []
@@ -1140,15 +1188,67 @@ def _refuse_overwriting(outputs: Sequence[tuple[str, str | Path | None]],
                 raise UsageError(f"argument {option}: {out} is also the file of {other}; give "
                                  f"each output its own file name")
         seen.append((option, out))
+        part = _recording_part(out) if recordings else None
+        if part is not None:
+            where = ("use another --out folder" if option == "--out" else
+                     "give another file name")
+            raise UsageError(f"argument {option}: {out} is {part}: a measurement, which "
+                             f"writing there would destroy; {where}")
 
 
-def _refuse_replacing_a_recording(out: str) -> None:
+def _is_recording_sidecar(path: Path) -> bool:
+    """Whether ``path`` is a recording's JSON sidecar: a JSON object whose ``"format"`` is the
+    recording format's (``bayespilot-recording/1``, docs/recording-format.md; a later
+    version's too)."""
+    try:
+        data = path.read_bytes()
+    except OSError:  # (missing, a folder, unreadable: not one said here)
+        return False
+    if b"bayespilot-recording/" not in data:  # (a result file: not parsed)
+        return False
+    try:
+        obj = json.loads(data.decode("utf-8-sig"))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        return False
+    fmt = obj.get("format") if isinstance(obj, dict) else None
+    return isinstance(fmt, str) and fmt.startswith("bayespilot-recording/")
+
+
+def _recording_part(path: Path) -> str | None:
+    """What of a recording the existing file ``path`` is, said for a refusal, or None.
+
+    A JSON sidecar (its ``"format"`` is the recording format's), a ``.csv`` beside such a
+    sidecar (``STEM.csv`` with ``STEM.json``: the pair :func:`bayespilot.io.read_recording`
+    reads), or a ``.mat`` file (bayespilot reads .mat recordings and writes none).  A file
+    of a command's own (a fit's JSON written before) is not one: it is replaced."""
+    from .io import _pair_paths
+
+    if not path.is_file():
+        return None
+    suffix = path.suffix.lower()
+    if suffix == ".mat":
+        return "a .mat file, a recording as bayespilot reads one (it writes no .mat file)"
+    if suffix == ".csv":
+        sidecar = _pair_paths(path)[1]
+        if _is_recording_sidecar(sidecar):
+            return (f"the CSV of the recording {path.with_suffix('')} (its sidecar {sidecar} "
+                    f"is a recording's)")
+        return None
+    if suffix == ".json" and _is_recording_sidecar(path):
+        return "the JSON sidecar of a recording (its \"format\" is the recording format's)"
+    return None
+
+
+def _refuse_replacing_a_recording(out: str | Path, option: str = "-o/--output",
+                                  force: bool = True) -> None:
     """Refuse (exit 2) to replace a recording that ``bayespilot simulate`` did not write.
 
     A simulated recording's sidecar says so (its ``"simulation"`` key): simulating onto it
     again is the common case (a changed seed) and replaces it, as ``-o`` says.  A lab's
     recording at that stem (a sidecar without it, or a CSV without a sidecar) is a
-    measurement that cannot be made again; ``--force`` replaces it all the same.
+    measurement that cannot be made again; ``--force`` replaces it all the same (``force``:
+    the command has it, said in the message; ``option`` names the option that put the
+    recording there, ``demo --quick``'s ``--out``).
 
     Raises
     ------
@@ -1167,11 +1267,12 @@ def _refuse_replacing_a_recording(out: str) -> None:
     there = " and ".join(str(p) for p in (csv_path, json_path) if p.exists())
     why = ("no \"simulation\" in its sidecar" if sidecar is not None else
            "a file without a simulated recording's sidecar")
-    raise UsageError(f"argument -o/--output: {there} "
+    raise UsageError(f"argument {option}: {there} "
                      f"{'are' if ' and ' in there else 'is'} not a recording 'bayespilot "
                      f"simulate' wrote ({why}: a lab's measurement, or another file): "
-                     f"simulating onto it would replace it; give another name, or --force to "
-                     f"replace it")
+                     f"simulating onto it would replace it; "
+                     + ("give another name, or --force to replace it" if force else
+                        "give another folder"))
 
 
 def _stem_files(out: str) -> list[Path]:
@@ -2234,7 +2335,9 @@ DIR/<key>.error.json and the others go on; running the same command again
 skips the finished ones and retries the failed (the same recordings: a stem,
 its .csv or its .json, with the same sidecar values; the same settings,
 defaults filled in); a <key>.json
-made from other recordings or settings is refused (exit 2). With --pool, one
+made from other recordings or settings is refused (exit 2), and so is a DIR
+that holds fit-batch's results (or a summary.csv diagnose-batch did not
+write): use another --out. With --pool, one
 recording under two names (a copy) in a condition is refused before anything
 runs. --reports writes the reports of the diagnoses a run makes: one
 finished before without a report is not redone and gets none (a warning
@@ -2277,14 +2380,17 @@ criteria and, with --compare, the comparison; one that fails leaves
 DIR/<key>.error.json and the others go on (exit 1 at the end); running the
 same command again skips the finished ones and retries the failed; a
 <key>.json made from another recording or with other settings is refused
-(exit 2). --noise ar goes with --method fast and --iterate with --method
-paper, as in 'bayespilot fit'.
+(exit 2), and so is a DIR that holds diagnose-batch's results (or a
+summary.csv fit-batch did not write): use another --out. --noise ar goes
+with --method fast and --iterate with --method paper, as in 'bayespilot fit'.
 
 DIR/summary.csv has one row per recording fitted in DIR with these
-settings, sorted by key: its subject, task and K_theta, the parameters
+settings, sorted by key: its key, subject, task and K_theta, the parameters
 with threshold, -ln L of both fits, the VAF, delta_bic (BIC without
 threshold minus BIC with: > 0 favours the threshold), with --compare ln BF,
-its error and decision, the seed and any error. DIR/conditions.csv, printed
+its error and decision, the seed and any error. Every column is always
+there: one not computed (no --compare, no --posterior) is empty, as is a
+value that is missing, NaN or infinite. DIR/conditions.csv, printed
 at the end, has one row per subject, task and K_theta: the number of runs,
 delta_abs's median, min and max over them, the summed differences of -ln L
 and BIC, and with --compare the pooled ln BF, its error and decision.
@@ -2299,8 +2405,10 @@ records, so that command repeats the chain: 5 to 10 s for an 81.92-s run
 (eq4), two to three times that with --likelihood coloured. DIR/<key>.nc holds the draws
 (netCDF, for 'bayespilot plot' or arviz), <key>.json the summary that
 'bayespilot sample --json' writes under 'posterior', and summary.csv
-delta_abs's posterior median and 90 % HDI (delta_abs_median,
-delta_abs_hdi_low, delta_abs_hdi_high) and whether the chain converged;
+delta_abs's posterior median and 90 % HDI (delta_abs_posterior_median,
+delta_abs_posterior_hdi_low, delta_abs_posterior_hdi_high; conditions.csv's
+delta_abs_median is the median of the runs' estimates) and whether the
+chain converged;
 summary.png draws the interval as an error bar. A sampling that fails is
 said and recorded (posterior_error), the fits are kept and the command exits
 with 1; run it again to sample those recordings again. --format pdf (or svg)

@@ -486,12 +486,15 @@ def _recording_metadata(recording: Recording) -> dict[str, Any]:
     if "control_gain" in d:  # the value read, not how it was written (69e-2 is 0.69)
         d["control_gain"] = float(d["control_gain"])
     if isinstance(d.get("forcing"), dict):
-        # the fields the diagnosis reads, as numbers (6.0 is line 6; a key of the lab's own
-        # inside the forcing object is not read, as the format says of unknown keys)
+        # the fields the diagnosis reads, as numbers: the lines' multiples ``n`` as integers,
+        # as the format has them (6.0 is line 6; results written before this recorded 6.0,
+        # which compares equal to 6 on resume), the rest as floats; a key of the lab's own
+        # inside the forcing object is not read, as the format says of unknown keys
         f = d["forcing"]
         d["forcing"] = {"base_frequency": float(f["base_frequency"]),
-                        **{part: {k: [float(x) for x in f[part][k]]
-                                  for k in ("n", "amplitude", "phase")}
+                        **{part: {"n": [int(x) for x in f[part]["n"]],
+                                  **{k: [float(x) for x in f[part][k]]
+                                     for k in ("amplitude", "phase")}}
                            for part in ("target", "disturbance")}}
     return d
 
@@ -689,6 +692,98 @@ def _differs(old: Any, new: Any, names: Mapping[str, str] | None = None) -> str:
     return " and ".join(said)
 
 
+#: The batch commands that write ``<key>.json`` and ``summary.csv`` into an output folder:
+#: for each, what its result files have (a key the other's lack), what its error files have
+#: (the context :func:`~bayespilot.campaign.run_keyed` writes with the error), the columns its
+#: ``summary.csv`` has always had, and its Python function.
+_BATCH_KINDS = {
+    "fit-batch": {"result": "fit_threshold", "error": "recording",
+                  "columns": {"key", "neg_log_lik_none", "delta_bic"},
+                  "function": "bayespilot.batch.fit_batch", "what": "a fit"},
+    "diagnose-batch": {"result": "diagnosis", "error": "recordings",
+                       "columns": {"key", "physics", "mismatch"},
+                       "function": "bayespilot.diagnose.batch.diagnose_batch",
+                       "what": "a diagnosis"},
+    "replicate": {"result": "job", "error": None,
+                  "columns": {"task", "F_n", "K_theta", "N50", "paper_N50"},
+                  "function": "bayespilot.campaign.run_campaign", "what": "a simulated fit"},
+}
+
+
+def _file_of(stored: Any, key: str, failed: bool) -> str | None:
+    """Which command of :data:`_BATCH_KINDS` wrote the parsed file ``stored`` of ``key`` (an
+    error file when ``failed``), or None (not a result of theirs)."""
+    if not (isinstance(stored, dict) and stored.get("key") == key):
+        return None
+    for command, kind in _BATCH_KINDS.items():
+        mark = kind["error" if failed else "result"]
+        others = [k["result"] for c, k in _BATCH_KINDS.items() if c != command]
+        if mark is not None and mark in stored and not any(k in stored for k in others):
+            return command
+    return None
+
+
+def _summary_of(path: Path) -> str | None:
+    """Which command of :data:`_BATCH_KINDS` wrote the CSV at ``path`` (by its header), "" for
+    a CSV none of them wrote, None where there is none (or it is empty)."""
+    import csv
+
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            header = next(csv.reader(fh), None)
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return "" if path.exists() else None
+    if not header:
+        return None
+    return next((command for command, kind in _BATCH_KINDS.items()
+                 if kind["columns"] <= set(header)), "")
+
+
+def _refuse_another_commands_folder(out: Path, command: str) -> None:
+    """Refuse (:class:`ResultConflictError`) an output folder that holds the results of
+    another command, before anything runs.
+
+    ``bayespilot fit-batch`` and ``bayespilot diagnose-batch`` (and ``replicate``) each write
+    ``<key>.json`` and ``summary.csv`` (and ``summary.png``) in their folder: one run into the
+    other's folder took the other's ``<key>.json`` for "not done" and replaced it, and its
+    summary, without a word.  A folder is refused that holds a ``<key>.json`` (or
+    ``<key>.error.json``) the other command wrote (by the keys only each writes:
+    ``fit_threshold`` against ``diagnosis``), or a ``summary.csv`` that ``command`` did not
+    write (by its header: the other's, or a file of one's own); the message names the files,
+    says which command wrote them and to use another output folder."""
+    from .. import campaign as C
+
+    if not out.is_dir():
+        return
+    theirs: dict[str, list[str]] = defaultdict(list)
+    for f in sorted(out.glob("*.json")):
+        failed = f.name.endswith(".error.json")
+        key = f.name[:-len(".error.json")] if failed else f.stem
+        stored = C._read_json(f)
+        by = _file_of(stored, key, failed)
+        if by is not None and by != command:
+            theirs[by].append(f.name)
+    summary = _summary_of(out / "summary.csv")
+    if not theirs and summary in (None, command):
+        return
+    said = []
+    for by, names in sorted(theirs.items()):
+        kind = _BATCH_KINDS[by]
+        said.append(f"{len(names)} result file(s) of 'bayespilot {by}' ({kind['function']}: "
+                    f"{kind['what']} each, with \"{kind['result']}\" where {command}'s have "
+                    f"\"{_BATCH_KINDS[command]['result']}\"): {', '.join(names[:3])}"
+                    f"{' ...' if len(names) > 3 else ''}")
+    if summary not in (None, command):
+        said.append(f"summary.csv of 'bayespilot {summary}'" if summary else
+                    "a summary.csv that no bayespilot batch wrote (its columns are not "
+                    f"{command}'s)")
+    raise ResultConflictError(
+        f"{out} holds {' and '.join(said)}: {command} would replace "
+        f"{'them' if len(said) > 1 or theirs else 'it'} (its <key>.json, summary.csv and "
+        f"summary.png are written there too); use another output folder (--out) for "
+        f"{command}; nothing was run")
+
+
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
                    seed: int = 0, alpha: float | None = None, n_bootstrap: int | None = None,
                    n_calibrate: int | None = None, noise_passes: int = 1,
@@ -792,8 +887,12 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         diagnosis's defaults filled in (``alpha=None`` and ``alpha=0.01`` are
         one), the seeds by ``batch_seed``.  Also results of the batch's keys
         written before seeds were drawn per diagnosis (they record no
-        ``batch_seed``; module docs, "Seeds"), all named at once.  A
-        CampaignError and a ValueError.
+        ``batch_seed``; module docs, "Seeds"), all named at once.  Also an
+        ``out_dir`` that holds results of another command (``<key>.json`` of
+        :func:`bayespilot.batch.fit_batch`, with ``fit_threshold``, or its
+        ``summary.csv``: a ``summary.csv`` this function did not write), which
+        the batch would replace: the message names them.  A CampaignError and a
+        ValueError.
     CampaignError
         The cluster cannot be reached or started or is lost during the run
         (what finished is saved), ``out_dir`` cannot be written in (checked
@@ -844,6 +943,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     paths = [str(p) for p in paths]
     if not paths:
         raise ValueError("no recordings given")
+    # (a folder of fit-batch's: refused before the recordings are read)
+    _refuse_another_commands_folder(Path(out_dir), "diagnose-batch")
     # a recording named twice (run.csv and run.json from one glob, or the same path) is one
     first: dict[str, str] = {}
     for p in paths:
