@@ -22,11 +22,17 @@ registered.  :meth:`PilotModel.plan` compiles any such model into the plain
 arrays that the numba simulator and likelihood interpret, so an extension
 needs no change to the simulator, the likelihood or the fitters.  A new kind
 of linear block or nonlinearity is a new code in ``kernels/_blocks.py`` (with
-its derivative there or in ``kernels/_sensitivity.py``; docs/model.md lists the
-places) plus a small class here, a subclass of :class:`Stage`,
-:class:`Nonlinearity` or :class:`Modulation` (the kind codes of the three
-families overlap, so each slot of a channel takes only its own family; a code
-the kernels do not compute is refused).
+its derivative there or in ``kernels/_sensitivity.py``, and its number of
+parameters in the ``ARITY_*`` tables; docs/model.md lists the places) plus a
+small class here, a subclass of :class:`Stage`, :class:`Nonlinearity` or
+:class:`Modulation` (the kind codes of the three families overlap, so each
+slot of a channel takes only its own family; a code the kernels do not compute
+is refused, and so is a block naming another number of parameters than its
+code reads: a subclass reusing a code is computed as the built-in block).
+
+The model without threshold (:meth:`PilotModel.without_threshold`) is the model
+with a dead zone's half-width held at 0 (the identity), or with any other
+threshold nonlinearity (a soft dead zone) removed.
 
 Sign convention
 ---------------
@@ -162,7 +168,9 @@ class Stage:
 
     A subclass is a frozen dataclass with a class attribute ``kind`` (a
     ``STAGE_*`` code of ``kernels/_blocks.py``) and a ``parameters`` tuple of
-    at most two parameter names.
+    as many parameter names as the kernels read for that code
+    (``ARITY_STAGE`` there: 0 to 2).  A subclass that reuses a built-in
+    block's code is computed as that block, whatever else it defines.
 
     Attributes
     ----------
@@ -179,7 +187,13 @@ class Nonlinearity:
     """Base class of the static nonlinearities (a channel's, or the model output's).
 
     ``kind`` is an ``NL_*`` code of ``kernels/_blocks.py``; ``parameters``
-    names at most two parameters.
+    names as many parameters as the kernels read for that code (``ARITY_NL``
+    there: 1 or 2).  A subclass that reuses a built-in block's code (a new code
+    is refused) is computed as that block: the kernels never call a Python
+    method of it, so a block of other maths (an asymmetric dead zone) is a new
+    code in the kernels (docs/model.md, "Extending the model"); one that names
+    another number of parameters than its code reads, or defines ``__call__``,
+    is refused.
 
     Attributes
     ----------
@@ -206,7 +220,7 @@ class Modulation:
     """Base class of the gain modulations of a channel (:attr:`Channel.modulation`).
 
     ``kind`` is a ``MOD_*`` code of ``kernels/_blocks.py``; ``parameters``
-    names one parameter.
+    names one parameter (``ARITY_MOD`` there).
 
     Attributes
     ----------
@@ -232,6 +246,8 @@ def _used_names(channels: Iterable["Channel"], output: Any, omega_nm: str,
 
 #: The kernel code prefix of each block family.
 _KIND_PREFIX = {Stage: "STAGE_", Nonlinearity: "NL_", Modulation: "MOD_"}
+#: How many parameters the kernels read for each code of a family (``kernels/_blocks.py``).
+_ARITY = {Stage: B.ARITY_STAGE, Nonlinearity: B.ARITY_NL, Modulation: B.ARITY_MOD}
 
 
 def _kernel_codes(prefix: str) -> dict[int, str]:
@@ -241,13 +257,34 @@ def _kernel_codes(prefix: str) -> dict[int, str]:
             if k.startswith(prefix) and k != prefix + "NONE" and isinstance(v, int)}
 
 
+def _builtin_blocks(family: type) -> dict[int, type]:
+    """The package's own block classes of ``family`` (this module's direct subclasses whose
+    ``kind`` is a code the kernels compute), kind code -> class.  A user's subclass, even one
+    refused, is no member to offer."""
+    codes = _kernel_codes(_KIND_PREFIX[family])
+    return {c.kind: c for c in family.__subclasses__()
+            if c.__module__ == __name__ and getattr(c, "kind", None) in codes}
+
+
+def _builtin_parameters(cls: type) -> str:
+    """The parameters of the built-in block ``cls`` as its defaults name them ("(delta)")."""
+    try:
+        names = cls().parameters
+    except TypeError:  # (FixedFilter: no defaults, and no parameters)
+        names = ()
+    return "(" + ", ".join(names) + ")" if names else "(none)"
+
+
 def _check_block(block, family: type, where: str, optional: bool = True) -> None:
-    """Raise TypeError unless ``block`` belongs to ``family`` (or is None, if optional), and
-    ValueError if its ``kind`` is no code of that family that the kernels compute."""
+    """Raise TypeError unless ``block`` belongs to ``family`` (or is None, if optional) and its
+    ``parameters`` is a tuple of names, and ValueError if its ``kind`` is no code of that family
+    that the kernels compute, or it names other than as many parameters as the kernels read
+    for that code (a subclass that reuses a built-in block's code is computed as that block)."""
     if optional and block is None:
         return
+    builtin = _builtin_blocks(family)
     if not isinstance(block, family):
-        members = ", ".join(c.__name__ for c in family.__subclasses__())
+        members = ", ".join(c.__name__ for c in builtin.values())
         alt = " or None" if optional else ""
         raise TypeError(f"{where} must be a {family.__name__} ({members}){alt}, "
                         f"got {type(block).__name__}")
@@ -261,6 +298,44 @@ def _check_block(block, family: type, where: str, optional: bool = True) -> None
             f"{where}: {type(block).__name__}.kind = {kind!r} is not a {family.__name__} code "
             f"the kernels compute ({known}); a new kind of block needs kernel code "
             "(docs/model.md, 'Extending the model')")
+    name = type(block).__name__
+    names = getattr(block, "parameters", None)
+    if isinstance(names, str):  # a str is a sequence of one-letter "names"
+        raise TypeError(f"{where}: {name}.parameters must be a tuple of parameter names, got "
+                        f"the str {names!r} (write ({names!r},))")
+    if not isinstance(names, (tuple, list)) or not all(isinstance(n, str) for n in names):
+        raise TypeError(f"{where}: {name}.parameters must be a tuple of parameter names (str), "
+                        f"got {names!r}")
+    same = builtin.get(kind)
+    what = same.__name__ if same is not None else codes[kind]
+    need = _ARITY[family].get(kind)
+    if need is not None and len(names) != need:
+        said = ", ".join(names) if names else "none"
+        if len(names) > need:
+            lost = ", ".join(names[need:])
+            effect = (f"the kernels would never read {lost}: they compute the built-in "
+                      f"{what}'s maths, on its {need} parameter{'' if need == 1 else 's'} "
+                      f"{_builtin_parameters(same) if same is not None else ''}, whatever "
+                      f"{name} means")
+        else:
+            effect = (f"the kernels read {need} for kind = {kind}, as the built-in {what}"
+                      f"{' ' + _builtin_parameters(same) if same is not None else ''}, and "
+                      f"would take the missing one{'' if need - len(names) == 1 else 's'} as 0")
+        raise ValueError(
+            f"{where}: {name} names {len(names)} parameter{'' if len(names) == 1 else 's'} "
+            f"({said}) for kind = {kind} ({codes[kind]}); {effect}.  Reusing a built-in "
+            "block's code gives that block's maths: a block of other maths needs a kind code of "
+            "its own and kernel code (docs/model.md, 'Extending the model')")
+    if same is not None and type(block) is not same and callable(block):
+        raise ValueError(
+            f"{where}: {name} defines __call__, which the kernels never call: kind = {kind} "
+            f"({codes[kind]}) makes them compute the built-in {what}'s maths, whatever {name} "
+            "says; a block of other maths needs a kind code of its own and kernel code "
+            "(docs/model.md, 'Extending the model')")
+    if kind == B.STAGE_FIXED and family is Stage and not isinstance(block, FixedFilter):
+        raise ValueError(f"{where}: {name}.kind = {kind} (STAGE_FIXED) is the FixedFilter's "
+                         "code, whose coefficients only a FixedFilter carries: use FixedFilter "
+                         "(or a subclass of it)")
 
 
 # --- linear stages ---------------------------------------------------------------
@@ -547,11 +622,16 @@ class Channel:
     ------
     ValueError
         On an unknown source, a sign other than +-1, more than two gain
-        parameters or :data:`MAX_STAGES` stages, or a bad ``oversample``.
+        parameters or :data:`MAX_STAGES` stages, or a bad ``oversample``; a
+        block whose ``kind`` is no code the kernels compute, or that names
+        another number of parameters than the kernels read for its code
+        (a subclass reusing a built-in block's code gets that block's maths),
+        or defines a ``__call__`` they never call.
     TypeError
         If a stage is not a :class:`Stage`, the nonlinearity not a
         :class:`Nonlinearity` or the modulation not a :class:`Modulation`
-        (the kernels would read the kind code of another family).
+        (the kernels would read the kind code of another family), or a
+        block's ``parameters`` is not a tuple of names (a str).
     """
 
     name: str
@@ -691,7 +771,8 @@ class PilotModel:
         declared, or a fixed value of an unknown parameter, or one that is
         complex or not finite.
     TypeError
-        If ``output`` is not a :class:`Nonlinearity` (or None).
+        If ``output`` is not a :class:`Nonlinearity` (or None); the output
+        block is checked as a channel's blocks are (:class:`Channel`).
     """
 
     channels: tuple[Channel, ...]
@@ -1008,10 +1089,13 @@ class PilotModel:
         Raises
         ------
         ValueError
-            On an unknown channel, an undeclared parameter, or a parameter
-            declared again with other bounds, default or unit.
+            On an unknown channel, an undeclared parameter, a parameter
+            declared again with other bounds, default or unit, or a block the
+            kernels do not compute as declared (its code, its number of
+            parameters: :class:`Channel`).
         TypeError
-            If ``stage`` is not a :class:`Stage`.
+            If ``stage`` is not a :class:`Stage`, or its ``parameters`` not a
+            tuple of names.
         """
         _check_block(stage, Stage, "add_stage: the stage", optional=False)
         return self._with_block(channel, stage, parameters, stages=lambda c: c.stages + (stage,))
@@ -1041,10 +1125,13 @@ class PilotModel:
         Raises
         ------
         ValueError
-            On an unknown channel, an undeclared parameter, or a parameter
-            declared again with other bounds, default or unit.
+            On an unknown channel, an undeclared parameter, a parameter
+            declared again with other bounds, default or unit, or a block the
+            kernels do not compute as declared (its code, its number of
+            parameters: :class:`Channel`).
         TypeError
-            If ``nonlinearity`` is neither a :class:`Nonlinearity` nor None.
+            If ``nonlinearity`` is neither a :class:`Nonlinearity` nor None, or its
+            ``parameters`` not a tuple of names.
         """
         _check_block(nonlinearity, Nonlinearity, "with_nonlinearity: the nonlinearity")
         return self._with_block(channel, nonlinearity, parameters,
@@ -1074,10 +1161,13 @@ class PilotModel:
         Raises
         ------
         ValueError
-            On an unknown channel, an undeclared parameter, or a parameter
-            declared again with other bounds, default or unit.
+            On an unknown channel, an undeclared parameter, a parameter
+            declared again with other bounds, default or unit, or a block the
+            kernels do not compute as declared (its code, its number of
+            parameters: :class:`Channel`).
         TypeError
-            If ``modulation`` is neither a :class:`Modulation` nor None.
+            If ``modulation`` is neither a :class:`Modulation` nor None, or its
+            ``parameters`` not a tuple of names.
         """
         _check_block(modulation, Modulation, "with_modulation: the modulation")
         return self._with_block(channel, modulation, parameters, modulation=lambda c: modulation)
@@ -1174,10 +1264,13 @@ class PilotModel:
         Raises
         ------
         ValueError
-            On an undeclared parameter, or a parameter declared again with
-            other bounds, default or unit.
+            On an undeclared parameter, a parameter declared again with
+            other bounds, default or unit, or a block the kernels do not
+            compute as declared (its code, its number of parameters:
+            :class:`Channel`).
         TypeError
-            If ``output`` is neither a :class:`Nonlinearity` nor None.
+            If ``output`` is neither a :class:`Nonlinearity` nor None, or its
+            ``parameters`` not a tuple of names.
         """
         _check_block(output, Nonlinearity, "with_output: the output block")
         return self._rebuilt(output=output, parameters=self._with_params(parameters),
@@ -1186,12 +1279,75 @@ class PilotModel:
     @property
     def has_threshold(self) -> bool:
         """True if a channel's or the output's nonlinearity has a threshold
-        (:attr:`Nonlinearity.thresholds`) that is estimated or fixed at a nonzero value."""
+        (:attr:`Nonlinearity.thresholds`) that is estimated or fixed at a nonzero value, or a
+        parameter named ``delta_abs`` is estimated (the name the fitters scan and profile as
+        the threshold, whatever block reads it: a fit of such a model reads "with threshold",
+        :attr:`~bayespilot.fit.result.FitResult.threshold`)."""
+        if "delta_abs" in self.parameter_names:
+            return True
         for nl in [c.nonlinearity for c in self.channels] + [self.output]:
             if nl is not None and any(self.fixed.get(name, None) != 0.0
                                       for name in nl.thresholds):
                 return True
         return False
+
+    def without_threshold(self) -> "PilotModel":
+        """The model without threshold: the null model that the fitters' ``threshold=False``
+        and the comparison with and without threshold take.
+
+        A dead zone (:class:`DeadZone`, or any block of its kind code) is the identity at a
+        half-width of 0, so its thresholds are held at 0: for the paper's model that is
+        ``delta_abs`` fixed at 0, the model of ``paper_model(threshold=False)`` (the same
+        parameters, in the same order).  Any other nonlinearity that has thresholds
+        (:attr:`Nonlinearity.thresholds`; :class:`SoftDeadZone`, which at a half-width of 0
+        still halves small inputs) is not the identity there: it is removed, with the
+        parameters only it read (a soft dead zone's ``w_soft``).  A parameter named
+        ``delta_abs`` still estimated after that (read by a block that declares no threshold,
+        e.g. a :class:`Saturation` in a dead zone composed of channels) is held at 0 too, as
+        the fitters take that name for the threshold.
+
+        Returns
+        -------
+        PilotModel
+            The model without threshold (:attr:`has_threshold` False); this model itself if
+            it has none already.  A model that lost a block is renamed to say so.
+
+        Examples
+        --------
+        >>> paper_model().without_threshold().fixed
+        {'delta_abs': 0.0}
+        >>> soft = paper_model().with_nonlinearity(
+        ...     "vestibular", SoftDeadZone("delta_abs", "w_soft"),
+        ...     [Parameter("w_soft", 1e-5, 0.05, 0.002, "IPUT")])
+        >>> soft.without_threshold().parameter_names
+        ('K_v', 'T_vl', 'tau_v', 'K_m', 'tau_m', 'omega_nm', 'zeta_nm')
+        """
+        zero: dict[str, float] = {}
+        removed: list[str] = []
+
+        def keep(nl, where: str):
+            """The block in place of ``nl`` (None: removed), its thresholds held at 0."""
+            if nl is None or not tuple(nl.thresholds):
+                return nl
+            if nl.kind == B.NL_DEADZONE:  # the identity at a half-width of 0
+                zero.update((name, 0.0) for name in nl.thresholds)
+                return nl
+            removed.append(f"{type(nl).__name__} {where}")
+            return None
+
+        chans = tuple(replace(c, nonlinearity=n) if n is not c.nonlinearity else c
+                      for c in self.channels
+                      for n in [keep(c.nonlinearity, f"on {c.name}")])
+        output = keep(self.output, "on the output")
+        model = self
+        if removed:
+            model = self._rebuilt(channels=chans, output=output,
+                                  name=f"{self.name}, no threshold ({', '.join(removed)} "
+                                       "removed)")
+        if "delta_abs" in model.parameter_names:
+            zero.setdefault("delta_abs", 0.0)
+        zero = {k: v for k, v in zero.items() if model.fixed.get(k, None) != v}
+        return model._fixed(**zero) if zero else model
 
     # -- compile --------------------------------------------------------------
     @cached_property

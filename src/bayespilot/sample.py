@@ -938,8 +938,16 @@ def _initial_ensemble(center, prior: _Prior, logpost: _LogPosterior, n_walkers: 
         todo = todo[bad]
         if todo.size == 0:
             return p0
+    why = ""
+    row = np.asarray(center, dtype=float)[None, :]
+    if np.isfinite(prior(row)[0]) and not np.isfinite(logpost(row)[0]):
+        # (the init itself is unstable: the loop or a block; perhaps every vector in the box is)
+        why = ("; the init itself has a non-finite likelihood (-ln L = +inf: its parameters "
+               "make the closed loop or a block unstable), and if no parameter vector within "
+               "the bounds is stable (fit_fast says so: 'no start gave a finite likelihood'), no "
+               "init will do: check the blocks' bounds")
     raise RuntimeError(f"could not place {todo.size} of {n_walkers} walkers where the posterior is "
-                       "positive around the initial point; give a better init")
+                       f"positive around the initial point; give a better init{why}")
 
 
 @one_blas_thread

@@ -51,7 +51,7 @@ from .gauss_newton import joint_refine, refine
 from .result import CHECK_GAP, FitResult
 from .scan import scan_parameter
 from .three_step import (_check_bool, _check_fittable, _check_steps, _model_for,
-                         _unidentified_settings, _warn_on_bounds)
+                         _refuse_unstable_everywhere, _unidentified_settings, _warn_on_bounds)
 from .._blas import one_blas_thread
 from .._seeds import resolve_seed
 
@@ -71,8 +71,10 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     recording : Recording
     model : PilotModel, optional
     threshold : bool
-        False fits the model without threshold (delta_abs = 0); a ``model``
-        without ``delta_abs`` has none either way.  True or False only (a
+        False fits the model without threshold
+        (:meth:`~bayespilot.model.PilotModel.without_threshold`: delta_abs = 0
+        for the paper's dead zone; a soft dead zone removed with its w_soft);
+        a ``model`` without a threshold has none either way.  True or False only (a
         string such as ``"no"`` is refused, not taken for its truth value).
     seed : int, optional
         Seeds the Latin-hypercube starts; the same seed gives the same fit.
@@ -132,7 +134,9 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         fewer than 4 (p + 1) samples after ``discard`` for the AR(p) model (p up
         to :data:`~bayespilot.noise.MAX_AR_ORDER` by BIC: 124 samples); the
         recording's problems are a :class:`~bayespilot.recording.RecordingError`
-        naming the shortest record that would do.
+        naming the shortest record that would do.  Also when no start gave a
+        finite likelihood (every Latin-hypercube start and its refinement made
+        the closed loop or a block unstable: check the blocks' bounds).
 
     Warns
     -----
@@ -202,6 +206,9 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
     starts = qmc.scale(qmc.LatinHypercube(d=lo.size, seed=seed).random(n_starts), lo, hi)
     runs = [refine(lik0, base.as_dict(x), hold=(), bounded=True) for x in starts]
     best0 = min(runs, key=lambda r: r.neg_log_lik)
+    _refuse_unstable_everywhere(base, float(best0.neg_log_lik),
+                                f"{n_starts} Latin-hypercube start{'' if n_starts == 1 else 's'}"
+                                " and their refinements")
     stages = {"starts": [r.to_dict() for r in runs]}
     if noise == "ar":
         # Prediction error: whiten by an AR model of the Eq. 4 fit's residual and start again

@@ -10,8 +10,9 @@ Step III -ln L over delta_abs on [0, 0.1] with the Step II parameters fixed;
          the minimiser is the final delta_abs (:func:`bayespilot.fit.scan.scan_parameter`).
          With ``iterate=True`` Steps II and III repeat until nothing changes.
 
-Without threshold the same procedure runs on the model with delta_abs fixed
-at 0 (Step III is then empty).
+Without threshold the same procedure runs on the model without threshold
+(:meth:`~bayespilot.model.PilotModel.without_threshold`: the paper's with delta_abs
+fixed at 0; Step III is then empty).
 """
 
 from __future__ import annotations
@@ -37,13 +38,37 @@ __all__ = ["fit_paper"]
 
 
 def _model_for(model: PilotModel | None, threshold: bool) -> PilotModel:
+    """The model a fit with or without threshold fits: ``model`` (default the paper's), or
+    without threshold :meth:`~bayespilot.model.PilotModel.without_threshold` (a dead zone's
+    ``delta_abs`` held at 0, the paper's construction; another threshold nonlinearity, as
+    a soft dead zone, removed with its own parameters)."""
     if model is None:
         return paper_model(threshold=threshold)
     if not isinstance(model, PilotModel):
         raise TypeError(f"model must be a PilotModel, got {type(model).__name__}")
-    if not threshold and "delta_abs" in model.parameter_names:
-        return model._fixed(delta_abs=0.0)
+    if not threshold:
+        return model.without_threshold()
     return model
+
+
+def _refuse_unstable_everywhere(model: PilotModel, fun: float, tried: str) -> None:
+    """Raise ValueError if ``fun``, the best -ln L a fitter found, is not finite: every
+    parameter vector it tried (``tried``, e.g. "8 Latin-hypercube starts") made the closed loop
+    or a block unstable (-ln L = +inf), and a FitResult of random parameters at -ln L = inf
+    would be returned without a word.  The message names the stage and H_nm parameters whose
+    bounds reach below 0 (a time constant, frequency or damping of the wrong sign), the
+    usual cause."""
+    if math.isfinite(fun):
+        return
+    blocks = [st for c in model.channels for st in c.stages]
+    names = [model.omega_nm, model.zeta_nm] + [n for st in blocks for n in st.parameters]
+    below = [f"{p.name} in [{p.lower:g}, {p.upper:g}]" for p in model.parameters
+             if p.name in names and p.name in model.parameter_names and p.lower < 0]
+    hint = (f" ({'; '.join(below)}: a time constant, frequency or damping below 0 is an "
+            "unstable block)" if below else "")
+    raise ValueError(f"no start gave a finite likelihood: every parameter vector tried "
+                     f"({tried}) made the closed loop or a block of {model.name!r} unstable "
+                     f"(-ln L = +inf); check the blocks' bounds{hint}")
 
 
 def _check_bool(name: str, value: Any) -> bool:
@@ -248,8 +273,10 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     model : PilotModel, optional
         Default :func:`~bayespilot.model.paper_model`.
     threshold : bool
-        False fits the model without threshold (delta_abs = 0).  True or
-        False only, as ``iterate``.
+        False fits the model without threshold
+        (:meth:`~bayespilot.model.PilotModel.without_threshold`: delta_abs = 0
+        for the paper's dead zone; a soft dead zone removed with its w_soft).
+        True or False only, as ``iterate``.
     seed : int, optional
         Seeds the genetic algorithm; the same seed gives the same fit.
         None draws one from fresh entropy; the seed used is
@@ -302,7 +329,9 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
         beyond the range of delta_abs's bounds, ``threshold`` or ``iterate``
         not a bool, ``discard`` outside [0, half the record], a setting the
         likelihood refuses, or a recording with no more than four samples per
-        free parameter or a constant u.
+        free parameter or a constant u; or no start gave a finite likelihood
+        (every parameter vector Step I tried made the closed loop or a block
+        unstable: check the blocks' bounds).
 
     Warns
     -----
@@ -365,6 +394,10 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     s1 = step_one(lik, repetitions=repetitions, n_best=n_best, seed=seed, progress=progress,
                   population=population, generations=generations, p_crossover=p_crossover,
                   p_mutation=p_mutation, bits=bits)
+    _refuse_unstable_everywhere(model, float(np.min(s1.funs)),
+                                f"Step I: {repetitions} genetic-algorithm run"
+                                f"{'' if repetitions == 1 else 's'}, population {population}, "
+                                f"{generations} generations")
     delta1 = s1.delta_abs if has_delta else None
 
     step2 = []
@@ -410,6 +443,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
     # reaches, the fast method's maximum).
     check = joint_refine(lik, params, fun) if has_delta else None
 
+    _refuse_unstable_everywhere(model, float(fun), "Steps II and III, from Step I's runs")
     full = dict(model.as_dict(model.full_vector(params), full=True))
     settings = {"repetitions": repetitions, "n_best": n_best, "population": population,
                 "generations": generations, "p_crossover": p_crossover, "p_mutation": p_mutation,

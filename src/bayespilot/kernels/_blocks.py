@@ -14,9 +14,11 @@ Extension point: a new parametric linear block is a new ``STAGE_*`` code with
 its coefficients in :func:`stage_tf` and their derivative in
 ``_sensitivity.stage_tf_tangent``; a new static nonlinearity is a new ``NL_*``
 code in :func:`nonlinearity` and :func:`nonlinearity_tangent` (and, if it is
-piecewise linear, in ``_oversample._piece`` and ``_oversample._piecewise``).
-``model.py`` refuses a block whose code is not here: the functions below pass an
-unknown code through as no block.
+piecewise linear, in ``_oversample._piece`` and ``_oversample._piecewise``), and
+its number of parameters in ``ARITY_STAGE``, ``ARITY_NL`` or ``ARITY_MOD``.
+``model.py`` refuses a block whose code is not here (the functions below pass an
+unknown code through as no block) or whose parameters are not as many as its
+code reads.
 """
 
 from __future__ import annotations
@@ -42,6 +44,15 @@ NL_SATURATION = 3     # clip(x, -p0, p0)
 # Channel gain modulation.
 MOD_NONE = 0
 MOD_LINEAR = 1        # gain x (1 + p0 (t / T - 1/2)): a gain that drifts linearly over the run
+
+# How many parameters the functions below read for each code (p0, then p1): a block must name
+# exactly that many (``model._check_block``).  A third name would never be read, and a missing
+# one would be taken as 0 (a second-order stage with damping 0, a soft dead zone of width 0).
+# A new code needs its entry here too.
+ARITY_STAGE = {STAGE_FIXED: 0, STAGE_HIGHPASS1: 1, STAGE_LOWPASS2: 2, STAGE_LOWPASS1: 1,
+               STAGE_HIGHPASS2: 2}
+ARITY_NL = {NL_DEADZONE: 1, NL_SOFT_DEADZONE: 2, NL_SATURATION: 1}
+ARITY_MOD = {MOD_LINEAR: 1}
 
 
 @njit
