@@ -426,11 +426,11 @@ class Posterior:
         lines = [f"bayespilot posterior ({self.settings.get('likelihood')} likelihood, "
                  f"{'converged' if self.converged else 'NOT converged'}, seed {self.seed})",
                  f"{'parameter':<10} {'mean':>10} {'median':>10} {'hdi 90%':>23} "
-                 f"{'r_hat':>6} {'ess':>7} {'tau':>7}"]
+                 f"{'r_hat':>6} {'ess_bulk':>8} {'tau':>7}"]
         for n, d in s.items():
             lines.append(f"{n:<10} {d['mean']:>10.4g} {d['median']:>10.4g} "
                          f"[{d['hdi_90'][0]:>10.4g},{d['hdi_90'][1]:>10.4g}] "
-                         f"{d['r_hat']:>6.3f} {d['ess_bulk']:>7.0f} {self.tau[n]:>7.1f}")
+                         f"{d['r_hat']:>6.3f} {d['ess_bulk']:>8.0f} {self.tau[n]:>7.1f}")
         return "\n".join(lines)
 
 
@@ -460,9 +460,10 @@ class _Prior:
         self.dists: dict[int, Any] = {}
         lo = np.asarray(default_lo, float).copy()
         hi = np.asarray(default_hi, float).copy()
-        if spec is None:
-            self.description = "uniform on the model bounds; " \
-                               f"uniform(-{PACF_BOUND}, {PACF_BOUND}) on pacf_j"
+        if spec is None:  # (the PACF terms named only where there are some: coloured)
+            pacf = any(n.startswith("pacf_") for n in self.names)
+            self.description = "uniform on the model bounds" + (
+                f"; uniform(-{PACF_BOUND}, {PACF_BOUND}) on pacf_j" if pacf else "")
         elif isinstance(spec, Mapping):
             unknown = [k for k in spec if k not in self.names]
             if unknown:
