@@ -75,7 +75,11 @@ study (docs/comparison.md):
   lets through a handful of peaks of |i| (with a large K_m) fits a few
   remnant events, not a perception threshold, and gave a false "threshold"
   on Fig. 11 data simulated without one
-  (:attr:`Comparison.plateau_probability` is P(delta_abs >= onset)).
+  (:attr:`Comparison.plateau_probability` is P(delta_abs >= onset)).  The
+  dead zone's input is taken at the maximum-likelihood point with threshold
+  (stages with free parameters before it, a washout or a platform, at their
+  estimates; a SoftDeadZone as a dead zone of its ``delta_abs``); where it
+  cannot be computed the guard is not applied, and the result says so.
 - A lost mode.  If every run with threshold missed the main mode, ln Z with
   threshold and so ln BF are only lower bounds: they can support
   "threshold" but not "none".
@@ -129,7 +133,8 @@ __all__ = ["Evidence", "SavageDickey", "Comparison", "PooledComparison", "nested
            "DECISION_Z", "THRESHOLD", "threshold_input_max", "plateau_onset", "PLATEAU_LEVEL",
            "PLATEAU_ACTIVE_FRACTION", "robust_evidence", "log_likelihood_at"]
 
-#: The nested parameter: the model without threshold has it fixed at 0.
+#: The nested parameter: the model without threshold has it fixed at 0 (a DeadZone's; a
+#: threshold not the identity at 0, a SoftDeadZone, is removed: :func:`compare`).
 THRESHOLD = "delta_abs"
 #: Jeffreys' scale (1961, Appendix B) in natural logs: (upper end of |ln BF|, category).
 JEFFREYS = ((0.5 * math.log(10.0), "barely worth mentioning"),
@@ -1146,7 +1151,10 @@ class Comparison:
         where the dead zone passes less than 1 % of the samples or switches
         the motion channel off.  Above
         :data:`PLATEAU_LEVEL` a "threshold" decision is made "inconclusive"
-        (``settings["decision_note"]`` says why).
+        (``settings["decision_note"]`` says why).  None where the guard could
+        not be applied (``settings["plateau_guard"]`` is then "not applied:
+        <reason>", said in :meth:`summary`, and in ``decision_note`` of a
+        "threshold" decision; see :func:`compare`).
     """
 
     log_bayes_factor: float
@@ -1318,6 +1326,7 @@ class Comparison:
             lb = "" if sd.lower_bound is None else f"; ln BF > {sd.lower_bound:.1f}"
             sd_line = f"Savage-Dickey: not valid ({sd.reason}{lb})"
         post = self.settings.get("posterior") if isinstance(self.settings, Mapping) else None
+        guard = self.settings.get("plateau_guard") if isinstance(self.settings, Mapping) else None
         if sd is not None and isinstance(post, Mapping) and post.get("converged") is False:
             steps = post.get("n_steps")
             sd_line += ("\n  Savage-Dickey posterior: not converged"
@@ -1338,6 +1347,8 @@ class Comparison:
             f"  -ln L (ML) threshold = {ic['neg_log_lik_threshold']:.2f}, none = "
             f"{ic['neg_log_lik_none']:.2f}; dAIC = {ic['delta_aic']:+.2f}, dBIC = "
             f"{ic['delta_bic']:+.2f} (none - threshold; > 0 favours threshold)",
+            *([f"  plateau guard {guard}"] if isinstance(guard, str)
+              and guard.startswith("not applied") else []),
             f"  {self.elapsed:.1f} s"])
 
     def __str__(self) -> str:
@@ -1415,38 +1426,118 @@ def _check_sample_options(options: Mapping[str, Any]) -> None:
                          "drawn from its seed)")
 
 
-def _threshold_input(model: PilotModel, recording: Recording) -> np.ndarray | None:
-    """|i|, the magnitude of the input of the dead zone on ``delta_abs``, or None."""
+def _linear_twin(model: PilotModel, c: int) -> bool:
+    """Whether channel ``c`` (a saturation) has a twin without nonlinearity and of the other
+    sign, alike in all else: the two make a dead zone, x - clip(x) (a composed dead zone)."""
+    import dataclasses
+
+    ch = model.channels[c]
+    for k, other in enumerate(model.channels):
+        if k != c and other.nonlinearity is None and dataclasses.replace(
+                ch, name=other.name, nonlinearity=None, sign=-ch.sign,
+                oversample=other.oversample) == other:
+            return True
+    return False
+
+
+def _threshold_channel(model: PilotModel) -> tuple[int | None, str]:
+    """``(c, "")``: channel ``c``'s nonlinearity is the dead zone on ``delta_abs`` whose input
+    sets the plateau (a :class:`~bayespilot.model.DeadZone`, a
+    :class:`~bayespilot.model.SoftDeadZone`, taken as a dead zone of its ``delta``, or the
+    :class:`~bayespilot.model.Saturation` on ``delta_abs`` of a dead zone composed as a linear
+    channel minus its clipped copy); ``(None, why)`` where there is no such one channel."""
+    from .model import DeadZone, Saturation, SoftDeadZone
+
+    out = model.output
+    if out is not None and THRESHOLD in out.parameters:
+        return None, (f"{THRESHOLD} is a parameter of the model output's "
+                      f"{type(out).__name__}, not of a channel's dead zone")
+    owners = [c for c, ch in enumerate(model.channels)
+              if ch.nonlinearity is not None and THRESHOLD in ch.nonlinearity.parameters]
+    if not owners:
+        return None, f"no channel's nonlinearity reads {THRESHOLD}"
+    if len(owners) > 1:
+        return None, (f"{THRESHOLD} is read by the nonlinearities of "
+                      f"{len(owners)} channels ("
+                      f"{', '.join(model.channels[c].name for c in owners)}), whose inputs differ")
+    c = owners[0]
+    ch = model.channels[c]
+    nl = ch.nonlinearity
+    if isinstance(nl, (DeadZone, SoftDeadZone)) and nl.delta == THRESHOLD:
+        return c, ""
+    if isinstance(nl, Saturation) and nl.limit == THRESHOLD and _linear_twin(model, c):
+        return c, ""
+    return None, (f"{THRESHOLD} is read by the {ch.name} channel's {type(nl).__name__}, "
+                  "which is not a dead zone on it (a DeadZone, a SoftDeadZone, or the "
+                  "Saturation of a dead zone composed as a linear channel minus its clipped "
+                  "copy)")
+
+
+def _threshold_input(model: PilotModel, recording: Recording,
+                     params: Mapping[str, float] | None = None) -> tuple[np.ndarray | None, str]:
+    """(|i|, "") with |i| the magnitude of the input of the dead zone on ``delta_abs``
+    (:func:`_threshold_channel`) over the recording, or (None, why it is not computed).
+
+    The channel's source through its fixed stages
+    (:func:`~bayespilot.likelihood.channel_inputs`), then through its stages with free
+    parameters at ``params`` by the likelihood's own recursion (Tustin's rule at the
+    recording's rate, from its exact periodic steady state, ``initial="periodic"``).
+    Without ``params`` a channel with such stages gives None."""
+    from .kernels._blocks import stage_tf, tustin
+    from .kernels._response import _filter_biquad
     from .likelihood import channel_inputs
-    from .model import DeadZone, FixedFilter
+    from .model import FixedFilter
 
-    for c, ch in enumerate(model.channels):
-        nl = ch.nonlinearity
-        if isinstance(nl, DeadZone) and nl.delta == THRESHOLD:
-            if not all(isinstance(st, FixedFilter) for st in ch.stages):
-                return None
-            return np.abs(channel_inputs(model, recording)[c])
-    return None
+    c, why = _threshold_channel(model)
+    if c is None:
+        return None, why
+    ch = model.channels[c]
+    free = [st for st in ch.stages if not isinstance(st, FixedFilter)]
+    if free and params is None:
+        return None, (f"the {ch.name} channel's dead zone follows stages with free parameters "
+                      f"({', '.join(type(st).__name__ for st in free)}), and no parameter "
+                      "values were given to compute its input at")
+    x = channel_inputs(model, recording)[c]
+    if free:
+        values = model.as_dict(model.full_vector(
+            {k: v for k, v in params.items() if k in model.all_names}), full=True)
+        const = np.zeros(6)
+        for st in free:
+            ps = [values[n] for n in st.parameters]
+            coef = stage_tf(st.kind, ps[0] if ps else 0.0, ps[1] if len(ps) > 1 else 0.0, const)
+            out = np.empty_like(x)
+            _filter_biquad(np.ascontiguousarray(x), *tustin(*coef, recording.dt), True, 0, out)
+            x = out
+    return np.abs(x), ""
 
 
-def threshold_input_max(model: PilotModel, recording: Recording) -> float | None:
+def threshold_input_max(model: PilotModel, recording: Recording,
+                        params: Mapping[str, float] | None = None) -> float | None:
     """max|i| of the input of the dead zone on ``delta_abs`` over the recording.
 
     For ``delta_abs`` at or above this value the dead zone passes nothing and
-    the channel is switched off: the plateau of the likelihood.  None when no
-    channel has a hard :class:`~bayespilot.model.DeadZone` on ``delta_abs`` or
-    when that channel has stages with free parameters (its input then depends
-    on them).
+    the channel is switched off: the plateau of the likelihood.  The dead
+    zone is a :class:`~bayespilot.model.DeadZone` on ``delta_abs``, a
+    :class:`~bayespilot.model.SoftDeadZone` on it (taken as a dead zone of
+    its ``delta``), or the :class:`~bayespilot.model.Saturation` on it of a
+    dead zone composed as a linear channel minus its clipped copy.  None when
+    no single channel has one, or when its channel has stages with free
+    parameters (a washout, a motion system) and ``params`` is not given.
 
     Parameters
     ----------
     model : PilotModel
         The model; the dead zone's input is its channel's source passed
-        through the channel's fixed stages (for the paper's model, the canal
+        through the channel's stages (for the paper's model, the canal
         output i of theta_ddot_m).
     recording : Recording
         The run, with the likelihood's default start-up treatment
         (``initial="periodic"``, :func:`~bayespilot.likelihood.channel_inputs`).
+    params : mapping, optional
+        Parameter values (by name; others at their defaults or fixed
+        values) at which the stages with free parameters are computed, e.g.
+        the maximum-likelihood point (:func:`compare` gives its own).  Not
+        needed for fixed stages.
 
     Returns
     -------
@@ -1457,16 +1548,17 @@ def threshold_input_max(model: PilotModel, recording: Recording) -> float | None
     Raises
     ------
     ValueError
-        If the dead zone's input is computed (a dead zone on ``delta_abs``
-        after fixed stages only) and a channel of ``model`` needs the
-        ``theta`` column, which ``recording`` does not have.
+        If the dead zone's input is computed and a channel of ``model``
+        needs the ``theta`` column, which ``recording`` does not have; or
+        ``params`` names a parameter the model does not have.
     """
-    i = _threshold_input(model, recording)
+    i, _ = _threshold_input(model, recording, params)
     return None if i is None else float(np.max(i))
 
 
 def plateau_onset(model: PilotModel, recording: Recording,
-                  active_fraction: float = PLATEAU_ACTIVE_FRACTION) -> float | None:
+                  active_fraction: float = PLATEAU_ACTIVE_FRACTION,
+                  params: Mapping[str, float] | None = None) -> float | None:
     """The ``delta_abs`` above which the dead zone passes under ``active_fraction`` of the samples.
 
     The (1 - ``active_fraction``) quantile of |i|, the input of the dead zone,
@@ -1482,6 +1574,9 @@ def plateau_onset(model: PilotModel, recording: Recording,
     recording : Recording
     active_fraction : float
         Fraction of the samples, in [0, 1).
+    params : mapping, optional
+        As in :func:`threshold_input_max`: the values at which stages with
+        free parameters before the dead zone are computed.
 
     Returns
     -------
@@ -1489,7 +1584,7 @@ def plateau_onset(model: PilotModel, recording: Recording,
     """
     if not 0.0 <= active_fraction < 1.0:
         raise ValueError(f"active_fraction must be in [0, 1), got {active_fraction!r}")
-    i = _threshold_input(model, recording)
+    i, _ = _threshold_input(model, recording, params)
     return None if i is None else float(np.quantile(i, 1.0 - active_fraction))
 
 
@@ -1608,14 +1703,21 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
             runs: int = 2, seed: int | None = None, posterior: Any = None,
             savage_dickey_samples: bool = True, sample_options: Mapping[str, Any] | None = None,
             progress: bool = False) -> Comparison:
-    """Compare the model with threshold against the same model with ``delta_abs = 0``.
+    """Compare the model with threshold against the same model without it.
 
     Parameters
     ----------
     recording : Recording
     model : PilotModel, optional
         The model with a free ``delta_abs`` (default: the paper's).  The model
-        without threshold is ``model.fix(delta_abs=0)``.
+        without threshold is the one the fitters use for ``threshold=False``:
+        ``delta_abs`` held at 0 for a :class:`~bayespilot.model.DeadZone`
+        (``model.fix(delta_abs=0)``, the paper's nested model); a threshold
+        that is not the identity at ``delta_abs = 0`` (a
+        :class:`~bayespilot.model.SoftDeadZone`) is removed, its other
+        parameters (``w_soft``) with it.  The Savage-Dickey check is then
+        marked not valid (the null is not ``delta_abs = 0`` of the model
+        with threshold).
     likelihood : {"eq4", "coloured"}
     ar : {"fixed", "sampled"}, default "fixed"
         For ``"coloured"``: the AR model held fixed (one, from a
@@ -1673,6 +1775,15 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     Returns
     -------
     Comparison
+        With the plateau guard (module docs) computed from the dead zone's
+        input at the maximum-likelihood point with threshold
+        (:func:`plateau_onset` with ``params``; a SoftDeadZone taken as a
+        dead zone of its ``delta_abs``, stages with free parameters before it
+        at their estimates).  Where it cannot be computed (``delta_abs`` on
+        the output, on several channels, or on a block that is not a dead
+        zone) ``plateau_probability`` is None, ``settings["plateau_guard"]``
+        says "not applied: <reason>", the summary says so, and a "threshold"
+        decision's ``decision_note`` is "plateau guard not applied: <reason>".
 
     Raises
     ------
@@ -1729,7 +1840,13 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
             raise TypeError(f"posterior must be a bayespilot.sample.Posterior, got "
                             f"{type(posterior).__name__}")
         _check_posterior(posterior, recording, model, likelihood, ar, ar_order, discard)
-    none_model = model._fixed(**{THRESHOLD: 0.0})
+    from .fit.three_step import _model_for
+
+    none_model = _model_for(model, threshold=False)  # the threshold removed, not made soft
+    # the model with threshold at the null: delta_abs = 0, unless the null lost parameters with
+    # its threshold (a SoftDeadZone's corner width): then no such point, the limit w -> 0
+    lost = [n for n in model.parameter_names
+            if n != THRESHOLD and n not in none_model.parameter_names]
     ss = np.random.SeedSequence(seed)
     s1, s0, s_mc = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
     noise = None
@@ -1758,6 +1875,8 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     start1 = dict(ev1.best)
     v1, p1 = _ml(nll1, start1, threshold=True)
     nested_start = dict(p0, **{THRESHOLD: 0.0})
+    for n in nll1.names:  # a parameter the null has not (w_soft): at its bound nearest to it
+        nested_start.setdefault(n, model.parameter(n).lower)
     v_nested = nll1(np.array([nested_start[n] for n in nll1.names]))
     if v_nested < v1:  # the model with threshold contains the one without
         v1, p1 = _ml(nll1, nested_start, threshold=True)
@@ -1780,7 +1899,13 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         post_info["warnings"] = _reissue(caught, recording.source, opts["max_steps"])
     if posterior is not None:
         sd = savage_dickey_from_posterior(posterior, model)
-        if posterior.settings.get("likelihood") != likelihood:
+        if lost:
+            sd = SavageDickey(None, False, f"the model without threshold is not the model with "
+                              f"threshold at {THRESHOLD} = 0 (it has no {', '.join(lost)}), so "
+                              "the posterior density there tests another null", None,
+                              sd.prior_density, sd.posterior_density, sd.bandwidth, sd.n_draws,
+                              sd.n_near)
+        elif posterior.settings.get("likelihood") != likelihood:
             sd = SavageDickey(None, False, f"the posterior used the "
                               f"{posterior.settings.get('likelihood')!r} likelihood, the "
                               f"comparison {likelihood!r}", None, sd.prior_density,
@@ -1803,14 +1928,21 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
                        f"below that without ({ev0.max_log_lik:.1f}) in all {len(reruns)} runs: "
                        "they missed the main mode, so ln BF is too low; rerun with more nlive",
                        RuntimeWarning)
-    i_max = threshold_input_max(model, recording)
-    onset = plateau_onset(model, recording)
+    # the plateau: the dead zone's input at the maximum-likelihood point with threshold
+    i, no_guard = _threshold_input(model, recording, p1)
+    i_max = None if i is None else float(np.max(i))
+    onset = None if i is None else float(np.quantile(i, 1.0 - PLATEAU_ACTIVE_FRACTION))
     plateau = None if onset is None else ev1.probability(THRESHOLD, onset)
     silent = _silent_threshold(nll1.lik)
     decision, why = _guarded_decision(log_bf, err, mode_ok, plateau, onset, silent)
+    guard = "applied" if i is not None else f"not applied: {no_guard}"
+    if i is None and decision == "threshold" and not why:
+        # the guard would have had its say on this decision: the note says it had none
+        why = f"plateau guard not applied: {no_guard}"
     settings.update(max_threshold_input=i_max, plateau_onset=onset,
                     plateau_active_fraction=PLATEAU_ACTIVE_FRACTION, decision_note=why,
-                    threshold_identified=silent is None)
+                    threshold_identified=silent is None, plateau_guard=guard,
+                    model_none=none_model.name)
     return Comparison(float(log_bf), float(err), decision, ev1, ev0, sd, ic, settings,
                       seed, time.perf_counter() - t0, recording.source, plateau)
 

@@ -226,6 +226,18 @@ def _base_from(d: Mapping[str, Any]) -> dict[str, Any]:
     return {k: numbers(v) if isinstance(v, Mapping) else number(v) for k, v in d.items()}
 
 
+def _base_over(base: Mapping[str, Any]) -> str:
+    """" (whole record, N = 8192)" or " (after the first 2 s, N = 7992)": the samples the base
+    fit's -ln L (Eq. 4) is over (``base["discard_seconds"]``, ``base["n"]``), which ``bayespilot
+    fit`` may count otherwise (it leaves out a start-up on a record not of whole periods); ""
+    for a file written before they were recorded."""
+    d, n = base.get("discard_seconds"), base.get("n")
+    if d is None or n is None or not (math.isfinite(float(d)) and math.isfinite(float(n))):
+        return ""
+    where = "whole record" if float(d) == 0.0 else f"after the first {float(d):g} s"
+    return f" ({where}, N = {int(n)})"
+
+
 def _ranking_and_chosen(d: Mapping[str, Any], pooled: bool, source_file: str | None):
     """A result file's dict of a diagnosis of the kind asked for (:func:`_kind_check`): its
     ranking (CandidateResults) and its chosen candidate, the ranking's entry of that name
@@ -301,6 +313,15 @@ def _at_bounds_lines(edge) -> list[str]:
             f"recording problem (sign or unit convention, offset), not physics"]
 
 
+def _base_bounds_lines(wider) -> list[str]:
+    """The summary's line for ``settings["base_bounds"]`` (the base model's bounds that are
+    the given base fit's, not Table 1's), or none."""
+    if not wider:
+        return []
+    return ["base model's bounds from base_fit (Table 1's otherwise): "
+            + ", ".join(f"{k} in [{lo:g}, {hi:g}]" for k, (lo, hi) in wider.items())]
+
+
 def _calibration_lines(ranking) -> list[str]:
     """The summary's account of the tests calibrated by the parametric bootstrap."""
     lines = []
@@ -332,14 +353,20 @@ class DiagnosisResult(_DiagnosisJSON):
     base : dict
         The base model's fit: ``params``, ``neg_log_lik`` (Eq. 4), ``vaf``,
         ``gls_neg_log_lik``, ``gls_params`` and ``gls_stderr`` (the GLS
-        estimates' standard errors; decision likelihood).
+        estimates' standard errors; decision likelihood), and
+        ``discard_seconds`` and ``n``, the samples ``neg_log_lik`` and
+        ``vaf`` are over (diagnose's own base fit: the whole record,
+        ``discard_seconds`` 0, where ``bayespilot fit`` may leave out a
+        start-up; absent in files written before they were recorded).
     chosen : CandidateResult or None
         The chosen extension's fit (parameters, standard errors).
     settings : dict
         alpha, seed, bootstrap size, band, skip, remnant of the replicates
         (``bootstrap``; with ``skipped``, why, when the bootstrap asked for
         could not be made; ``dropped`` replicates that failed), the base
-        fit's parameters on a bound (``base_at_bounds``, when any).
+        fit's parameters on a bound (``base_at_bounds``, when any), the base
+        model's bounds taken from ``base_fit`` (``base_bounds``: name ->
+        [lower, upper], those that are not Table 1's; when any).
     elapsed : float
         Wall time, s.
     source : str or None
@@ -428,8 +455,9 @@ class DiagnosisResult(_DiagnosisJSON):
         lines = [f"bayespilot diagnose{' ' + self.source if self.source else ''}",
                  f"decision: {self.physics}" + (" (mismatch)" if self.mismatch else
                                                 " (no extension justified)"),
-                 f"base model: -ln L (Eq. 4) = {self.base['neg_log_lik']:.2f}, "
-                 f"VAF = {self.base['vaf']:.2f} %",
+                 f"base model: -ln L (Eq. 4) = {self.base['neg_log_lik']:.2f}"
+                 f"{_base_over(self.base)}, VAF = {self.base['vaf']:.2f} %",
+                 *_base_bounds_lines(self.settings.get("base_bounds")),
                  *_at_bounds_lines(self.settings.get("base_at_bounds")),
                  f"level: alpha = {self.settings['alpha']:g} over "
                  f"{self.settings['n_tested']} candidates",
@@ -653,7 +681,28 @@ def _check(recording, alpha, n_bootstrap, skip_seconds, candidates, oversample=1
         raise ValueError(f"candidates names an entry twice: {list(names)}")
     if not names:
         raise ValueError("candidates is empty: name at least one catalogue entry (None: all)")
+    _check_needs(names)
     return names
+
+
+def _check_needs(names) -> None:
+    """Refuse (ValueError naming the entry and its ``needs``), before any fit, a candidate
+    whose model reads a recording column its ``needs`` leaves out (an entry put in the
+    registry without :func:`register_extension`'s check): it would fail at its own fit, after
+    the base fit, the bootstrap and the candidates before it, where ``needs`` lets the
+    diagnosis skip it on a recording without the column."""
+    from ..model import paper_model
+    from .catalogue import _unlisted_needs
+
+    base = None
+    for name in names:
+        ext = get_extension(name)
+        if ext.likelihood != "gls":
+            continue
+        base = paper_model() if base is None else base
+        why = _unlisted_needs(ext, ext.build(base))
+        if why is not None:
+            raise ValueError(why)
 
 
 def _base_gls(recording, base_model, start: Mapping[str, float], *, skip: int,
@@ -757,11 +806,61 @@ def _base_at_bounds_note(edge: Sequence[Mapping[str, Any]]) -> str:
     said = ", ".join(f"{d['parameter']} = {d['value']:.4g} on its {d['side']} bound "
                      f"({d['bound']:g}, {d['fit']} fit)" for d in edge)
     return (f"the base fit has {said}: the bound, not the data, stopped it, because of the "
-            f"recording (a sign or unit convention of u, e or theta, an offset) or of physics "
-            f"the base model lacks (a strong otolith channel can put tau_m on 1 s); an "
-            f"extension named from this base fit may be making up for a recording problem "
-            f"rather than for missing physics: check the recording (signs, units, offsets) "
-            f"before reading the decision")
+            f"recording (a sign or unit convention of u, e or theta, an offset), of a loop "
+            f"gain unlike the paper's (the base model's bounds are Table 1's, K_v and K_m up "
+            f"to 10, unless base_fit was made with others: a small plant or stick gain can "
+            f"need more), or of physics the base model lacks (a strong otolith channel can "
+            f"put tau_m on 1 s); an extension named from this base fit may be making up for "
+            f"the recording or the bounds rather than for missing physics: check the "
+            f"recording (signs, units, offsets) and, for a gain on its bound, rescale u "
+            f"(diagnose rec.with_signals(u=rec.u / c), c = 10 say, and multiply the fitted "
+            f"K_v and K_m by c; docs/fitting.md, 'A loop gain unlike the paper's') or give "
+            f"a base_fit made with wider bounds, before reading the decision")
+
+
+def _base_model(base_fit, oversample: int, where: str = ""):
+    """The base model the candidates extend: the paper's (Table 1 bounds), with the bounds
+    ``base_fit`` was made with where they differ (a lab whose loop gain needs K_v > 10), and
+    those differences (name -> [lower, upper]; empty: Table 1's).
+
+    A ValueError, before any fit, if an estimate of ``base_fit`` lies outside the bounds of
+    that base model (its bounds not recorded, or a fit of another model): the catalogue's
+    tests would start from a point the base model cannot hold."""
+    import dataclasses
+
+    from ..model import paper_model
+
+    model = paper_model(oversample=oversample)
+    if base_fit is None:
+        return model, {}
+    box = base_fit._box()
+    params, wider = [], {}
+    for p in model.parameters:
+        lo, hi = (float(v) for v in box.get(p.name, (p.lower, p.upper)))
+        if (lo, hi) != (p.lower, p.upper):
+            p = dataclasses.replace(p, lower=lo, upper=hi, default=min(max(p.default, lo), hi))
+            wider[p.name] = [lo, hi]
+        params.append(p)
+    if wider:
+        model = dataclasses.replace(model, parameters=tuple(params))
+    out = []
+    for p in model.parameters:
+        v = base_fit.params.get(p.name)
+        if p.name in model.parameter_names and v is not None and not (
+                p.lower - 1e-9 * (p.upper - p.lower) <= float(v)
+                <= p.upper + 1e-9 * (p.upper - p.lower)) and p.name not in box:
+            out.append(f"{p.name} = {float(v):.4g} outside [{p.lower:g}, {p.upper:g}]")
+    if out:
+        raise ValueError(
+            f"{where}base_fit has {', '.join(out)}, the bounds of diagnose's base model (the "
+            f"paper's, Table 1), and records no bounds of its own for "
+            f"{'it' if len(out) == 1 else 'them'}: the catalogue's tests extend the paper's "
+            f"model within its bounds, where this fit cannot be held.  Rescale u so that the "
+            f"estimates fall inside Table 1 (diagnose rec.with_signals(u=rec.u / c) and "
+            f"multiply the fitted K_v and K_m by c; docs/fitting.md, 'A loop gain unlike the "
+            f"paper's'), or give a base_fit made by fit_fast or fit_paper with widened "
+            f"bounds (it records them; diagnose then uses them)")
+    return model, wider
 
 
 #: What a recording without forcing functions misses (a warning's text; what to give:
@@ -841,7 +940,6 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
     will have (the forcing's notes; a bootstrap asked for that cannot be made).
     """
     from ..fit.fast import fit_fast
-    from ..model import paper_model
     from . import decide as D
     from . import locate as L
 
@@ -870,7 +968,7 @@ def _prepare(recording, *, seed, n_bootstrap, base_fit, skip_seconds, omega_c, n
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     bar.set_postfix_str("base fit")
-    base_model = paper_model(oversample=oversample)
+    base_model, _ = _base_model(base_fit, oversample, _where(recording))
     if base_fit is None:
         # discard=0: the diagnosis leaves out its own start (skip_seconds) of every statistic
         base_fit = fit_fast(recording, base_model, seed=seed, n_starts=n_starts,
@@ -1077,6 +1175,14 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         registered, :data:`NAMES`).
     base_fit : FitResult, optional
         A fit of the paper's model to this recording, to skip the base fit.
+        The base model (which every candidate extends; their own parameters
+        keep their bounds) takes the bounds it was made with where they are
+        not Table 1's: a lab whose loop gain needs K_v > 10 fits with
+        widened bounds (docs/fitting.md, "A loop gain unlike the paper's")
+        and gives that fit here (``settings["base_bounds"]``).  Without
+        it, the base model has Table 1's bounds; rescaling u
+        (``recording.with_signals(u=recording.u / c)``) is the other way
+        round them.
     skip_seconds : float
         Start of the record left out of the decision likelihood and evidence
         (the likelihood's start-up transient).
@@ -1174,7 +1280,10 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         ``candidates`` is a string or one Extension, empty,
         repeats a name, names one that is not in the catalogue or gives an
         Extension that :func:`~bayespilot.diagnose.catalogue.register_extension`
-        refuses; or
+        refuses, or names an entry whose model reads a recording column its
+        ``needs`` leaves out (checked before the base fit); ``base_fit`` has
+        an estimate outside the paper's bounds (Table 1) and records no
+        bounds of its own for it (the message says to rescale u); or
         ``n_calibrate`` is asked for with ``profile_noise=True``.
 
     Warns
@@ -1204,7 +1313,9 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         :attr:`~bayespilot.fit.result.FitResult.at_bounds`, or the GLS fit)
         is on a bound of its search box, other than ``delta_abs = 0`` and a
         parameter fixed or not identified: the named extension may be making
-        up for a recording problem rather than physics.  The decision is made
+        up for a recording problem, or for bounds that do not suit the loop
+        (a gain on its bound: the message names the rescale of u), rather
+        than physics.  The decision is made
         as ever; ``settings["base_at_bounds"]`` records the parameters (and
         the summary shows them).  A subclass of EvidenceWarning.
 
@@ -1229,6 +1340,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         if not isinstance(base_fit, FitResult):
             raise TypeError(f"base_fit must be a FitResult (of fit_fast or fit_paper), got "
                             f"{type(base_fit).__name__}")
+    # a base fit outside the base model's bounds: refused before any work
+    _, wider = _base_model(base_fit, oversample, _where(recording))
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     if profile_noise and n_calibrate:
         raise ValueError("n_calibrate does not combine with profile_noise=True (the replicates "
@@ -1340,10 +1453,14 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         if forcing is not None else None
     arrays["level"] = level
     arrays["noise"] = noise  # the decision's noise model (decide.NoiseModel)
+    # the samples the Eq. 4 -ln L is over: diagnose's own base fit takes the whole record
+    # (discard 0), where `bayespilot fit` may leave out a start-up
+    discard = float(base_fit.settings.get("discard") or 0.0)
     base_d = {"params": dict(base_fit.params), "neg_log_lik": float(base_fit.neg_log_lik),
               "vaf": float(base_fit.vaf), "gls_params": dict(base.params),
               "gls_neg_log_lik": float(base.neg_log_lik),
-              "gls_stderr": base.stderr}
+              "gls_stderr": base.stderr, "discard_seconds": discard,
+              "n": recording.n_samples - int(round(discard * recording.sample_rate_hz))}
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "bootstrap": boot_info,
                 "n_calibrate": n_calibrate, "noise_passes": noise_passes, "refit": refit,
@@ -1358,6 +1475,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         settings["evidence_notes"] = list(run.notes)  # (the EvidenceWarnings, for the record)
     if run.base_at_bounds:
         settings["base_at_bounds"] = [dict(d) for d in run.base_at_bounds]  # (BaseFitWarning)
+    if wider:
+        settings["base_bounds"] = wider  # the base model's bounds that are base_fit's
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
                            where, base_d, chosen, settings, time.perf_counter() - t0,
                            recording.source, arrays, base_model=base_model,

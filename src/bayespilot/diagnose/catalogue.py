@@ -154,7 +154,11 @@ class Extension:
     likelihood : {"gls", "censored"}
         Which likelihood fits and tests it (see :mod:`bayespilot.diagnose.decide`).
     needs : tuple of str
-        Recording columns it needs (e.g. ``("theta",)``).
+        Recording columns it needs beyond those every recording has (e.g.
+        ``("theta",)``): every one its model's channels read (a channel on
+        ``theta_m`` or ``theta`` reads ``theta``; :func:`register_extension`
+        checks).  :func:`~bayespilot.diagnose.diagnose` skips the entry on a
+        recording without them.
     refine_threshold : bool
         Whether delta_abs is re-estimated with it (the threshold shape entry).
     boundary_null : bool
@@ -307,6 +311,41 @@ LIKELIHOODS: tuple[str, ...] = ("gls", "censored")
 _REGISTERED: dict[str, Extension] = {}
 
 
+#: The recording column a channel's source reads beyond those every recording has
+#: (:data:`bayespilot.recording.REQUIRED_SIGNALS`): an entry whose model has such a channel
+#: must name the column in ``needs``.
+_SOURCE_COLUMNS = {"theta_m": "theta", "theta": "theta"}
+
+
+def _columns_read(model: PilotModel) -> dict[str, list[str]]:
+    """The optional recording columns ``model``'s channels read: column -> the channels
+    ("name (source)") that read it."""
+    out: dict[str, list[str]] = {}
+    for ch in model.channels:
+        col = _SOURCE_COLUMNS.get(ch.source)
+        if col is not None:
+            out.setdefault(col, []).append(f"{ch.name} ({ch.source})")
+    return out
+
+
+def _unlisted_needs(ext: Extension, model: PilotModel) -> str | None:
+    """Why ``ext``'s ``needs`` leaves out a column ``model`` (its build of the base model)
+    reads, or None: without it :func:`~bayespilot.diagnose.diagnose` would not skip the entry
+    on a recording lacking the column but fail at its fit, after the base fit and the
+    bootstrap."""
+    read = _columns_read(model)
+    left = [c for c in read if c not in tuple(ext.needs)]
+    if not left:
+        return None
+    which = "; ".join(f"the {c!r} column, read by the channel(s) {', '.join(read[c])}"
+                      for c in left)
+    fixed = tuple(ext.needs) + tuple(left)
+    return (f"extension {ext.name!r}: its model reads {which}, and needs={tuple(ext.needs)!r} "
+            f"leaves it out; give needs={fixed!r}, so that diagnose skips the entry on a "
+            f"recording without {'it' if len(left) == 1 else 'them'} rather than failing at "
+            f"its fit after the base fit and the bootstrap")
+
+
 def _names_tuple(value: Any, what: str, name: str) -> tuple[str, ...]:
     """``value`` (a tuple or list of distinct str) as a tuple, or a ValueError naming ``what``."""
     if isinstance(value, str):
@@ -381,6 +420,9 @@ def _validated(ext: Extension) -> Extension:
         raise ValueError(f"extension {name!r}: build(paper_model()) leaves the base model's "
                          f"{', '.join(lost)} fixed or out; an extension must keep the base "
                          f"model's free parameters free (its test counts only those it adds)")
+    unlisted = _unlisted_needs(dataclasses.replace(ext, needs=needs), model)
+    if unlisted is not None:
+        raise ValueError(unlisted)
     added = [n for n in model.parameter_names if n not in base.parameter_names]
     if set(added) != set(new):
         raise ValueError(f"extension {name!r}: build(paper_model()) adds the free parameters "
@@ -427,7 +469,9 @@ def register_extension(ext: Extension) -> Extension:
     :func:`~bayespilot.model.paper_model`, returns a PilotModel which keeps
     the base model's free parameters free and adds exactly the free
     parameters ``new_parameters`` names (at least one: the test's degrees of
-    freedom); ``likelihood`` ``"gls"`` (``"censored"`` is wired to the
+    freedom), and whose channels read only the recording columns every
+    recording has or that ``needs`` names (a channel on ``theta_m`` or
+    ``theta`` needs ``needs=("theta",)``); ``likelihood`` ``"gls"`` (``"censored"`` is wired to the
     built-in ``control-saturation``); ``signature_keys`` keys of the located
     evidence (:data:`bayespilot.diagnose.locate.EVIDENCE`); ``starts`` giving
     values within the bounds of new parameters only.  What is not checked:

@@ -1551,7 +1551,7 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
                     f"estimate from the base model's output{after}.")
     else:
         freq = f"<p>{html.escape(_no_describing_function(result))}</p>"
-    from . import _calibration_lines
+    from . import _base_over, _calibration_lines
 
     cal = "".join(f"<p>{html.escape(line)}</p>" for line in _calibration_lines(result.ranking)
                   if line)
@@ -1572,7 +1572,7 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
 <style>{_STYLE}</style></head><body>
 <h1>{title}</h1>
 <p>Recording: {html.escape(str(result.source))}. Mismatch: <b>{_yes_no(result.mismatch)}</b>.
-Base model: -ln L (Eq. 4) = {result.base['neg_log_lik']:.2f}, VAF = {result.base['vaf']:.2f} %.
+Base model: -ln L (Eq. 4) = {result.base['neg_log_lik']:.2f}{_base_over(result.base)}, VAF = {result.base['vaf']:.2f} %.
 Decision at family-wise level alpha = {result.settings['alpha']:g}
 ({result.settings['level_per_candidate']:.2g} per candidate). Time {result.elapsed:.1f} s.</p>
 {_notes_html([("", n) for n in (result.settings or {}).get("evidence_notes", ())])}
