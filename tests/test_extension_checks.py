@@ -96,6 +96,35 @@ def test_without_threshold_holds_any_dead_zone_at_zero():
     assert out.fixed == {"delta_abs": 0.0}
 
 
+def test_without_threshold_keeps_a_clipped_copy_that_declares_its_limit(rec):
+    """A dead zone composed of channels, the linear motion channel minus a copy clipped at a
+    limit that its block declares as a threshold: the model without threshold holds that limit
+    at 0 (the copy silent, the difference the linear channel), it does not remove the block
+    (the copy unclipped would cancel the motion channel).  Reference: the linear model's -ln
+    L at the same parameters."""
+    import dataclasses
+
+    from bayespilot.likelihood import Likelihood
+
+    class Limit(Saturation):  # (a Saturation whose limit is the threshold)
+        @property
+        def thresholds(self):
+            return tuple(self.parameters)
+
+    lin = paper_model(threshold=False).without_threshold()
+    motion = next(c for c in lin.channels if c.name == "vestibular")
+    clipped = dataclasses.replace(motion, name="clipped", sign=-motion.sign,
+                                  nonlinearity=Limit("i_lim"))
+    composed = dataclasses.replace(
+        lin, channels=(*lin.channels, clipped),
+        parameters=(*lin.parameters, Parameter("i_lim", 0.0, 0.1, 0.0075, "IPUT")))
+    none = composed.without_threshold()
+    assert none.fixed.get("i_lim") == 0.0 and len(none.channels) == 3
+    p = {k: v for k, v in paper_parameters("FD").items() if k != "delta_abs"}
+    want = Likelihood(lin, rec, discard=2.0).neg_log_lik(p)
+    assert Likelihood(none, rec, discard=2.0).neg_log_lik(p) == pytest.approx(want, rel=1e-9)
+
+
 def test_has_threshold_agrees_with_the_fits_label(rec):
     """A free parameter named delta_abs is the threshold the fitters scan, whatever block reads
     it (a Saturation in a dead zone composed of channels): has_threshold said False while the

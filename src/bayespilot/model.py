@@ -1295,16 +1295,19 @@ class PilotModel:
         """The model without threshold: the null model that the fitters' ``threshold=False``
         and the comparison with and without threshold take.
 
-        A dead zone (:class:`DeadZone`, or any block of its kind code) is the identity at a
-        half-width of 0, so its thresholds are held at 0: for the paper's model that is
+        A soft dead zone (:class:`SoftDeadZone`, or any block of its kind code) is not the
+        identity at a half-width of 0 (it still halves small inputs): it is removed, with the
+        parameters only it read (its ``w_soft``).  Every other nonlinearity that has
+        thresholds (:attr:`Nonlinearity.thresholds`) has them held at 0: a dead zone
+        (:class:`DeadZone`) is the identity there, so for the paper's model that is
         ``delta_abs`` fixed at 0, the model of ``paper_model(threshold=False)`` (the same
-        parameters, in the same order).  Any other nonlinearity that has thresholds
-        (:attr:`Nonlinearity.thresholds`; :class:`SoftDeadZone`, which at a half-width of 0
-        still halves small inputs) is not the identity there: it is removed, with the
-        parameters only it read (a soft dead zone's ``w_soft``).  A parameter named
-        ``delta_abs`` still estimated after that (read by a block that declares no threshold,
-        e.g. a :class:`Saturation` in a dead zone composed of channels) is held at 0 too, as
-        the fitters take that name for the threshold.
+        parameters, in the same order); a block of one's own that declares a threshold (e.g.
+        a :class:`Saturation` subclass in a dead zone composed of channels, the linear
+        channel minus a clipped copy: clipped at 0 the copy is silent and the difference
+        linear) keeps its place, as removing it would change what the other channels
+        compute.  A parameter named ``delta_abs`` still estimated after that (read by a block
+        that declares no threshold) is held at 0 too, as the fitters take that name for the
+        threshold.
 
         Returns
         -------
@@ -1329,7 +1332,7 @@ class PilotModel:
             """The block in place of ``nl`` (None: removed), its thresholds held at 0."""
             if nl is None or not tuple(nl.thresholds):
                 return nl
-            if nl.kind == B.NL_DEADZONE:  # the identity at a half-width of 0
+            if nl.kind != B.NL_SOFT_DEADZONE:  # (a dead zone: the identity at 0)
                 zero.update((name, 0.0) for name in nl.thresholds)
                 return nl
             removed.append(f"{type(nl).__name__} {where}")
