@@ -299,3 +299,30 @@ def test_fits_refuse_a_model_unstable_everywhere(rec):
                                                "non-finite likelihood.*check the blocks' bounds"):
             sample(rec, m, init=dict(m.defaults), n_walkers=20, max_steps=100, min_steps=50,
                    check_every=50, seed=0, progress=False)
+
+
+# --- changing a channel's fields -------------------------------------------------------------
+def test_with_channel_adds_a_lead_as_building_the_channel_by_hand(rec):
+    """with_channel("vestibular", lead=...) is the model built with dataclasses.replace (what
+    an extender had to do): the same -ln L at the same parameters; removing the lead again
+    drops its parameter and gives the paper model's -ln L; a misspelt field is refused."""
+    import dataclasses
+
+    T_ml = Parameter("T_ml", 0.0, 1.0, 0.1, "s")
+    base = paper_model()
+    lead = base.with_channel("vestibular", lead="T_ml", parameters=[T_ml])
+    chans = tuple(dataclasses.replace(c, lead="T_ml") if c.name == "vestibular" else c
+                  for c in base.channels)
+    by_hand = dataclasses.replace(base, channels=chans, parameters=(*base.parameters, T_ml))
+    p = dict(paper_parameters("FD"), T_ml=0.15)
+    want = Likelihood(by_hand, rec, discard=2.0).neg_log_lik(p)
+    assert Likelihood(lead, rec, discard=2.0).neg_log_lik(p) == want
+    assert want != Likelihood(base, rec, discard=2.0).neg_log_lik(paper_parameters("FD"))
+    back = lead.with_channel("vestibular", lead=None)
+    assert back.parameter_names == base.parameter_names
+    assert Likelihood(back, rec, discard=2.0).neg_log_lik(paper_parameters("FD")) == \
+        Likelihood(base, rec, discard=2.0).neg_log_lik(paper_parameters("FD"))
+    with pytest.raises(TypeError, match="unknown field.s. leed; a channel's fields are delay"):
+        base.with_channel("vestibular", leed="T_ml")
+    with pytest.raises(ValueError, match="not declared: T_x"):
+        base.with_channel("vestibular", lead="T_x")

@@ -1172,6 +1172,64 @@ class PilotModel:
         _check_block(modulation, Modulation, "with_modulation: the modulation")
         return self._with_block(channel, modulation, parameters, modulation=lambda c: modulation)
 
+    def with_channel(self, channel: str, parameters: Iterable[Parameter] = (),
+                     **fields: Any) -> "PilotModel":
+        """Change fields of a channel: a lead, its delay, gain, sign, source, stages, ...
+
+        For what the block builders (:meth:`add_stage`, :meth:`with_nonlinearity`,
+        :meth:`with_modulation`) do not cover: e.g. a lead (1 + T_ml s) on the motion
+        channel, ``with_channel("vestibular", lead="T_ml", parameters=[Parameter("T_ml", 0.0,
+        1.0, 0.1, "s")])``.  The channel is rebuilt with the new fields (and checked as
+        :class:`Channel` checks any); a parameter only the old fields read is dropped.
+
+        Parameters
+        ----------
+        channel : str
+            Name of the channel, e.g. ``"vestibular"``.
+        parameters : iterable of Parameter, default ()
+            Declarations of the new parameters the fields name (bounds, default, unit).  A
+            name the model already declares may be given again only with the same bounds,
+            default and unit (it is then shared: ``delay="tau_v"`` gives the channel the
+            visual channel's delay).
+        **fields
+            :class:`Channel` fields and their new values (not ``name``).
+
+        Returns
+        -------
+        PilotModel
+            A new model; this one is unchanged.
+
+        Raises
+        ------
+        TypeError
+            A field :class:`Channel` does not have (or ``name``), none given, or a value
+            :class:`Channel` refuses by type (a stage that is not a :class:`Stage`, ...).
+        ValueError
+            On an unknown channel, an undeclared parameter, a parameter declared again
+            with other bounds, default or unit, or a value :class:`Channel` refuses.
+
+        Examples
+        --------
+        >>> lead = paper_model().with_channel(
+        ...     "vestibular", lead="T_ml", parameters=[Parameter("T_ml", 0.0, 1.0, 0.1, "s")])
+        >>> lead.parameter_names[-1], lead.channels[1].lead
+        ('T_ml', 'T_ml')
+        """
+        from dataclasses import fields as dataclass_fields
+
+        known = {f.name for f in dataclass_fields(Channel)} - {"name"}
+        unknown = sorted(set(fields) - known)
+        if unknown or not fields:
+            said = f"unknown field(s) {', '.join(unknown)}" if unknown else "no field given"
+            raise TypeError(f"with_channel: {said}; a channel's fields are "
+                            f"{', '.join(sorted(known))}")
+        chans = list(self.channels)
+        i = self._channel(channel)
+        chans[i] = replace(chans[i], **fields)
+        return self._rebuilt(channels=tuple(chans), parameters=self._with_params(parameters),
+                             name=f"{self.name} + {channel} with "
+                                  f"{', '.join(f'{k}={v!r}' for k, v in fields.items())}")
+
     def add_channel(self, channel: Channel, parameters: Iterable[Parameter] = ()) -> "PilotModel":
         """Add a parallel channel (e.g. an otolith channel).
 
