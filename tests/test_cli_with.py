@@ -179,30 +179,52 @@ def _paper(task: str) -> dict:
 
 
 @pytest.mark.parametrize("argv", [
-    ["compare", "{run}", "--with", "threshold-shape"],
     ["loglik", "{run}", "--params", "{params}", "--no-threshold", "--with", "threshold-shape"],
     ["fit", "{run}", "--method", "fast", "--no-threshold", "--with", "threshold-shape"],
 ])
 def test_threshold_shape_without_threshold_is_refused(washout_fit, tmp_path, capsys,
                                                       monkeypatch, argv):
-    """compare's and --no-threshold's model holds delta_abs at 0, where the soft dead zone is
-    not the identity: "without threshold" would keep a nonlinearity (a different -ln L)."""
-    import bayespilot.compare
+    """--no-threshold's model removes the soft dead zone (it is not the identity at
+    delta_abs = 0), which leaves the paper's model without threshold: the entry would do
+    nothing, and is refused before anything runs."""
     import bayespilot.fit.fast
 
     def started(*a, **k):
         raise AssertionError("the computation started")
 
-    monkeypatch.setattr(bayespilot.compare, "compare", started)
     monkeypatch.setattr(bayespilot.fit.fast, "fit_fast", started)
     run, _ = washout_fit
     params = tmp_path / "soft.json"
     params.write_text(json.dumps({**_paper("FT"), "w_soft": 0.01}))
     code, out, err = _run(capsys, *[a.format(run=run, params=params) for a in argv])
     assert code == 2 and out == "", err
-    shown = "compare" if argv[0] == "compare" else "--no-threshold"
-    assert (f"argument --with: threshold-shape with {shown}: its SoftDeadZone is not the "
-            f"identity at delta_abs = 0") in err, err
+    assert ("argument --with: threshold-shape with --no-threshold: the model without "
+            "threshold removes its SoftDeadZone") in err, err
+
+
+def test_compare_with_threshold_shape_weighs_it_against_the_linear_model(
+        washout_fit, capsys, monkeypatch):
+    """compare --with threshold-shape: the soft dead zone's model against its model without
+    threshold, the linear one (compare builds it; it was refused while "without threshold"
+    meant delta_abs held at 0)."""
+    import bayespilot.compare
+    from bayespilot.cli import CommandFailed
+    from bayespilot.fit.three_step import _model_for
+
+    seen = []
+
+    def compare(rec, model, **kwargs):
+        seen.append(model)
+        raise CommandFailed("stopped by the test")
+
+    monkeypatch.setattr(bayespilot.compare, "compare", compare)
+    run, _ = washout_fit
+    code, _, err = _run(capsys, "compare", run, "--with", "threshold-shape")
+    assert code == 1 and err.splitlines()[-1] == "bayespilot: error: stopped by the test", err
+    (model,) = seen
+    assert "w_soft" in model.parameter_names and model.has_threshold
+    none = _model_for(model, threshold=False)
+    assert "w_soft" not in none.all_names and "delta_abs" not in none.all_names
 
 
 def test_threshold_shape_with_a_free_threshold_is_taken(washout_fit, tmp_path, capsys):

@@ -1368,8 +1368,9 @@ def _cmd_compare(args: argparse.Namespace) -> int:
                          *_code_files(args.extended_by, "--with")])
     posterior = _read_posterior(args.posterior) if args.posterior else None
     rec = _read(args.recording)
-    # (compare's model without threshold is this one with delta_abs fixed at 0)
-    model = _paper_model_with(args, rec, without_threshold="compare")
+    # (compare's model without threshold is this one's without_threshold(): a soft dead
+    # zone of --with threshold-shape removed, the linear model)
+    model = _paper_model_with(args, rec)
     if args.json:
         _check_writable(args.json, "comparison")
     _say(args, f"comparing the model with and without threshold on {rec.source} "
@@ -1954,11 +1955,13 @@ def _paper_model_and_entries(args: argparse.Namespace, recording=None, *,
 
     Refused as bad input: an entry the recording lacks a column for; (``fitted``: a command
     that fits or evaluates the likelihood) one that only ``diagnose`` fits (its likelihood
-    is not Eq. 4's); and, when the command uses the model without threshold
+    is not Eq. 4's); and, when the command takes only the model without threshold
     (``without_threshold``: how it says so, e.g. ``"--no-threshold"``), one that puts on
     delta_abs a nonlinearity other than the paper's dead zone (``threshold-shape``'s soft
-    dead zone): held at delta_abs = 0 that is not the identity (slope 1/2 at 0), so the
-    model "without threshold" would still have a nonlinearity there.
+    dead zone): the model without threshold removes that block
+    (:meth:`~bayespilot.model.PilotModel.without_threshold`), which leaves the paper's model
+    without threshold, the entry with nothing to do.  (``compare`` weighs the model with
+    the entry against that one: not refused.)
     """
     from .model import DeadZone, paper_model
 
@@ -1987,18 +1990,18 @@ def _paper_model_and_entries(args: argparse.Namespace, recording=None, *,
             except (TypeError, ValueError, KeyError) as exc:
                 raise UsageError(f"argument --with: {ext.name} cannot extend "
                                  f"{model.name!r} ({exc})") from None
-            # (the fitters and compare make "no threshold" by fixing delta_abs at 0: only
-            # the paper's dead zone is then no nonlinearity at all)
+            # (the model without threshold removes a threshold block that is not the
+            # paper's dead zone: with --no-threshold the entry would do nothing)
             kept = [nl for nl in [c.nonlinearity for c in model.channels] + [model.output]
                     if without_threshold and nl is not None and "delta_abs" in nl.thresholds
                     and not isinstance(nl, DeadZone)]
             if kept:
-                raise UsageError(f"argument --with: {ext.name} with {without_threshold}: its "
-                                 f"{type(kept[0]).__name__} is not the identity at delta_abs = "
-                                 f"0 (a soft dead zone keeps a slope of 1/2 at 0), so the model "
-                                 f"without threshold would still hold a nonlinearity; "
-                                 f"{ext.name} goes with a free threshold (fit or sample "
-                                 f"without --no-threshold)")
+                raise UsageError(f"argument --with: {ext.name} with {without_threshold}: the "
+                                 f"model without threshold removes its "
+                                 f"{type(kept[0]).__name__} (it is not the identity at "
+                                 f"delta_abs = 0), which leaves the paper's model without "
+                                 f"threshold; drop --with {ext.name}, or fit it with a free "
+                                 f"threshold (without --no-threshold)")
             used.append(ext)
     return model, used
 
