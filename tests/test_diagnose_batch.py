@@ -228,9 +228,14 @@ def test_task_posterior_pooled_and_a_failure_kept(tmp_path, monkeypatch):
                      duration=40.96).recording for s in (22, 23)]
     opts = {"n_bootstrap": 0, "candidates": ["motion-washout"], "seed": 0}
     task = DiagnoseTask("s1_FD_k1", ("a", "b"), "s1", "FD", 1.0)
+    # (on a coarse grid, here and in the task: the grid's points are the posterior's cost,
+    # and what is tested is that the task's is the direct call's)
+    monkeypatch.setattr(dg, "shared_posterior",
+                        lambda res, recs, **k: shared_posterior(res, recs, n_grid=5, **k))
     res, _ = run_diagnose_task(task, recs, dict(opts, posterior=True))
     ref = diagnose_pooled(recs, **opts)
-    shared_posterior(ref, recs)
+    shared_posterior(ref, recs, n_grid=5)
+    assert res.posterior.grid[0].size == 5
     assert res.physics == ref.physics == "motion-washout"
     got, want = res.posterior.marginals["omega_w"], ref.posterior.marginals["omega_w"]
     assert got["median"] == pytest.approx(want["median"], rel=1e-9)
