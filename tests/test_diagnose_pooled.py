@@ -38,6 +38,17 @@ def washout_result(washout_runs):
                            candidates=["motion-washout", "time-varying-gains"])
 
 
+@pytest.fixture(scope="module")
+def washout_posterior(washout_runs, washout_result):
+    """shared_posterior of the washout diagnosis on 11 grid points (computed once: two tests
+    read it), kept on the result as its posterior."""
+    from bayespilot.diagnose import shared_posterior
+
+    post = shared_posterior(washout_result, washout_runs, n_grid=11)
+    assert washout_result.posterior is post
+    return post
+
+
 def test_pooled_reports_the_fit_with_each_runs_own_noise_model(washout_runs, washout_result):
     """The reported pooled fit (pooled_final_fit): each run's delta_abs at the minimum of a
     plain grid scan of its own GLS likelihood (the run's own noise model, the other
@@ -287,14 +298,14 @@ def _fd_hessian(f, x, rel=1e-3):
 
 
 def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
-        washout_runs, washout_result, tmp_path):
+        washout_runs, washout_result, washout_posterior, tmp_path):
     """Reference: at three grid values of omega_w, each run's pilot parameters refitted on its
     own and integrated out with a central-difference Hessian of its GLS -ln L (not the
     Gauss-Newton one the module uses); the log density's differences must agree."""
     from bayespilot.diagnose import shared_posterior
 
     res = washout_result
-    post = shared_posterior(res, washout_runs, n_grid=11)
+    post = washout_posterior  # (the result's posterior: the fixture's first user)
     assert res.posterior is post and post.names == ("omega_w",)
     from bayespilot.diagnose.report import plot_shared_posterior
 
@@ -470,14 +481,14 @@ def test_pooled_refine_reports_the_covariance_of_the_point_it_returns(washout_ru
 
 
 def test_a_failed_grid_point_does_not_wreck_the_shared_posterior(washout_runs, washout_result,
-                                                                 monkeypatch):
+                                                                 washout_posterior, monkeypatch):
     """A grid point whose pooled fit fails gets its density from its neighbours: the marginal
     stays where it was (left at zero density, the spline through it put the median outside
     the interval it had), and the summary says how many points failed."""
     import bayespilot.diagnose.posterior as P
     from bayespilot.diagnose import shared_posterior
 
-    post0 = shared_posterior(washout_result, washout_runs, n_grid=11)
+    post0 = washout_posterior
     m0 = post0.marginals["omega_w"]
     g = post0.grid[0]
     target = g[int(np.argmin(np.abs(g - m0["mode"]))) + 1]  # beside the mode
