@@ -418,7 +418,7 @@ def test_shared_posterior_is_the_laplace_marginal_of_the_pooled_likelihood(
 
 
 def test_shared_posterior_of_two_shared_parameters():
-    """Two shared drifts on a 7 x 7 grid: near-Gaussian, so each marginal's sd is the pooled
+    """Two shared drifts on a 5 x 5 grid: near-Gaussian, so each marginal's sd is the pooled
     fit's standard error and its central 90 % interval the fit +- 1.645 of them; a grid too
     coarse is refused."""
     from bayespilot.diagnose import shared_posterior
@@ -430,8 +430,8 @@ def test_shared_posterior_of_two_shared_parameters():
     res = diagnose_pooled(recs, seed=0, n_bootstrap=0, n_starts=2,
                           candidates=["time-varying-gains"])
     assert res.physics == "time-varying-gains"
-    post = shared_posterior(res, recs, n_grid=7)
-    assert post.log_density.shape == (7, 7) and post.settings["failed_points"] == 0
+    post = shared_posterior(res, recs, n_grid=5)
+    assert post.log_density.shape == (5, 5) and post.settings["failed_points"] == 0
     for n in ("drift_v", "drift_m"):
         # the grid is of the test's likelihood with each run's delta_abs at the reported fit's:
         # centred on the pooled fit under it, near the test's (the drifts barely move delta_abs)
