@@ -109,9 +109,14 @@ def test_compare_plateau_guard_behind_a_washout():
     assert "plateau guard" not in c.summary()
 
 
-def test_compare_says_when_the_plateau_guard_is_not_applied():
+def test_compare_says_when_the_plateau_guard_is_not_applied(monkeypatch):
     """delta_abs read by dead zones on two channels: no one input, so no guard, and the
-    result says so (was a silent None)."""
+    result says so (was a silent None); a decision for the threshold, which the guard would
+    have weighed, says so in its note (the decision made "threshold" here: on these data it
+    is "none", ln BF -7)."""
+    import bayespilot.compare as cmp
+
+    monkeypatch.setattr(cmp, "_guarded_decision", lambda *a, **k: ("threshold", ""))
     base = paper_model()
     vis = dataclasses.replace(base.channels[0], nonlinearity=DeadZone("delta_abs"))
     m = PilotModel((vis, base.channels[1]), base.parameters, name="two dead zones")
@@ -124,9 +129,41 @@ def test_compare_says_when_the_plateau_guard_is_not_applied():
     guard = c.settings["plateau_guard"]
     assert guard.startswith("not applied: ") and "2 channels (visual, vestibular)" in guard
     assert f"plateau guard {guard}" in c.summary()
-    if c.decision == "threshold":
-        assert c.settings["decision_note"] == f"plateau guard {guard}"
+    assert c.decision == "threshold"
+    assert c.settings["decision_note"] == f"plateau guard {guard}"
     assert plateau_onset(m, rec) is None
+    # both dead zones read delta_abs, which the null holds at 0: nothing else held
+    assert c.settings["null_also_zeroes"] == []
+
+
+def test_the_null_says_how_it_differs_from_delta_abs_at_zero():
+    """compare's Savage-Dickey check reads the posterior at delta_abs = 0 of the model with
+    threshold: not the null when the null removed a block (a soft dead zone, its w_soft fixed
+    too: the check looked for lost free parameters only) or held another threshold at 0 (a
+    second dead zone's), and the summary says when the null zeroes more than delta_abs."""
+    from bayespilot.compare import Comparison, _null_differences
+    from bayespilot.model import SoftDeadZone
+
+    p = paper_model()
+    assert _null_differences(p, p.without_threshold()) == ([], [])
+    soft = p.with_nonlinearity("vestibular", SoftDeadZone("delta_abs", "w_soft"),
+                               [Parameter("w_soft", 1e-5, 0.05, 0.002, "IPUT")])
+    fixed = soft.fix(w_soft=0.002)
+    assert _null_differences(fixed, fixed.without_threshold()) == (
+        ["SoftDeadZone on vestibular"], [])
+    two = p.with_nonlinearity("visual", DeadZone("delta_vis"),
+                              [Parameter("delta_vis", 0.0, 0.1, 0.0, "rad")])
+    assert _null_differences(two, two.without_threshold()) == ([], ["delta_vis"])
+    # the summary's line, from the settings a comparison records (the other fields stand-ins)
+    import types
+
+    ev = types.SimpleNamespace(log_z=0.0, log_z_err=0.1, settings={"nlive": 40})
+    ic = dict(neg_log_lik_threshold=0.0, neg_log_lik_none=0.0, delta_aic=0.0, delta_bic=0.0)
+    lines = [Comparison(1.0, 0.1, "none", ev, ev, None, ic, {"null_also_zeroes": zeroed}, 0,
+                        1.0, None, None).summary().splitlines() for zeroed in ([], ["delta_vis"])]
+    line = ("  the model without threshold also holds delta_vis at 0: ln BF weighs these "
+            "thresholds and delta_abs together")
+    assert line in lines[1] and lines[0] == [x for x in lines[1] if x != line]
 
 
 # --- diagnose: another lab's bounds (extension finding 1; outputs 1.2) --------------------------

@@ -1327,6 +1327,8 @@ class Comparison:
             sd_line = f"Savage-Dickey: not valid ({sd.reason}{lb})"
         post = self.settings.get("posterior") if isinstance(self.settings, Mapping) else None
         guard = self.settings.get("plateau_guard") if isinstance(self.settings, Mapping) else None
+        also = (self.settings.get("null_also_zeroes") or []) if isinstance(self.settings,
+                                                                           Mapping) else []
         if sd is not None and isinstance(post, Mapping) and post.get("converged") is False:
             steps = post.get("n_steps")
             sd_line += ("\n  Savage-Dickey posterior: not converged"
@@ -1349,6 +1351,8 @@ class Comparison:
             f"{ic['delta_bic']:+.2f} (none - threshold; > 0 favours threshold)",
             *([f"  plateau guard {guard}"] if isinstance(guard, str)
               and guard.startswith("not applied") else []),
+            *([f"  the model without threshold also holds {', '.join(also)} at 0: ln BF "
+               f"weighs these thresholds and delta_abs together"] if also else []),
             f"  {self.elapsed:.1f} s"])
 
     def __str__(self) -> str:
@@ -1843,10 +1847,11 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     from .fit.three_step import _model_for
 
     none_model = _model_for(model, threshold=False)  # the threshold removed, not made soft
-    # the model with threshold at the null: delta_abs = 0, unless the null lost parameters with
-    # its threshold (a SoftDeadZone's corner width): then no such point, the limit w -> 0
-    lost = [n for n in model.parameter_names
-            if n != THRESHOLD and n not in none_model.parameter_names]
+    # the model with threshold at the null: delta_abs = 0, unless the null removed a block (a
+    # SoftDeadZone: no such point, the limit w -> 0) or held other thresholds at 0 too
+    removed, zeroed = _null_differences(model, none_model)
+    not_nested = "; ".join([*([f"it has no {', '.join(removed)}"] if removed else []),
+                            *([f"it holds {', '.join(zeroed)} at 0 too"] if zeroed else [])])
     ss = np.random.SeedSequence(seed)
     s1, s0, s_mc = (int(s.generate_state(1)[0]) for s in ss.spawn(3))
     noise = None
@@ -1899,10 +1904,10 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         post_info["warnings"] = _reissue(caught, recording.source, opts["max_steps"])
     if posterior is not None:
         sd = savage_dickey_from_posterior(posterior, model)
-        if lost:
+        if not_nested:
             sd = SavageDickey(None, False, f"the model without threshold is not the model with "
-                              f"threshold at {THRESHOLD} = 0 (it has no {', '.join(lost)}), so "
-                              "the posterior density there tests another null", None,
+                              f"threshold at {THRESHOLD} = 0 ({not_nested}), so the posterior "
+                              f"density there tests another null", None,
                               sd.prior_density, sd.posterior_density, sd.bandwidth, sd.n_draws,
                               sd.n_near)
         elif posterior.settings.get("likelihood") != likelihood:
@@ -1942,9 +1947,25 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     settings.update(max_threshold_input=i_max, plateau_onset=onset,
                     plateau_active_fraction=PLATEAU_ACTIVE_FRACTION, decision_note=why,
                     threshold_identified=silent is None, plateau_guard=guard,
-                    model_none=none_model.name)
+                    model_none=none_model.name, null_also_zeroes=zeroed)
     return Comparison(float(log_bf), float(err), decision, ev1, ev0, sd, ic, settings,
                       seed, time.perf_counter() - t0, recording.source, plateau)
+
+
+def _null_differences(model: PilotModel, none_model: PilotModel
+                      ) -> tuple[list[str], list[str]]:
+    """How the model without threshold (``none_model``, :meth:`PilotModel.without_threshold`)
+    differs from ``model`` at delta_abs = 0: the blocks it removed ("SoftDeadZone on
+    vestibular") and the other thresholds it holds at 0 (names), each empty for the paper's
+    model, whose null is exactly delta_abs = 0."""
+    removed = [f"{type(c.nonlinearity).__name__} on {c.name}"
+               for c, c0 in zip(model.channels, none_model.channels)
+               if c.nonlinearity is not None and c0.nonlinearity is None]
+    if model.output is not None and none_model.output is None:
+        removed.append(f"{type(model.output).__name__} on the output")
+    zeroed = sorted(k for k, v in none_model.fixed.items()
+                    if k != THRESHOLD and model.fixed.get(k) != v)
+    return removed, zeroed
 
 
 def _reissue(caught, source: str | None, max_steps: int) -> list[str]:
