@@ -16,7 +16,7 @@ from bayespilot.diagnose import get_extension
 from bayespilot.fit.fast import fit_fast
 from bayespilot.fit.result import FitResult
 from bayespilot.io import read_recording, write_recording
-from bayespilot.model import paper_model
+from bayespilot.model import DeadZone, Parameter, paper_model
 from bayespilot.recording import Recording
 from test_cli import _loglik_value, _run  # (the command-line tests' helpers)
 
@@ -199,7 +199,7 @@ def test_threshold_shape_without_threshold_is_refused(washout_fit, tmp_path, cap
     code, out, err = _run(capsys, *[a.format(run=run, params=params) for a in argv])
     assert code == 2 and out == "", err
     assert ("argument --with: threshold-shape with --no-threshold: the model without "
-            "threshold removes its SoftDeadZone") in err, err
+            "threshold removes its SoftDeadZone on vestibular") in err, err
 
 
 def test_compare_with_threshold_shape_weighs_it_against_the_linear_model(
@@ -245,3 +245,48 @@ def test_loglik_loads_a_file_of_ones_own_once(washout_fit, tmp_path, capsys):
                           "--with", f"{entry}:MY_WASHOUT")
     assert code == 0, err
     assert out.count("loading loud.py") == 1, out
+
+
+VISUAL_DEAD_ZONE = '''
+import dataclasses
+from bayespilot.diagnose import get_extension
+from bayespilot.model import DeadZone, Parameter
+
+
+def _build(model):
+    return model.with_nonlinearity("visual", DeadZone("delta_vis"),
+                                   [Parameter("delta_vis", 0.0, 0.1, 0.0, "rad")])
+
+
+VIS_DZ = dataclasses.replace(get_extension("motion-washout"), name="visual-dead-zone",
+                             build=_build, new_parameters=("delta_vis",), starts=())
+'''
+
+
+def test_loglik_without_threshold_is_the_model_fit_without_threshold_fits(
+        washout_fit, tmp_path, capsys):
+    """loglik --no-threshold --with an entry that adds a second dead zone (delta_vis)
+    evaluates the model fit --no-threshold fits, without_threshold()'s: delta_vis held at 0
+    with delta_abs (it built paper_model(threshold=False) and then the entry, so delta_vis
+    was read from the parameter file and the two commands' "no threshold" models differed)."""
+    from bayespilot.likelihood import Likelihood
+
+    run, _ = washout_fit
+    entry = tmp_path / "vis.py"
+    entry.write_text(VISUAL_DEAD_ZONE)
+    params = tmp_path / "p.json"
+    params.write_text(json.dumps({**_paper("FT"), "delta_vis": 0.02}))
+    code, out, err = _run(capsys, "loglik", run, "--params", params, "--no-threshold",
+                          "--with", f"{entry}:VIS_DZ")
+    assert code == 0, err
+    rec = read_recording(run)
+    model = paper_model().with_nonlinearity(
+        "visual", DeadZone("delta_vis"), [Parameter("delta_vis", 0.0, 0.1, 0.0, "rad")])
+    held = dict(_paper("FT"), delta_abs=0.0, delta_vis=0.0)
+    from bayespilot.likelihood import _startup_default
+
+    skip = _startup_default(rec, "periodic")
+    want = Likelihood(model, rec, discard=skip).neg_log_lik(held)
+    assert _loglik_value(out) == pytest.approx(want, rel=1e-12)
+    assert want != pytest.approx(Likelihood(model, rec, discard=skip).neg_log_lik(
+        dict(held, delta_vis=0.02)), rel=1e-6)

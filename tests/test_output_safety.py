@@ -133,7 +133,8 @@ def test_fit_batch_refuses_a_folder_of_diagnoses_and_runs_nothing(recs, diagnose
             rf"^{out} holds 2 result file\(s\) of 'bayespilot diagnose-batch' "
             r"\(bayespilot\.diagnose\.batch\.diagnose_batch: a diagnosis each, with "
             r"\"diagnosis\" where fit-batch's have \"fit_threshold\"\): a\.json, b\.json and "
-            r"summary\.csv of 'bayespilot diagnose-batch': fit-batch would replace them .*"
+            r"summary\.csv of 'bayespilot diagnose-batch': fit-batch writes its own .* would "
+            r"replace that summary and mix its results with them .*"
             r"use another output folder \(--out\) for fit-batch; nothing was run$")):
         fit_batch(recs, out, **FITS)
     assert _files(out) == before
@@ -148,7 +149,7 @@ def test_diagnose_batch_refuses_a_folder_of_fits_and_runs_nothing(recs, fitted, 
             rf"^{out} holds 2 result file\(s\) of 'bayespilot fit-batch' "
             r"\(bayespilot\.batch\.fit_batch: a fit each, with \"fit_threshold\" where "
             r"diagnose-batch's have \"diagnosis\"\): a\.json, b\.json and summary\.csv of "
-            r"'bayespilot fit-batch': diagnose-batch would replace them")):
+            r"'bayespilot fit-batch': diagnose-batch writes its own")):
         diagnose_batch(recs, out, **DIAGNOSES)
     assert _files(out) == before
 
@@ -164,7 +165,7 @@ def test_one_result_of_the_other_batch_among_others_is_refused(recs, fitted, dia
     (out / "zz.json").write_text(json.dumps({**stored, "key": "zz"}))
     with pytest.raises(ResultConflictError, match=r"holds 1 result file\(s\) of 'bayespilot "
                                                   r"diagnose-batch' .*: zz\.json: fit-batch "
-                                                  r"would replace them"):
+                                                  r"writes its own"):
         fit_batch(recs, out, **FITS)
     (out / "zz.json").unlink()
     context = {k: v for k, v in json.loads((fitted / "a.json").read_text()).items()
@@ -173,13 +174,13 @@ def test_one_result_of_the_other_batch_among_others_is_refused(recs, fitted, dia
     (out / "zz.error.json").write_text(json.dumps(
         {"key": "zz", **context, "error": "RuntimeError", "message": "x"}))
     with pytest.raises(ResultConflictError, match=r"of 'bayespilot fit-batch' .*: "
-                                                  r"zz\.error\.json: diagnose-batch would"):
+                                                  r"zz\.error\.json: diagnose-batch writes"):
         diagnose_batch(recs, out, **DIAGNOSES)
     (out / "zz.error.json").unlink()
     shutil.copy(diagnosed / "summary.csv", out / "summary.csv")
     with pytest.raises(ResultConflictError, match=(
-            rf"^{out} holds summary\.csv of 'bayespilot diagnose-batch': fit-batch would "
-            r"replace it")):
+            rf"^{out} holds summary\.csv of 'bayespilot diagnose-batch': fit-batch writes its "
+            r"own .* would replace that summary and mix its results with it ")):
         fit_batch(recs, out, **FITS)
     (out / "summary.csv").write_text("subject,weight\ns1,70\n")  # (a lab's own table)
     with pytest.raises(ResultConflictError, match=r"holds a summary\.csv that no bayespilot "
@@ -315,22 +316,37 @@ def test_the_quick_demo_does_not_replace_a_lab_recording(recs, tmp_path, monkeyp
     assert _files(tmp_path) == before
 
 
-def test_replicate_does_not_replace_a_batch_summary(fitted, tmp_path, monkeypatch, capsys):
+def test_replicate_does_not_replace_a_batch_summary(fitted, diagnosed, tmp_path, monkeypatch,
+                                                    capsys):
+    """replicate refuses what the batches refuse: another batch's summary, its results
+    without their summary (an interrupted run's: replicate's files among them made that batch
+    refuse its own folder), and a summary.csv of one's own."""
     import bayespilot.campaign
 
     def ran(*args, **kwargs):
         raise AssertionError("the study ran")
 
     monkeypatch.setattr(bayespilot.campaign, "run_campaign", ran)
+    argv = ["replicate", "--realizations", "1", "--method", "fast", "--workers", "1", "-q"]
     out = _copy(fitted, tmp_path)
     before = _files(out)
-    assert main(["replicate", "--realizations", "1", "--method", "fast", "--out", str(out),
-                 "--workers", "1", "-q"]) == 2
-    assert capsys.readouterr().err == (
-        f"bayespilot: error: argument --out: {out / 'summary.csv'} is the summary of "
-        f"'bayespilot fit-batch', which replicate would replace with its own; use another "
-        f"--out folder\n")
+    assert main([*argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"bayespilot: error: argument --out: {out} holds 2 result file(s) "
+                          f"of 'bayespilot fit-batch'"), err
+    assert err.endswith("use another output folder (--out) for replicate; nothing was run\n")
     assert _files(out) == before
+    results = tmp_path / "results"
+    shutil.copytree(diagnosed, results)
+    (results / "summary.csv").unlink()
+    assert main([*argv, "--out", str(results)]) == 2
+    assert "of 'bayespilot diagnose-batch'" in capsys.readouterr().err
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "summary.csv").write_text("subject,score\ns1,3\n")
+    assert main([*argv, "--out", str(own)]) == 2
+    assert "a summary.csv that no bayespilot batch wrote" in capsys.readouterr().err
+    assert (own / "summary.csv").read_text() == "subject,score\ns1,3\n"
 
 
 def test_a_fit_written_again_replaces_the_earlier_one(recs, tmp_path, capsys):

@@ -932,13 +932,12 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
         raise UsageError(f"argument {arg}: {exc}") from None
     out = Path(args.out)
     _refuse_overwriting([("--out", out / "summary.csv"), ("--out", out / "summary.md")], [])
-    from .diagnose.batch import _summary_of
+    from .diagnose.batch import ResultConflictError, _refuse_another_commands_folder
 
-    other = _summary_of(out / "summary.csv")
-    if other in ("fit-batch", "diagnose-batch"):  # (its tables would be replaced by ours)
-        raise UsageError(f"argument --out: {out / 'summary.csv'} is the summary of "
-                         f"'bayespilot {other}', which replicate would replace with its own; "
-                         f"use another --out folder")
+    try:  # (another batch's results or a summary of one's own: the batches' own rule)
+        _refuse_another_commands_folder(out, "replicate")
+    except ResultConflictError as exc:
+        raise UsageError(f"argument --out: {exc}") from None
     _say(args, f"{len(jobs)} fits ({args.method} method, {args.realizations} realization(s) x "
                f"{len(args.tasks)} task(s) x {len(args.motion_gains)} K_theta x "
                f"{len(args.remnant_fractions)} F_n, {_FITS_SAID[args.fits]}) on "
@@ -1949,23 +1948,26 @@ def _check_columns(entries: Sequence, recording) -> None:
 def _paper_model_and_entries(args: argparse.Namespace, recording=None, *,
                              threshold: bool = True, fitted: bool = True,
                              without_threshold: str | None = None) -> tuple:
-    """The paper's model (``--oversample``; ``threshold``: with a free delta_abs), extended by
-    each ``--with`` entry in turn, and the entries (for :func:`_check_columns` once the
-    recording is read: a ``FILE.py:NAME`` is run once, by this call).
+    """The paper's model (``--oversample``), extended by each ``--with`` entry in turn (and,
+    ``threshold`` False, then without threshold:
+    :meth:`~bayespilot.model.PilotModel.without_threshold`, the model ``fit --no-threshold``
+    fits), and the entries (for :func:`_check_columns` once the recording is read: a
+    ``FILE.py:NAME`` is run once, by this call).
 
     Refused as bad input: an entry the recording lacks a column for; (``fitted``: a command
     that fits or evaluates the likelihood) one that only ``diagnose`` fits (its likelihood
     is not Eq. 4's); and, when the command takes only the model without threshold
-    (``without_threshold``: how it says so, e.g. ``"--no-threshold"``), one that puts on
-    delta_abs a nonlinearity other than the paper's dead zone (``threshold-shape``'s soft
-    dead zone): the model without threshold removes that block
+    (``without_threshold``: how it says so, e.g. ``"--no-threshold"``), one that adds a
+    threshold block that is not a dead zone (``threshold-shape``'s soft dead zone, whatever
+    threshold it reads): the model without threshold removes that block
     (:meth:`~bayespilot.model.PilotModel.without_threshold`), which leaves the paper's model
     without threshold, the entry with nothing to do.  (``compare`` weighs the model with
     the entry against that one: not refused.)
     """
-    from .model import DeadZone, paper_model
+    from .compare import _null_differences
+    from .model import paper_model
 
-    model = paper_model(threshold=threshold, oversample=getattr(args, "oversample", 1))
+    model = paper_model(oversample=getattr(args, "oversample", 1))
     used: list = []
     for spec in args.extended_by:
         if ":" in spec:
@@ -1990,20 +1992,19 @@ def _paper_model_and_entries(args: argparse.Namespace, recording=None, *,
             except (TypeError, ValueError, KeyError) as exc:
                 raise UsageError(f"argument --with: {ext.name} cannot extend "
                                  f"{model.name!r} ({exc})") from None
-            # (the model without threshold removes a threshold block that is not the
-            # paper's dead zone: with --no-threshold the entry would do nothing)
-            kept = [nl for nl in [c.nonlinearity for c in model.channels] + [model.output]
-                    if without_threshold and nl is not None and "delta_abs" in nl.thresholds
-                    and not isinstance(nl, DeadZone)]
-            if kept:
+            # (the model without threshold removes a threshold block that is not a dead
+            # zone, without_threshold's own rule: with --no-threshold the entry's block
+            # would do nothing)
+            removed = (_null_differences(model, model.without_threshold())[0]
+                       if without_threshold else [])
+            if removed:
                 raise UsageError(f"argument --with: {ext.name} with {without_threshold}: the "
-                                 f"model without threshold removes its "
-                                 f"{type(kept[0]).__name__} (it is not the identity at "
-                                 f"delta_abs = 0), which leaves the paper's model without "
-                                 f"threshold; drop --with {ext.name}, or fit it with a free "
+                                 f"model without threshold removes its {removed[0]} (it is not "
+                                 f"the identity at a threshold of 0), which leaves the model "
+                                 f"without it; drop --with {ext.name}, or use it with a free "
                                  f"threshold (without --no-threshold)")
             used.append(ext)
-    return model, used
+    return (model if threshold else model.without_threshold()), used
 
 
 def _diagnose_arguments(p: argparse.ArgumentParser, seed_help: str | None = None) -> None:

@@ -778,10 +778,10 @@ def _refuse_another_commands_folder(out: Path, command: str) -> None:
                     "a summary.csv that no bayespilot batch wrote (its columns are not "
                     f"{command}'s)")
     raise ResultConflictError(
-        f"{out} holds {' and '.join(said)}: {command} would replace "
-        f"{'them' if len(said) > 1 or theirs else 'it'} (its <key>.json, summary.csv and "
-        f"summary.png are written there too); use another output folder (--out) for "
-        f"{command}; nothing was run")
+        f"{out} holds {' and '.join(said)}: {command} writes its own <key>.json, "
+        f"summary.csv and summary.png there, so it would replace that summary and mix its "
+        f"results with {'them' if len(said) > 1 or theirs else 'it'} (neither command could "
+        f"resume there); use another output folder (--out) for {command}; nothing was run")
 
 
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
