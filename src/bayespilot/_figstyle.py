@@ -30,7 +30,10 @@ def figure_options(title, formats, dpi) -> dict:
     "formats": tuple, "dpi": int | None}``."""
     import numbers
 
-    if not isinstance(title, bool) and type(title).__name__ != "bool_":
+    # (numpy's bool is a bool, as plots._title_text takes it: numpy 1 names its type "bool_",
+    # numpy 2 "bool"; checked by name, this module imports no numpy)
+    if not (isinstance(title, bool) or (type(title).__module__ == "numpy"
+                                        and type(title).__name__ in ("bool", "bool_"))):
         raise TypeError(f"title must be True or False, got {title!r}")
     if isinstance(formats, str):
         formats = (formats,)

@@ -116,8 +116,8 @@ def _warn_untitled(posterior, title: Any, what: str) -> None:
     """A ConvergenceWarning when the title that says "not converged" is off or replaced
     (``title`` not True) and the posterior has not converged: the reader of the figure no
     longer sees it, the user is told to say it in the caption."""
-    if title is True or posterior.converged:
-        return
+    if (isinstance(title, (bool, np.bool_)) and title) or posterior.converged:
+        return  # (numpy's True too: the figure's own title, which says it)
     from ._caller import warn_at_caller
     from .sample import ConvergenceWarning
 
@@ -1135,7 +1135,8 @@ def plot_pair(posterior: Posterior, names: Sequence[str] = ("K_m", "tau_m", "del
     _keep_note(fig, own)
     _warn_untitled(posterior, title, "plot_pair")
     text = _title_text(title, own)
-    if text and (new or title is not True):  # (given axes: a title only when the caller names one)
+    # (given axes: a title only when the caller names one; numpy's True is True)
+    if text and (new or isinstance(title, str)):
         fig.suptitle(_wrap(text, fig.get_figwidth() - 0.3, 10.0), fontsize=10)
     return fig
 

@@ -348,7 +348,7 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None, *,
         for a in (ax, *rest):
             a.set_axis_off()
         ax.text(0.5, 0.5, msg, ha="center", va="center", transform=ax.transAxes, wrap=True)
-        if title is not True:  # (a str: the caller's title; True: none, as before)
+        if isinstance(title, str):  # (the caller's title; True, numpy's too: none, as before)
             _fig_title(fig, text)
         return fig
     created = axes is None
@@ -363,7 +363,7 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None, *,
     data_kw = dict(ls="none", marker="o", ms=4, color="k")
     base_kw = dict(ls="none", marker="s", ms=6, mfc="none", mec="C0", mew=1.2)
     after_kw = dict(ls="none", marker="^", ms=6, mfc="none", mec="C3", mew=1.2)
-    for col, key, title, unit in (
+    for col, key, heading, unit in (  # (not `title`: the caller's is read below)
             (0, "H_v", r"visual channel $H_\mathrm{v} = u/e$", H_V_UNIT),
             (1, "H_m", r"motion channel $H_\mathrm{m} = u/\ddot\theta_\mathrm{m}$", H_M_UNIT)):
         ax_m, ax_p = axes[0, col], axes[1, col]
@@ -375,7 +375,7 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None, *,
         if ma is not None:
             ax_m.loglog(w, np.abs(ma[key]), **after_kw)
             ax_p.semilogx(w, _align(np.degrees(np.unwrap(np.angle(ma[key]))), ph_d), **after_kw)
-        ax_m.set_title(title, fontsize="medium")
+        ax_m.set_title(heading, fontsize="medium")
         ax_m.set_ylabel(f"magnitude ({unit})")
         ax_p.set_ylabel("phase (deg)")
         ax_p.set_xlabel(r"$\omega$ (rad/s)")
@@ -393,7 +393,8 @@ def plot_frequency_response(result: DiagnosisResult, axes: Any = None, *,
                    ncols=_columns(handles, fig, 2, figsize), fontsize="small", frameon=False)
     else:
         axes[0, 0].legend(handles=handles, fontsize="small")
-    if created or title is not True:  # (given axes: a title only when the caller names one)
+    # (given axes: a title only when the caller names one; numpy's True is True)
+    if created or isinstance(title, str):
         _fig_title(fig, text)
     return fig
 
