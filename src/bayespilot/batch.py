@@ -135,9 +135,11 @@ def _information_criteria(fit_threshold: Any, fit_none: Any, model: PilotModel,
                           recording: Recording) -> dict[str, Any]:
     """:func:`~bayespilot.compare.information_criteria` of the two fits, k counted as
     :func:`~bayespilot.compare.compare` counts it (the model's free parameters, an AR
-    noise model's coefficients, + 1 for the output-error variance), n the samples the fit
-    with threshold's likelihood uses (after its discard, less the AR order)."""
-    from .compare import THRESHOLD, information_criteria
+    noise model's coefficients, + 1 for the output-error variance; without threshold those
+    of the model the fit without threshold fitted, ``model.without_threshold()``), n the
+    samples the fit with threshold's likelihood uses (after its discard, less the AR
+    order)."""
+    from .compare import information_criteria
     from .likelihood import Likelihood
     from .noise import ARNoise
 
@@ -152,7 +154,7 @@ def _information_criteria(fit_threshold: Any, fit_none: Any, model: PilotModel,
                      discard=fit_threshold.settings["discard"], noise=noise(fit_threshold))
     return information_criteria(fit_threshold.neg_log_lik, fit_none.neg_log_lik,
                                 k(model, fit_threshold),
-                                k(model._fixed(**{THRESHOLD: 0.0}), fit_none), lik.n_terms)
+                                k(model.without_threshold(), fit_none), lik.n_terms)
 
 
 def _run_fit_task(recording: Recording, settings: Mapping[str, Any]
