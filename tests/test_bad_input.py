@@ -194,7 +194,8 @@ def _cli_bad(d: Path, run: Path, p: Path) -> dict[str, tuple[list, int, str]]:
         "loglik: recording is a directory": (["loglik", d / "adir", "--params", p], 2, "adir"),
         "fit: not a MATLAB file": (["fit", not_mat], 2, "not a readable MATLAB"),
         "loglik: sidecar given as parameters": (["loglik", run, "--params", f"{run}.json"], 2,
-                                                "unknown parameter name(s) 'format'"),
+                                                "is a recording's JSON sidecar, not a "
+                                                "parameter file"),
         # misspelled and out-of-range parameters
         "simulate: misspelled parameter": (["simulate", "-o", d / "x", "--params", kvv], 2,
                                            "unknown parameter name(s) 'K_vv'"),

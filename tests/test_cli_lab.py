@@ -54,7 +54,8 @@ def test_loglik_no_threshold_ignores_a_fits_delta_abs(fitted, capsys):
     run, fit_json = fitted
     code, out, err = _run(capsys, "loglik", run, "--params", fit_json, "--no-threshold", "-v")
     assert code == 0, err
-    assert "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)" in err
+    assert ("--no-threshold: delta_abs from the parameter file is ignored (held at 0, as fit "
+            "--no-threshold holds every threshold)") in err
     code, out_q, err_q = _run(capsys, "loglik", run, "--params", fit_json, "--no-threshold")
     assert code == 0 and "ignored" not in err_q  # (said with -v only)
 

@@ -279,6 +279,9 @@ def test_loglik_without_threshold_is_the_model_fit_without_threshold_fits(
     code, out, err = _run(capsys, "loglik", run, "--params", params, "--no-threshold",
                           "--with", f"{entry}:VIS_DZ")
     assert code == 0, err
+    # (said without -v: a second threshold held at 0 is not the one the option names)
+    assert ("bayespilot: warning: --no-threshold: delta_abs, delta_vis from the parameter file are ignored (held "
+            "at 0, as fit --no-threshold holds every threshold)") in err
     rec = read_recording(run)
     model = paper_model().with_nonlinearity(
         "visual", DeadZone("delta_vis"), [Parameter("delta_vis", 0.0, 0.1, 0.0, "rad")])

@@ -133,9 +133,9 @@ def test_fit_batch_refuses_a_folder_of_diagnoses_and_runs_nothing(recs, diagnose
             rf"^{out} holds 2 result file\(s\) of 'bayespilot diagnose-batch' "
             r"\(bayespilot\.diagnose\.batch\.diagnose_batch: a diagnosis each, with "
             r"\"diagnosis\" where fit-batch's have \"fit_threshold\"\): a\.json, b\.json and "
-            r"summary\.csv of 'bayespilot diagnose-batch': fit-batch writes its own .* would "
-            r"replace that summary and mix its results with them .*"
-            r"use another output folder \(--out\) for fit-batch; nothing was run$")):
+            r"summary\.csv of 'bayespilot diagnose-batch': fit-batch would mix its <key>\.json "
+            r"results with theirs \(neither command could resume the folder\) and replace that "
+            r"summary\.csv with its own; use another output folder \(--out\) for fit-batch; nothing was run$")):
         fit_batch(recs, out, **FITS)
     assert _files(out) == before
 
@@ -149,7 +149,7 @@ def test_diagnose_batch_refuses_a_folder_of_fits_and_runs_nothing(recs, fitted, 
             rf"^{out} holds 2 result file\(s\) of 'bayespilot fit-batch' "
             r"\(bayespilot\.batch\.fit_batch: a fit each, with \"fit_threshold\" where "
             r"diagnose-batch's have \"diagnosis\"\): a\.json, b\.json and summary\.csv of "
-            r"'bayespilot fit-batch': diagnose-batch writes its own")):
+            r"'bayespilot fit-batch': diagnose-batch would mix")):
         diagnose_batch(recs, out, **DIAGNOSES)
     assert _files(out) == before
 
@@ -165,7 +165,9 @@ def test_one_result_of_the_other_batch_among_others_is_refused(recs, fitted, dia
     (out / "zz.json").write_text(json.dumps({**stored, "key": "zz"}))
     with pytest.raises(ResultConflictError, match=r"holds 1 result file\(s\) of 'bayespilot "
                                                   r"diagnose-batch' .*: zz\.json: fit-batch "
-                                                  r"writes its own"):
+                                                  r"would mix its <key>\.json results with "
+                                                  r"theirs \(neither command could resume the "
+                                                  r"folder\); use another"):
         fit_batch(recs, out, **FITS)
     (out / "zz.json").unlink()
     context = {k: v for k, v in json.loads((fitted / "a.json").read_text()).items()
@@ -174,13 +176,13 @@ def test_one_result_of_the_other_batch_among_others_is_refused(recs, fitted, dia
     (out / "zz.error.json").write_text(json.dumps(
         {"key": "zz", **context, "error": "RuntimeError", "message": "x"}))
     with pytest.raises(ResultConflictError, match=r"of 'bayespilot fit-batch' .*: "
-                                                  r"zz\.error\.json: diagnose-batch writes"):
+                                                  r"zz\.error\.json: diagnose-batch would mix"):
         diagnose_batch(recs, out, **DIAGNOSES)
     (out / "zz.error.json").unlink()
     shutil.copy(diagnosed / "summary.csv", out / "summary.csv")
     with pytest.raises(ResultConflictError, match=(
-            rf"^{out} holds summary\.csv of 'bayespilot diagnose-batch': fit-batch writes its "
-            r"own .* would replace that summary and mix its results with it ")):
+            rf"^{out} holds summary\.csv of 'bayespilot diagnose-batch': fit-batch would "
+            r"replace that summary\.csv with its own; use another")):
         fit_batch(recs, out, **FITS)
     (out / "summary.csv").write_text("subject,weight\ns1,70\n")  # (a lab's own table)
     with pytest.raises(ResultConflictError, match=r"holds a summary\.csv that no bayespilot "

@@ -722,8 +722,18 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
         without_threshold="--no-threshold" if args.no_threshold else None)
     params = _read_params(args.params, model, require=model.parameter_names,
                           detail=lambda text: _detail(args, text), with_hint=True)
-    if args.no_threshold and "delta_abs" in params:
-        _detail(args, "--no-threshold: delta_abs from the parameter file is ignored (fixed at 0)")
+    held = sorted({t for nl in [c.nonlinearity for c in model.channels] + [model.output]
+                   if nl is not None for t in nl.thresholds} & set(params))
+    if args.no_threshold and held:  # (every threshold the model declares is held at 0)
+        said = (f"--no-threshold: {', '.join(held)} from the parameter file "
+                f"{'are' if len(held) > 1 else 'is'} ignored (held at 0, as fit --no-threshold "
+                f"holds every threshold)")
+        # (a threshold other than the one the option names: a warning line; stdout's first
+        # line stays the value)
+        if held == ["delta_abs"]:
+            _detail(args, said)
+        else:
+            _warning_line(said)
     rec = _read(args.recording)
     _check_columns(entries, rec)
     _detail(args, f"{rec!r}\n{model.summary()}\ninitial conditions: {args.initial}")

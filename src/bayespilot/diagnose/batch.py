@@ -777,11 +777,13 @@ def _refuse_another_commands_folder(out: Path, command: str) -> None:
         said.append(f"summary.csv of 'bayespilot {summary}'" if summary else
                     "a summary.csv that no bayespilot batch wrote (its columns are not "
                     f"{command}'s)")
+    harm = [*([f"mix its <key>.json results with theirs (neither command could resume "
+               f"the folder)"] if theirs else []),
+            *(["replace that summary.csv with its own"] if summary not in (None, command)
+              else [])]
     raise ResultConflictError(
-        f"{out} holds {' and '.join(said)}: {command} writes its own <key>.json, "
-        f"summary.csv and summary.png there, so it would replace that summary and mix its "
-        f"results with {'them' if len(said) > 1 or theirs else 'it'} (neither command could "
-        f"resume there); use another output folder (--out) for {command}; nothing was run")
+        f"{out} holds {' and '.join(said)}: {command} would {' and '.join(harm)}; use another "
+        f"output folder (--out) for {command}; nothing was run")
 
 
 def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bool = False,
