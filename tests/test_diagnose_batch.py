@@ -576,8 +576,9 @@ def twins(tmp_path_factory):
     return a, b, str(folder / "a2")
 
 
-#: Cheap settings with a bootstrap (its replicates are what the seeds are for).
-BOOT = {"n_bootstrap": 2, "candidates": ["motion-washout"], "progress": False,
+#: Cheap settings with a bootstrap (its replicates are what the seeds are for; one is enough
+#: to tell two seeds' draws apart).
+BOOT = {"n_bootstrap": 1, "candidates": ["motion-washout"], "progress": False,
         "warm_cache": False}
 #: Without it, for what the seeds do not change.
 NOBOOT = dict(BOOT, n_bootstrap=0)
