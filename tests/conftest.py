@@ -18,30 +18,6 @@ from bayespilot.simulate import simulate  # noqa: E402
 #: Length of the simulated recordings used by the kernel tests, s.
 DURATION = 20.0
 
-#: The test files that take longest, longest first (measured with ``pytest --durations``
-#: on 2 cores, 2026-11-29: test_diagnose_batch about a quarter of the suite's test time,
-#: test_diagnose_pooled an eighth, then tens of seconds each).  They are collected first and
-#: xdist, told to keep that order (``--no-loadscope-reorder`` in pyproject.toml), hands each
-#: worker the next file in it: the long files start first and the short ones fill the end
-#: (longest processing time first).  xdist's own order, by number of tests, could leave a
-#: file of few slow tests to start last while the other worker idled.  A file not listed
-#: keeps its place (alphabetical) after these; the list need not be exact to help.
-SLOW_FILES = ("test_diagnose_batch.py", "test_diagnose_pooled.py", "test_diagnose.py",
-              "test_compare.py", "test_report_figures.py", "test_fit.py",
-              "test_extension_compare_diagnose.py", "test_cli.py", "test_campaign.py",
-              "test_plots_figures.py", "test_batch.py", "test_cli_fit_batch.py",
-              "test_simulate.py", "test_docs.py", "test_diagnose_custom.py",
-              "test_faithfulness.py", "test_cli_figures.py", "test_cli_with.py",
-              "test_likelihood.py", "test_cli_diagnose.py", "test_cli_lab.py",
-              "test_bad_input.py", "test_api_docs.py", "test_provenance.py", "test_example.py")
-
-
-def pytest_collection_modifyitems(config, items):
-    """The slow files first, in :data:`SLOW_FILES`' order, each file's tests in their own
-    order (a stable sort by file)."""
-    rank = {name: i for i, name in enumerate(SLOW_FILES)}
-    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
-
 
 def make_rng(seed: int = 0) -> np.random.Generator:
     """The one way tests make random numbers: a seeded numpy Generator."""
