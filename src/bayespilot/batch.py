@@ -607,9 +607,8 @@ def _write_summaries(out: Path, settings: Mapping[str, Any],
     :func:`bayespilot._figstyle.figure_options`, default a titled PNG at
     :data:`~bayespilot.diagnose.report.FIGURE_DPI`); a summary figure of another format, or
     of no result now, is removed (it showed other results)."""
-    from ._figstyle import save_figure
     from ._files import write_csv_atomic
-    from .diagnose.report import FIGURE_DPI, FORMATS, _pyplot
+    from .diagnose.report import _write_summary_figure
 
     found = _results(out, settings, current)
     rows = [_summary_row(found[k]) for k in sorted(found)]
@@ -617,18 +616,8 @@ def _write_summaries(out: Path, settings: Mapping[str, Any],
     write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS, rows)
     write_csv_atomic(out / "conditions.csv", CONDITION_FIELDS, conditions)
     figure = {"title": True, "formats": ("png",), "dpi": None, **(figure or {})}
-    for fmt in FORMATS:
-        if fmt not in figure["formats"] or not conditions:
-            with suppress(FileNotFoundError):
-                (out / f"summary.{fmt}").unlink()
-    if conditions:
-        fig = _plot_summary(rows, conditions, title=figure["title"])
-        try:  # (closed even when saving fails)
-            for fmt in figure["formats"]:
-                save_figure(fig, out / f"summary.{fmt}",
-                            FIGURE_DPI if figure["dpi"] is None else figure["dpi"])
-        finally:
-            _pyplot().close(fig)
+    _write_summary_figure((lambda: _plot_summary(rows, conditions, title=figure["title"]))
+                          if conditions else None, out, figure["formats"], figure["dpi"])
 
 
 def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str = "paper",

@@ -722,8 +722,7 @@ def _cmd_loglik(args: argparse.Namespace) -> int:
         without_threshold="--no-threshold" if args.no_threshold else None)
     params = _read_params(args.params, model, require=model.parameter_names,
                           detail=lambda text: _detail(args, text), with_hint=True)
-    held = sorted({t for nl in [c.nonlinearity for c in model.channels] + [model.output]
-                   if nl is not None for t in nl.thresholds} & set(params))
+    held = sorted(set(model._threshold_names) & set(params))
     if args.no_threshold and held:  # (every threshold the model declares is held at 0)
         said = (f"--no-threshold: {', '.join(held)} from the parameter file "
                 f"{'are' if len(held) > 1 else 'is'} ignored (held at 0, as fit --no-threshold "

@@ -1343,11 +1343,15 @@ class PilotModel:
         :attr:`~bayespilot.fit.result.FitResult.threshold`)."""
         if "delta_abs" in self.parameter_names:
             return True
-        for nl in [c.nonlinearity for c in self.channels] + [self.output]:
-            if nl is not None and any(self.fixed.get(name, None) != 0.0
-                                      for name in nl.thresholds):
-                return True
-        return False
+        return any(self.fixed.get(name, None) != 0.0 for name in self._threshold_names)
+
+    @property
+    def _threshold_names(self) -> tuple[str, ...]:
+        """The names the channels' and the output's nonlinearities declare as thresholds
+        (:attr:`Nonlinearity.thresholds`), each once, in the model's order."""
+        return tuple(dict.fromkeys(name for nl in [c.nonlinearity for c in self.channels]
+                                   + [self.output] if nl is not None
+                                   for name in nl.thresholds))
 
     def without_threshold(self) -> "PilotModel":
         """The model without threshold: the null model that the fitters' ``threshold=False``

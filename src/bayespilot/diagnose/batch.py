@@ -98,7 +98,6 @@ import re
 import time
 import warnings
 from collections import Counter, defaultdict
-from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
@@ -777,8 +776,8 @@ def _refuse_another_commands_folder(out: Path, command: str) -> None:
         said.append(f"summary.csv of 'bayespilot {summary}'" if summary else
                     "a summary.csv that no bayespilot batch wrote (its columns are not "
                     f"{command}'s)")
-    harm = [*([f"mix its <key>.json results with theirs (neither command could resume "
-               f"the folder)"] if theirs else []),
+    harm = [*(["mix its <key>.json results with theirs (neither command could resume "
+               "the folder)"] if theirs else []),
             *(["replace that summary.csv with its own"] if summary not in (None, command)
               else [])]
     raise ResultConflictError(
@@ -1296,8 +1295,7 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path, *, title: 
     :func:`~bayespilot.diagnose.report.plot_batch` with ``title``, at ``dpi``, default
     :data:`~bayespilot.diagnose.report.FIGURE_DPI`; beyond a page's diagnoses the figure
     grows so that every one is named, :func:`_summary_figsize`); returns the CSV's path."""
-    from .._figstyle import save_figure
-    from .report import FIGURE_DPI, FORMATS, _pyplot, plot_batch
+    from .report import _write_summary_figure, plot_batch
 
     out = Path(out_dir)
     found = _diagnoses(tasks, out)
@@ -1305,16 +1303,7 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path, *, title: 
                             batch_summary_rows(tasks, out, found))
     done = [(key, d) for key, d in found.items() if d is not None]
     formats = figure_options(title, formats, dpi)["formats"]
-    # (a summary figure of another format, or of nothing now, showed other diagnoses)
-    for fmt in FORMATS:
-        if fmt not in formats or not done:
-            with suppress(FileNotFoundError):
-                (out / f"summary.{fmt}").unlink()
-    if done:
-        fig = plot_batch(done, title=title, figsize=_summary_figsize(len(done)))
-        try:  # (closed even when saving fails)
-            for fmt in formats:
-                save_figure(fig, out / f"summary.{fmt}", FIGURE_DPI if dpi is None else dpi)
-        finally:
-            _pyplot().close(fig)
+    _write_summary_figure((lambda: plot_batch(done, title=title,
+                                              figsize=_summary_figsize(len(done))))
+                          if done else None, out, formats, dpi)
     return path

@@ -1352,6 +1352,28 @@ def _write_manifest(path: Path, files: Mapping[str, str]) -> Path:
                                           "files": dict(sorted(files.items()))}))
 
 
+def _write_summary_figure(draw: Any, out: Path, formats: Sequence[str],
+                          dpi: int | None = None) -> None:
+    """A batch's ``out/summary.<format>`` for each of ``formats`` (diagnose-batch's and
+    fit-batch's): the figure ``draw()`` returns (``draw`` None: nothing to draw now), at
+    ``dpi`` (default :data:`FIGURE_DPI`), closed even when saving fails; a summary figure of
+    a format not asked for, or of nothing now, is removed (it showed other results)."""
+    from contextlib import suppress
+
+    for fmt in FORMATS:
+        if fmt not in formats or draw is None:
+            with suppress(FileNotFoundError):
+                (out / f"summary.{fmt}").unlink()
+    if draw is None:
+        return
+    fig = draw()
+    try:
+        for fmt in formats:
+            save_figure(fig, out / f"summary.{fmt}", FIGURE_DPI if dpi is None else dpi)
+    finally:
+        _pyplot().close(fig)
+
+
 def _png(fig, path: Path, formats: Sequence[str] = ("png",)) -> Path:
     """Save ``fig`` as the PNG ``path`` at :data:`FIGURE_DPI` (and in each other of
     ``formats`` beside it, of the same stem: fonts embedded as TrueType in a PDF, text kept
