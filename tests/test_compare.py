@@ -711,6 +711,36 @@ def test_pool_counts_each_recording_once_and_says_when_there_is_no_test():
     assert zero.endswith("; no paired test (every recording has ln BF = 0)")
 
 
+def test_pool_refuses_comparisons_of_different_hypotheses():
+    """Review: pool summed the ln BFs of comparisons whose nulls held different thresholds
+    at 0 (or of different models) without a word: the sum of two tests is neither."""
+    def of(digest, source, **test):
+        c = _comparison_of(digest, source)
+        return dataclasses.replace(c, settings=dict(c.settings, **test))
+
+    paper = dict(model="paper", model_none="paper without threshold", null_also_zeroes=[])
+    a, b = of("a" * 64, "fd0", **paper), of("b" * 64, "fd1", **paper)
+    assert pool([a, b]).n == 2
+    two = of("c" * 64, "fd2", model="paper", model_none="paper without threshold",
+             null_also_zeroes=["delta_2"])
+    with pytest.raises(ValueError, match=r"^results\[0\] \(fd0\) tests model 'paper' against "
+                                         r"'paper without threshold' but results\[2\] \(fd2\) "
+                                         r"tests model 'paper' against 'paper without threshold' "
+                                         r"\(its null also holds delta_2 at 0\): a pool sums "
+                                         r"the ln BFs of one hypothesis"):
+        pool([a, b, two])
+    other = of("d" * 64, "fd3", model="soft", model_none="soft without threshold",
+               null_also_zeroes=[])
+    with pytest.raises(ValueError, match=r"results\[1\] \(fd3\) tests model 'soft'"):
+        pool([a.to_dict(), other.to_dict()])
+    # an older comparison that records only its model is checked on that; a hand-made
+    # mapping without settings is not checked
+    old = of("e" * 64, "fd4", model="paper")
+    assert pool([a, old, {"log_bayes_factor": 1.0}]).n == 3
+    with pytest.raises(ValueError, match="tests model 'soft'"):
+        pool([old, other])
+
+
 def test_evidence_leaves_out_by_default_what_compare_does(monkeypatch):
     """evidence() defaulted to discard 0 for both likelihoods while compare() leaves out the
     sampler's lead-in (coloured) or a cut record's 2-s start-up (eq4): the two weighed
