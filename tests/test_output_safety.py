@@ -351,6 +351,34 @@ def test_replicate_does_not_replace_a_batch_summary(fitted, diagnosed, tmp_path,
     assert (own / "summary.csv").read_text() == "subject,score\ns1,3\n"
 
 
+def test_run_campaign_refuses_a_folder_of_batch_results(fitted, diagnosed, tmp_path,
+                                                         monkeypatch):
+    """Review: the Python run_campaign (replicate's function) took fit-batch's <key>.json
+    under a job's key for "not done" and replaced it; a summary.csv of the caller's own is
+    left to it (run_campaign writes none)."""
+    from bayespilot.campaign import paper_study, run_campaign
+
+    jobs = paper_study(1, tasks=("FD",), motion_gains=(1.0,), remnant_fractions=(0.2,),
+                       method="fast", duration=5.0, n_starts=1)
+    _nothing_runs(monkeypatch)
+    for folder, by in ((fitted, "fit-batch"), (diagnosed, "diagnose-batch")):
+        out = _copy(folder, tmp_path / by)
+        stored = json.loads((out / "a.json").read_text())  # (a result under a job's key)
+        (out / f"{jobs[0].key}.json").write_text(json.dumps(dict(stored, key=jobs[0].key)))
+        before = _files(out)
+        with pytest.raises(ResultConflictError, match=(
+                rf"^{out} holds 3 result file\(s\) of 'bayespilot {by}' .*: replicate would "
+                r"mix its <key>\.json results with theirs \(neither command could resume the "
+                r"folder\); use another output folder")):
+            run_campaign(jobs, out, workers=1, progress=False, warm_cache=False)
+        assert _files(out) == before
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "summary.csv").write_text("subject,score\ns1,3\n")
+    with pytest.raises(AssertionError, match=f"run_keyed was given {len(jobs)} task"):
+        run_campaign(jobs, own, workers=1, progress=False, warm_cache=False)
+
+
 def test_a_fit_written_again_replaces_the_earlier_one(recs, tmp_path, capsys):
     """A result of the command itself is not a recording: a rerun replaces it."""
     from bayespilot.fit.fast import fit_fast

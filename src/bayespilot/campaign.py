@@ -1255,7 +1255,10 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
         workers, a worker lacks bayespilot or has another version of it (the
         workers are named; nothing is run), a Client given is closed, a
         local cluster cannot start, a result cannot be written, or ``out_dir``
-        holds a result of the same key for other settings.
+        holds a result of the same key for other settings, or results of
+        :func:`~bayespilot.batch.fit_batch` or
+        :func:`~bayespilot.diagnose.batch.diagnose_batch` (a
+        :class:`~bayespilot.diagnose.batch.ResultConflictError`, nothing run).
     ValueError
         Duplicate keys, ``workers`` < 1 or given with ``scheduler``, another
         ``progress``.
@@ -1296,6 +1299,10 @@ def run_campaign(jobs: Iterable[Job], out_dir: str | Path, *,
     except OSError as exc:
         raise CampaignError(f"{out}: cannot create the output folder "
                             f"({exc.strerror or exc})") from None
+    from .diagnose.batch import _refuse_another_commands_folder
+
+    # (fit-batch's or diagnose-batch's results there were taken for "not done" and replaced)
+    _refuse_another_commands_folder(out, "replicate", summary=False)
 
     pending: list[Job] = []
     skipped = 0

@@ -738,7 +738,7 @@ def _summary_of(path: Path) -> str | None:
                  if kind["columns"] <= set(header)), "")
 
 
-def _refuse_another_commands_folder(out: Path, command: str) -> None:
+def _refuse_another_commands_folder(out: Path, command: str, *, summary: bool = True) -> None:
     """Refuse (:class:`ResultConflictError`) an output folder that holds the results of
     another command, before anything runs.
 
@@ -749,7 +749,9 @@ def _refuse_another_commands_folder(out: Path, command: str) -> None:
     ``<key>.error.json``) the other command wrote (by the keys only each writes:
     ``fit_threshold`` against ``diagnosis``), or a ``summary.csv`` that ``command`` did not
     write (by its header: the other's, or a file of one's own); the message names the files,
-    says which command wrote them and to use another output folder."""
+    says which command wrote them and to use another output folder.  ``summary=False``
+    checks the result files only (for :func:`~bayespilot.campaign.run_campaign`, which
+    writes no summary.csv: its caller may keep its own there)."""
     from .. import campaign as C
 
     if not out.is_dir():
@@ -762,7 +764,7 @@ def _refuse_another_commands_folder(out: Path, command: str) -> None:
         by = _file_of(stored, key, failed)
         if by is not None and by != command:
             theirs[by].append(f.name)
-    summary = _summary_of(out / "summary.csv")
+    summary = _summary_of(out / "summary.csv") if summary else None
     if not theirs and summary in (None, command):
         return
     said = []
