@@ -318,6 +318,35 @@ def test_the_quick_demo_does_not_replace_a_lab_recording(recs, tmp_path, monkeyp
     assert _files(tmp_path) == before
 
 
+def test_the_full_demo_does_not_replace_a_lab_recording(recs, tmp_path, monkeypatch, capsys):
+    """Review: the quick demo refused a lab's recording at its name, the full one replaced
+    ``recordings/FD_k1.csv``; a demo's own (with its ``simulation`` block, or in a folder with
+    the demo's report.md, written before it kept that block) is replaced as a rerun does."""
+    import bayespilot.simulate as S
+
+    def ran(*args, **kwargs):
+        raise AssertionError("the demo simulated")
+
+    monkeypatch.setattr(S, "simulate", ran)
+    folder = tmp_path / "recordings"
+    folder.mkdir()
+    for ext in (".csv", ".json"):
+        shutil.copy(recs[0] + ext, folder / f"FD_k0.75{ext}")
+    before = _files(folder)
+    argv = ["demo", "--out", str(tmp_path), "--motion-gains", "1,0.75", "-q"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err == (f"bayespilot: error: argument --out: {folder / 'FD_k0.75.csv'} and "
+                   f"{folder / 'FD_k0.75.json'} are not a recording the demo wrote (no "
+                   f"\"simulation\" in a sidecar, no report.md in {tmp_path}): the demo would "
+                   "replace it; give another folder\n")
+    assert _files(folder) == before and sorted(p.name for p in tmp_path.iterdir()) == [
+        "recordings"]
+    (tmp_path / "report.md").write_text("# an earlier demo's report\n")
+    assert main(argv) == 1
+    assert "unexpected AssertionError: the demo simulated" in capsys.readouterr().err
+
+
 def test_replicate_does_not_replace_a_batch_summary(fitted, diagnosed, tmp_path, monkeypatch,
                                                     capsys):
     """replicate refuses what the batches refuse: another batch's summary, its results

@@ -827,6 +827,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
                                 f"({_os_reason(exc)})") from None
+        except ValueError as exc:  # (a lab's recording where a run's would go)
+            raise UsageError(f"argument --out: {exc}") from None
         print(f"report: {report}")
         return EXIT_OK
     from . import presets

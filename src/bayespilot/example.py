@@ -60,6 +60,33 @@ def _shown(formats: Sequence[str]) -> str:
     return next((f for f in ("png", "svg") if f in formats), formats[0])
 
 
+def _refuse_a_lab_recording(out: Path, stems: Sequence[Path]) -> None:
+    """Refuse (ValueError) to simulate onto a recording at one of ``stems`` that is not the
+    demo's own: a lab's measurement cannot be made again.  The demo's own has a sidecar with
+    the ``"simulation"`` block, or (written before it kept that block) lies in a folder with
+    the demo's ``report.md``."""
+    import json
+
+    if (out / "report.md").is_file():
+        return
+    for stem in stems:
+        # (a name, not a suffix, ends in ".75": FD_k0.75)
+        csv, side = (stem.parent / f"{stem.name}{ext}" for ext in (".csv", ".json"))
+        there = [p for p in (csv, side) if p.exists()]
+        if not there:
+            continue
+        try:
+            sidecar = json.loads(side.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            sidecar = None
+        if isinstance(sidecar, dict) and isinstance(sidecar.get("simulation"), dict):
+            continue
+        raise ValueError(f"{' and '.join(str(p) for p in there)} "
+                         f"{'are' if len(there) > 1 else 'is'} not a recording the demo "
+                         "wrote (no \"simulation\" in a sidecar, no report.md in "
+                         f"{out}): the demo would replace it; give another folder")
+
+
 def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
                 motion_gains: Sequence[float] = (0.5, 1.0), task: str = "FD",
                 remnant_fraction: float = 0.15, duration: float | None = None,
@@ -127,7 +154,9 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     ValueError
         A ``task``, ``likelihood``, ``motion_gains`` or ``seed`` out of range,
         or ``formats`` empty or naming one not in ``("png", "pdf", "svg")``;
-        nothing is written.
+        or ``out/recordings/`` holds a file at a run's name that no demo
+        wrote (a lab's recording: its sidecar has no ``"simulation"`` and
+        ``out`` has no ``report.md``); nothing is written.
     TypeError
         ``title`` is not True or False; nothing is written.
 
@@ -171,6 +200,7 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
         raise ValueError(f"motion_gains must be positive numbers, got {motion_gains!r}")
     out = Path(out)
     dirs = {k: out / k for k in ("recordings", "fits", "posteriors", "comparisons", "figures")}
+    _refuse_a_lab_recording(out, [dirs["recordings"] / f"{task}_k{kt:g}" for kt in gains])
     for d in dirs.values():
         d.mkdir(parents=True, exist_ok=True)
     plt = _pyplot()
