@@ -401,9 +401,11 @@ def test_a_posterior_is_the_one_bayespilot_sample_gives_with_the_recorded_seed(
     assert main(["sample", rec, "-o", str(alone) + ".nc", "--json", str(alone) + ".json",
                  "--seed", str(seed), "--max-steps", "30", "-q"]) == 0
     capsys.readouterr()
-    summary = json.loads((tmp_path / "alone.json").read_text(encoding="utf-8"))
+    alone_json = json.loads((tmp_path / "alone.json").read_text(encoding="utf-8"))
+    summary = alone_json["summary"]
     assert result["posterior"]["summary"] == summary
     assert (result["posterior"]["converged"], result["posterior"]["steps"]) == (False, 30)
+    assert (alone_json["converged"], alone_json["steps"]) == (False, 30)
     batch, single = (arviz.from_netcdf(str(f)) for f in (out / "s2-run1.nc",
                                                           tmp_path / "alone.nc"))
     for name in summary:

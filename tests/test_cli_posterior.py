@@ -46,12 +46,19 @@ def test_sample_writes_netcdf_and_summary(sampled):
     code, nc, js = sampled
     assert code == 0 and nc.exists() and js.exists()
     post = Posterior.from_netcdf(nc)
-    summary = json.loads(js.read_text())
+    stored = json.loads(js.read_text())
+    summary = stored["summary"]
     names = ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm", "delta_abs")
     assert tuple(summary) == names == post.parameter_names  # (no version key among them)
     import emcee
 
     import bayespilot
+    # outputs audit 4.1: whether the chain converged, and of what, beside the table
+    assert stored["converged"] is post.converged and stored["steps"] == 300
+    assert (stored["file"], stored["seed"], stored["likelihood"]) == (str(nc), 2, "eq4")
+    assert stored["recording"] == post.settings["recording"] == str(nc.parent / "run")
+    assert len(stored["recording_sha256"]) == 64 and stored["model"] == "Pool et al. (2012)"
+    assert stored["bayespilot_version"] == bayespilot.__version__
     attrs = post.idata.posterior.attrs
     assert attrs["bayespilot_version"] == bayespilot.__version__
     assert attrs["inference_library_version"] == emcee.__version__

@@ -124,7 +124,7 @@ def test_sample_with_an_entry_and_its_plot(washout_fit, tmp_path, capsys):
     code, out, err = _run(capsys, "sample", run, "--with", "motion-washout", "--max-steps", "60",
                           "-o", post, "--json", tmp_path / "post.json", "-q")
     assert code == 0, err
-    summary = json.loads((tmp_path / "post.json").read_text())
+    summary = json.loads((tmp_path / "post.json").read_text())["summary"]
     assert "omega_w" in summary and "zeta_w" not in summary  # (fixed: not sampled)
     code, out, err = _run(capsys, "plot", post, "-o", tmp_path / "plots", "-q")
     assert code == 0, err

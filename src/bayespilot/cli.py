@@ -1364,7 +1364,14 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         raise CommandFailed(f"{out}: cannot write the posterior ({_os_reason(exc)})") from None
     _say(args, f"wrote {out}")
     if args.json:
-        _write_json(args.json, post.summary(), version=False)  # (keyed by parameter)
+        # fit-batch's "posterior" object (summary, converged, steps, file) and what the
+        # chain was run on (a bare table said neither whether it converged nor of what)
+        st = post.settings
+        _write_json(args.json, {
+            "summary": post.summary(), "converged": bool(post.converged),
+            "steps": int(st["n_steps"]), "file": str(out), "seed": post.seed,
+            **{k: st.get(k) for k in ("likelihood", "model", "recording",
+                                      "recording_sha256")}})
         _say(args, f"wrote {args.json}")
     return EXIT_OK
 
