@@ -13,7 +13,7 @@ from bayespilot.fit.gauss_newton import refine
 from bayespilot.fit.result import FitResult
 from bayespilot.fit.scan import scan_parameter
 from bayespilot.fit.three_step import fit_paper
-from bayespilot.io import write_recording
+from bayespilot.io import read_recording, write_recording
 from bayespilot.likelihood import Likelihood
 from bayespilot.model import Parameter, Washout, paper_model
 from bayespilot.simulate import simulate
@@ -79,6 +79,20 @@ def test_scan_minimum_is_the_grid_argmin(sim):
         scan_parameter(Likelihood(paper_model(threshold=False), sim.recording), sim.params)
 
 
+def _content_sha256(recording):
+    """The recording's content digest, written out here (hashlib alone): the sha256 of the
+    hex sha256 of its signals (sorted names, float64 bytes), then of (fs, K_theta)."""
+    import hashlib
+
+    inner = hashlib.sha256()
+    for name in sorted(recording.signals):
+        inner.update(name.encode())
+        inner.update(np.asarray(recording.signals[name], dtype=np.float64).tobytes())
+    outer = hashlib.sha256(inner.hexdigest().encode())
+    outer.update(repr((float(recording.sample_rate_hz), float(recording.motion_gain))).encode())
+    return outer.hexdigest()
+
+
 def test_fast_fit_recovers_threshold_and_is_never_worse_with_it(sim):
     with_t = fit_fast(sim.recording, seed=0, n_starts=3, profile_step=0.005)
     without = fit_fast(sim.recording, seed=0, n_starts=3, threshold=False)
@@ -87,6 +101,8 @@ def test_fast_fit_recovers_threshold_and_is_never_worse_with_it(sim):
     assert with_t.params["delta_abs"] == pytest.approx(0.0075, abs=0.003)
     # the 30-s record is not whole periods of the forcing: the fit leaves its start-up out
     assert with_t.settings["discard"] == 2.0
+    # outputs audit 4.3: which recording, by content (the digest sample and compare record)
+    assert with_t.settings["recording_sha256"] == _content_sha256(sim.recording)
     lik = Likelihood(paper_model(), sim.recording, discard=with_t.settings["discard"])
     # on 30 s of data K_v and the motion channel trade off; the optimum is at least the truth's
     assert with_t.neg_log_lik <= lik.neg_log_lik(sim.params)
@@ -106,6 +122,7 @@ def test_paper_fit_small_is_reproducible_and_serialises(sim, tmp_path):
     a = fit_paper(sim.recording, **kw)
     b = fit_paper(sim.recording, **kw)
     assert a.params == b.params and a.neg_log_lik == b.neg_log_lik
+    assert a.settings["recording_sha256"] == _content_sha256(sim.recording)
     steps = a.steps
     assert len(steps["step1"]["runs"]) == 3 and len(steps["step2"]) == 3
     # Step I delta_abs: mean of the 2 best GA runs
@@ -389,6 +406,7 @@ def test_cli_fit_json(sim, tmp_path, capsys):
     assert set(d["params"]) == set(paper_model().parameter_names)
     assert d["method"] == "fast" and d["seed"] == 3
     assert np.isfinite(d["neg_log_lik"]) and 0 < d["vaf"] <= 100
+    assert d["settings"]["recording_sha256"] == _content_sha256(read_recording(tmp_path / "run"))
     assert main(["fit", str(tmp_path / "missing")]) == 2
 
 

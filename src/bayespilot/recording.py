@@ -1163,6 +1163,31 @@ class Recording:
                 f"task={self.task}, K_theta={self.motion_gain:g}, columns=[{cols}]{src})")
 
 
+def _recording_digest(recording: Recording) -> str:
+    """SHA-256 of what a recording holds: its signals (names and float64 values), its sample
+    rate and K_theta; the same run however it is named or wherever it lies.
+
+    Fits (``settings["recording_sha256"]``), :func:`~bayespilot.sample.sample` and
+    :func:`~bayespilot.compare.compare` record it, and ``compare`` refuses a posterior whose
+    digest is not that of the recording it compares on.  (The batches key their seeds and
+    resume on :func:`_signals_digest`, the signals' alone: a resumed batch keeps its seeds.)
+
+    Parameters
+    ----------
+    recording : Recording
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
+    """
+    import hashlib
+
+    h = hashlib.sha256(_signals_digest(recording).encode())
+    h.update(repr((float(recording.sample_rate_hz), float(recording.motion_gain))).encode())
+    return h.hexdigest()
+
+
 def _signals_digest(recording: Recording) -> str:
     """SHA-256 of a recording's signals (names and float64 values): the same run however it
     is named or wherever it lies (a batch's resume; pooling one run twice)."""

@@ -70,7 +70,7 @@ from .likelihood import (COLOURED_DISCARD, Likelihood, _checked_discard, _startu
                          coloured_discard)
 from .model import PilotModel, paper_model
 from .noise import MAX_AR_ORDER, ARNoise
-from .recording import Recording
+from .recording import Recording, _recording_digest
 from ._blas import one_blas_thread
 from ._caller import warn_at_caller
 from ._seeds import resolve_seed
@@ -733,30 +733,6 @@ def _stored_fingerprint(path) -> dict | None:
     except OSError:
         return None  # not HDF5: _open_backend says so
     return json.loads(stored) if stored is not None and iteration > 0 else None
-
-
-def _recording_digest(recording: Recording) -> str:
-    """SHA-256 of what a recording holds: its signals (names and float64 values), its sample
-    rate and K_theta; the same run however it is named or wherever it lies.
-
-    :func:`sample` records it in ``settings["recording_sha256"]``, and
-    :func:`bayespilot.compare.compare` refuses a posterior whose digest is
-    not that of the recording it compares on.
-
-    Parameters
-    ----------
-    recording : Recording
-
-    Returns
-    -------
-    str
-        64 hexadecimal digits.
-    """
-    from .recording import _signals_digest
-
-    h = hashlib.sha256(_signals_digest(recording).encode())
-    h.update(repr((float(recording.sample_rate_hz), float(recording.motion_gain))).encode())
-    return h.hexdigest()
 
 
 def _fingerprint(recording: Recording, model: PilotModel, names, likelihood: str, order: int,

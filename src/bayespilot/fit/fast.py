@@ -46,7 +46,7 @@ from ..likelihood import (Likelihood, _checked_discard, _coloured_default, _star
                           _startup_reason)
 from ..model import PilotModel
 from ..noise import MAX_AR_ORDER, ARNoise
-from ..recording import Recording
+from ..recording import Recording, _recording_digest
 from .gauss_newton import joint_refine, refine
 from .result import CHECK_GAP, FitResult
 from .scan import scan_parameter
@@ -220,7 +220,8 @@ def fit_fast(recording: Recording, model: PilotModel | None = None, *, threshold
         best0 = min(runs, key=lambda r: r.neg_log_lik)
         stages["starts_whitened"] = [r.to_dict() for r in runs]
     settings = {"n_starts": n_starts, "initial": initial, "discard": discard,
-                "model": model.name, "noise": None if given is None else given.to_dict()}
+                "model": model.name, "noise": None if given is None else given.to_dict(),
+                "recording_sha256": _recording_digest(recording)}
     if discard_reason is not None:
         settings["discard_reason"] = discard_reason
     if not has_delta:

@@ -27,7 +27,7 @@ import numpy as np
 from ..likelihood import (Likelihood, _checked_discard, _startup_default, _startup_reason,
                           _unidentified)
 from ..model import PilotModel, paper_model
-from ..recording import OFFSET_RATIO as _OFFSET_RATIO, Recording
+from ..recording import OFFSET_RATIO as _OFFSET_RATIO, Recording, _recording_digest
 from .gauss_newton import joint_refine, refine
 from .result import CHECK_GAP, FitResult, NotAtMaximumWarning
 from .scan import scan_parameter
@@ -449,7 +449,7 @@ def fit_paper(recording: Recording, model: PilotModel | None = None, *, threshol
                 "generations": generations, "p_crossover": p_crossover, "p_mutation": p_mutation,
                 "bits": bits, "scan_step": scan_step, "iterate": iterate,
                 "max_iterations": max_iterations, "initial": initial, "discard": discard,
-                "model": model.name}
+                "model": model.name, "recording_sha256": _recording_digest(recording)}
     if discard_reason is not None:
         settings["discard_reason"] = discard_reason
     _unidentified_settings(settings, lik)
