@@ -3,8 +3,10 @@
 Every stochastic entry point (``simulate``, ``fit_fast``, ``fit_paper``,
 ``sample``, ``compare``, ``nested_evidence``, ``diagnose``, ``diagnose_pooled``,
 ``bayes_factor``) takes ``seed``: an integer >= 0
-gives the same result bit for bit, and ``None`` draws a seed from fresh
-operating-system entropy.  Either way the function runs with, and its result
+gives the same result bit for bit on the same machine and software (on a CPU
+with other vector instructions, or another BLAS, to about 1e-10 relative:
+docs/cli.md, "Seeds and reproducibility"), and ``None`` draws a seed from
+fresh operating-system entropy.  Either way the function runs with, and its result
 records, an integer that repeats the run when given back as ``seed``.
 """
 
