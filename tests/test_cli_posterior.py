@@ -56,6 +56,8 @@ def test_sample_writes_netcdf_and_summary(sampled):
     # outputs audit 4.1: whether the chain converged, and of what, beside the table
     assert stored["converged"] is post.converged and stored["steps"] == 300
     assert (stored["file"], stored["seed"], stored["likelihood"]) == (str(nc), 2, "eq4")
+    # (what sample() needs to run the chain again: the CLI's min_steps is min(1000, max))
+    assert (stored["max_steps"], stored["min_steps"]) == (300, 300)
     assert stored["recording"] == post.settings["recording"] == str(nc.parent / "run")
     assert len(stored["recording_sha256"]) == 64 and stored["model"] == "Pool et al. (2012)"
     assert stored["bayespilot_version"] == bayespilot.__version__

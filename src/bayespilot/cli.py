@@ -1420,8 +1420,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
         _write_json(args.json, {
             "summary": post.summary(), "converged": bool(post.converged),
             "steps": int(st["n_steps"]), "file": str(out), "seed": post.seed,
-            **{k: st.get(k) for k in ("likelihood", "model", "recording",
-                                      "recording_sha256")}})
+            **{k: st.get(k) for k in ("likelihood", "max_steps", "min_steps", "model",
+                                      "recording", "recording_sha256")}})
         _say(args, f"wrote {args.json}")
     return EXIT_OK
 
