@@ -538,15 +538,56 @@ def _condition_rows(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]
     return rows
 
 
+#: fit-batch's summary figure draws at most this many conditions one column each, as it
+#: always did, and only while their names fit side by side (measured: each name's box clear
+#: of the next, level up to 3 conditions, at 30 degrees beyond; about 7 short names,
+#: "s01, FD, K_theta = 0.5", fill a page's width) ...
+_SUMMARY_COLUMNS = 12
+#: ... else one row each, their names level, the figure a page wide and this tall (in) per
+#: row of its axes: a name (0.13 in of small text) and a gap, as diagnose-batch's summary
+#: (:data:`bayespilot.diagnose.batch.SUMMARY_ROW_HEIGHT`) ...
+_SUMMARY_ROW = 0.19
+#: ... and this tall (in) around the rows (title, the delta_abs scale above and below them,
+#: its label: 0.91 in as drawn) ...
+_SUMMARY_ROWS_MARGIN = 1.0
+#: ... up to this height (in; as diagnose-batch's: matplotlib draws at most 2**16 pixels a
+#: side, 60 in is 36000 at 600 dpi): beyond about 310 conditions every k-th is named.
+_SUMMARY_MAX_HEIGHT = 60.0
+
+
+def _summary_rows_size(n: int) -> tuple[float, float]:
+    """The size (in) of the summary figure of ``n`` conditions drawn one row each: a page
+    wide, :data:`_SUMMARY_ROW` per row and :data:`_SUMMARY_ROWS_MARGIN` around them, at
+    least 4 in (the columns' height) and at most :data:`_SUMMARY_MAX_HEIGHT`."""
+    from .plots import PAGE_WIDTH
+
+    return PAGE_WIDTH, min(max(4.0, _SUMMARY_ROWS_MARGIN + _SUMMARY_ROW * n), _SUMMARY_MAX_HEIGHT)
+
+
+def _tick_labels_overlap(labels: Sequence[Any]) -> bool:
+    """Whether the boxes of any two of the tick ``labels`` (of a laid out figure) overlap."""
+    boxes = [t.get_window_extent() for t in labels if t.get_visible() and t.get_text()]
+    return any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+
+
 def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mapping[str, Any]],
                   title: bool | str = True) -> Any:
     """Each run's delta_abs (rows of ``summary.csv`` with a result), one column per condition,
     marked by the run's decision (with a comparison) or by the sign of its delta_bic, with
     its posterior's 90 % HDI as an error bar where it has one; the runs of a condition side
     by side in its column, in the order of their keys (their bars would overlap); ``title``
-    as every plot function takes it (:func:`bayespilot.plots.plot_trace`)."""
-    from .diagnose.report import _subplots
-    from .plots import _param_label, _title_text
+    as every plot function takes it (:func:`bayespilot.plots.plot_trace`).
+
+    Columns while the conditions' names fit side by side (:data:`_SUMMARY_COLUMNS`: a figure
+    at most a page wide, 4 in tall); else one row per condition, top to bottom, delta_abs
+    across (its scale above and below the rows), the figure a page wide and as tall as
+    the rows need (:func:`_summary_rows_size`; every k-th condition named beyond
+    :data:`_SUMMARY_MAX_HEIGHT`). The legend is outside the data: under the columns'
+    names, right of the rows."""
+    import re
+
+    from .diagnose.report import _legend_under, _pyplot, _subplots
+    from .plots import _legend_columns, _param_label, _title_text
 
     where = {(c["subject"], c["task"], c["motion_gain"]): i for i, c in enumerate(conditions)}
     done = [r for r in rows if not r.get("error")]
@@ -562,40 +603,80 @@ def _plot_summary(rows: Sequence[Mapping[str, Any]], conditions: Sequence[Mappin
               "inconclusive": ("s", "0.5", "inconclusive")} if compared else
              {True: ("o", "C0", r"$\Delta$BIC > 0 (threshold)"),
               False: ("x", "C3", r"$\Delta$BIC $\leq$ 0 (none)")})
-    fig, ax = _subplots(figsize=(max(4.8, 1.6 + 1.0 * len(conditions)), 4.0))
-    for kind, (marker, colour, text) in kinds.items():
-        xs, ys = [], []
-        for n, r in enumerate(done):
-            mine = r.get("decision") if compared else float(r["delta_bic"]) > 0
-            if mine == kind:
-                xs.append(x[n])
-                ys.append(r["delta_abs"])
-        if xs:
-            ax.scatter(xs, ys, marker=marker, c=colour, label=text, zorder=3)
     bars = [(x[n], float(r["delta_abs_posterior_hdi_low"]),
              float(r["delta_abs_posterior_hdi_high"]))
             for n, r in enumerate(done)
             if r.get("delta_abs_posterior_hdi_low") not in (None, "")
             and r.get("delta_abs_posterior_hdi_high") not in (None, "")]
-    if bars:  # (centred on the interval: it need not hold the estimate)
-        bx, lo, hi = (np.array(v, dtype=float) for v in zip(*bars))
-        ax.errorbar(bx, (lo + hi) / 2, yerr=(hi - lo) / 2, fmt="none", ecolor="0.35",
-                    elinewidth=1.0, capsize=2.5, zorder=2, label="posterior 90 % HDI")
-    ax.set_xticks(range(len(conditions)))
-    ax.set_xticklabels([c["label"].replace("K_theta", r"$K_\theta$") for c in conditions],
-                       rotation=30 if len(conditions) > 3 else 0, ha="right"
-                       if len(conditions) > 3 else "center", fontsize="small")
-    ax.set_xlim(-0.6, len(conditions) - 0.4)
-    ax.set_ylim(bottom=0.0)  # (0: no threshold)
-    ax.set_ylabel(_param_label("delta_abs"))
-    ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize="small", title="per run", title_fontsize="small")
+    names = [c["label"].replace("K_theta", r"$K_\theta$") for c in conditions]
+    n_cond = len(conditions)
     text = _title_text(title, f"The threshold of {len(done)} run{'s' if len(done) != 1 else ''}"
-                              f" in {len(conditions)} condition"
-                              f"{'s' if len(conditions) != 1 else ''}")
-    if text:
-        ax.set_title(text, fontsize="medium")
-    return fig
+                              f" in {n_cond} condition{'s' if n_cond != 1 else ''}")
+
+    def draw(across: bool) -> Any:  # one column per condition (across), else one row
+        if across:
+            fig, ax = _subplots(figsize=(max(4.8, 1.6 + 1.0 * n_cond), 4.0))
+        else:
+            fig, ax = _subplots(figsize=_summary_rows_size(n_cond), tall=True)
+        for kind, (marker, colour, label) in kinds.items():
+            xs, ys = [], []
+            for n, r in enumerate(done):
+                mine = r.get("decision") if compared else float(r["delta_bic"]) > 0
+                if mine == kind:
+                    xs.append(x[n])
+                    ys.append(r["delta_abs"])
+            if xs:  # (whole at delta_abs = 0, on the axis: not cut in half)
+                ax.scatter(*((xs, ys) if across else (ys, xs)), marker=marker, c=colour,
+                           label=label, zorder=3, clip_on=False,
+                           **({} if across else {"s": 16}))
+        if bars:  # (centred on the interval: it need not hold the estimate)
+            bx, lo, hi = (np.array(v, dtype=float) for v in zip(*bars))
+            style = dict(fmt="none", ecolor="0.35", elinewidth=1.0, zorder=2,
+                         label="posterior 90 % HDI")
+            if across:
+                ax.errorbar(bx, (lo + hi) / 2, yerr=(hi - lo) / 2, capsize=2.5, **style)
+            else:
+                ax.errorbar((lo + hi) / 2, bx, xerr=(hi - lo) / 2, capsize=1.5, **style)
+        if across:
+            ax.set_xticks(range(n_cond))
+            ax.set_xticklabels(names, rotation=30 if n_cond > 3 else 0,
+                               ha="right" if n_cond > 3 else "center", fontsize="small")
+            ax.set_xlim(-0.6, n_cond - 0.4)
+            ax.set_ylim(bottom=0.0)  # (0: no threshold)
+            ax.set_ylabel(_param_label("delta_abs"))
+            ax.grid(axis="y", alpha=0.3)
+            # as many columns as fit (its entries' width as drawn, not as mathtext spells it)
+            shown = [re.sub(r"\$?\\[A-Za-z]+\$?", "x", h.get_label()).replace("$", "")
+                     for h in ax.get_legend_handles_labels()[0]]
+            _legend_under(ax, title="per run",
+                          ncols=_legend_columns(shown, fig.get_figwidth(), len(shown)))
+        else:
+            # every k-th named where a row of the axes is shorter than a name and its gap
+            row = (fig.get_figheight() - _SUMMARY_ROWS_MARGIN) / max(n_cond, 1)
+            k = max(1, math.ceil(_SUMMARY_ROW / row - 1e-9))
+            ax.set_yticks(range(0, n_cond, k))
+            ax.set_yticklabels(names[::k], fontsize="small")
+            if k > 1:  # (a tick on every row: the unnamed ones counted from a named one)
+                ax.set_yticks(range(n_cond), minor=True)
+            ax.set_ylim(n_cond - 0.5, -0.5)  # (the first condition at the top)
+            ax.set_xlim(left=0.0)  # (0: no threshold)
+            ax.set_xlabel(_param_label("delta_abs"))
+            ax.xaxis.set_label_position("top")
+            ax.tick_params(axis="x", top=True, labeltop=True)
+            ax.grid(axis="both", alpha=0.3)
+            ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                      fontsize="small", title="per run", title_fontsize="small")
+        if text:
+            ax.set_title(text, fontsize="medium")
+        return fig, ax
+
+    if n_cond <= _SUMMARY_COLUMNS:
+        fig, ax = draw(True)
+        fig.draw_without_rendering()  # (the names' place)
+        if not _tick_labels_overlap(ax.get_xticklabels()):
+            return fig
+        _pyplot().close(fig)
+    return draw(False)[0]
 
 
 def _write_summaries(out: Path, settings: Mapping[str, Any],
