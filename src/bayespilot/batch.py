@@ -840,6 +840,10 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
         QuestionableRecordingWarning, an EstimateOnBoundWarning, a ConvergenceWarning of
         a chain, ...), naming how many recordings and which; each result file lists its
         own under ``warnings``.  Once for the posteriors that could not be sampled.
+    QuestionableRecordingWarning
+        Once per reason reading the recordings gives (a short record, a low sample
+        rate, ...), naming how many recordings and which; a reason of one recording as
+        reading it says it.
 
     Examples
     --------
@@ -847,11 +851,10 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
     ...                     workers=2)  # doctest: +SKIP
     """
     from . import campaign as C
-    from .diagnose.batch import (ResultConflictError, _differs, _recording_metadata,
-                                 _refuse_another_commands_folder, _the_recording, plan_batch,
-                                 task_seed)
-    from .io import read_recording
-    from .recording import RecordingError, _signals_digest
+    from .diagnose.batch import (ResultConflictError, _differs, _read_recordings,
+                                 _recording_metadata, _refuse_another_commands_folder,
+                                 _the_recording, plan_batch, task_seed)
+    from .recording import _signals_digest
 
     t0 = time.perf_counter()
     C._check_cluster_options(scheduler, workers, progress, connect_timeout)
@@ -876,15 +879,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
     paths = list(first.values())
     if not paths:
         raise ValueError("no recordings given")
-    recs, bad = {}, []
-    for p in paths:
-        try:
-            recs[p] = read_recording(p)
-        except RecordingError as exc:
-            bad.append(str(exc))
-    if bad:
-        raise RecordingError(f"{len(bad)} of {len(paths)} recordings cannot be read; nothing "
-                             "was run:\n  " + "\n  ".join(bad))
+    # (every one read, the unreadable all named; a reason to question many said once,
+    # naming them, not once per recording on every call)
+    recs = _read_recordings(paths)
     unfit = [said for said in (_fittable_problem(r, options) for r in recs.values()) if said]
     if unfit:
         raise ValueError(f"{len(unfit)} of {len(paths)} recordings cannot be fitted; nothing "

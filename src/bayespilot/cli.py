@@ -1796,7 +1796,7 @@ def _cmd_diagnose_batch(args: argparse.Namespace) -> int:
     # (the evidence's gaps: one line per kind of gap, after the diagnoses, from their
     # results; the workers keep them quiet)
     with _batch_errors(), _questionable_said(), _warnings_of(MissingReportWarning, said), \
-            _warnings_of((EvidenceWarning, SummaryScopeWarning), _warning_line):
+            _warnings_of((EvidenceWarning, SummaryScopeWarning, RuntimeWarning), _warning_line):
         summary = diagnose_batch(paths, args.out, pool=args.pool, seed=args.seed,
                                  alpha=args.alpha, n_bootstrap=args.bootstrap,
                                  n_calibrate=args.calibrate,
@@ -2840,8 +2840,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "the caption)")
     _diagnose_arguments(p, seed_help=_batch_seed_help(
         "each diagnosis runs with its own seed drawn from S and its recordings' content (not "
-        "from their paths, order or the other recordings; run j of a pooled one uses its "
-        "seed + j)", "diagnose"))
+        "from their paths, order or the other recordings; run j of a pooled one, in the order "
+        "of the runs' content, uses its seed + j)", "diagnose"))
     _cluster_arguments(p)
     _common(p, sub=True)
     p.set_defaults(handler=_cmd_diagnose_batch)

@@ -37,8 +37,11 @@ recordings' bootstraps (and base-fit starts, and posterior chains) draw
 independent streams, and a diagnosis's seed does not depend on the order of
 the paths, on which other recordings are in the batch, or on resuming.  A
 pooled condition's runs are seeded ``s + j`` from its seed ``s``
-(:func:`~bayespilot.diagnose.diagnose_pooled`).  Each result records the
-seed its diagnosis ran with (``settings["seed"]``: ``diagnose(recording,
+(:func:`~bayespilot.diagnose.diagnose_pooled`), run j the j-th in the order of
+the runs' signals' digests (:func:`plan_batch`): the same recordings under
+other names or in other folders give the same diagnosis.  A pooled result
+made before (its runs in the order of their files) resumes as it is.  Each
+result records the seed its diagnosis ran with (``settings["seed"]``: ``diagnose(recording,
 seed=...)`` with the other settings repeats it) and the batch's
 (``settings["batch_seed"]``, what a resume compares).  A result of one of the
 batch's keys written before seeds were drawn per diagnosis (its settings
@@ -57,7 +60,9 @@ Outputs in ``out_dir``: ``<key>.json`` (``key``, ``recordings``, ``settings``
 (the options, the diagnosis's own ``seed`` and the ``batch_seed``),
 ``recording_digests``, ``recording_metadata`` (one per recording, as
 ``recordings``), ``condition``, ``diagnosis``: the same dict as ``bayespilot diagnose
---json`` writes,
+--json`` writes, ``warnings`` (those the diagnosis issued on the worker but its
+evidence notes, which ``diagnosis`` keeps: ``category`` and ``message``, each once, as
+fit-batch's results list theirs; said once per kind at the end, naming the diagnoses),
 ``elapsed_seconds``, ``host``, ``versions`` and ``bayespilot_version``: those of
 the worker that made the diagnosis, not of the process that writes the file),
 ``<key>/`` (the report, with
@@ -98,6 +103,7 @@ import re
 import time
 import warnings
 from collections import Counter, defaultdict
+from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Sequence
@@ -190,8 +196,8 @@ def _clashes(keys: Sequence[str]) -> list[str]:
     return sorted(k for k, n in Counter(keys).items() if n > 1)
 
 
-def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
-               ) -> list[DiagnoseTask]:
+def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False,
+               digests: Mapping[str, str] | None = None) -> list[DiagnoseTask]:
     """The batch's diagnoses: one per recording, or (``pool``) one per subject and condition.
 
     Parameters
@@ -202,9 +208,14 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
         The recordings read from ``paths``, in the same order.
     pool : bool
         Group the runs of one subject, task and motion gain into one pooled
-        diagnosis, its runs in the order of the files they resolve to (run j
-        is seeded ``s + j`` from the task's seed ``s``: sorted, the result
-        does not depend on the order the paths were given).
+        diagnosis, its runs in the order of their signals' digests
+        (:func:`~bayespilot.recording._signals_digest`; run j is seeded
+        ``s + j`` from the task's seed ``s``, and the pooled fit sums the
+        runs in that order: by their content, the result depends neither on
+        the order the paths were given nor on the files' names or folders).
+    digests : mapping of str to str, optional
+        Each path's signals' digest, if already computed (default: computed
+        from ``recordings`` when ``pool``).
 
     Returns
     -------
@@ -253,7 +264,13 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
             f"Pooling shares the extension's parameters over runs of one task; diagnose "
             f"each task's runs in a batch of their own (its own out folder), or without "
             f"pooling")
-    tasks = [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(sorted(ps, key=_the_recording)),
+    if digests is None:
+        digests = {str(p): _signals_digest(r) for p, r in zip(paths, recordings)}
+
+    def by_content(p: str) -> tuple[str, str]:  # (the file: only between equal signals)
+        return digests[p], _the_recording(p)
+
+    tasks = [DiagnoseTask(_slug(f"{s}_{t}_k{k:g}"), tuple(sorted(ps, key=by_content)),
                           s, t, k)
              for (s, t, k), ps in sorted(groups.items())]
     clash = _clashes([t.key for t in tasks])
@@ -420,14 +437,24 @@ def _run_on_worker(task: DiagnoseTask, recordings: Sequence[Recording],
     (:func:`bayespilot.campaign._versions`) and its bayespilot release under
     :data:`~bayespilot._files.VERSION_KEY`.  Taken here, on the worker: the result file
     (written by the client) named the client's machine and versions, whichever worker had
-    made its numbers (run_job records them so for replicate)."""
+    made its numbers (run_job records them so for replicate).  And ``warnings``: those the
+    diagnosis issued (``category`` and ``message``, each once,
+    :func:`bayespilot.campaign._warnings_once`), recorded, not issued (a worker printed each
+    raw, with dask's line, a SilentChannelWarning once per candidate of a run without
+    motion), but for its EvidenceWarnings, which the diagnosis keeps itself (:func:`_notes`),
+    and libraries' notices to developers (as fit_batch's tasks leave them out)."""
     from .. import __version__
     from .._files import VERSION_KEY
-    from ..campaign import _versions
+    from ..campaign import _versions, _warnings_once
 
-    res, elapsed = run_diagnose_task(task, recordings, options, extensions)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for quiet in (DeprecationWarning, PendingDeprecationWarning, FutureWarning,
+                      EvidenceWarning):
+            warnings.simplefilter("ignore", quiet)
+        res, elapsed = run_diagnose_task(task, recordings, options, extensions)
     return res, elapsed, {"host": platform.node(), "versions": _versions(),
-                          VERSION_KEY: __version__}
+                          VERSION_KEY: __version__, "warnings": _warnings_once(caught)}
 
 
 def _notes(res: Any) -> list[tuple[str, type[EvidenceWarning]]]:
@@ -530,6 +557,83 @@ def _the_recording(path: Any) -> str:
         return str(Path(first).resolve())
     except Exception:  # noqa: BLE001 - a recording gone since (RecordingError), a bad path
         return str(path)
+
+
+#: A number in a warning's text (what differs from one recording to the next in one reason:
+#: "the record is 10 s long", "max |theta_ddot_m| = 0.12 rad/s^2").
+_NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def _read_recordings(paths: Sequence[str]) -> dict[str, Recording]:
+    """Each of ``paths`` read (:func:`~bayespilot.io.read_recording`), by path, for a batch.
+
+    The QuestionableRecordingWarnings of reading are said once per reason, not once per
+    recording (:func:`_say_questionable`: a lab's hundreds of short runs gave hundreds of
+    lines, on every call); other warnings pass on as they were.  The recordings that cannot be
+    read are all named in one RecordingError, after those warnings; nothing is run."""
+    from ..io import read_recording
+    from ..recording import QuestionableRecordingWarning, RecordingError
+
+    recs: dict[str, Recording] = {}
+    bad: list[str] = []
+    questioned: list[tuple[str, str, str]] = []  # (path, reason without the path, as said)
+    others = []
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", QuestionableRecordingWarning)
+        for p in paths:
+            try:
+                recs[p] = read_recording(p)
+            except RecordingError as exc:
+                bad.append(str(exc))
+            source = recs[p].source if p in recs else None
+            for w in caught:
+                if not issubclass(w.category, QuestionableRecordingWarning):
+                    others.append(w)
+                    continue
+                text = str(w.message)
+                for prefix in (f"{source}: " if source else None, f"{p}: "):
+                    if prefix and text.startswith(prefix):
+                        text = text[len(prefix):]
+                        break
+                questioned.append((p, text, str(w.message)))
+            del caught[:]
+    for w in others:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if bad:
+        with suppress(Warning):  # (a warning made an error must not hide why)
+            _say_questionable(questioned, len(paths))
+        raise RecordingError(f"{len(bad)} of {len(paths)} recordings cannot be read; nothing "
+                             "was run:\n  " + "\n  ".join(bad))
+    _say_questionable(questioned, len(paths))
+    return recs
+
+
+def _say_questionable(questioned: Sequence[tuple[str, str, str]], total: int) -> None:
+    """One :class:`~bayespilot.recording.QuestionableRecordingWarning` per reason of
+    ``questioned`` (``(path, reason, message)``: the reason without the path, and the warning's
+    text as reading the recording said it), naming how many of
+    the ``total`` recordings and which (the first three, then "... (N in all)").  Reasons that
+    differ in their numbers alone (a record of 10 s and one of 12 s) are one: said with one
+    recording's text.  A reason of one recording is said as reading it says it."""
+    from .._caller import warn_at_caller
+    from ..campaign import _listed
+    from ..recording import QuestionableRecordingWarning
+
+    kinds: dict[str, list[tuple[str, str, str]]] = {}
+    for p, reason, message in questioned:
+        kinds.setdefault(_NUMBER.sub("#", reason), []).append((p, reason, message))
+    for seen in kinds.values():
+        names = sorted({p for p, _, _ in seen})
+        first = min(reason for p, reason, _ in seen if p == names[0])
+        if len(names) == 1:  # (each as read: one recording's own)
+            texts = list(dict.fromkeys(message for _, _, message in seen))
+        elif len({reason for _, reason, _ in seen}) == 1:
+            texts = [f"{len(names)} of {total} recordings ({_listed(names, 3)}): {first}"]
+        else:
+            texts = [f"{len(names)} of {total} recordings ({_listed(names, 3)}), e.g. "
+                     f"{names[0]}: {first}"]
+        for text in texts:
+            warn_at_caller(text, QuestionableRecordingWarning)
 
 
 def _resume_view(stored: Mapping[str, Any], defaults: Mapping[str, Any], *,
@@ -873,9 +977,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     bayespilot.recording.RecordingError
         A recording cannot be read (every such file is named); nothing is run.
     ValueError
-        A bad setting, a recording the settings do not suit (too short), keys
-        that clash, ``pool`` without subjects, the same recording (the same
-        signals) under two names in one pooled condition, an entry of one's
+        A bad setting, recordings the settings do not suit (too short: every
+        one named, one line each), keys that clash, ``pool`` without
+        subjects, the same recording (the same signals) under two names in
+        one pooled condition, an entry of one's
         own that ``register_extension`` refuses or that cannot be pickled,
         ``formats`` empty or naming one not in ``("png", "pdf", "svg")``, a
         ``dpi`` that is not a whole number >= 1, ``workers`` not a positive
@@ -923,6 +1028,15 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     BaseFitWarning
         The same, for a base fit with a pilot parameter on a bound (a
         subclass of EvidenceWarning, issued as what it was in the diagnosis).
+    RuntimeWarning
+        Once per kind of the other warnings the diagnoses issued on the
+        workers (a SilentChannelWarning of a run without motion, ...), naming
+        how many diagnoses and which, with one's message; each result file
+        lists its own under ``warnings``.
+    QuestionableRecordingWarning
+        Once per reason reading the recordings gives (a short record, a low
+        sample rate, ...), naming how many recordings and which; a reason of
+        one recording as reading it says it.
 
     Examples
     --------
@@ -932,8 +1046,6 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     import inspect
 
     from .. import campaign as C
-    from ..io import read_recording
-    from ..recording import RecordingError
     from . import SKIP_SECONDS, _check, diagnose
     from .catalogue import Extension, _candidate_name, candidate_names, registered_extensions
 
@@ -953,15 +1065,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     for p in paths:
         first.setdefault(_the_recording(p), p)
     paths = list(first.values())
-    recs, bad = [], []
-    for p in paths:
-        try:
-            recs.append(read_recording(p))
-        except RecordingError as exc:
-            bad.append(str(exc))
-    if bad:
-        raise RecordingError(f"{len(bad)} of {len(paths)} recordings cannot be read; nothing "
-                             "was run:\n  " + "\n  ".join(bad))
+    # (all read before any is refused; a reason to question many is said once, naming them)
+    by_path = _read_recordings(paths)
+    recs = [by_path[p] for p in paths]
     options = {"seed": seed, "noise_passes": noise_passes}
     for name, value in (("alpha", alpha), ("n_bootstrap", n_bootstrap),
                         ("n_calibrate", n_calibrate)):
@@ -985,17 +1091,27 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     default = {k: v.default for k, v in inspect.signature(diagnose).parameters.items()}
+
+    def check(rec: Recording, skip: float) -> None:
+        _check(rec, options.get("alpha", default["alpha"]),
+               options.get("n_bootstrap", default["n_bootstrap"]), skip,
+               options.get("candidates"), 1,
+               options.get("n_calibrate", default["n_calibrate"]), noise_passes)
+
+    check(recs[0], 0.0)  # the settings (a bad one: its own error, not one per recording)
+    unfit = []  # then what each recording must have for them (long enough), all named
     for rec, p in zip(recs, paths):
         try:
-            _check(rec, options.get("alpha", default["alpha"]),
-                   options.get("n_bootstrap", default["n_bootstrap"]), SKIP_SECONDS,
-                   options.get("candidates"), 1,
-                   options.get("n_calibrate", default["n_calibrate"]), noise_passes)
-        except ValueError as exc:
-            raise ValueError(f"{p}: {exc}") from None
-    tasks = plan_batch(paths, recs, pool=pool)
-    by_path = dict(zip(paths, recs))
+            check(rec, SKIP_SECONDS)
+        except ValueError as exc:  # (the message names the recording, or is given its path)
+            said = str(exc)
+            unfit.append(said if (rec.source and rec.source in said) or p in said
+                         else f"{p}: {said}")
+    if unfit:
+        raise ValueError(f"{len(unfit)} of {len(paths)} recordings cannot be diagnosed with "
+                         f"these settings; nothing was run:\n  " + "\n  ".join(unfit))
     digests = {p: _signals_digest(r) for p, r in by_path.items()}
+    tasks = plan_batch(paths, recs, pool=pool, digests=digests)
     metadata = {p: _recording_metadata(r) for p, r in by_path.items()}
     twice = []  # one run under two names (a copy) in a pooled condition: refused now, not
     for t in tasks:  # by the diagnosis on a worker
@@ -1088,6 +1204,10 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
 
     def to_json(key: str, value) -> dict[str, Any]:
         res, elapsed, made = value  # (made: the worker's host and versions, _run_on_worker)
+        made = dict(made)
+        recorded = made.pop("warnings", [])  # (on the worker; said here once per kind)
+        for w in recorded:
+            warned[w["category"]].append((key, w["message"]))
         t = by_key[key]
         if reports:
             try:
@@ -1098,11 +1218,22 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         for said in _notes(res):  # (silenced on the worker, said here once per text)
             noted.setdefault(said, []).append(key)
         return C._jsonable({"key": key, **_settings(t, options, digests, metadata),
-                            "diagnosis": res.to_dict(), "elapsed_seconds": elapsed,
+                            "diagnosis": res.to_dict(), "warnings": recorded,
+                            "elapsed_seconds": elapsed,
                             # (the worker's release, which dumps keeps, not the client's)
                             **made})
 
     noted: dict[tuple[str, type[EvidenceWarning]], list[str]] = {}
+    warned: dict[str, list[tuple[str, str]]] = defaultdict(list)
+
+    def say_warned() -> None:  # (by note and key, not in the order the diagnoses finished)
+        for (note, category), keys in sorted(noted.items(), key=lambda item: item[0][0]):
+            keys = sorted(keys)
+            n = len(keys)
+            warnings.warn(f"{n} diagnos{'is' if n == 1 else 'es'} ({', '.join(keys[:3])}"
+                          f"{' ...' if n > 3 else ''}): {note}", category, stacklevel=3)
+        C._say_each_kind(warned, "diagnosis(es)")
+
     try:
         completed, errors = C.run_keyed(
             [(t.key, _run_on_worker, (t, [by_path[p] for p in t.paths],
@@ -1112,12 +1243,11 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
             progress=progress, connect_timeout=connect_timeout,
             warm=_warm if warm_cache else None, desc="diagnoses", unit="diagnosis",
             to_json=to_json, scatter=True)
-    finally:  # (by note and key, not in the order the diagnoses happened to finish)
-        for (note, category), keys in sorted(noted.items(), key=lambda item: item[0][0]):
-            keys = sorted(keys)
-            n = len(keys)
-            warnings.warn(f"{n} diagnos{'is' if n == 1 else 'es'} ({', '.join(keys[:3])}"
-                          f"{' ...' if n > 3 else ''}): {note}", category, stacklevel=2)
+    except BaseException:  # (the run stopped: what finished is saved, and its warnings said,
+        with suppress(Warning):  # but a warning made an error must not hide why)
+            say_warned()
+        raise
+    say_warned()
     settings = _batch_view({"settings": json.loads(json.dumps({**options,
                                                                 "batch_seed": seed}))}, implied)
     earlier, other = _earlier_tasks(tasks, out, settings, implied)
