@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -35,6 +37,28 @@ def without_theta(rec: Recording) -> Recording:
     signals = {k: v for k, v in rec.signals.items() if k != "theta"}
     return Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, rec.metadata,
                      source=rec.source)
+
+
+def pytest_configure(config):
+    """Before pytest-xdist starts two or more workers (in its controller only), fill numba's
+    cache in two processes side by side (tests/_warm_numba.py): on a fresh install each
+    worker otherwise compiled the same kernels at once, before its first test.  Where the
+    cache is already full the parts only load it (a few seconds).  ``BAYESPILOT_TEST_WARM=0``
+    skips it."""
+    workers = getattr(config.option, "numprocesses", None)
+    if (hasattr(config, "workerinput") or not isinstance(workers, int) or workers < 2
+            or os.environ.get("BAYESPILOT_TEST_WARM") == "0"):
+        return
+    script = Path(__file__).with_name("_warm_numba.py")
+    env = dict(os.environ, NUMBA_NUM_THREADS="1")
+    parts = [subprocess.Popen([sys.executable, str(script), part], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for part in ("a", "b")]
+    for p in parts:
+        try:
+            p.wait(timeout=600)
+        except subprocess.TimeoutExpired:  # (the tests compile what is left)
+            p.kill()
 
 
 @pytest.fixture(scope="session")
