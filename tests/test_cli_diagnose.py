@@ -7,6 +7,7 @@ import json
 import numpy as np
 import pytest
 
+import bayespilot
 from bayespilot.cli import main
 from bayespilot.diagnose import NAMES
 from bayespilot.io import write_recording
@@ -54,6 +55,8 @@ def test_diagnose_json_and_report(rec_stem, tmp_path, capsys):
     assert "time.nonstationarity" in d["where"]
     html = (rep / "report.html").read_text()
     assert "data:image/png;base64," in html and "<img" in html
+    assert html.endswith(f"<p>Report written by bayespilot {bayespilot.__version__}.</p>\n"
+                         "</body></html>\n")
     for name in ("residuals.png", "candidates.png", "diagnosis.json"):
         assert (rep / name).stat().st_size > 0
     # a 30-s run is not whole forcing periods (no describing function) and --bootstrap 0

@@ -12,6 +12,7 @@ import re
 import numpy as np
 import pytest
 
+import bayespilot
 from bayespilot.cli import main
 from bayespilot.compare import Comparison, decide
 from bayespilot.fit.result import FitResult
@@ -58,6 +59,7 @@ def test_demo_writes_the_report_and_its_files(demo):
     assert code == 0
     report = (out / "report.md").read_text()
     assert "with seed 3 (run i seeded 3 + i)" in report  # (a reader can repeat it)
+    assert f"`bayespilot demo` (bayespilot {bayespilot.__version__})" in report  # (with what)
     rows = [line for line in report.splitlines() if line.startswith("| FD_k1 |")]
     assert len(rows) == 1
     cells = [c.strip() for c in rows[0].strip("|").split("|")]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
 import time
 from contextlib import ExitStack
 
@@ -207,3 +208,29 @@ def test_the_nested_fit_seed_has_an_exact_text_twin():
     from bayespilot.fit.result import FitResult
 
     assert FitResult.from_dict(res["fit"]).seed == job.fit_seed
+
+
+def test_figures_name_the_release_that_drew_them(tmp_path):
+    """Outputs audit 4.8: a figure named Matplotlib alone as its maker (a PNG's Software, a
+    PDF's and SVG's Creator), so it could not be traced to the bayespilot that drew it; the
+    files stay the same bytes run to run."""
+    import matplotlib
+    from PIL import Image
+
+    from bayespilot._figstyle import save_figure
+
+    made = f"bayespilot {bayespilot.__version__}, Matplotlib {matplotlib.__version__}"
+    fig = _figure()
+    for fmt in ("png", "pdf", "svg"):
+        a, b = tmp_path / f"a.{fmt}", tmp_path / f"b.{fmt}"
+        save_figure(fig, a)
+        save_figure(fig, b)
+        assert a.read_bytes() == b.read_bytes()
+        if fmt == "png":
+            assert Image.open(a).info["Software"] == made
+        elif fmt == "pdf":
+            assert f"/Creator ({made})".encode() in a.read_bytes()
+        else:
+            creator = re.search(r"<dc:creator>\s*<cc:Agent>\s*<dc:title>(.*?)</dc:title>",
+                                a.read_text())
+            assert creator is not None and creator.group(1) == made

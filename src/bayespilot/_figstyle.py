@@ -88,8 +88,18 @@ def save_figure(fig, path, dpi: int = PLOT_DPI) -> None:
 
 
 def _metadata(fmt: str) -> dict:
-    """``savefig``'s keyword that leaves the date out of a figure of format ``fmt``: an SVG's
-    ``Date`` (its ``dc:date``) and a PDF's ``CreationDate`` set to None, which matplotlib
-    leaves out; none for the other formats (a PNG has no date)."""
-    key = {"svg": "Date", "pdf": "CreationDate"}.get(str(fmt).lower())
-    return {} if key is None else {"metadata": {key: None}}
+    """``savefig``'s keyword that leaves the date out of a figure of format ``fmt`` and names
+    the release that drew it: an SVG's ``Date`` (its ``dc:date``) and a PDF's
+    ``CreationDate`` set to None, which matplotlib leaves out (a PNG has no date), and the
+    PNG's ``Software``, the PDF's and SVG's ``Creator``, "bayespilot X, Matplotlib Y" (they
+    named Matplotlib alone: a figure could not be traced to the code that drew it)."""
+    import matplotlib
+
+    from . import __version__
+
+    fmt = str(fmt).lower()
+    made = f"bayespilot {__version__}, Matplotlib {matplotlib.__version__}"
+    meta = {"svg": {"Date": None, "Creator": made}, "pdf": {"CreationDate": None,
+                                                            "Creator": made},
+            "png": {"Software": made}}.get(fmt)
+    return {} if meta is None else {"metadata": meta}

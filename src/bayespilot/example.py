@@ -328,6 +328,7 @@ def _untitled(title: bool):
 
 def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
             lead_in: float, ext: str = "png") -> str:
+    from . import __version__
     from .compare import DECISION_LEVEL, DECISION_Z
 
     true_d = truth["delta_abs"]
@@ -342,8 +343,8 @@ def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
         + ("all with the coloured (prediction-error) likelihood: the output error whitened by "
            f"one AR model per run, estimated from a prediction-error fit, the first {lead_in:g} s "
            "left out. " if likelihood == "coloured" else "all with the paper's Eq. 4 likelihood. ")
-        + f"Made in {elapsed:.0f} s by `bayespilot demo` with seed {seed} (run i seeded "
-        f"{seed} + i).",
+        + f"Made in {elapsed:.0f} s by `bayespilot demo` (bayespilot {__version__}) with seed "
+        f"{seed} (run i seeded {seed} + i).",
         "",
         "| run | K_theta | F_n | delta_abs ML | posterior median | 90 % HDI | P(within +-50 %) "
         "| -ln L with | -ln L without | ln BF | decision |",

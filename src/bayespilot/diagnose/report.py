@@ -1590,6 +1590,8 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
     band = (f"the decision's band, up to omega_c = {omega_c:g} rad/s, unshaded"
             if math.isfinite(omega_c) else "the decision uses the whole band")
     title = f"bayespilot diagnosis: {physics}"
+    from .. import __version__
+
     page = f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>{title}</title>
 <style>{_STYLE}</style></head><body>
@@ -1618,6 +1620,7 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 {f"<h2>Profile likelihood of the new parameters</h2>{_img(paths['profile'], 'Scaled deviance along each new parameter (twice the rise of -ln L times c = (standard error of the fit / standard error of the test)^2, at most 1, so that a quadratic profile gives the reported standard error), the level it must stay below, the interval and the reported fit.')}" if "profile" in paths else ""}
 {f"<h2>Posterior of the extended model</h2>{_img(paths['posterior'], 'Marginal posterior of each new parameter with the maximum-likelihood fit and its standard error.')}" if post is not None else ""}
 <pre>{html.escape(result.summary())}</pre>
+<p>Report written by bayespilot {__version__}.</p>
 </body></html>
 """
     paths["html"] = write_text_atomic(out / "report.html", page)
