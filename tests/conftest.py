@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +40,10 @@ def without_theta(rec: Recording) -> Recording:
                      source=rec.source)
 
 
+#: What the warm-up before the workers did (pytest_configure), for the session's header.
+_WARMED: list[str] = []
+
+
 def pytest_configure(config):
     """Before pytest-xdist starts two or more workers (in its controller only), fill numba's
     cache in two processes side by side (tests/_warm_numba.py): on a fresh install each
@@ -51,14 +56,25 @@ def pytest_configure(config):
         return
     script = Path(__file__).with_name("_warm_numba.py")
     env = dict(os.environ, NUMBA_NUM_THREADS="1")
-    parts = [subprocess.Popen([sys.executable, str(script), part], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-             for part in ("a", "b")]
-    for p in parts:
+    t0 = time.perf_counter()
+    parts = {part: subprocess.Popen([sys.executable, str(script), part], env=env,
+                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for part in ("a", "b")}
+    said = []
+    for part, p in parts.items():
         try:
-            p.wait(timeout=600)
+            code = p.wait(timeout=600)
         except subprocess.TimeoutExpired:  # (the tests compile what is left)
             p.kill()
+            code = "timed out"
+        said.append(f"{part} {'done' if code == 0 else f'failed ({code})'}")
+    # (before the session's clock starts: the header says what it took)
+    _WARMED.append(f"numba cache filled in {time.perf_counter() - t0:.0f} s by two processes "
+                   f"before the workers started ({', '.join(said)}; tests/_warm_numba.py)")
+
+
+def pytest_report_header(config):
+    return _WARMED
 
 
 @pytest.fixture(scope="session")
