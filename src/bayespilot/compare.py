@@ -2287,15 +2287,20 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
                             float(x.mean()), t, p, w, wp, label, note, n_out, *decided)
 
 
+def _result_name(results: Sequence[Any], k: int) -> str:
+    """How pool's messages name ``results[k]``: "results[k]", with its source if it has one."""
+    r = results[k]
+    src = r.source if isinstance(r, Comparison) else r.get("source")
+    return f"results[{k}]" + (f" ({src})" if src else "")
+
+
 def _check_once(i: int, r: Any, d: Mapping[str, Any], first_of: dict[Any, int],
                 results: Sequence[Any]) -> None:
     """Refuse (ValueError) ``results[i]`` if an earlier result is the same Comparison object
     or a comparison of the same recording (by ``settings["recording_sha256"]``): a pool
     counts each recording once.  Records ``r`` in ``first_of``."""
     def name(k: int) -> str:
-        other = results[k]
-        src = other.source if isinstance(other, Comparison) else other.get("source")
-        return f"results[{k}]" + (f" ({src})" if src else "")
+        return _result_name(results, k)
 
     if isinstance(r, Comparison):
         if ("object", id(r)) in first_of:
@@ -2340,11 +2345,8 @@ def _check_same_test(i: int, d: Mapping[str, Any], first: tuple[dict[str, Any], 
             return (f"model {t.get('model')!r}{null}"
                     + (f" (its null also holds {', '.join(also)} at 0)" if also else ""))
 
-        def name(k: int) -> str:
-            r = results[k]
-            src = r.source if isinstance(r, Comparison) else r.get("source")
-            return f"results[{k}]" + (f" ({src})" if src else "")
-        raise ValueError(f"{name(j)} tests {what(ref)} but {name(i)} tests {what(test)}: a "
+        raise ValueError(f"{_result_name(results, j)} tests {what(ref)} but "
+                         f"{_result_name(results, i)} tests {what(test)}: a "
                          "pool sums the ln BFs of one hypothesis; pool the comparisons of "
                          "each model apart")
     return first
