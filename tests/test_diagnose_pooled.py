@@ -212,6 +212,8 @@ def test_pooled_fit_matches_a_profile_over_the_shared_parameter(washout_runs, wa
         # improve it; here by a hair)
         assert run["base"]["gls_neg_log_lik"] <= base.neg_log_lik + 1e-9
         assert base.neg_log_lik == pytest.approx(run["base"]["gls_neg_log_lik"], abs=0.01)
+        # the samples its Eq. 4 -ln L is over, as a single diagnosis's base says them
+        assert (run["base"]["discard_seconds"], run["base"]["n"]) == (0.0, rec.n_samples)
         whitened.append((D.Whitened(model, rec, noise), base))
     names = tuple(n for n in model.parameter_names if n not in ("omega_w", "delta_abs"))
     grid = np.array([0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.6])

@@ -226,6 +226,15 @@ def _base_from(d: Mapping[str, Any]) -> dict[str, Any]:
     return {k: numbers(v) if isinstance(v, Mapping) else number(v) for k, v in d.items()}
 
 
+def _base_samples(base_fit: Any, recording: Recording) -> dict[str, float | int]:
+    """``discard_seconds`` and ``n``: the samples the base fit's -ln L (Eq. 4) is over.
+    diagnose's own base fit takes the whole record (discard 0), where ``bayespilot fit`` may
+    leave out a start-up (a base_fit given)."""
+    discard = float(base_fit.settings.get("discard") or 0.0)
+    return {"discard_seconds": discard,
+            "n": recording.n_samples - int(round(discard * recording.sample_rate_hz))}
+
+
 def _base_over(base: Mapping[str, Any]) -> str:
     """" (whole record, N = 8192)" or " (after the first 2 s, N = 7992)": the samples the base
     fit's -ln L (Eq. 4) is over (``base["discard_seconds"]``, ``base["n"]``), which ``bayespilot
@@ -1453,14 +1462,10 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         if forcing is not None else None
     arrays["level"] = level
     arrays["noise"] = noise  # the decision's noise model (decide.NoiseModel)
-    # the samples the Eq. 4 -ln L is over: diagnose's own base fit takes the whole record
-    # (discard 0), where `bayespilot fit` may leave out a start-up
-    discard = float(base_fit.settings.get("discard") or 0.0)
     base_d = {"params": dict(base_fit.params), "neg_log_lik": float(base_fit.neg_log_lik),
               "vaf": float(base_fit.vaf), "gls_params": dict(base.params),
               "gls_neg_log_lik": float(base.neg_log_lik),
-              "gls_stderr": base.stderr, "discard_seconds": discard,
-              "n": recording.n_samples - int(round(discard * recording.sample_rate_hz))}
+              "gls_stderr": base.stderr, **_base_samples(base_fit, recording)}
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
                 "seed": seed, "n_bootstrap": n_bootstrap, "bootstrap": boot_info,
                 "n_calibrate": n_calibrate, "noise_passes": noise_passes, "refit": refit,

@@ -43,8 +43,8 @@ from .._caller import warn_at_caller
 from .._files import json_ready, number, numbers, write_text_atomic
 from .._seeds import resolve_seed
 from . import (ALPHA, MAX_REBASE, N_CALIBRATE, REBASE_TOL, SKIP_SECONDS, _calibrated_decision,
-               _at_bounds_lines, _base_from, _bic, _calibration_lines, _calibrator, _check,
-               _dropped_why, _fitted_lines, _DiagnosisJSON, _ranking_and_chosen, _short_repr,
+               _at_bounds_lines, _base_from, _base_samples, _bic, _calibration_lines,
+               _calibrator, _check, _dropped_why, _fitted_lines, _DiagnosisJSON, _ranking_and_chosen, _short_repr,
                _parameter_units, _prepare, _saturation)
 from .catalogue import Extension, get_extension
 
@@ -1169,7 +1169,8 @@ def diagnose_pooled(recordings: Sequence, *, seed: int | None = 0, alpha: float 
                                "neg_log_lik": float(run.base_fit.neg_log_lik),
                                "vaf": float(run.base_fit.vaf),
                                "gls_params": dict(run.base.params),
-                               "gls_neg_log_lik": float(run.base.neg_log_lik)},
+                               "gls_neg_log_lik": float(run.base.neg_log_lik),
+                               **_base_samples(run.base_fit, rec)},
                       "where": run.where,
                       "delta_neg_log_lik": {n: s[j] for n, s in shares.items()},
                       "params": chosen_params,
