@@ -131,6 +131,9 @@ def test_compare_json(sampled, run_dir, tmp_path, capsys):
     assert d["decision"] == "threshold" and d["delta_aic"] > 0
     assert d["savage_dickey_valid"] is False  # no draws near 0
     assert "decision: threshold" in out
+    # outputs audit 4.4: which posterior the Savage-Dickey check read
+    post = d["settings"]["posterior"]
+    assert (post["given"], post["seed"], post["file"]) == (True, 2, str(nc))
 
 
 def test_compare_refuses_the_posterior_of_another_recording(sampled, run_dir, capsys):

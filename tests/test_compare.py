@@ -660,6 +660,8 @@ def test_compare_says_when_its_savage_dickey_posterior_did_not_converge(monkeypa
     assert conv[0].message.n_steps == 60
     assert c.settings["posterior"]["warnings"] == [str(conv[0].message)]
     assert c.settings["posterior"]["converged"] is False
+    assert c.settings["posterior"]["given"] is False  # (sampled by compare, with its seed)
+    assert isinstance(c.settings["posterior"]["seed"], int)
     assert ("\n  Savage-Dickey posterior: not converged after 60 steps, so the check above is "
             "rough\n") in c.summary()
     lost_mode = [w for w in caught if "missed the main mode" in str(w.message)]

@@ -1458,7 +1458,10 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     _print_warnings(w for w in caught if _said_to_user(w))
     print(result.summary())
     if args.json:
-        _write_json(args.json, result.to_dict())
+        d = result.to_dict()
+        if args.posterior and isinstance(d["settings"].get("posterior"), dict):
+            d["settings"]["posterior"]["file"] = str(args.posterior)  # (the file it read)
+        _write_json(args.json, d)
         _say(args, f"wrote {args.json}")
     return EXIT_OK
 

@@ -1891,7 +1891,9 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
     ic["ml_none"] = p0
 
     sd = None
-    post_info: dict[str, Any] = {}
+    # (whether the Savage-Dickey posterior was given or sampled here, and its seed)
+    post_info: dict[str, Any] = {} if posterior is None else {"given": True,
+                                                              "seed": posterior.seed}
     if posterior is None and savage_dickey_samples:
         from .sample import ConvergenceWarning, sample as run_sample
 
@@ -1901,7 +1903,8 @@ def compare(recording: Recording, model: PilotModel | None = None, *, likelihood
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", ConvergenceWarning)
             posterior = run_sample(recording, model, **lik_opts, init=init, seed=s_mc, **opts)
-        post_info["warnings"] = _reissue(caught, recording.source, opts["max_steps"])
+        post_info.update(given=False, seed=posterior.seed,
+                         warnings=_reissue(caught, recording.source, opts["max_steps"]))
     if posterior is not None:
         sd = savage_dickey_from_posterior(posterior, model)
         if not_nested:
