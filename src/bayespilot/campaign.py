@@ -65,6 +65,7 @@ import numpy as np
 
 from . import presets
 from ._caller import warn_at_caller
+from ._html import SummaryHTML
 from ._interrupt import caused_by_interrupt
 
 if TYPE_CHECKING:  # (only named in annotations: distributed is imported when a campaign runs)
@@ -573,7 +574,7 @@ def run_job(job: Job) -> dict[str, Any]:
 
 
 @dataclass(frozen=True)
-class CampaignSummary:
+class CampaignSummary(SummaryHTML):
     """What :func:`run_campaign` did.
 
     Attributes
@@ -595,6 +596,8 @@ class CampaignSummary:
     what : str
         What was run, for the printed summary ("fits", "diagnoses").
     """
+
+    _html_text = "__str__"  # (a notebook shows its printed account)
 
     total: int
     completed: int

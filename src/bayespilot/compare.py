@@ -110,6 +110,7 @@ import numpy as np
 
 from ._files import (WrongKind, dataclass_fields, dumps, nan_for_null, number, numbers,
                      read_result, require_keys, write_text_atomic)
+from ._html import SummaryHTML
 from ._interrupt import interrupt_between_steps
 from ._seeds import resolve_seed
 from .likelihood import Likelihood
@@ -1121,7 +1122,7 @@ def robust_evidence(run: Callable[[int], Evidence], n_runs: int,
 
 # --- one recording ---------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
-class Comparison:
+class Comparison(SummaryHTML):
     """Threshold against no threshold on one recording (see :func:`compare`).
 
     Attributes
@@ -2011,7 +2012,7 @@ def _reissue(caught, source: str | None, max_steps: int) -> list[str]:
 
 # --- pooling -------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class PooledComparison:
+class PooledComparison(SummaryHTML):
     """Threshold against none over recordings of one condition (see :func:`pool`).
 
     Attributes

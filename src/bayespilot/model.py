@@ -53,6 +53,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from . import presets
+from ._html import SummaryHTML
 from .forcing import _is_complex
 from .kernels import _blocks as B
 from .kernels import _response as R
@@ -744,7 +745,7 @@ def _paper_parameters() -> tuple[Parameter, ...]:
 
 
 @dataclass(frozen=True, eq=False)
-class PilotModel:
+class PilotModel(SummaryHTML):
     """A multimodal pilot model: channels, neuromuscular block, parameters.
 
     Use :func:`paper_model` for the model of Pool et al. (2012) and the

@@ -63,6 +63,7 @@ import numba
 import numpy as np
 
 from . import _files
+from ._html import SummaryHTML
 from ._interrupt import interrupt_between_steps
 from .fit.result import FitResult
 from .kernels import _coloured as C
@@ -215,7 +216,7 @@ def pacf_from_residual(eps: np.ndarray, order: int) -> np.ndarray:
 
 # --- the posterior ---------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
-class Posterior:
+class Posterior(SummaryHTML):
     """Posterior draws of the pilot parameters (and AR partial autocorrelations).
 
     Attributes
@@ -239,6 +240,8 @@ class Posterior:
         The seed used (drawn from fresh entropy when ``seed=None`` was
         given); None in results saved before it was recorded.
     """
+
+    _html_text = "__str__"  # (a notebook shows its printed account)
 
     idata: Any
     parameter_names: tuple[str, ...]

@@ -64,6 +64,7 @@ from .catalogue import (CATALOGUE, NAMES, Extension, _candidate_name, candidate_
 from .locate import BaseFitWarning, EvidenceWarning
 from .._blas import one_blas_thread
 from .._caller import warn_at_caller
+from .._html import SummaryHTML
 from .._seeds import resolve_seed
 
 if TYPE_CHECKING:
@@ -168,7 +169,7 @@ class _JSONSummary:
         return cls.from_dict(d)
 
 
-class _DiagnosisJSON(_JSONSummary):
+class _DiagnosisJSON(_JSONSummary, SummaryHTML):
     """:class:`_JSONSummary` of a diagnosis: it also reads a diagnose-batch file (its
     settings, then the diagnosis), and its ``from_dict`` names the file in its messages."""
 

@@ -9,8 +9,9 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any, Mapping
 
-from .._files import WrongKind, dumps, read_result, require_keys, write_text_atomic
 from .. import presets
+from .._files import WrongKind, dumps, read_result, require_keys, write_text_atomic
+from .._html import SummaryHTML
 from ..recording import _frozen, _ReadOnlyDict, _ReadOnlyList, _thawed
 
 __all__ = ["FitResult", "EstimateOnBoundWarning", "NotAtMaximumWarning", "ON_BOUND_RTOL",
@@ -76,7 +77,7 @@ def _bound_side(value: float, lo: float, hi: float) -> str | None:
 
 
 @dataclass(frozen=True, eq=False)
-class FitResult:
+class FitResult(SummaryHTML):
     """A fitted pilot model.
 
     ``params``, ``settings``, ``steps``, ``bounds`` and ``units`` are read-only copies of
