@@ -342,9 +342,21 @@ def test_the_full_demo_does_not_replace_a_lab_recording(recs, tmp_path, monkeypa
                    "replace it; give another folder\n")
     assert _files(folder) == before and sorted(p.name for p in tmp_path.iterdir()) == [
         "recordings"]
-    (tmp_path / "report.md").write_text("# an earlier demo's report\n")
+    (tmp_path / "report.md").write_text("# another report\n")  # (not the demo's)
+    assert main(argv) == 2
+    capsys.readouterr()
+    (tmp_path / "report.md").write_text("# bayespilot worked example\n\nan earlier demo's\n")
     assert main(argv) == 1
     assert "unexpected AssertionError: the demo simulated" in capsys.readouterr().err
+
+    # (review: any ValueError of the demo's run was said as a fault of --out, exit 2)
+    def fails(*args, **kwargs):
+        raise ValueError("a fault of the run")
+
+    monkeypatch.setattr(S, "simulate", fails)
+    assert main(["demo", "--out", str(tmp_path / "fresh"), "-q"]) == 1
+    assert capsys.readouterr().err.startswith(
+        "bayespilot: error: unexpected ValueError: a fault of the run")
 
 
 def test_replicate_does_not_replace_a_batch_summary(fitted, diagnosed, tmp_path, monkeypatch,
@@ -480,6 +492,8 @@ def test_the_forcing_lines_are_integers_and_old_results_still_resume(recs, fitte
                   "\"fit_threshold\" and \"fit_none\"; 'bayespilot fit REC --json' writes one "
                   "fit's file), not a parameter file"),
     ("sidecar", "is a recording's JSON sidecar, not a parameter file"),
+    ("posterior", "is a posterior's summary ('bayespilot sample --json': statistics per "
+                  "parameter), not a parameter file"),
 ])
 def test_loglik_says_what_a_params_file_of_another_kind_is(recs, fitted, diagnosed, tmp_path,
                                                            capsys, which, said):
@@ -488,6 +502,12 @@ def test_loglik_says_what_a_params_file_of_another_kind_is(recs, fitted, diagnos
     if which == "diagnosis":
         path = tmp_path / "diag.json"
         path.write_text(json.dumps(json.loads((diagnosed / "a.json").read_text())["diagnosis"]))
+    elif which == "posterior":  # (what sample --json writes: its table under "summary")
+        path = tmp_path / "post.json"
+        table = {"mean": 1.0, "median": 1.0, "hdi_90": [0.9, 1.1], "r_hat": 1.0,
+                 "ess_bulk": 400.0, "ess_tail": 400.0, "tau": 50.0}
+        path.write_text(json.dumps({"summary": {"K_v": table, "delta_abs": table},
+                                    "converged": True, "steps": 1000, "seed": 0}))
     else:
         path = files[which]
     assert main(["loglik", recs[0], "--params", str(path)]) == 2

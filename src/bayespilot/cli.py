@@ -452,7 +452,10 @@ def _result_kind(obj: Mapping[str, object]) -> str | None:
         return "a comparison ('bayespilot compare --json')"
     if "job" in obj and "fit" in obj:
         return "a result of 'bayespilot replicate' (a simulated run's fit)"
-    if obj and all(isinstance(v, dict) and "median" in v and "r_hat" in v for v in obj.values()):
+    table = obj.get("summary") if "converged" in obj else obj  # (its table, before with it)
+    if (isinstance(table, Mapping) and table
+            and all(isinstance(v, dict) and "median" in v and "r_hat" in v
+                    for v in table.values())):
         return "a posterior's summary ('bayespilot sample --json': statistics per parameter)"
     return None
 
@@ -817,7 +820,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
                          "or --quick")
     formats = _formats(args)
     if not args.quick:
-        from .example import run_example
+        from .example import LabRecordingThere, run_example
 
         figure = {"formats": formats, "dpi": args.dpi, "title": not args.no_title}
         try:  # (warnings one line each, as they come: the demo runs for minutes)
@@ -827,7 +830,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         except OSError as exc:
             raise CommandFailed(f"{args.out}: cannot write the example "
                                 f"({_os_reason(exc)})") from None
-        except ValueError as exc:  # (a lab's recording where a run's would go)
+        except LabRecordingThere as exc:  # (a lab's recording where a run's would go)
             raise UsageError(f"argument --out: {exc}") from None
         print(f"report: {report}")
         return EXIT_OK
@@ -2347,8 +2350,10 @@ prediction-error fit and held while the pilot parameters are sampled; with
 closed-loop tracking the output error is the coloured remnant: see
 docs/posteriors.md for how the likelihoods' intervals are calibrated.
 
-The summary JSON (--json) has one object per parameter name with mean,
-median, hdi_90 ([low, high]), r_hat, ess_bulk, ess_tail and tau.
+The summary JSON (--json) has under "summary" one object per parameter name
+with mean, median, hdi_90 ([low, high]), r_hat, ess_bulk, ess_tail and tau,
+and whether the chain converged, its steps, the netCDF file, the seed, the
+likelihood, max_steps, min_steps, the model and the recording.
 A run that stops at --max-steps before converging warns and still writes.
 
 Examples:

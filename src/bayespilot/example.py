@@ -60,15 +60,28 @@ def _shown(formats: Sequence[str]) -> str:
     return next((f for f in ("png", "svg") if f in formats), formats[0])
 
 
+class LabRecordingThere(ValueError):
+    """``run_example``'s ``out/recordings/`` holds, at a run's name, a recording no demo
+    wrote (the command line says it of ``--out``)."""
+
+
+#: The first line of the demo's report.md (:func:`_report`): a folder with it is the demo's.
+REPORT_HEADING = "# bayespilot worked example"
+
+
 def _refuse_a_lab_recording(out: Path, stems: Sequence[Path]) -> None:
-    """Refuse (ValueError) to simulate onto a recording at one of ``stems`` that is not the
-    demo's own: a lab's measurement cannot be made again.  The demo's own has a sidecar with
-    the ``"simulation"`` block, or (written before it kept that block) lies in a folder with
-    the demo's ``report.md``."""
+    """Refuse (:class:`LabRecordingThere`) to simulate onto a recording at one of ``stems``
+    that is not the demo's own: a lab's measurement cannot be made again.  The demo's own
+    has a sidecar with the ``"simulation"`` block, or (written before it kept that block)
+    lies in a folder with the demo's ``report.md`` (its first line the demo's heading)."""
     import json
 
-    if (out / "report.md").is_file():
-        return
+    try:
+        with open(out / "report.md", encoding="utf-8") as fh:
+            if fh.readline().rstrip("\n") == REPORT_HEADING:
+                return
+    except (OSError, UnicodeDecodeError):
+        pass
     for stem in stems:
         # (a name, not a suffix, ends in ".75": FD_k0.75)
         csv, side = (stem.parent / f"{stem.name}{ext}" for ext in (".csv", ".json"))
@@ -81,7 +94,7 @@ def _refuse_a_lab_recording(out: Path, stems: Sequence[Path]) -> None:
             sidecar = None
         if isinstance(sidecar, dict) and isinstance(sidecar.get("simulation"), dict):
             continue
-        raise ValueError(f"{' and '.join(str(p) for p in there)} "
+        raise LabRecordingThere(f"{' and '.join(str(p) for p in there)} "
                          f"{'are' if len(there) > 1 else 'is'} not a recording the demo "
                          "wrote (no \"simulation\" in a sidecar, no report.md in "
                          f"{out}): the demo would replace it; give another folder")
@@ -333,7 +346,7 @@ def _report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
 
     true_d = truth["delta_abs"]
     lines = [
-        "# bayespilot worked example",
+        REPORT_HEADING,
         "",
         f"{len(rows)} simulated runs of the {task} task of Pool et al. (2012), one per motion gain "
         f"K_theta ({', '.join(f'{k:g}' for k in gains)}), with the Table 3 pilot "
