@@ -741,6 +741,11 @@ def test_pool_refuses_comparisons_of_different_hypotheses():
     assert pool([a, old, {"log_bayes_factor": 1.0}]).n == 3
     with pytest.raises(ValueError, match="tests model 'soft'"):
         pool([old, other])
+    # (review: each was compared with the first alone; behind an older one that records its
+    # model only, two of different nulls were pooled)
+    with pytest.raises(ValueError, match=r"results\[1\] \(fd0\) tests model 'paper' against "
+                                         r"'paper without threshold' but results\[2\] \(fd2\)"):
+        pool([old, a, two])
 
 
 def test_evidence_leaves_out_by_default_what_compare_does(monkeypatch):

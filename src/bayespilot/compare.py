@@ -2229,14 +2229,14 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
         raise ValueError("results must be a non-empty sequence of comparisons")
     lbf, err, dec, on_plateau, lost_mode, unidentified = [], [], [], [], [], []
     first_of: dict[Any, int] = {}  # a Comparison (by identity) or a recording's digest: index
-    first_test: tuple[dict[str, Any], int] | None = None  # the first recorded test, its index
+    tests: list[tuple[dict[str, Any], int]] = []  # each recorded test, with its index
     for i, r in enumerate(results):
         d = r.to_dict() if isinstance(r, Comparison) else r
         if not isinstance(d, Mapping) or "log_bayes_factor" not in d:
             raise TypeError("each result must be a Comparison or a mapping with "
                             "'log_bayes_factor' and 'log_bayes_factor_err'")
         _check_once(i, r, d, first_of, results)
-        first_test = _check_same_test(i, d, first_test, results)
+        _check_same_test(i, d, tests, results)
         lbf.append(float(d["log_bayes_factor"]))
         err.append(float(d.get("log_bayes_factor_err", 0.0)))
         settings = d.get("settings") or {}
@@ -2323,26 +2323,26 @@ def _check_once(i: int, r: Any, d: Mapping[str, Any], first_of: dict[Any, int],
         first_of["recording", digest] = i
 
 
-def _check_same_test(i: int, d: Mapping[str, Any], first: tuple[dict[str, Any], int] | None,
-                     results: Sequence[Any]) -> tuple[dict[str, Any], int] | None:
+def _check_same_test(i: int, d: Mapping[str, Any], tests: list[tuple[dict[str, Any], int]],
+                     results: Sequence[Any]) -> None:
     """Refuse (ValueError) ``results[i]`` if it tests the threshold of another model, or
-    against another null, than ``first`` (the first comparison that records its test, and
-    its index): a pool sums ln BFs of one hypothesis.  A comparison records its
-    ``settings["model"]``, ``"model_none"`` and ``"null_also_zeroes"`` (the other thresholds
-    its null holds at 0); one that does not (a hand-made mapping) is not checked.  Returns
-    the new ``first``."""
+    against another null, than an earlier comparison (``tests``: each that records its test,
+    with its index; ``results[i]``'s is added): a pool sums ln BFs of one hypothesis.  A
+    comparison records its ``settings["model"]``, ``"model_none"`` and
+    ``"null_also_zeroes"`` (the other thresholds its null holds at 0); each pair is compared
+    on what both record (an older one, its model alone), and one that records none (a
+    hand-made mapping) is not checked."""
     settings = d.get("settings")
     if not isinstance(settings, Mapping):
-        return first
+        return
     test = {k: settings[k] for k in ("model", "model_none") if settings.get(k) is not None}
     if settings.get("model_none") is not None or "null_also_zeroes" in settings:
         test["null_also_zeroes"] = sorted(settings.get("null_also_zeroes") or [])
     if not test:
-        return first
-    if first is None:
-        return test, i
-    ref, j = first
-    if any(test[k] != ref[k] for k in test if k in ref):
+        return
+    for ref, j in tests:
+        if not any(test[k] != ref[k] for k in test if k in ref):
+            continue
         def what(t: Mapping[str, Any]) -> str:
             also = t.get("null_also_zeroes") or []
             null = f" against {t['model_none']!r}" if t.get("model_none") else ""
@@ -2353,7 +2353,7 @@ def _check_same_test(i: int, d: Mapping[str, Any], first: tuple[dict[str, Any], 
                          f"{_result_name(results, i)} tests {what(test)}: a "
                          "pool sums the ln BFs of one hypothesis; pool the comparisons of "
                          "each model apart")
-    return first
+    tests.append((test, i))
 
 
 class _CallableModule(types.ModuleType):
