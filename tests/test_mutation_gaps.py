@@ -262,7 +262,30 @@ def test_each_kind_counts_recordings_not_warnings():
                        "recording(s)")
     (w,) = said
     assert str(w.message).startswith(
-        "EstimateOnBoundWarning in 2 recording(s) (a, b), e.g. a: K_v at its bound; ")
+        "EstimateOnBoundWarning in 2 recording(s) (a, b), e.g. a: K_v at its bound (2 "
+        "different messages in all); ")
+
+
+def test_each_kind_shows_the_message_most_recordings_share():
+    """Review: the example was the first recording's alphabetically first message (a
+    diagnosis without motion warns once per candidate: one candidate's h_head was shown, the
+    base model's message every run shares was not)."""
+    from bayespilot.campaign import _say_each_kind
+
+    with pytest.warns(RuntimeWarning) as said:
+        _say_each_kind({"SilentChannelWarning": [("a", "candidate A: h_head"),
+                                                 ("a", "base: delta_abs"),
+                                                 ("b", "candidate B: K_ot"),
+                                                 ("b", "base: delta_abs")]},
+                       "diagnosis(es)")
+    (w,) = said
+    assert str(w.message) == ("SilentChannelWarning in 2 diagnosis(es) (a, b), e.g. a: base: "
+                              "delta_abs (3 different messages in all); each result file lists "
+                              "its warnings under 'warnings'")
+    with pytest.warns(RuntimeWarning) as said:  # (one message: nothing more said)
+        _say_each_kind({"X": [("b", "m"), ("a", "m")]}, "fit(s)")
+    assert str(said[0].message) == ("X in 2 fit(s) (a, b), e.g. a: m; each result file lists "
+                                    "its warnings under 'warnings'")
 
 
 def test_run_keyed_bar_counts_the_tasks_done_before(tmp_path, monkeypatch, fake_cluster):

@@ -462,12 +462,21 @@ def _warnings_once(caught: Iterable[Any]) -> list[dict[str, str]]:
 def _say_each_kind(warned: Mapping[str, Sequence[tuple[str, str]]], what: str) -> None:
     """Say each kind of warning the tasks recorded once (``warned``: category -> (key,
     message) pairs): a RuntimeWarning naming how many tasks (``what``, e.g. "fit(s)") and
-    which, with one task's message."""
+    which, with the message most of them share (ties: the first in order) and, where their
+    messages differ, how many different ones there are."""
     for category, seen in sorted(warned.items()):
         keys = sorted({k for k, _ in seen})
+        said_by: dict[str, set[str]] = {}
+        for k, m in seen:
+            said_by.setdefault(m, set()).add(k)
+        # (a diagnosis without motion warns once per candidate: the example is the message
+        # the most tasks share, not one candidate's picked by the alphabet)
+        example = min(said_by, key=lambda m: (-len(said_by[m]), m))
+        by = min(said_by[example])
+        others = (f" ({len(said_by)} different messages in all)" if len(said_by) > 1 else "")
         warn_at_caller(f"{category} in {len(keys)} {what} ({_listed(keys, 3)}), e.g. "
-                       f"{keys[0]}: {min(m for k, m in seen if k == keys[0])}; each result "
-                       f"file lists its warnings under 'warnings'", RuntimeWarning)
+                       f"{by}: {example}{others}; each result file lists its warnings under "
+                       f"'warnings'", RuntimeWarning)
 
 
 def run_job(job: Job) -> dict[str, Any]:
