@@ -2,10 +2,7 @@
 
 from __future__ import annotations
 
-import os
-import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -38,50 +35,6 @@ def without_theta(rec: Recording) -> Recording:
     signals = {k: v for k, v in rec.signals.items() if k != "theta"}
     return Recording(signals, rec.sample_rate_hz, rec.motion_gain, rec.task, rec.metadata,
                      source=rec.source)
-
-
-#: What the warm-up before the workers did (pytest_configure), for the session's header.
-_WARMED: list[str] = []
-
-
-def pytest_configure(config):
-    """Before pytest-xdist starts two or more workers (in its controller only), fill numba's
-    cache in two processes side by side (tests/_warm_numba.py): on a fresh install each
-    worker otherwise compiled the same kernels at once, before its first test.  Where the
-    cache is already full the parts only load it (a few seconds).  Only for the whole suite
-    (no test files or folders named: those compile what they use); ``BAYESPILOT_TEST_WARM=0``
-    skips it."""
-    workers = getattr(config.option, "numprocesses", None)
-    if (hasattr(config, "workerinput") or not isinstance(workers, int) or workers < 2
-            or getattr(config.option, "file_or_dir", None)
-            or os.environ.get("BAYESPILOT_TEST_WARM") == "0"):
-        return
-    script = Path(__file__).with_name("_warm_numba.py")
-    env = dict(os.environ, NUMBA_NUM_THREADS="1")
-    t0 = time.perf_counter()
-    parts = {part: subprocess.Popen([sys.executable, str(script), part], env=env,
-                                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-             for part in ("a", "b")}
-    said = []
-    try:
-        for part, p in parts.items():  # (10 minutes for both together)
-            try:
-                code = p.wait(timeout=max(0.0, t0 + 600 - time.perf_counter()))
-            except subprocess.TimeoutExpired:  # (the tests compile what is left)
-                code = "timed out"
-            said.append(f"{part} {'done' if code == 0 else f'failed ({code})'}")
-    finally:  # (also on Ctrl-C: no compiling process left behind)
-        for p in parts.values():
-            if p.poll() is None:
-                p.kill()
-                p.wait()
-    # (before the session's clock starts: the header says what it took)
-    _WARMED.append(f"numba cache filled in {time.perf_counter() - t0:.0f} s by two processes "
-                   f"before the workers started ({', '.join(said)}; tests/_warm_numba.py)")
-
-
-def pytest_report_header(config):
-    return _WARMED
 
 
 @pytest.fixture(scope="session")
