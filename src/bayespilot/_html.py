@@ -20,5 +20,4 @@ class SummaryHTML:
 
     def _repr_html_(self) -> str:
         """The summary in a notebook, escaped (a source path with ``<`` or ``&``)."""
-        text = str(self) if self._html_text == "__str__" else getattr(self, self._html_text)()
-        return f"<pre>{html.escape(text)}</pre>"
+        return f"<pre>{html.escape(getattr(self, self._html_text)())}</pre>"

@@ -1318,16 +1318,12 @@ def _refuse_replacing_a_recording(out: str | Path, option: str = "-o/--output",
     UsageError
         A file of the stem exists and is not a simulated recording's.
     """
-    csv_path, json_path = _stem_files(out)
-    if not (csv_path.exists() or json_path.exists()):
+    from .io import _pair_on_disk
+
+    files, sidecar, simulated = _pair_on_disk(out)
+    if not files or simulated:
         return
-    try:
-        sidecar = json.loads(json_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):  # no sidecar, or one no simulation wrote
-        sidecar = None
-    if isinstance(sidecar, dict) and isinstance(sidecar.get("simulation"), dict):
-        return
-    there = " and ".join(str(p) for p in (csv_path, json_path) if p.exists())
+    there = " and ".join(str(p) for p in files)
     why = ("no \"simulation\" in its sidecar" if sidecar is not None else
            "a file without a simulated recording's sidecar")
     raise UsageError(f"argument {option}: {there} "

@@ -116,8 +116,8 @@ from ._seeds import resolve_seed
 from .likelihood import Likelihood
 from .model import PilotModel, paper_model
 from .noise import ARNoise
-from .sample import _default_discard, _recording_digest, likelihood_options
-from .recording import Recording
+from .sample import _default_discard, likelihood_options
+from .recording import Recording, _recording_digest
 from ._blas import one_blas_thread
 from ._caller import warn_at_caller
 
@@ -1637,8 +1637,6 @@ def _check_posterior(posterior: Posterior, recording: Recording, model: PilotMod
     A posterior under the other likelihood is not refused: its Savage-Dickey estimate is
     marked not valid, and its AR model is not used.
     """
-    from .sample import _recording_digest
-
     s = posterior.settings or {}
     here = recording.source or "the recording compared"
     there = s.get("recording") or "an unnamed recording"

@@ -74,7 +74,7 @@ def _refuse_a_lab_recording(out: Path, stems: Sequence[Path]) -> None:
     that is not the demo's own: a lab's measurement cannot be made again.  The demo's own
     has a sidecar with the ``"simulation"`` block, or (written before it kept that block)
     lies in a folder with the demo's ``report.md`` (its first line the demo's heading)."""
-    import json
+    from .io import _pair_on_disk
 
     try:
         with open(out / "report.md", encoding="utf-8") as fh:
@@ -83,21 +83,12 @@ def _refuse_a_lab_recording(out: Path, stems: Sequence[Path]) -> None:
     except (OSError, UnicodeDecodeError):
         pass
     for stem in stems:
-        # (a name, not a suffix, ends in ".75": FD_k0.75)
-        csv, side = (stem.parent / f"{stem.name}{ext}" for ext in (".csv", ".json"))
-        there = [p for p in (csv, side) if p.exists()]
-        if not there:
-            continue
-        try:
-            sidecar = json.loads(side.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            sidecar = None
-        if isinstance(sidecar, dict) and isinstance(sidecar.get("simulation"), dict):
-            continue
-        raise LabRecordingThere(f"{' and '.join(str(p) for p in there)} "
-                         f"{'are' if len(there) > 1 else 'is'} not a recording the demo "
-                         "wrote (no \"simulation\" in a sidecar, no report.md in "
-                         f"{out}): the demo would replace it; give another folder")
+        there, _, simulated = _pair_on_disk(stem)
+        if there and not simulated:
+            raise LabRecordingThere(f"{' and '.join(str(p) for p in there)} "
+                                    f"{'are' if len(there) > 1 else 'is'} not a recording the "
+                                    "demo wrote (no \"simulation\" in a sidecar, no report.md "
+                                    f"in {out}): the demo would replace it; give another folder")
 
 
 def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,

@@ -95,6 +95,22 @@ def _pair_paths(path: Path) -> tuple[Path, Path]:
     return _with_suffix_added(stem, ".csv"), _with_suffix_added(stem, ".json")
 
 
+def _pair_on_disk(path: str | os.PathLike) -> tuple[list[Path], Any, bool]:
+    """The recording pair :func:`write_recording` would write at ``path`` as it lies on disk:
+    its files that exist, its sidecar parsed (None where there is none, or it is no JSON),
+    and whether ``bayespilot simulate`` wrote it (the sidecar's ``"simulation"`` block).  The
+    one rule by which the command line and the demo replace a simulated run but refuse a
+    lab's measurement."""
+    csv_path, json_path = _pair_paths(Path(path))
+    there = [p for p in (csv_path, json_path) if p.exists()]
+    try:
+        sidecar = json.loads(json_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        sidecar = None
+    simulated = isinstance(sidecar, dict) and isinstance(sidecar.get("simulation"), dict)
+    return there, sidecar, simulated
+
+
 def _read_bytes(path: Path) -> bytes:
     try:
         with open(path, "rb") as fh:
