@@ -307,3 +307,12 @@ def test_cli_diagnose_batch_prints_the_workers_warnings_one_line_each(tmp_path, 
     assert len(lines) == 1 and lines[0].startswith(
         "bayespilot: warning: SilentChannelWarning in 2 diagnosis(es) (k0a, k0b), e.g. k0a: "), err
     assert "RuntimeWarning" not in err and "sys.exit" not in err
+
+
+def test_plan_batch_refuses_digests_without_a_path(swapped):
+    """(Its new keyword: a mapping that lacks a path raised a bare KeyError of the path.)"""
+    base, recs = swapped
+    paths = [str(base / "orig" / n) for n in ("r1", "r2")]
+    with pytest.raises(ValueError, match=r"^digests has no digest of .* \(1 of 2 paths\): give "
+                                         r"one per path, or none$"):
+        plan_batch(paths, recs, pool=True, digests={paths[0]: "0" * 64})

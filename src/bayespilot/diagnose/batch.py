@@ -228,10 +228,16 @@ def plan_batch(paths: Sequence[str], recordings: Sequence, *, pool: bool = False
         cannot be told apart; ``pool`` and a group whose runs differ in the
         sample rate, the controlled element, ``control_gain`` or the forcing
         functions (:func:`~bayespilot.diagnose.pooled.pooling_disagreements`; every
-        such group named, with its runs and what differs).
+        such group named, with its runs and what differs); ``digests`` without one
+        of the paths.
     """
     if len(paths) != len(recordings):
         raise ValueError(f"{len(paths)} paths for {len(recordings)} recordings")
+    missing = [str(p) for p in paths if digests is not None and str(p) not in digests]
+    if missing:
+        raise ValueError(f"digests has no digest of {', '.join(missing[:3])}"
+                         f"{' ...' if len(missing) > 3 else ''} ({len(missing)} of "
+                         f"{len(paths)} paths): give one per path, or none")
     if not pool:
         stems = [Path(p).stem if Path(p).suffix in (".csv", ".json", ".mat") else Path(p).name
                  for p in paths]
