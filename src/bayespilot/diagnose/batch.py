@@ -775,7 +775,10 @@ def _differs(old: Any, new: Any, names: Mapping[str, str] | None = None) -> str:
         return "other recordings"
     said, changes = [], []  # (changes: per run, the sidecar values it reads that differ)
     if old.get("metadata") != new.get("metadata"):
-        for digest in sorted(new.get("metadata") or {}):
+        # (the runs by their names here: their digests' order differs from machine to
+        # machine, with the simulated signals' last bits)
+        for digest in sorted(new.get("metadata") or {},
+                             key=lambda d: ((names or {}).get(d, d), d)):
             was, now = (old.get("metadata") or {}).get(digest, {}), new["metadata"][digest]
             keys = sorted(k for k in set(was) | set(now) if was.get(k) != now.get(k))
             where = f"{(names or {}).get(digest, digest)}: " if len(new["metadata"]) > 1 else ""
