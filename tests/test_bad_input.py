@@ -162,9 +162,11 @@ def _cli_bad(d: Path, run: Path, p: Path) -> dict[str, tuple[list, int, str]]:
                                                     d / "p.nc"], 2, "NaN in column 'e'"),
                    "sample: unknown likelihood": (["sample", run, "-o", d / "p.nc",
                                                    "--likelihood", "eq5"], 2, "--likelihood"),
-                   "sample: backend in a missing folder": (
+                   # (refused before the maximum-likelihood fit, which it followed)
+                   "sample: backend in a folder that cannot be made": (
                        ["sample", run, "-o", d / "p.nc", "--max-steps", "10", "--backend",
-                        d / "none" / "b.h5"], 1, "cannot open the sampler's backend file")},
+                        Path(f"{run}.csv") / "b.h5"], 1,
+                       "cannot write the sampler's backend file")},
         "compare": {"compare: missing recording": (["compare", d / "nothere"], 2,
                                                    "file not found"),
                     "compare: malformed recording": (["compare", MALFORMED / "inf_value"], 2,

@@ -1384,6 +1384,8 @@ def _cmd_sample(args: argparse.Namespace) -> int:
     _check_writable(args.output, "posterior")  # hours of sampling are not lost to an unwritable file
     if args.json:
         _check_writable(args.json, "summary")
+    if args.backend:  # (its folder made, as the posterior's: refused after the fit, it was)
+        _check_writable(args.backend, "sampler's backend file")
     _say(args, f"sampling the posterior of {rec.source} ({args.likelihood} likelihood, at most "
                f"{args.max_steps} steps; starts with a maximum-likelihood fit) ...")
     with warnings.catch_warnings(record=True) as caught:
