@@ -2473,8 +2473,8 @@ at the end, has one row per subject, task and K_theta: the number of runs,
 delta_abs's median, min and max over them, the summed differences of -ln L
 and BIC, and with --compare the pooled ln BF, its error and decision.
 DIR/summary.png draws every run's delta_abs per condition. One fit of an
-81.92-s run takes about 2 s (--method fast) or 7 s (--method paper), two
-per recording; --compare adds minutes per recording.
+81.92-s run takes about 2 s (--method fast) or 1.3 s (--method paper; 4 s on
+a CPU without AVX2 or AVX-512), two per recording; --compare adds minutes per recording.
 
 --posterior also samples each recording's posterior after its fits, as
 'bayespilot sample REC --seed S' samples it (the same --likelihood and
