@@ -307,6 +307,10 @@ def test_cli_diagnose_batch_prints_the_workers_warnings_one_line_each(tmp_path, 
     assert len(lines) == 1 and lines[0].startswith(
         "bayespilot: warning: SilentChannelWarning in 2 diagnosis(es) (k0a, k0b), e.g. k0a: "), err
     assert "RuntimeWarning" not in err and "sys.exit" not in err
+    # (in the command's words: a command-line user cannot call model.fix)
+    assert ("the record says nothing about them, and the values given for them are not "
+            "estimates") in lines[0], lines[0]
+    assert "model.fix" not in err
 
 
 def test_plan_batch_refuses_digests_without_a_path(swapped):

@@ -517,11 +517,13 @@ def _questionable_said():
 
 
 def _warning_line(message) -> None:
-    """``bayespilot: warning: <message>`` on stderr, above any progress bar on the screen
-    (printed directly, it ran into the bar's line)."""
+    """``bayespilot: warning: <message>`` on stderr, in the command's words
+    (:func:`_in_cli_words`: diagnose-batch's grouped worker warnings said "fix them
+    (model.fix)"), above any progress bar on the screen (printed directly, it ran into the
+    bar's line)."""
     from tqdm.auto import tqdm
 
-    tqdm.write(f"{PROG}: warning: {message}", file=sys.stderr)
+    tqdm.write(f"{PROG}: warning: {_in_cli_words(message)}", file=sys.stderr)
 
 
 #: The library's advice in a warning that a command-line user cannot follow, and what the
