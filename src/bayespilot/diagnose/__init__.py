@@ -362,7 +362,8 @@ class DiagnosisResult(_DiagnosisJSON):
         The located evidence with bootstrap p-values.
     base : dict
         The base model's fit: ``params``, ``neg_log_lik`` (Eq. 4), ``vaf``,
-        ``gls_neg_log_lik``, ``gls_params`` and ``gls_stderr`` (the GLS
+        ``gls_neg_log_lik``, ``gls_params`` (every parameter, those held
+        fixed at their values) and ``gls_stderr`` (the GLS
         estimates' standard errors; decision likelihood), and
         ``discard_seconds`` and ``n``, the samples ``neg_log_lik`` and
         ``vaf`` are over (diagnose's own base fit: the whole record,
@@ -376,7 +377,9 @@ class DiagnosisResult(_DiagnosisJSON):
         could not be made; ``dropped`` replicates that failed), the base
         fit's parameters on a bound (``base_at_bounds``, when any), the base
         model's bounds taken from ``base_fit`` (``base_bounds``: name ->
-        [lower, upper], those that are not Table 1's; when any).
+        [lower, upper], those that are not Table 1's; when any), the base
+        model's parameters held fixed as ``base_fit`` held them
+        (``base_fixed``: name -> value; when any).
     elapsed : float
         Wall time, s.
     source : str or None
@@ -468,6 +471,7 @@ class DiagnosisResult(_DiagnosisJSON):
                  f"base model: -ln L (Eq. 4) = {self.base['neg_log_lik']:.2f}"
                  f"{_base_over(self.base)}, VAF = {self.base['vaf']:.2f} %",
                  *_base_bounds_lines(self.settings.get("base_bounds")),
+                 *_base_fixed_lines(self.settings.get("base_fixed"), self.units),
                  *_at_bounds_lines(self.settings.get("base_at_bounds")),
                  f"level: alpha = {self.settings['alpha']:g} over "
                  f"{self.settings['n_tested']} candidates",
@@ -828,14 +832,74 @@ def _base_at_bounds_note(edge: Sequence[Mapping[str, Any]]) -> str:
             f"a base_fit made with wider bounds, before reading the decision")
 
 
+def _base_fixed(base_fit, model, where: str = "") -> dict[str, float]:
+    """The parameters ``base_fit`` held fixed (:attr:`~bayespilot.fit.result.FitResult.fixed`)
+    that ``model`` (the paper's) has, name -> ``base_fit``'s value: the base model holds them
+    there too, so that no fit of the diagnosis (the GLS base fit, every extension's, the
+    profile intervals, the bootstrap's and the calibration's replicates) estimates what the
+    user held.  A parameter only marked as not identified (``settings["unidentified"]``, a
+    silent channel's) is free in ``base_fit`` and stays free, as without a base_fit.
+
+    A ValueError for a fit without threshold (``delta_abs`` held at 0): the catalogue extends
+    the paper's model with its threshold (``threshold-shape`` reshapes it, every extension's
+    reported fit rescans it), which a base model without one would turn into another question
+    (whether there is a threshold at all: :mod:`bayespilot.compare`'s)."""
+    held = [k for k in base_fit.fixed if k in model.all_names and k in base_fit.params]
+    if "delta_abs" in held and float(base_fit.params["delta_abs"]) == 0.0:
+        raise ValueError(
+            f"{where}base_fit was made without threshold (delta_abs held at 0): diagnose tests "
+            f"extensions of the paper's model with its threshold (threshold-shape reshapes it, "
+            f"the reported fits rescan it), and would otherwise estimate the delta_abs this fit "
+            f"held; give a base_fit made with the threshold "
+            f"(fit_fast or fit_paper with threshold=True, the default), or none (diagnose "
+            f"then makes its own); whether there is a threshold at all is bayespilot.compare's "
+            f"question")
+    return {k: float(base_fit.params[k]) for k in held}
+
+
+def _check_held(names: Sequence[str], base_model, held: Mapping[str, float]) -> None:
+    """A ValueError, before any fit, if a candidate's ``build`` of ``base_model`` frees or
+    changes a parameter the base model holds for ``base_fit`` (``held``): its test would
+    estimate what the user held and count a degree of freedom it does not say.  The built-in
+    entries keep a model's fixed parameters (``add_stage``, ``with_nonlinearity``, ... keep
+    them); an entry that no longer has the parameter at all (it replaced the block that read
+    it) holds nothing and is accepted."""
+    if not held:
+        return
+    for name in names:
+        model = get_extension(name).build(base_model)
+        bad = [f"{k} ({'free' if k not in model.fixed else f'held at {model.fixed[k]:g}'}, "
+               f"base_fit's {v:g})" for k, v in held.items()
+               if k in model.all_names and model.fixed.get(k) != v]
+        if bad:
+            raise ValueError(
+                f"extension {name!r}: its build of the base model leaves {', '.join(bad)}, "
+                f"which base_fit held fixed and the diagnosis holds in the base model; an "
+                f"extension must keep the base model's fixed parameters (build it with the "
+                f"model's add_stage, add_channel, with_nonlinearity, with_modulation or "
+                f"with_output, which keep them), or leave this candidate out")
+
+
+def _base_fixed_lines(held, units: Mapping[str, str] | None = None) -> list[str]:
+    """The summary's line for ``settings["base_fixed"]`` (the parameters the base model holds
+    at base_fit's values, as base_fit held them), or none."""
+    if not held:
+        return []
+    return ["base model's parameters held fixed as base_fit held them (in every fit here): "
+            + ", ".join(f"{k} = {float(v):g}{_unit_suffix(units or {}, k)}"
+                        for k, v in held.items())]
+
+
 def _base_model(base_fit, oversample: int, where: str = ""):
     """The base model the candidates extend: the paper's (Table 1 bounds), with the bounds
-    ``base_fit`` was made with where they differ (a lab whose loop gain needs K_v > 10), and
-    those differences (name -> [lower, upper]; empty: Table 1's).
+    ``base_fit`` was made with where they differ (a lab whose loop gain needs K_v > 10) and
+    the parameters it held fixed held at its values (:func:`_base_fixed`; the returned model's
+    ``fixed``), and those differences of bounds (name -> [lower, upper]; empty: Table 1's).
 
     A ValueError, before any fit, if an estimate of ``base_fit`` lies outside the bounds of
     that base model (its bounds not recorded, or a fit of another model): the catalogue's
-    tests would start from a point the base model cannot hold."""
+    tests would start from a point the base model cannot hold; or if ``base_fit`` was made
+    without threshold (:func:`_base_fixed`)."""
     import dataclasses
 
     from ..model import paper_model
@@ -853,6 +917,9 @@ def _base_model(base_fit, oversample: int, where: str = ""):
         params.append(p)
     if wider:
         model = dataclasses.replace(model, parameters=tuple(params))
+    held = _base_fixed(base_fit, model, where)
+    if held:  # (without the bounds check: the fit's own model may have had other bounds)
+        model = model._fixed(**held)
     out = []
     for p in model.parameters:
         v = base_fit.params.get(p.name)
@@ -1192,7 +1259,18 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         and gives that fit here (``settings["base_bounds"]``).  Without
         it, the base model has Table 1's bounds; rescaling u
         (``recording.with_signals(u=recording.u / c)``) is the other way
-        round them.
+        round them.  The parameters it held fixed
+        (:attr:`~bayespilot.fit.result.FitResult.fixed`, e.g. a fit of
+        ``paper_model().fix(tau_v=0.3)``) the base model holds at its
+        values, so that no fit of the diagnosis estimates them: the GLS
+        base fit, every extension's fit and test, the reported refit and
+        its profile intervals, the bootstrap's and the calibration's
+        replicates (``settings["base_fixed"]``, and a line of the
+        summary); an extension whose ``build`` would free one is refused.
+        Parameters it only marks as not identified
+        (``settings["unidentified"]``, a silent channel's) stay free, as
+        without it.  A fit without threshold (``delta_abs`` held at 0) is
+        refused: the catalogue extends the model with its threshold.
     skip_seconds : float
         Start of the record left out of the decision likelihood and evidence
         (the likelihood's start-up transient).
@@ -1293,7 +1371,9 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         refuses, or names an entry whose model reads a recording column its
         ``needs`` leaves out (checked before the base fit); ``base_fit`` has
         an estimate outside the paper's bounds (Table 1) and records no
-        bounds of its own for it (the message says to rescale u); or
+        bounds of its own for it (the message says to rescale u), or was
+        made without threshold (``delta_abs`` held at 0), or a candidate's
+        ``build`` frees a parameter it held fixed; or
         ``n_calibrate`` is asked for with ``profile_noise=True``.
 
     Warns
@@ -1350,8 +1430,11 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         if not isinstance(base_fit, FitResult):
             raise TypeError(f"base_fit must be a FitResult (of fit_fast or fit_paper), got "
                             f"{type(base_fit).__name__}")
-    # a base fit outside the base model's bounds: refused before any work
-    _, wider = _base_model(base_fit, oversample, _where(recording))
+    # a base fit outside the base model's bounds, or without threshold: refused before any
+    # work; so is a candidate whose build frees a parameter base_fit held
+    model0, wider = _base_model(base_fit, oversample, _where(recording))
+    held = {} if base_fit is None else _base_fixed(base_fit, model0)
+    _check_held(names, model0, held)
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     if profile_noise and n_calibrate:
         raise ValueError("n_calibrate does not combine with profile_noise=True (the replicates "
@@ -1464,7 +1547,9 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     arrays["level"] = level
     arrays["noise"] = noise  # the decision's noise model (decide.NoiseModel)
     base_d = {"params": dict(base_fit.params), "neg_log_lik": float(base_fit.neg_log_lik),
-              "vaf": float(base_fit.vaf), "gls_params": dict(base.params),
+              "vaf": float(base_fit.vaf),
+              # every parameter, those held fixed (settings["base_fixed"]) at their values
+              "gls_params": base_model.as_dict(base_model.full_vector(base.params), full=True),
               "gls_neg_log_lik": float(base.neg_log_lik),
               "gls_stderr": base.stderr, **_base_samples(base_fit, recording)}
     settings = {"alpha": alpha, "level_per_candidate": level, "n_tested": len(tested),
@@ -1483,6 +1568,8 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
         settings["base_at_bounds"] = [dict(d) for d in run.base_at_bounds]  # (BaseFitWarning)
     if wider:
         settings["base_bounds"] = wider  # the base model's bounds that are base_fit's
+    if held:
+        settings["base_fixed"] = dict(held)  # held in every fit at base_fit's values
     return DiagnosisResult(chosen is not None, chosen.physics if chosen else "none", ranking,
                            where, base_d, chosen, settings, time.perf_counter() - t0,
                            recording.source, arrays, base_model=base_model,
