@@ -663,12 +663,15 @@ class Likelihood:
         return (p.ch_int, p.ch_float, p.st_int, p.st_const, p.out_int)
 
     # -- single evaluations ----------------------------------------------------
-    def response(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+    def response(self,
+                 params: Mapping[str, float] | Sequence[float] | np.ndarray | None
+                 ) -> np.ndarray:
         """Model output u_hat at ``params`` (by name, or the free vector in order).
 
         Parameters
         ----------
-        params : mapping of str to float, sequence of float or ndarray
+        params : mapping of str to float, sequence of float, ndarray or None
+            (None: the model's defaults)
             Values by name (free parameters not given take the model's
             defaults) or the free-parameter vector in ``model.parameter_names``
             order.
@@ -685,12 +688,15 @@ class Likelihood:
             y[:] = np.nan
         return y
 
-    def residual(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+    def residual(self,
+                 params: Mapping[str, float] | Sequence[float] | np.ndarray | None
+                 ) -> np.ndarray:
         """Output error eps = u - u_hat over the whole record (Eq. 4 uses ``eps[self.used]``).
 
         Parameters
         ----------
-        params : mapping of str to float, sequence of float or ndarray
+        params : mapping of str to float, sequence of float, ndarray or None
+            (None: the model's defaults)
             Values by name (free parameters not given take the model's
             defaults) or the free-parameter vector in ``model.parameter_names``
             order.
@@ -707,13 +713,16 @@ class Likelihood:
         """N of Eq. 4: the samples kept, less the p a noise model conditions on."""
         return self.n - self.skip - self._a.size
 
-    def fit_residual(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> np.ndarray:
+    def fit_residual(self,
+                     params: Mapping[str, float] | Sequence[float] | np.ndarray | None
+                     ) -> np.ndarray:
         """The residual whose sum of squares -ln L is increasing in: eps over the samples
         kept, whitened by the noise model if there is one (length :attr:`n_terms`).
 
         Parameters
         ----------
-        params : mapping of str to float, sequence of float or ndarray
+        params : mapping of str to float, sequence of float, ndarray or None
+            (None: the model's defaults)
             Values by name (free parameters not given take the model's
             defaults) or the free-parameter vector in ``model.parameter_names``
             order.
@@ -727,14 +736,15 @@ class Likelihood:
         eps = self.residual(params)[self.used]
         return eps if self.noise is None else self.noise.whiten(eps)
 
-    def fit_jacobian(self, params: Mapping[str, float] | Sequence[float] | np.ndarray,
+    def fit_jacobian(self, params: Mapping[str, float] | Sequence[float] | np.ndarray | None,
                      names: Sequence[str] | None = None) -> np.ndarray:
         """d :meth:`fit_residual` / d parameter, shape (:attr:`n_terms`, len(names)), exact
         (the model's sensitivities, passed through the same whitening filter).
 
         Parameters
         ----------
-        params : mapping of str to float, sequence of float or ndarray
+        params : mapping of str to float, sequence of float, ndarray or None
+            (None: the model's defaults)
             Values by name (free parameters not given take the model's
             defaults) or the free-parameter vector in ``model.parameter_names``
             order.
@@ -756,7 +766,9 @@ class Likelihood:
         J = -self.jacobian(params, names)[1][self.used]
         return J if self.noise is None else self.noise.whiten(J)
 
-    def neg_log_lik(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> float:
+    def neg_log_lik(self,
+                    params: Mapping[str, float] | Sequence[float] | np.ndarray | None
+                    ) -> float:
         """-ln L (Eq. 4, s2 profiled); +inf for an unstable parameter vector.
 
         Computed by the same routine as :meth:`batch` (one row), so the two
@@ -764,7 +776,8 @@ class Likelihood:
 
         Parameters
         ----------
-        params : mapping of str to float, sequence of float or ndarray
+        params : mapping of str to float, sequence of float, ndarray or None
+            (None: the model's defaults)
             Values by name (free parameters not given take the model's
             defaults) or the free-parameter vector in ``model.parameter_names``
             order.
@@ -805,12 +818,13 @@ class Likelihood:
             _warn_perfect_fit()
         return float(val)
 
-    def vaf(self, params: Mapping[str, float] | Sequence[float] | np.ndarray) -> float:
+    def vaf(self, params: Mapping[str, float] | Sequence[float] | np.ndarray | None) -> float:
         """Variance accounted for, 1 - var(eps)/var(u), in percent, over the samples Eq. 4 uses.
 
         Parameters
         ----------
-        params : mapping of str to float, sequence of float or ndarray
+        params : mapping of str to float, sequence of float, ndarray or None
+            (None: the model's defaults)
             Values by name (free parameters not given take the model's
             defaults) or the free-parameter vector in ``model.parameter_names``
             order.
@@ -822,13 +836,14 @@ class Likelihood:
         """
         return vaf(self.u[self.used], self.response(params)[self.used])
 
-    def jacobian(self, params: Mapping[str, float] | Sequence[float] | np.ndarray,
+    def jacobian(self, params: Mapping[str, float] | Sequence[float] | np.ndarray | None,
                  names: Sequence[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Model output and its exact derivatives with respect to parameters.
 
         Parameters
         ----------
-        params : mapping of str to float, sequence of float or ndarray
+        params : mapping of str to float, sequence of float, ndarray or None
+            (None: the model's defaults)
             Values by name (free parameters not given take the model's
             defaults) or the free-parameter vector in ``model.parameter_names``
             order.

@@ -640,11 +640,11 @@ class Channel:
     delay: str
     gain: tuple[str, ...] = ()
     stages: tuple = ()
-    nonlinearity: object = None
+    nonlinearity: Nonlinearity | None = None
     lead: str | None = None
     sign: float = 1.0
     gain_const: float = 1.0
-    modulation: object = None
+    modulation: Modulation | None = None
     oversample: int = 1
 
     def __post_init__(self) -> None:
@@ -780,7 +780,7 @@ class PilotModel(SummaryHTML):
     parameters: tuple[Parameter, ...]
     omega_nm: str = "omega_nm"
     zeta_nm: str = "zeta_nm"
-    output: object = None
+    output: Nonlinearity | None = None
     fixed: Mapping[str, float] = field(default_factory=dict)
     name: str = "pilot model"
 

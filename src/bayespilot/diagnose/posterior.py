@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 from scipy.integrate import trapezoid
@@ -246,7 +246,7 @@ class SharedPosterior(_JSONSummary):
                 "settings": self.settings, "elapsed_seconds": self.elapsed}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "SharedPosterior":
+    def from_dict(cls, d: Mapping[str, Any]) -> "SharedPosterior":
         """The posterior a :meth:`to_dict` holds: the log density as written
         (``log_density``), or, in a file written before 2026-11-29, the log of its
         density (-inf where the density underflowed).
