@@ -2153,8 +2153,11 @@ def _likelihood_arguments(p: argparse.ArgumentParser, profiled: bool = False) ->
     """--likelihood, --ar, --ar-order and --oversample, as sample() and compare() take them (``profiled``:
     the command offers --ar profiled, which sample() has and the evidence has not)."""
     p.add_argument("--likelihood", choices=("eq4", "coloured"), default="eq4",
-                   help="'eq4': white output error (the paper's Eq. 4, default); 'coloured': "
-                        "AR output error (a prediction-error likelihood)")
+                   help="'eq4': white output error (the paper's Eq. 4, default; on "
+                        "closed-loop recordings its intervals are several times too narrow "
+                        "and its Bayes factors inflated); 'coloured': AR output error (a "
+                        "prediction-error likelihood: the calibrated one, docs/posteriors.md "
+                        "and docs/comparison.md)")
     if profiled:
         p.add_argument("--ar", choices=("profiled", "fixed", "sampled"), default="profiled",
                        help="'coloured' only: the AR model re-estimated at every parameter "

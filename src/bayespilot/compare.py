@@ -1354,6 +1354,7 @@ class Comparison(SummaryHTML):
               and guard.startswith("not applied") else []),
             *([f"  the model without threshold also holds {', '.join(also)} at 0: ln BF "
                f"weighs these thresholds and delta_abs together"] if also else []),
+            *([f"  {EQ4_COMPARISON_NOTE}"] if self.settings.get("likelihood") == "eq4" else []),
             f"  {self.elapsed:.1f} s"])
 
     def __str__(self) -> str:
@@ -1366,6 +1367,14 @@ class Comparison(SummaryHTML):
                 f"{_num(self.log_bayes_factor_err, '.2f')} -> {self.decision}"
                 f"{'' if n is None else f', N = {n}'}{_source(self.source)}>")
 
+
+#: What :meth:`Comparison.summary` says of a comparison under Eq. 4 (the default, the paper's
+#: likelihood): measured in docs/comparison.md, "Which likelihood".
+EQ4_COMPARISON_NOTE = (
+    "note: Eq. 4 treats the remnant, which is coloured, as white, and inflates ln BF on "
+    "closed-loop recordings: it can decide 'threshold' on recordings without one "
+    "(docs/comparison.md, 'Which likelihood'); decide with the coloured likelihood "
+    "(likelihood='coloured'; bayespilot compare --likelihood coloured)")
 
 #: The counts among :func:`information_criteria`'s entries (ints; every other entry is a float
 #: or, ``ml_*``, a dict of floats).

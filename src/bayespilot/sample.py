@@ -87,6 +87,14 @@ AR_MODES = ("fixed", "sampled", "profiled")
 # COLOURED_DISCARD (imported above, re-exported here): the cap of the coloured likelihood's
 # default discard, :func:`~bayespilot.likelihood.coloured_discard` (min(2 s, a quarter of
 # the record)); it lives in bayespilot.likelihood with the rule.
+#: What a posterior under Eq. 4 (the default, the paper's likelihood) says below its table:
+#: measured in docs/posteriors.md, "A held-out check".
+EQ4_POSTERIOR_NOTE = (
+    "note: Eq. 4 treats the remnant, which is coloured, as white: on closed-loop recordings "
+    "these intervals are several times too narrow (docs/posteriors.md, 'A held-out check'); "
+    "the coloured likelihood gives calibrated ones (likelihood='coloured'; bayespilot sample "
+    "--likelihood coloured)")
+
 #: Default prior on each partial autocorrelation: uniform(-PACF_BOUND, PACF_BOUND).
 PACF_BOUND = 0.99
 #: Half-width of the initial ball of walkers, as a fraction of each parameter's bound range.
@@ -434,6 +442,8 @@ class Posterior(SummaryHTML):
             lines.append(f"{n:<10} {d['mean']:>10.4g} {d['median']:>10.4g} "
                          f"[{d['hdi_90'][0]:>10.4g},{d['hdi_90'][1]:>10.4g}] "
                          f"{d['r_hat']:>6.3f} {d['ess_bulk']:>8.0f} {self.tau[n]:>7.1f}")
+        if self.settings.get("likelihood") == "eq4":
+            lines.append(EQ4_POSTERIOR_NOTE)
         return "\n".join(lines)
 
 
