@@ -1084,22 +1084,33 @@ def _os_reason(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
 
+#: Bytes :func:`_check_writable` writes beside an output before the computation: one block of
+#: a file system, which a full disk refuses (an empty file it accepted, and the computation
+#: ran to fail at the end).  A disk with less free than the output needs still passes.
+_PROBE_BYTES = 4096
+
+
 def _check_writable(path: str | Path, what: str) -> None:
     """Refuse, before a long computation, an output file that could not be written (its
-    result would be lost): the folder is created and a file written beside it and removed."""
+    result would be lost): the folder is created and :data:`_PROBE_BYTES` written beside it
+    and removed (also when the write fails)."""
     from ._files import temporary_sibling
 
     p = Path(path)
     # (Path drops a trailing slash: 'dir/' not yet there wrote a file named 'dir')
     if p.is_dir() or str(path).endswith(("/", os.sep)):
         raise UsageError(f"{path}: is a folder; give a file name for the {what}")
+    probe = None
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
         probe = temporary_sibling(p)
-        probe.write_bytes(b"")
-        probe.unlink()
+        probe.write_bytes(b"\0" * _PROBE_BYTES)
     except OSError as exc:
         raise CommandFailed(f"{p}: cannot write the {what} ({_os_reason(exc)})") from None
+    finally:
+        if probe is not None:
+            with contextlib.suppress(OSError):
+                probe.unlink()
 
 
 def _recording_files(spec: str) -> list[tuple[str, Path]]:
