@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 
 import numpy as np
@@ -219,6 +220,29 @@ def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, 
     d = json.loads(out.read_text())["chosen"]["posterior"]
     assert d["params"]["omega_w"]["median"] == pytest.approx(
         float(np.median(back.draws("omega_w"))))
+
+    # a posterior that cannot be written (a full disk) fails the command at the end: the
+    # diagnosis is still printed and its --json written (both were lost with it); the
+    # diagnosis is the one above, read back, and the chain a stub
+    from bayespilot.diagnose import DiagnosisResult
+
+    class Unwritable:
+        def to_netcdf(self, path):
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    done = DiagnosisResult.from_json(out)
+    monkeypatch.setattr(dg, "diagnose", lambda *a, **k: done)
+    monkeypatch.setattr(dg, "sample_chosen", lambda *a, **k: Unwritable())
+    out2 = tmp_path / "d2.json"
+    code, stdout, err = _run(capsys, "diagnose", stem, "--bootstrap", "0", "--posterior",
+                             tmp_path / "full.nc", "--json", out2)
+    assert code == 1
+    assert "decision: motion-washout" in stdout
+    assert err.splitlines()[-1] == (f"bayespilot: error: {tmp_path / 'full.nc'}: cannot write "
+                                    f"the posterior (No space left on device); the diagnosis "
+                                    f"above was printed and its other files written")
+    assert json.loads(out2.read_text())["physics"] == "motion-washout"
+    assert not (tmp_path / "full.nc").exists()
 
 
 def test_diagnose_bayes_factor_option(rec_stem, tmp_path, capsys, monkeypatch):

@@ -1607,6 +1607,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
                                       noise_passes=args.noise_passes, progress=_progress(args))
     except ValueError as exc:  # e.g. a recording too short for the analysis
         raise UsageError(str(exc)) from None
+    # (a posterior that cannot be written fails the command at the end: the diagnosis is
+    # still printed and its --json and --report written; it was lost with the posterior)
+    unwritten: str | None = None
     if args.posterior is not None:
         if res.chosen is None or get_extension(res.physics).likelihood != "gls":
             # asked for a file and none is written: a warning, even with --quiet
@@ -1620,13 +1623,13 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
 
             try:
                 shared_posterior(res, recs, progress=_progress(args))
-                write_text_atomic(args.posterior, dumps(res.posterior.to_dict()))
             except ValueError as exc:
                 raise CommandFailed(str(exc)) from None
+            try:
+                write_text_atomic(args.posterior, dumps(res.posterior.to_dict()))
+                _say(args, f"wrote {args.posterior}")
             except OSError as exc:
-                raise CommandFailed(f"{args.posterior}: cannot write the posterior "
-                                    f"({_os_reason(exc)})") from None
-            _say(args, f"wrote {args.posterior}")
+                unwritten = f"{args.posterior}: cannot write the posterior ({_os_reason(exc)})"
         else:
             _say(args, f"sampling the posterior of the model with {res.physics} (coloured "
                        "likelihood, started at its fit) ...")
@@ -1639,10 +1642,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             _print_warnings(w for w in caught if _said_to_user(w))
             try:
                 post.to_netcdf(args.posterior)
+                _say(args, f"wrote {args.posterior}")
             except OSError as exc:
-                raise CommandFailed(f"{args.posterior}: cannot write the posterior "
-                                    f"({_os_reason(exc)})") from None
-            _say(args, f"wrote {args.posterior}")
+                unwritten = f"{args.posterior}: cannot write the posterior ({_os_reason(exc)})"
     if args.bayes_factor:
         _weigh(args, res, recs[0])
     print(res.summary())
@@ -1659,6 +1661,9 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
             raise CommandFailed(f"{args.report}: cannot write the report "
                                 f"({_os_reason(exc)})") from None
         _say(args, f"wrote {paths['html']} (with {', '.join(p.name for k, p in paths.items() if k not in ('html', 'manifest'))})")
+    if unwritten:
+        raise CommandFailed(f"{unwritten}; the diagnosis above was printed"
+                            f"{' and its other files written' if args.json or args.report else ''}")
     return EXIT_OK
 
 

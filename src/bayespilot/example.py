@@ -287,10 +287,10 @@ def run_example(out: str | Path = "bayespilot-demo", *, seed: int | None = 0,
     write_text_atomic(out / "pooled_comparison.json", dumps(pooled.to_dict()))
     elapsed = time.perf_counter() - t_start
     report = out / "report.md"
-    report.write_text(_report(rows, pooled, truth, task, gains, elapsed, likelihood, seed,
-                              coloured_discard(rec),  # (every run is of one duration)
-                              _shown(figure["formats"])),
-                      encoding="utf-8")
+    # (atomic: on a full disk it was left empty, the earlier report lost)
+    write_text_atomic(report, _report(rows, pooled, truth, task, gains, elapsed, likelihood,
+                                      seed, coloured_discard(rec),  # (one duration for all)
+                                      _shown(figure["formats"])))
     say(f"wrote {report} ({elapsed:.0f} s)")
     plt.close("all")
     if unconverged:
