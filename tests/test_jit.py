@@ -59,3 +59,37 @@ def test_the_package_kernels_carry_the_folder_keyed_cache():
     assert isinstance(_blocks.stage_tf._cache, _FolderCache)
     with pytest.raises(TypeError, match="no signature"):
         njit("f8(f8)")
+
+
+def test_a_cache_that_cannot_be_saved_is_said_once_and_the_work_goes_on(monkeypatch):
+    """A full disk under numba's cache (numba raised OSError from its save, and every command
+    died at its first compile): said once per process, as a RuntimeWarning naming the
+    folder, and the compile's result kept."""
+    import errno
+    import warnings
+
+    from numba.core.caching import FunctionCache
+
+    import bayespilot._jit as J
+
+    def add_one(x):
+        return x + 1
+
+    cache = J._FolderCache(add_one)
+    saved = []
+
+    def full(self, sig, data):
+        saved.append(sig)
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(FunctionCache, "save_overload", full)
+    monkeypatch.setattr(J, "_unsaved_said", False)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert cache.save_overload("sig1", None) is None
+        assert cache.save_overload("sig2", None) is None
+    assert saved == ["sig1", "sig2"]  # (numba's own save was tried each time)
+    assert [w.category for w in caught] == [RuntimeWarning]
+    assert str(caught[0].message).startswith(
+        f"bayespilot: cannot save numba's compiled kernels in {cache._cache_path} (No space "
+        "left on device); going on without caching them")

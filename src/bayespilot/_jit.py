@@ -84,6 +84,31 @@ class _FolderCache(FunctionCache):
         cache_file = self._cache_file
         cache_file._source_stamp = (cache_file._source_stamp, digest)
 
+    def save_overload(self, sig, data):
+        """numba's save of a compiled kernel, a failure to write it (a full disk, a quota)
+        said once per process and the computation going on: the cache only spares the next
+        process a compile, and every command died at its first compile on a full disk (in a
+        batch, every recording failed in seconds, named as an OSError of no file)."""
+        try:
+            super().save_overload(sig, data)
+        except OSError as exc:
+            _say_unsaved(getattr(self, "_cache_path", "?"), exc)
+
+
+# Whether :func:`_say_unsaved` has spoken in this process (60 kernels failed to save in one fit).
+_unsaved_said = False
+
+
+def _say_unsaved(where: str, exc: OSError) -> None:
+    global _unsaved_said
+    if _unsaved_said:
+        return
+    _unsaved_said = True
+    warnings.warn(f"bayespilot: cannot save numba's compiled kernels in {where} "
+                  f"({exc.strerror or exc}); going on without caching them (the next process "
+                  f"compiles them again). Free space there, or set NUMBA_CACHE_DIR to a folder "
+                  f"with room.", RuntimeWarning, stacklevel=2)
+
 
 def _with_folder_cache(dispatcher):
     cache = getattr(dispatcher, "_cache", None)
