@@ -44,3 +44,27 @@ def test_an_eq4_comparison_says_its_bayes_factor_is_inflated(rec):
     coloured = dataclasses.replace(c, settings=dict(c.settings, likelihood="coloured"))
     assert EQ4_COMPARISON_NOTE not in coloured.summary()
     assert coloured.summary().splitlines()[1:] == lines[1:-2] + lines[-1:]
+
+
+def test_a_pool_of_eq4_comparisons_says_its_sum_is_inflated():
+    """pool() sums the recordings' ln BF: under Eq. 4 the sum of inflated ones decided
+    'threshold' on the held-out recordings without a threshold (+15.6 over 20), so its
+    summary says so too; the likelihood is kept, and read back from a file."""
+    from bayespilot.compare import PooledComparison, pool
+
+    def made(lik, v):
+        d = {"log_bayes_factor": v, "log_bayes_factor_err": 0.5}
+        return d if lik is None else dict(d, settings={"likelihood": lik})
+
+    eq4 = pool([made("eq4", v) for v in (5.0, 7.0, 6.0)])
+    assert eq4.likelihood == "eq4" and eq4.decision == "threshold"
+    assert eq4.summary().splitlines()[1] == f"  {EQ4_COMPARISON_NOTE}"
+    assert PooledComparison.from_dict(eq4.to_dict()).likelihood == "eq4"
+    coloured = pool([made("coloured", v) for v in (5.0, 7.0, 6.0)])
+    assert coloured.likelihood == "coloured" and "\n" not in coloured.summary()
+    mixed = pool([made("coloured", 5.0), made("eq4", 7.0)])
+    assert mixed.likelihood == "mixed" and EQ4_COMPARISON_NOTE in mixed.summary()
+    bare = pool([made(None, 5.0), made(None, 7.0)])  # (hand-made, or files of before)
+    assert bare.likelihood == "" and "\n" not in bare.summary()
+    old = {k: v for k, v in eq4.to_dict().items() if k != "likelihood"}
+    assert PooledComparison.from_dict(old).likelihood == ""

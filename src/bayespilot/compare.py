@@ -2060,6 +2060,11 @@ class PooledComparison(SummaryHTML):
         The sum the decision is made on: over the recordings that identify
         the threshold (the same as ``log_bayes_factor`` when all do; NaN when
         none does, and in files written before).
+    likelihood : str
+        The pooled comparisons' likelihood (``settings["likelihood"]``):
+        ``"eq4"`` or ``"coloured"``, ``"mixed"`` when they differ, ``""``
+        when none records it (and in files written before).  Under Eq. 4 the
+        summary says that its ln BF, and so their sum, is inflated.
     """
 
     n: int
@@ -2077,6 +2082,7 @@ class PooledComparison(SummaryHTML):
     n_unidentified: int = 0
     decided_log_bayes_factor: float = math.nan
     decided_log_bayes_factor_err: float = math.nan
+    likelihood: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         """Every attribute by name (:func:`dataclasses.asdict`)."""
@@ -2160,7 +2166,9 @@ class PooledComparison(SummaryHTML):
                 f"{_num(self.log_bayes_factor_err, '.2f')} -> {self.decision}>")
 
     def summary(self) -> str:
-        """One line for people: the sum ln BF and decision, the per-recording counts, the tests."""
+        """One line for people: the sum ln BF and decision, the per-recording counts, the tests;
+        under Eq. 4 a second, :data:`EQ4_COMPARISON_NOTE` (a sum of inflated ln BFs decided
+        'threshold' on 20 held-out recordings without one: docs/comparison.md)."""
         counts = ", ".join(f"{k} {self.decisions.get(k, 0)}" for k in DECISIONS)
         lbf, err = self.log_bayes_factor, self.log_bayes_factor_err
         head = f"sum ln BF = {lbf:+.2f} +- {err:.2f} "
@@ -2173,7 +2181,8 @@ class PooledComparison(SummaryHTML):
                 f"recording{'' if self.n == 1 else 's'}, " + head
                 + _verdict(lbf, err, self.decision, self.decision_note,
                            identified=self.n_unidentified < self.n)
-                + f"; per recording: {counts}; " + self._tests())
+                + f"; per recording: {counts}; " + self._tests()
+                + (f"\n  {EQ4_COMPARISON_NOTE}" if self.likelihood in ("eq4", "mixed") else ""))
 
     def _tests(self) -> str:
         """The paired tests for :meth:`summary`, or why there are none."""
@@ -2235,6 +2244,7 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
     if isinstance(results, (Comparison, Mapping)) or not len(results):
         raise ValueError("results must be a non-empty sequence of comparisons")
     lbf, err, dec, on_plateau, lost_mode, unidentified = [], [], [], [], [], []
+    likelihoods: set[str] = set()
     first_of: dict[Any, int] = {}  # a Comparison (by identity) or a recording's digest: index
     tests: list[tuple[dict[str, Any], int]] = []  # each recorded test, with its index
     for i, r in enumerate(results):
@@ -2247,6 +2257,8 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
         lbf.append(float(d["log_bayes_factor"]))
         err.append(float(d.get("log_bayes_factor_err", 0.0)))
         settings = d.get("settings") or {}
+        if settings.get("likelihood"):
+            likelihoods.add(str(settings["likelihood"]))
         unidentified.append(settings.get("threshold_identified") is False)
         dec.append(d.get("decision") or ("inconclusive" if unidentified[-1]
                                          else decide(lbf[-1], err[-1])))
@@ -2294,8 +2306,11 @@ def pool(results: Sequence[Comparison | Mapping[str, Any]], *, label: str = "") 
         decision, note = "inconclusive", (f"in {lost_in} of {n_in} recordings nested "
                                           "sampling lost the main mode; the others do not decide "
                                           "for 'none'")
+    likelihood = (likelihoods.pop() if len(likelihoods) == 1 else
+                  "mixed" if likelihoods else "")
     return PooledComparison(int(x.size), total, total_err, decision, counts,
-                            float(x.mean()), t, p, w, wp, label, note, n_out, *decided)
+                            float(x.mean()), t, p, w, wp, label, note, n_out, *decided,
+                            likelihood=likelihood)
 
 
 def _result_name(results: Sequence[Any], k: int) -> str:
