@@ -14,13 +14,16 @@ cells).  Everything else is the package's default.
 
 * ``--posteriors LIK``: ``bayespilot.sample(rec, seed=r)`` with ``likelihood="eq4"`` (LIK
   ``eq4``) or ``"coloured"`` (LIK ``profiled``: the AR model profiled, ``sample``'s default
-  ``ar``); recording seed 7,000,000 + 1000 case + r.  The report counts how often the 90 % and
-  50 % HDIs (``Posterior.credible_interval``) and the central 90 % interval hold the truth,
-  and the spread of the posterior medians over the runs against the mean posterior sd (1 is
-  honest; above 1 the intervals are too narrow).
+  ``ar``); recording seed 7,000,000 + 1000 case + r, case = 100 K_theta x 10 + 10 F_n
+  (1002 for K_theta 1, F_n 0.2: seeds 8,002,000 + r).  The report counts how often the 90 %
+  and 50 % HDIs (``Posterior.credible_interval``) and the central 90 % interval hold the
+  truth, the spread of the posterior medians over the runs against the mean posterior sd (1
+  is honest; above 1 the intervals are too narrow), and the same for the maximum-likelihood
+  fit the chain starts from (``settings["init_point"]``: the prediction-error fit under the
+  coloured likelihood, the Eq. 4 fit under Eq. 4).
 * ``--comparisons LIK``: ``bayespilot.compare.compare(rec, seed=r)`` with ``likelihood=LIK``
   on recordings with delta_abs = ``--delta`` (seed 8,000,000 (+ 500 with a threshold) +
-  1000 case + r), without the Savage-Dickey check (it does not enter the decision); the
+  1000 case + r: 9,002,000 + r without a threshold, 9,002,500 + r with), without the Savage-Dickey check (it does not enter the decision); the
   report counts the decisions.
 
 One JSON per run in ``analyses/results/heldout_check/raw/`` (resumable: a run on disk is not
@@ -47,6 +50,13 @@ NAMES = ("K_v", "T_vl", "tau_v", "K_m", "tau_m", "omega_nm", "zeta_nm", "delta_a
 
 
 def _case(task: str, kt: float, fn: float) -> int:
+    """The cell's number in the seeds: 100 K_theta x 10 + 10 F_n (+ 5000 for FT); one per cell
+    for K_theta a multiple of 0.01 and F_n of 0.1 below 1, which is checked (F_n 0.15 and 0.2
+    would share one)."""
+    if abs(kt * 100 - round(kt * 100)) > 1e-9 or abs(fn * 10 - round(fn * 10)) > 1e-9 \
+            or not 0 <= fn < 1:
+        raise SystemExit(f"--kt {kt} --fn {fn}: the seeds take K_theta in steps of 0.01 and "
+                         "F_n in steps of 0.1 below 1")
     return int(round(kt * 100)) * 10 + int(round(fn * 10)) + (0 if task == "FD" else 5000)
 
 
@@ -72,7 +82,8 @@ def run_posteriors(lik: str, task: str, kt: float, fn: float, start: int, n: int
                                      likelihood="eq4" if lik == "eq4" else "coloured")
         res = {"tag": tag, "r": r, "seed": seed, "truth": truth, "lik": lik,
                "elapsed": time.perf_counter() - t0, "converged": bool(post.converged),
-               "n_steps": post.settings.get("n_steps"), "summary": post.summary(), "params": {}}
+               "n_steps": post.settings.get("n_steps"), "summary": post.summary(),
+               "init_point": post.settings.get("init_point"), "params": {}}
         for name in post.parameter_names:
             x = np.asarray(post.idata.posterior[name].values, dtype=float).ravel()
             res["params"][name] = {
@@ -133,7 +144,8 @@ def report() -> None:
         lo, hi = (int(stats.binom.ppf(q, n, 0.9)) for q in (0.025, 0.975))
         print(f"\n{tag}: {n} runs, converged {sum(r['converged'] for r in rows)}; 90 % HDIs "
               f"should hold the truth in {0.9 * n:.1f} (95 % range {lo}-{hi})")
-        print(f"  {'param':9s} {'HDI90':>6s} {'HDI50':>6s} {'cen90':>6s} {'sd(med)/psd':>12s}")
+        print(f"  {'param':9s} {'HDI90':>6s} {'HDI50':>6s} {'cen90':>6s} {'sd(med)/psd':>12s} "
+              f"{'sd(fit)/psd':>12s}")
         for p in NAMES:
             t = np.array([r["truth"][p] for r in rows])
             h90 = np.array([r["params"][p]["hdi90"] for r in rows])
@@ -144,7 +156,10 @@ def report() -> None:
             k50 = int(np.sum((h50[:, 0] <= t) & (t <= h50[:, 1])))
             c90 = int(np.sum((q[:, 0] <= t) & (t <= q[:, 4])))
             ratio = q[:, 2].std(ddof=1) / psd.mean() if n > 1 else math.nan
-            print(f"  {p:9s} {k90:3d}/{n:<2d} {k50:3d}/{n:<2d} {c90:3d}/{n:<2d} {ratio:12.2f}")
+            fit = np.array([(r.get("init_point") or {}).get(p, math.nan) for r in rows])
+            fit_ratio = np.std(fit, ddof=1) / psd.mean() if n > 1 else math.nan
+            print(f"  {p:9s} {k90:3d}/{n:<2d} {k50:3d}/{n:<2d} {c90:3d}/{n:<2d} {ratio:12.2f} "
+                  f"{fit_ratio:12.2f}")
 
 
 def main() -> None:

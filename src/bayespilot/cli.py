@@ -2900,8 +2900,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "median and 90%% HDI in summary.csv")
     p.add_argument("--likelihood", choices=("eq4", "coloured"), default=None,
                    help="with --posterior: 'eq4': white output error (the paper's Eq. 4, "
-                        "default); 'coloured': AR output error (a prediction-error "
-                        "likelihood, its AR model profiled), as 'bayespilot sample' takes it")
+                        "default; its intervals several times too narrow on closed-loop "
+                        "recordings); 'coloured': AR output error (a prediction-error "
+                        "likelihood, its AR model profiled: the calibrated one), as "
+                        "'bayespilot sample' takes it")
     p.add_argument("--max-steps", type=_count, default=None, metavar="N",
                    help="with --posterior: stop each chain after N steps even if not "
                         "converged (default 20000, as 'bayespilot sample')")

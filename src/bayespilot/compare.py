@@ -427,7 +427,8 @@ DYNESTY_BOUNDS = ("none", "single", "multi", "balls", "cubes")
 
 
 def nested_evidence(log_likelihood: Callable[[np.ndarray], float],
-                    lower: Sequence[float] | np.ndarray, upper: Sequence[float] | np.ndarray, *, names: Sequence[str] | None = None,
+                    lower: Sequence[float] | np.ndarray, upper: Sequence[float] | np.ndarray,
+                    *, names: Sequence[str] | None = None,
                     nlive: int = 200, dlogz: float = 0.5, sample: str = "rwalk",
                     bound: str = "multi", seed: int | None = None,
                     progress: bool = False) -> Evidence:
