@@ -370,6 +370,13 @@ def test_diagnose_batch_formats_dpi_and_no_title(lone, tmp_path, capsys, monkeyp
     assert "s9-run1" in err and not (report / "candidates.pdf").exists()
     assert (out / "summary.pdf").is_file()
     assert not (out / "summary.png").exists() and not (out / "summary.svg").exists()
+    # the same options twice (the defaults: the command's --dpi is a number, the batch's
+    # default None, and dpi does not reach a report): nothing said of the reports
+    for _ in range(2):
+        code, stdout, err = _run(capsys, "diagnose-batch", lone, "--out", tmp_path / "again",
+                                 "--bootstrap", "0", "--reports")
+        assert code == 0, err
+    assert "left as they were drawn" not in err and "except for" not in stdout
 
 
 def test_diagnose_batch_refuses_bad_figure_options_before_running(lone, tmp_path):

@@ -687,13 +687,16 @@ def _write_summaries(out: Path, settings: Mapping[str, Any],
     call's keys and digests, :func:`_results`; ``figure``: title, formats and dpi,
     :func:`bayespilot._figstyle.figure_options`, default a titled PNG at
     :data:`~bayespilot.diagnose.report.FIGURE_DPI`); a summary figure of another format, or
-    of no result now, is removed (it showed other results)."""
+    of no result now, is removed (it showed other results).  The earlier figure is removed
+    before the tables are written, the new one drawn after them: a write that fails (a full
+    disk) never leaves a figure of other results beside new tables."""
     from ._files import write_csv_atomic
-    from .diagnose.report import _write_summary_figure
+    from .diagnose.report import _remove_summary_figures, _write_summary_figure
 
     found = _results(out, settings, current)
     rows = [_summary_row(found[k]) for k in sorted(found)]
     conditions = _condition_rows([found[k] for k in sorted(found) if "fit_threshold" in found[k]])
+    _remove_summary_figures(out)
     write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS, rows)
     write_csv_atomic(out / "conditions.csv", CONDITION_FIELDS, conditions)
     figure = {"title": True, "formats": ("png",), "dpi": None, **(figure or {})}
@@ -827,8 +830,9 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
     CampaignError
         The cluster cannot be reached or started or is lost during the run (what
         finished is saved), ``out_dir`` cannot be written in (a result or posterior
-        file among them), a worker lacks bayespilot or has another version of it, or
-        (``posterior``) arviz cannot be imported here.
+        file among them; the summary tables and figure: every result is saved, and the
+        same call again writes them), a worker lacks bayespilot or has another version of
+        it, or (``posterior``) arviz cannot be imported here.
     TypeError
         A ``scheduler`` that is not an address (str), a ``distributed.Client`` or a
         ``distributed.deploy.Cluster``; a ``title`` that is not True or False.
@@ -901,7 +905,10 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
     out = Path(out_dir)
     try:  # (a folder that cannot be written in: said now, not after the first result)
         out.mkdir(parents=True, exist_ok=True)
-        tempfile.TemporaryFile(dir=out).close()
+        # one byte written, not an empty file: a full disk still makes an empty one
+        with tempfile.TemporaryFile(dir=out) as probe:
+            probe.write(b"\0")
+            probe.flush()
     except OSError as exc:
         raise C.CampaignError(f"{out}: cannot write in the output folder "
                               f"({exc.strerror or exc})") from None
@@ -963,7 +970,13 @@ def fit_batch(paths: Sequence[str | Path], out_dir: str | Path, *, method: str =
             _say_warned(out, [t.key for t in pending])
         raise
     _say_warned(out, [t.key for t in pending])
-    _write_summaries(out, _batch_settings(next(iter(headers.values()))),
-                     {t.key: digests[t.paths[0]] for t in tasks}, figure)
+    try:
+        _write_summaries(out, _batch_settings(next(iter(headers.values()))),
+                         {t.key: digests[t.paths[0]] for t in tasks}, figure)
+    except OSError as exc:  # (a full disk: each recording's result is saved)
+        reason = " ".join(str(exc.strerror or exc).split())
+        raise C.CampaignError(f"{out}: cannot write the summary tables and figure ({reason}); "
+                              f"each recording's result is saved there: run the same "
+                              f"command again to write them") from None
     return C.CampaignSummary(len(tasks), completed, len(done), len(errors), errors, out,
                              time.perf_counter() - t0, "recordings")

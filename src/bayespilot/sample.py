@@ -362,6 +362,18 @@ class Posterior(SummaryHTML):
         -------
         Path
             ``path``.
+
+        Raises
+        ------
+        OSError
+            If the file cannot be written (a full disk, ``path`` a folder); the old file is
+            kept and no temporary file is left.
+
+        Notes
+        -----
+        The file is built in memory (:func:`_netcdf_image`) and its bytes written with
+        :func:`~bayespilot._files.replacing`: HDF5 writing straight to a full disk failed
+        part-way (h5py RuntimeErrors, multi-line messages, a segmentation fault).
         """
         from ._files import replacing
 
@@ -373,8 +385,9 @@ class Posterior(SummaryHTML):
         idata = az.InferenceData(**{g: getattr(self.idata, g).copy(deep=False)
                                     for g in self.idata.groups()})
         _set_meta_attrs(idata, meta)
+        image = _netcdf_image(idata)
         with replacing(path) as tmp:  # the old file is kept if the write fails
-            idata.to_netcdf(str(tmp))
+            tmp.write_bytes(image)
         return Path(path)
 
     @classmethod
@@ -806,6 +819,54 @@ def _set_meta_attrs(idata, meta: Mapping[str, Any]) -> None:
         for k in stale - set(new) - {_files.VERSION_KEY}:
             group.attrs.pop(k, None)
         group.attrs.update(new)
+
+
+def _netcdf_image(idata) -> bytes:
+    """``idata`` as the bytes of a netCDF-4 file, built in memory (for
+    :meth:`Posterior.to_netcdf`).
+
+    The file ``InferenceData.to_netcdf`` writes (engine h5netcdf): its attributes, then each
+    group in order, zlib on the variables of a numeric dtype; the same groups, variables,
+    attributes, dtypes, chunks and filters, and the same bytes run to run.  Only the bytes
+    are then written to disk, by plain Python: HDF5 writing a file itself failed part-way
+    on a full disk (h5py RuntimeErrors, messages of several lines, a segmentation fault
+    when the file was closed) and left its temporary file.
+
+    The write runs under dask's synchronous scheduler: xarray locks the file it writes
+    with a lock of the current scheduler, which under a dask.distributed client (fit-batch
+    writes each posterior in the client's process) is the cluster's, named by the target,
+    and the cluster cannot name an in-memory file ("RuntimeError: Semaphore or Lock ... not
+    known"); this process's own lock is the right one for its own buffer.
+    """
+    import io
+
+    import dask
+    import xarray as xr
+
+    def compressible(dtype) -> bool:  # (arviz's rule for its default compression)
+        if dtype.kind == "V":
+            return all(compressible(d) for d, *_ in dtype.fields.values())
+        return dtype.kind in "biufcS"
+
+    buf = io.BytesIO()
+    mode = "w"
+    attrs = dict(getattr(idata, "_attrs", None) or {})
+    with dask.config.set(scheduler="synchronous"):
+        if attrs:
+            xr.Dataset(attrs=attrs).to_netcdf(buf, mode=mode, engine="h5netcdf", group="/")
+            mode = "a"
+        for name in idata.groups():
+            data = getattr(idata, name)
+            encoding = {v: {"zlib": True} for v, x in data.variables.items()
+                        if compressible(x.dtype)}
+            data.to_netcdf(buf, mode=mode, group=f"/{name}", engine="h5netcdf",
+                           encoding=encoding)
+            mode = "a"
+    if mode == "w":  # no groups, no attributes: an empty netCDF file, as arviz writes
+        import h5netcdf
+
+        h5netcdf.File(buf, mode="w").close()
+    return buf.getvalue()
 
 
 def _to_idata(sampler, names, tau: np.ndarray, meta: dict,

@@ -1013,7 +1013,8 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     CampaignError
         The cluster cannot be reached or started or is lost during the run
         (what finished is saved), ``out_dir`` cannot be written in (checked
-        before computing) or a result cannot be written; a worker of the
+        before computing) or a result or the summary cannot be written (every
+        diagnosis is saved; the same call again writes the summary); a worker of the
         scheduler, Client or Cluster given lacks bayespilot or has another
         version of it (the workers are named; nothing is run), or a Client
         given is closed.
@@ -1137,8 +1138,9 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
     try:
         out.mkdir(parents=True, exist_ok=True)
         # a folder that exists but cannot be written in: said now, not after the first result
+        # (one byte written, not an empty file: a full disk still makes an empty one)
         with replacing(out / ".bayespilot-write-check") as probe:
-            probe.write_text("")
+            probe.write_bytes(b"\0")
         (out / ".bayespilot-write-check").unlink()
     except OSError as exc:
         raise C.CampaignError(f"{out}: cannot write in the output folder "
@@ -1187,9 +1189,11 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
         skipped += 1
         if reports and not (out / t.key / "report.html").is_file():
             unreported.append(t.key)
-        elif reports and figure != _FIGURE_DEFAULTS:
+        elif reports and any(figure[k] != _FIGURE_DEFAULTS[k] for k in ("title", "formats")):
+            # (dpi is the summary figure's: a report is drawn at its own, so the command's
+            # default --dpi, which is not None, said every report was drawn otherwise)
             as_drawn.append(t.key)
-    if as_drawn:  # (--format, --no-title, --dpi reach the reports this call draws only)
+    if as_drawn:  # (--format, --no-title reach the reports this call draws only)
         n = len(as_drawn)
         warnings.warn(f"{n} report(s) of diagnoses finished before are left as they were "
                       f"drawn, not in the figure options asked for now ({', '.join(as_drawn[:5])}"
@@ -1266,7 +1270,13 @@ def diagnose_batch(paths: Sequence[str | Path], out_dir: str | Path, *, pool: bo
                       f"settings ({', '.join(other[:5])}{' ...' if n > 5 else ''}), left out "
                       f"of summary.csv: it covers the diagnoses made with this batch's "
                       f"settings", SummaryScopeWarning, stacklevel=2)
-    write_summary(sorted([*tasks, *earlier], key=lambda t: t.key), out, **figure)
+    try:
+        write_summary(sorted([*tasks, *earlier], key=lambda t: t.key), out, **figure)
+    except OSError as exc:  # (a full disk: each diagnosis is saved)
+        reason = " ".join(str(exc.strerror or exc).split())
+        raise CampaignError(f"{out}: cannot write the summary table and figure ({reason}); "
+                            f"each diagnosis is saved there: run the same command again to "
+                            f"write them") from None
     return C.CampaignSummary(len(tasks), completed, skipped, len(errors), errors, out,
                              time.perf_counter() - t0, "diagnoses")
 
@@ -1435,11 +1445,16 @@ def write_summary(tasks: Sequence[DiagnoseTask], out_dir: str | Path, *, title: 
     finished, ``out_dir/summary.<format>`` for each of ``formats`` (default PNG,
     :func:`~bayespilot.diagnose.report.plot_batch` with ``title``, at ``dpi``, default
     :data:`~bayespilot.diagnose.report.FIGURE_DPI`; beyond a page's diagnoses the figure
-    grows so that every one is named, :func:`_summary_figsize`); returns the CSV's path."""
-    from .report import _write_summary_figure, plot_batch
+    grows so that every one is named, :func:`_summary_figsize`); returns the CSV's path.
+
+    The earlier figure is removed before the table is written, the new one drawn after it:
+    a write that fails (a full disk: an OSError) never leaves a figure of other diagnoses
+    beside a new table."""
+    from .report import _remove_summary_figures, _write_summary_figure, plot_batch
 
     out = Path(out_dir)
     found = _diagnoses(tasks, out)
+    _remove_summary_figures(out)
     path = write_csv_atomic(out / "summary.csv", SUMMARY_FIELDS,
                             batch_summary_rows(tasks, out, found))
     done = [(key, d) for key, d in found.items() if d is not None]

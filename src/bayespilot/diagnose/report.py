@@ -22,8 +22,10 @@ import hashlib
 import html
 import json
 import math
+import os
+from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -1352,6 +1354,16 @@ def _write_manifest(path: Path, files: Mapping[str, str]) -> Path:
                                           "files": dict(sorted(files.items()))}))
 
 
+def _remove_summary_figures(out: Path) -> None:
+    """Remove a batch's ``out/summary.<format>`` (each of :data:`FORMATS`), before its
+    tables are rewritten: a write that then fails (a full disk) leaves tables without a
+    figure, never beside one of other results (:func:`_write_summary_figure` writes the
+    new one after the tables)."""
+    for fmt in FORMATS:
+        with suppress(FileNotFoundError):
+            (out / f"summary.{fmt}").unlink()
+
+
 def _write_summary_figure(draw: Any, out: Path, formats: Sequence[str],
                           dpi: int | None = None) -> None:
     """A batch's ``out/summary.<format>`` for each of ``formats`` (diagnose-batch's and
@@ -1466,6 +1478,53 @@ _STYLE = ("body{font-family:sans-serif;max-width:1000px;margin:auto}"
           "font-size:90%}figcaption{font-size:85%;color:#444}")
 
 
+#: The files of a report that describe one diagnosis as a whole (the page and its JSON):
+#: removed when a report fails part-way (:func:`_whole_report`).
+_REPORT_WHOLE = ("report.html", "diagnosis.json")
+
+
+def _folder_state(out: Path) -> dict[str, tuple[int, int]]:
+    """Each file in ``out`` (name -> inode, mtime in ns): an atomic write changes its entry
+    (a new inode), a failed one leaves none behind."""
+    try:
+        with os.scandir(out) as entries:
+            return {e.name: (e.inode(), e.stat(follow_symlinks=False).st_mtime_ns)
+                    for e in entries}
+    except OSError:
+        return {}
+
+
+@contextmanager
+def _whole_report(out: Path) -> Iterator[set[str]]:
+    """Within: write a report's files in ``out``, adding the name of each of
+    :data:`_REPORT_WHOLE` written to the yielded set.
+
+    A failure part-way (a full disk, an interrupt, a figure that cannot be drawn) after a
+    file in ``out`` changed leaves the folder mixed: new figures beside the page and
+    ``diagnosis.json`` of the earlier report.  So the earlier ``report.html`` and
+    ``diagnosis.json`` (those not written by this report) are removed, and an OSError says
+    that the report in ``out`` is incomplete (one line; its kind and errno kept).  A failure
+    before anything changed leaves the earlier report whole, and the exception as it was.
+    """
+    before = _folder_state(out)
+    written: set[str] = set()
+    try:
+        yield written
+    except BaseException as exc:
+        if _folder_state(out) == before:  # (nothing written: the earlier report is whole)
+            raise
+        for name in _REPORT_WHOLE:
+            if name not in written:
+                with suppress(OSError):
+                    (out / name).unlink()
+        if not isinstance(exc, OSError):
+            raise
+        reason = " ".join(str(exc.strerror or exc).split())
+        raise OSError(exc.errno, f"{reason}; the report in {out} is incomplete, without "
+                                 f"report.html: run again once it can be written",
+                      exc.filename) from exc
+
+
 def write_report(result: DiagnosisResult, directory: str | Path, *, recording: Any = None,
                  formats: Sequence[str] = ("png",), title: bool = True) -> dict[str, Path]:
     """Write the figures, ``report.html`` and ``diagnosis.json`` to ``directory``.
@@ -1516,12 +1575,17 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         The figures are written first, each atomically (a temporary file,
         then renamed: an interrupt leaves the old file or the new one), then
         ``diagnosis.json``, then ``report.html``: a new page always comes
-        with its own figures.
+        with its own figures.  A failure part-way (a full disk) removes the
+        earlier report's ``report.html`` and ``diagnosis.json``, so that no
+        page or JSON of another diagnosis stays beside the new figures; a
+        failure before any file changed leaves the earlier report whole.
 
     Raises
     ------
     OSError
-        ``directory`` cannot be created or a file in it written.
+        ``directory`` cannot be created or a file in it written; after a
+        failure part-way its message ends by saying that the report in
+        ``directory`` is incomplete (no ``report.html``).
     ValueError
         Neither ``result.settings["dt"]`` nor ``recording`` gives the sample
         interval (:func:`plot_residuals`; a result of ``diagnose`` has it), or
@@ -1552,11 +1616,22 @@ def write_report(result: DiagnosisResult, directory: str | Path, *, recording: A
         figures["profile"] = None  # (one left from an earlier report is removed)
     if post is None:
         figures["posterior"] = None
+    with _whole_report(out) as written:
+        paths = _write_report_files(result, out, figures, formats, post, written)
+    return paths
+
+
+def _write_report_files(result: DiagnosisResult, out: Path, figures: Mapping[str, Any],
+                        formats: Sequence[str], post: Any, written: set[str]) -> dict[str, Path]:
+    """The files of :func:`write_report` (``figures``: name -> how to draw it, or None),
+    each name added to ``written`` once written (:func:`_whole_report`)."""
+    chosen = getattr(result, "chosen", None)
     # no empty placeholder, nor a figure left from an earlier report; the figures first,
     # the page last (an interrupted report never has a new page beside old figures)
     paths = _write_figures(_listed(figures), out, formats)
     paths["json"] = out / "diagnosis.json"
     result.to_json(paths["json"])
+    written.add(paths["json"].name)
 
     physics = html.escape(result.physics)
     after = f" and with {physics}" if chosen is not None else ""
@@ -1624,4 +1699,5 @@ Decision at family-wise level alpha = {result.settings['alpha']:g}
 </body></html>
 """
     paths["html"] = write_text_atomic(out / "report.html", page)
+    written.add(paths["html"].name)
     return paths
