@@ -232,7 +232,7 @@ def test_pooled_fit_matches_a_profile_over_the_shared_parameter(washout_runs, wa
     assert near.min() - 0.05 <= res.chosen.params["omega_w"] <= near.max() + 0.05
 
 
-def test_pooled_controls_say_none_and_report(tmp_path):
+def test_pooled_controls_say_none_and_report(tmp_path, monkeypatch):
     res = diagnose_pooled(_runs(None, (43, 44)), seed=0, n_bootstrap=0, n_starts=2,
                           candidates=["motion-washout", "otolith-channel", "control-saturation"])
     assert res.physics == "none" and not res.mismatch
@@ -253,6 +253,26 @@ def test_pooled_controls_say_none_and_report(tmp_path):
     assert set((tmp_path / "rep").iterdir()) == set(paths.values())
     with pytest.raises(ValueError, match="formats"):
         res.report(tmp_path / "rep", formats=("jpeg",))
+    # a full disk at the second figure of another report in the folder: the earlier page and
+    # diagnosis.json are removed, not left to disagree with the new figure, and it is said
+    import errno
+
+    import matplotlib.figure
+
+    real, saves = matplotlib.figure.Figure.savefig, []
+
+    def savefig(self, fname, *args, **kwargs):
+        saves.append(fname)
+        if len(saves) >= 2:
+            raise OSError(errno.ENOSPC, "No space left on device", str(fname))
+        return real(self, fname, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    with pytest.raises(OSError, match=r"No space left on device; the report in .* is "
+                                      r"incomplete, without report.html"):
+        res.report(tmp_path / "rep")  # (its first figure replaced: the folder changed)
+    left = {p.name for p in (tmp_path / "rep").iterdir()}
+    assert "report.html" not in left and "diagnosis.json" not in left and "candidates.png" in left
 
 
 def test_pooled_whole_band_starts_from_the_low_band_fit(monkeypatch):

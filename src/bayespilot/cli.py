@@ -985,6 +985,10 @@ def _cmd_replicate(args: argparse.Namespace) -> int:
     fractions = [f for f in args.remnant_fractions if f in (0.0, 0.2, 0.3)] \
         or list(args.remnant_fractions)
     try:
+        # (the figure of an earlier call removed first: it would stand beside tables of
+        # other results if the new one cannot be drawn)
+        for fmt in ("png", "pdf", "svg"):
+            png.with_suffix(f".{fmt}").unlink(missing_ok=True)
         write_summary_csv(rows, csv_path)
         write_text_atomic(md_path, header + table + "\n")
     except OSError as exc:
@@ -1081,7 +1085,8 @@ def _os_reason(exc: OSError) -> str:
     if isinstance(exc, (FileExistsError, NotADirectoryError)):
         return (f"{exc.filename} is a file, not a folder" if exc.filename and
                 isinstance(exc, FileExistsError) else "a part of the path is a file, not a folder")
-    return exc.strerror or str(exc)
+    # (one line: HDF5's texts break lines, and an error is one line)
+    return " ".join(str(exc.strerror or exc).split())
 
 
 #: Bytes :func:`_check_writable` writes beside an output before the computation: one block of
@@ -3094,7 +3099,7 @@ def _main(argv: Sequence[str] | None) -> int:
             return 130
         if verbose:
             traceback.print_exc()
-        print(f"{PROG}: error: unexpected {type(exc).__name__}: {exc} "
+        print(f"{PROG}: error: unexpected {type(exc).__name__}: {' '.join(str(exc).split())} "
               f"(run with -v for the traceback, and please report it)", file=sys.stderr)
         return EXIT_FAILURE
 

@@ -466,10 +466,7 @@ class PooledDiagnosisResult(_DiagnosisJSON):
         TypeError
             ``title`` is not True or False.
         """
-        import html
-
-        from .report import (_STYLE, _candidate_table, _checked_formats, _img, _listed,
-                             _notes_html, _write_figures, _yes_no, plot_candidates,
+        from .report import (_checked_formats, _whole_report, plot_candidates,
                              plot_shared_posterior)
 
         formats = _checked_formats(formats)
@@ -482,9 +479,23 @@ class PooledDiagnosisResult(_DiagnosisJSON):
                    "runs": lambda: plot_runs(self, title=t),
                    "posterior": None if self.posterior is None
                    else (lambda: plot_shared_posterior(self.posterior, title=t))}
+        # (a failure part-way leaves no page or diagnosis.json of an earlier report beside
+        # the new figures: _whole_report, as the single-run report)
+        with _whole_report(out) as written:
+            return self._write_report_files(out, figures, formats, written)
+
+    def _write_report_files(self, out: Path, figures: Mapping[str, Any],
+                            formats: Sequence[str], written: set[str]) -> dict[str, Path]:
+        """The files of :meth:`report`, each name added to ``written`` once written."""
+        import html
+
+        from .report import (_STYLE, _candidate_table, _img, _listed, _notes_html,
+                             _write_figures, _yes_no)
+
         paths = _write_figures(_listed(figures), out, formats)  # (names in report.FIGURES)
         paths["json"] = out / "diagnosis.json"
         self.to_json(paths["json"])
+        written.add(paths["json"].name)
 
         title = f"bayespilot pooled diagnosis: {html.escape(self.physics)}"
         page = (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
@@ -514,6 +525,7 @@ class PooledDiagnosisResult(_DiagnosisJSON):
                 f"<pre>{html.escape(self.summary())}</pre></body></html>\n")
         paths["html"] = out / "report.html"
         write_text_atomic(paths["html"], page)
+        written.add(paths["html"].name)
         return paths
 
 
