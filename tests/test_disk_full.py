@@ -51,18 +51,20 @@ def _left(folder: Path) -> list[str]:
     return sorted(p.name for p in folder.iterdir() if p.name.startswith("."))
 
 
+def _fail_text_write(monkeypatch, prefix: str) -> None:
+    """Path.write_text of a file whose name starts with ``prefix`` fails as a full disk."""
+    real = Path.write_text
+
+    def write_text(self, data, *args, **kwargs):
+        if self.name.startswith(prefix):
+            _full_disk(self, data.encode())
+        return real(self, data, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "write_text", write_text)
+
+
 # --- F1: the netCDF posterior ---------------------------------------------------------------------
-class _Chain:
-    """The two methods :func:`bayespilot.sample._to_idata` reads from an emcee sampler."""
-
-    def __init__(self):
-        self.x = np.random.default_rng(7).standard_normal((60, 8, 3)) * 0.05 + 0.4
-
-    def get_chain(self):
-        return self.x
-
-    def get_log_prob(self):
-        return -0.5 * (self.x ** 2).sum(axis=2)
+from test_result_files import _Chain  # noqa: E402  (a fake emcee sampler)
 
 
 def _posterior():
@@ -74,7 +76,7 @@ def _posterior():
             "settings": {"likelihood": "coloured", "n_steps": 60, "ar": "profiled",
                          "tau_history": [[20, 2.5], [40, float("nan")]],
                          "true_parameters": {"K_v": 0.4}}}
-    idata, meta = _to_idata(_Chain(), names, np.array([3.0, 4.0, 5.0]), meta,
+    idata, meta = _to_idata(_Chain((60, 8, 3), seed=7, scale=0.05, centre=0.4), names, np.array([3.0, 4.0, 5.0]), meta,
                             {"K_v": "-", "tau_v": "s", "delta_abs": "IPUT"})
     return Posterior(idata, tuple(names), tau, False, meta["settings"], 11)
 
@@ -267,14 +269,7 @@ def test_diagnose_batch_summary_on_a_full_disk(recs, diagnosis, tmp_path, monkey
     earlier = ",".join(B.SUMMARY_FIELDS) + "\n"  # (an earlier batch's table, no row)
     (out / "summary.csv").write_text(earlier, encoding="utf-8")
     (out / "summary.png").write_bytes(b"\x89PNG of other diagnoses")
-    real = Path.write_text
-
-    def write_text(self, data, *args, **kwargs):  # (the table's temporary file)
-        if self.name.startswith(".summary.csv."):
-            _full_disk(self, data.encode())
-        return real(self, data, *args, **kwargs)
-
-    monkeypatch.setattr(Path, "write_text", write_text)
+    _fail_text_write(monkeypatch, ".summary.csv.")  # (the table's temporary file)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with pytest.raises(CampaignError) as caught:
@@ -348,14 +343,7 @@ def test_a_report_whose_page_fails_keeps_its_own_json_only(diagnosis, tmp_path, 
     out = tmp_path / "rep"
     diagnosis.report(out)
     other = dataclasses.replace(diagnosis, source="recs/other-run")
-    real = Path.write_text
-
-    def write_text(self, data, *args, **kwargs):  # (the page's temporary file)
-        if self.name.startswith(".report.html."):
-            _full_disk(self, data.encode())
-        return real(self, data, *args, **kwargs)
-
-    monkeypatch.setattr(Path, "write_text", write_text)
+    _fail_text_write(monkeypatch, ".report.html.")  # (the page's temporary file)
     with pytest.raises(OSError, match="incomplete, without report.html"):
         other.report(out)
     assert not (out / "report.html").exists() and _left(out) == [".bayespilot-report.json"]

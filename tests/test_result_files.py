@@ -167,10 +167,11 @@ def test_json_ready_writes_numpy_arrays():
 
 # --- finding 4 and C6: a posterior's netCDF holds its fields as they are now, and units ------
 class _Chain:
-    """The two methods _to_idata reads from an emcee sampler."""
+    """The two methods _to_idata reads from an emcee sampler: ``shape`` (steps, walkers,
+    parameters) of normal draws about ``centre`` (also tests/test_disk_full.py's)."""
 
-    def __init__(self):
-        self.x = np.random.default_rng(1).standard_normal((40, 6, 2)) * 0.01 + 0.5
+    def __init__(self, shape=(40, 6, 2), seed=1, scale=0.01, centre=0.5):
+        self.x = np.random.default_rng(seed).standard_normal(shape) * scale + centre
 
     def get_chain(self):
         return self.x
