@@ -209,6 +209,10 @@ def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, 
     real = dg.sample_chosen
     monkeypatch.setattr(dg, "sample_chosen", lambda res, r, **kw: real(
         res, r, n_walkers=20, max_steps=600, min_steps=200, check_every=200, **kw))
+    made = []  # (the diagnosis, kept for the failures below)
+    real_diagnose = dg.diagnose
+    monkeypatch.setattr(dg, "diagnose", lambda *a, **k: made.append(real_diagnose(*a, **k))
+                        or made[-1])
     post, out = tmp_path / "post.nc", tmp_path / "d.json"
     code, stdout, err = _run(capsys, "diagnose", stem, "--bootstrap", "0", "--posterior", post,
                              "--json", out, "--calibrate", "3")
@@ -223,14 +227,12 @@ def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, 
 
     # a posterior that cannot be written (a full disk) fails the command at the end: the
     # diagnosis is still printed and its --json written (both were lost with it); the
-    # diagnosis is the one above, read back, and the chain a stub
-    from bayespilot.diagnose import DiagnosisResult
-
+    # diagnosis is the one above, and the chain a stub
     class Unwritable:
         def to_netcdf(self, path):
             raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
-    done = DiagnosisResult.from_json(out)
+    (done,) = made
     monkeypatch.setattr(dg, "diagnose", lambda *a, **k: done)
     monkeypatch.setattr(dg, "sample_chosen", lambda *a, **k: Unwritable())
     out2 = tmp_path / "d2.json"
@@ -243,6 +245,27 @@ def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, 
                                     f"above was printed and its other files written")
     assert json.loads(out2.read_text())["physics"] == "motion-washout"
     assert not (tmp_path / "full.nc").exists()
+
+    # --json inside the --report folder (allowed: the same content), the report failing
+    # part-way (its second figure): the --json the command wrote is kept, not removed with
+    # the incomplete report's files
+    import matplotlib.figure
+
+    real, saves = matplotlib.figure.Figure.savefig, []
+
+    def savefig(self, fname, *args, **kwargs):
+        saves.append(fname)
+        if len(saves) >= 2:
+            raise OSError(errno.ENOSPC, "No space left on device", str(fname))
+        return real(self, fname, *args, **kwargs)
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    rep = tmp_path / "rep"
+    code, stdout, err = _run(capsys, "diagnose", stem, "--bootstrap", "0", "--json",
+                             rep / "diagnosis.json", "--report", rep)
+    assert code == 1 and "the report in" in err and "is incomplete" in err
+    assert json.loads((rep / "diagnosis.json").read_text())["physics"] == "motion-washout"
+    assert not (rep / "report.html").exists()
 
 
 def test_diagnose_bayes_factor_option(rec_stem, tmp_path, capsys, monkeypatch):

@@ -67,3 +67,22 @@ def test_a_full_disk_is_refused_before_the_computation(command, what, run, full_
                                     f"space left on device)")
     assert "warning" in err.splitlines()[0]  # (the short record's: the only other line)
     assert list(full_disk.iterdir()) == []  # (the probe removed, though its write failed)
+
+
+def test_a_report_folder_on_a_full_disk_is_refused_before_the_diagnosis(run, full_disk, capsys,
+                                                                         monkeypatch):
+    """diagnose --report: the folder was only made (mkdir passes on a full disk) and the
+    diagnosis ran; now a block is written in it first."""
+    import bayespilot.diagnose
+
+    def ran(*a, **k):
+        raise AssertionError("the computation ran")
+
+    monkeypatch.setattr(bayespilot.diagnose, "diagnose", ran)
+    report = full_disk / "rep"
+    code = main(["diagnose", str(run), "--bootstrap", "0", "--report", str(report), "-q"])
+    err = capsys.readouterr().err
+    assert code == 1, err
+    assert err.splitlines()[-1] == (f"bayespilot: error: {report / 'report.html'}: cannot write "
+                                    "the report (No space left on device)")
+    assert list(report.iterdir()) == []

@@ -1372,14 +1372,6 @@ def _report_files(folder: str | Path) -> list[Path]:
         *(f"{figure}.{fmt}" for figure in FIGURES for fmt in FORMATS))]
 
 
-def _check_folder(path: str | Path, what: str) -> None:
-    """Refuse, before a long computation, an output folder that cannot be made."""
-    try:
-        Path(path).mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise CommandFailed(f"{path}: cannot write the {what} ({_os_reason(exc)})") from None
-
-
 def _cmd_sample(args: argparse.Namespace) -> int:
     from .sample import sample
 
@@ -1585,8 +1577,8 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     for path, what in ((args.posterior, "posterior"), (args.json, "diagnosis")):
         if path:  # checked before the diagnosis: its minutes are not lost to a bad path
             _check_writable(path, what)
-    if args.report:
-        _check_folder(args.report, "report")
+    if args.report:  # (a block written in the folder: a full disk is refused now, too)
+        _check_writable(Path(args.report) / "report.html", "report")
     try:
         if len(recs) == 1:
             rec = recs[0]
@@ -1653,18 +1645,25 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     if args.bayes_factor:
         _weigh(args, res, recs[0])
     print(res.summary())
+    also = "" if unwritten is None else f"; and {unwritten}"  # (said with a later failure)
     if args.json:
         try:
             res.to_json(args.json)
         except OSError as exc:
-            raise CommandFailed(f"{args.json}: cannot write the diagnosis ({_os_reason(exc)})") from None
+            raise CommandFailed(f"{args.json}: cannot write the diagnosis ({_os_reason(exc)})"
+                                f"{also}") from None
         _say(args, f"wrote {args.json}")
     if args.report:
         try:
             paths = res.report(args.report, formats=args.report_format, title=_title(args))
         except OSError as exc:
+            # (a report that fails part-way removes its diagnosis.json, which --json may be:
+            # written again, as the command said it was)
+            if args.json and not Path(args.json).exists():
+                with contextlib.suppress(OSError):
+                    res.to_json(args.json)
             raise CommandFailed(f"{args.report}: cannot write the report "
-                                f"({_os_reason(exc)})") from None
+                                f"({_os_reason(exc)}){also}") from None
         _say(args, f"wrote {paths['html']} (with {', '.join(p.name for k, p in paths.items() if k not in ('html', 'manifest'))})")
     if unwritten:
         raise CommandFailed(f"{unwritten}; the diagnosis above was printed"

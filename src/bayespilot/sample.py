@@ -52,6 +52,7 @@ import json
 import math
 import os
 import sys
+import threading
 import time
 import types
 import warnings
@@ -821,6 +822,10 @@ def _set_meta_attrs(idata, meta: Mapping[str, Any]) -> None:
         group.attrs.update(new)
 
 
+#: Serialises :func:`_netcdf_image`'s change of dask's (process-wide) scheduler setting.
+_NETCDF_LOCK = threading.Lock()
+
+
 def _netcdf_image(idata) -> bytes:
     """``idata`` as the bytes of a netCDF-4 file, built in memory (for
     :meth:`Posterior.to_netcdf`).
@@ -851,7 +856,8 @@ def _netcdf_image(idata) -> bytes:
     buf = io.BytesIO()
     mode = "w"
     attrs = dict(getattr(idata, "_attrs", None) or {})
-    with dask.config.set(scheduler="synchronous"):
+    # (dask's config is the process's: two threads writing at once left it synchronous)
+    with _NETCDF_LOCK, dask.config.set(scheduler="synchronous"):
         if attrs:
             xr.Dataset(attrs=attrs).to_netcdf(buf, mode=mode, engine="h5netcdf", group="/")
             mode = "a"
