@@ -249,17 +249,9 @@ def test_diagnose_posterior_writes_the_extended_models_netcdf(tmp_path, capsys, 
     # --json inside the --report folder (allowed: the same content), the report failing
     # part-way (its second figure): the --json the command wrote is kept, not removed with
     # the incomplete report's files
-    import matplotlib.figure
+    from test_disk_full import _fail_at
 
-    real, saves = matplotlib.figure.Figure.savefig, []
-
-    def savefig(self, fname, *args, **kwargs):
-        saves.append(fname)
-        if len(saves) >= 2:
-            raise OSError(errno.ENOSPC, "No space left on device", str(fname))
-        return real(self, fname, *args, **kwargs)
-
-    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    _fail_at(monkeypatch, 2)
     rep = tmp_path / "rep"
     code, stdout, err = _run(capsys, "diagnose", stem, "--bootstrap", "0", "--json",
                              rep / "diagnosis.json", "--report", rep)

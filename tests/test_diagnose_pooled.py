@@ -255,19 +255,9 @@ def test_pooled_controls_say_none_and_report(tmp_path, monkeypatch):
         res.report(tmp_path / "rep", formats=("jpeg",))
     # a full disk at the second figure of another report in the folder: the earlier page and
     # diagnosis.json are removed, not left to disagree with the new figure, and it is said
-    import errno
+    from test_disk_full import _fail_at
 
-    import matplotlib.figure
-
-    real, saves = matplotlib.figure.Figure.savefig, []
-
-    def savefig(self, fname, *args, **kwargs):
-        saves.append(fname)
-        if len(saves) >= 2:
-            raise OSError(errno.ENOSPC, "No space left on device", str(fname))
-        return real(self, fname, *args, **kwargs)
-
-    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", savefig)
+    _fail_at(monkeypatch, 2)
     with pytest.raises(OSError, match=r"No space left on device; the report in .* is "
                                       r"incomplete, without report.html"):
         res.report(tmp_path / "rep")  # (its first figure replaced: the folder changed)

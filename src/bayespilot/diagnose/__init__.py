@@ -1433,7 +1433,7 @@ def diagnose(recording: Recording, *, seed: int | None = 0, alpha: float = ALPHA
     # a base fit outside the base model's bounds, or without threshold: refused before any
     # work; so is a candidate whose build frees a parameter base_fit held
     model0, wider = _base_model(base_fit, oversample, _where(recording))
-    held = {} if base_fit is None else _base_fixed(base_fit, model0)
+    held = dict(model0.fixed)  # (base_fit's held parameters, :func:`_base_fixed`)
     _check_held(names, model0, held)
     seed = resolve_seed(seed)  # None: a fresh one, recorded in the settings
     if profile_noise and n_calibrate:
